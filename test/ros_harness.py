@@ -1,0 +1,90 @@
+"""Real nodes over real DDS for integration tests: start console scripts as processes, talk
+to them from an in-test node, and wait on conditions with timeouts (never fixed sleeps)."""
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def executable(name: str) -> str:
+    """Console script installed beside this interpreter (the project's venv)."""
+    path = Path(sys.executable).parent / name
+    found = str(path) if path.exists() else shutil.which(name)
+    if not found:
+        raise FileNotFoundError(f"console script {name!r} is not installed; run the set-up command")
+    return found
+
+
+class NodeProcess:
+    """A node started as its console script; ``stop()`` ends it with SIGINT and returns its log."""
+
+    def __init__(self, exe: str, *ros_args: str, args: tuple[str, ...] = ()) -> None:
+        self._log = tempfile.NamedTemporaryFile("w+", prefix=f"{exe}-", suffix=".log", delete=False)  # noqa: SIM115
+        command = [executable(exe), *args]
+        if ros_args:
+            command += ["--ros-args", *ros_args]
+        self.process = subprocess.Popen(
+            command, stdout=self._log, stderr=subprocess.STDOUT, env=os.environ.copy()
+        )
+
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def log(self) -> str:
+        self._log.flush()
+        return Path(self._log.name).read_text(encoding="utf-8", errors="replace")
+
+    def stop(self, timeout: float = 10.0) -> str:
+        if self.alive():
+            self.process.send_signal(signal.SIGINT)
+            try:
+                self.process.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait(timeout)
+        text = self.log()
+        self._log.close()
+        os.unlink(self._log.name)
+        return text
+
+    def __enter__(self) -> NodeProcess:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+
+class Probe:
+    """The test's own node and executor; ``wait_until`` spins until a condition holds."""
+
+    def __init__(self, name: str = "test_probe") -> None:
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = Node(name, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def wait_until(self, condition: Callable[[], bool], timeout: float, what: str = "condition") -> None:
+        deadline = time.monotonic() + timeout
+        while not condition():
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"timed out after {timeout} s waiting for {what}")
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
