@@ -20,16 +20,25 @@ class ConfigError(ValueError):
 def config_path(name: str) -> Path:
     """Path of a config file shipped with the package (source tree or installed share/)."""
     candidates = [CONFIG_DIR / name]
-    try:
-        from ament_index_python.packages import get_package_share_directory
-
-        candidates.append(Path(get_package_share_directory("manipulator_kinematics")) / "config" / name)
-    except Exception:  # noqa: BLE001 - ament index absent or package not installed: source tree only
-        pass
+    share = _installed_share()
+    if share is not None:
+        candidates.append(share / "config" / name)
     for path in candidates:
         if path.is_file():
             return path
     raise FileNotFoundError(f"config file {name!r} not found in {[str(c) for c in candidates]}")
+
+
+def _installed_share() -> Path | None:
+    """share/manipulator_kinematics of an installed package (colcon/ament), if there is one."""
+    try:
+        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+    except ImportError:  # the numpy cores work without any ROS installed
+        return None
+    try:
+        return Path(get_package_share_directory("manipulator_kinematics"))
+    except (PackageNotFoundError, ValueError, LookupError):
+        return None
 
 
 def load_parameters(path: str | Path, node_name: str = "/**") -> dict[str, Any]:

@@ -11,6 +11,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Self
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -60,7 +61,7 @@ class NodeProcess:
         os.unlink(self._log.name)
         return text
 
-    def __enter__(self) -> NodeProcess:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -1,0 +1,759 @@
+"""Hydraulic excavator kinematics as a hybrid chain (paper 000: Zhang, Su, Yin, 1994).
+
+The manipulator is an open main chain (swing theta1, boom theta2, arm theta3, bucket theta4)
+driven by independent closed-loop cylinder mechanisms with secondary coordinates
+D = [theta1, d2, d3, d4] (swing angle and the boom, arm and bucket cylinder lengths):
+
+* boom and arm: one cylinder closes a triangle (eq. 1);
+* bucket: a six-bar split into the cylinder four-bar (arm, cylinder, side link) and the bucket
+  four-bar (arm, side link, H-link, bucket) in series (eq. 2);
+* the open chain gives the bucket tip Q = [x, y, z, alpha] (eq. 3), J0 (eq. 5);
+* thetadot = K Ddot (eq. 7), Qdot = JC0 Ddot with JC0 = J0 K (eq. 8) and its inverse (eq. 9);
+* accelerations forward (eqs. 10-11) and inverse (eqs. 12-13).
+
+Everything is closed form. Every entry point takes one state (shape (4,)) or a batch (shape
+(N, 4)); one state runs on Python floats (math), a batch on numpy arrays, through the same code,
+so a single call costs microseconds and a batch runs at millions of states per second.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+from manipulator_kinematics.params import ConfigError, config_path, load_parameters
+
+CYLINDERS = ("boom_cylinder", "arm_cylinder", "bucket_cylinder")
+JOINTS = ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")
+DEFAULT_CONFIG = "excavator_cet200.yaml"
+
+# Lengths this close outside a stroke end still count as inside, so that lengths computed from
+# angles at a stroke end (round-off of a few ulp) are accepted.
+STROKE_TOLERANCE = 1e-9
+
+_SCALAR = SimpleNamespace(sqrt=math.sqrt, acos=math.acos, atan2=math.atan2, sin=math.sin, cos=math.cos)
+_ARRAY = SimpleNamespace(sqrt=np.sqrt, acos=np.arccos, atan2=np.arctan2, sin=np.sin, cos=np.cos)
+
+
+class StrokeError(ValueError):
+    """A state outside the machine's strokes/limits, non-finite, or geometrically impossible."""
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Stroke ends, swing range and speed limits (SI units), all from the machine file."""
+
+    stroke_min: np.ndarray  # (3,) boom, arm, bucket cylinder minimum length
+    stroke_max: np.ndarray  # (3,)
+    swing_min: float
+    swing_max: float
+    max_cylinder_speed: np.ndarray  # (3,) m/s
+    max_swing_speed: float  # rad/s
+    reference: np.ndarray  # (4,) D of the reference state [theta1, d2, d3, d4]
+
+    @property
+    def d_min(self) -> np.ndarray:
+        """Lower limits of D = [theta1, d2, d3, d4]."""
+        return np.concatenate(([self.swing_min], self.stroke_min))
+
+    @property
+    def d_max(self) -> np.ndarray:
+        return np.concatenate(([self.swing_max], self.stroke_max))
+
+    @property
+    def max_rates(self) -> np.ndarray:
+        """Speed limits of D, [rad/s, m/s, m/s, m/s]."""
+        return np.concatenate(([self.max_swing_speed], self.max_cylinder_speed))
+
+
+@dataclass(frozen=True)
+class _Triangle:
+    """A cylinder of length d closing a triangle at a pivot (paper eq. 1).
+
+    ``first`` and ``second`` are the pins at the cylinder's ends, relative to the pivot, each in
+    the frame of the body it sits on; the joint angle is the rotation of the second body that
+    makes the pin distance equal d: theta = ang(first) + orientation * gamma - ang(second).
+    """
+
+    name: str
+    a: float  # |first - pivot|
+    b: float  # |second - pivot|
+    phi_first: float
+    phi_second: float
+    orientation: int
+
+    def closes(self, d: Any, m: SimpleNamespace) -> tuple[Any, Any, Any]:
+        """gamma (angle opposite d), dgamma/dd and d2gamma/dd2 (eq. 1: k21, k22)."""
+        a, b = self.a, self.b
+        c = (a * a + b * b - d * d) / (2.0 * a * b)
+        _check_closes(c, self.name)
+        s = m.sqrt(1.0 - c * c)
+        k = d / (a * b * s)
+        return m.acos(c), k, k / d - k * k * c / s
+
+
+def _check_closes(c: Any, name: str) -> None:
+    """|cos| < 1 or the linkage cannot be assembled at this length."""
+    if np.any(np.abs(c) >= 1.0):
+        raise StrokeError(f"{name}: the linkage cannot close (triangle inequality violated)")
+
+
+def _point(value: Any, key: str) -> np.ndarray:
+    point = np.asarray(value, dtype=float)
+    if point.shape != (2,) or not np.all(np.isfinite(point)):
+        raise ConfigError(f"excavator.{key}: expected a point [x, z] of two finite numbers, got {value!r}")
+    return point
+
+
+def _positive(value: Any, key: str) -> float:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"excavator.{key}: expected a number, got {value!r}") from None
+    if not math.isfinite(number) or number <= 0.0:
+        raise ConfigError(f"excavator.{key}: must be a positive finite number, got {value!r}")
+    return number
+
+
+def _number(value: Any, key: str) -> float:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"excavator.{key}: expected a number, got {value!r}") from None
+    if not math.isfinite(number):
+        raise ConfigError(f"excavator.{key}: must be finite, got {value!r}")
+    return number
+
+
+def _sign(value: Any, key: str) -> int:
+    if value not in (1, -1):
+        raise ConfigError(f"excavator.{key}: orientation must be 1 or -1, got {value!r}")
+    return int(value)
+
+
+def _get(section: dict[str, Any], path: str) -> Any:
+    node: Any = section
+    for part in path.split("."):
+        if not isinstance(node, dict) or part not in node:
+            raise ConfigError(f"excavator.{path}: missing from the machine description")
+        node = node[part]
+    return node
+
+
+def _angle(v: np.ndarray) -> float:
+    return math.atan2(v[1], v[0])
+
+
+class Excavator:
+    """Kinematics of one excavator (geometry + limits), see the module docstring.
+
+    Coordinates: D = [theta1, d2, d3, d4] (rad, m, m, m), theta = [theta1..theta4] (rad),
+    Q = [x, y, z, alpha]: bucket tip in the base frame (m) and bucket line angle (rad).
+    """
+
+    def __init__(self, description: dict[str, Any]) -> None:
+        """Build from the nested ``excavator`` section of a parameters file; validates it."""
+        if not isinstance(description, dict):
+            raise ConfigError("excavator: the machine description must be a mapping")
+        g = description
+        self.name = str(g.get("name", "excavator"))
+        self.l1, self.l0 = _point(_get(g, "boom.foot_pin"), "boom.foot_pin")
+        self.l2 = _positive(_get(g, "boom.length"), "boom.length")
+        self.l3 = _positive(_get(g, "arm.length"), "arm.length")
+        self.l4 = _positive(_get(g, "bucket.length"), "bucket.length")
+        foot = np.array([self.l1, self.l0])
+        arm_pin = np.array([self.l2, 0.0])  # boom frame
+        self._bucket_pin = np.array([self.l3, 0.0])  # arm frame
+
+        boom_base = _point(_get(g, "boom_cylinder.base_pin"), "boom_cylinder.base_pin") - foot
+        boom_rod = _point(_get(g, "boom_cylinder.rod_pin"), "boom_cylinder.rod_pin")
+        arm_base = _point(_get(g, "arm_cylinder.base_pin"), "arm_cylinder.base_pin") - arm_pin
+        arm_rod = _point(_get(g, "arm_cylinder.rod_pin"), "arm_cylinder.rod_pin")
+        self._pins_local = {
+            "boom_cylinder_base": boom_base + foot,
+            "boom_cylinder_rod": boom_rod,
+            "arm_cylinder_base": arm_base + arm_pin,
+            "arm_cylinder_rod": arm_rod,
+        }
+        self._boom = self._triangle("boom_cylinder", boom_base, boom_rod, g)
+        self._arm = self._triangle("arm_cylinder", arm_base, arm_rod, g)
+
+        bucket_base = _point(_get(g, "bucket_cylinder.base_pin"), "bucket_cylinder.base_pin")
+        self._pivot = _point(_get(g, "side_link.pivot"), "side_link.pivot")
+        self._side = _positive(_get(g, "side_link.length"), "side_link.length")
+        self._pins_local["bucket_cylinder_base"] = bucket_base
+        self._pins_local["side_link_pivot"] = self._pivot
+        to_base = bucket_base - self._pivot
+        # Side-link angle phi in the arm frame comes from the same triangle form with the rod
+        # pin at (side length, 0) of a frame turning with the side link (eq. 1 applied to Fig. 7b).
+        self._side_triangle = _Triangle(
+            "bucket_cylinder",
+            float(np.hypot(*to_base)),
+            self._side,
+            _angle(to_base),
+            0.0,
+            _sign(_get(g, "bucket_cylinder.orientation"), "bucket_cylinder.orientation"),
+        )
+        h_pin = _point(_get(g, "h_link.bucket_pin"), "h_link.bucket_pin")
+        self._h_radius = float(np.hypot(*h_pin))  # bucket pin -> H-link pin
+        self._h_phase = _angle(h_pin)
+        self._h_link = _positive(_get(g, "h_link.length"), "h_link.length")
+        self._h_orientation = _sign(_get(g, "h_link.orientation"), "h_link.orientation")
+        self._pins_local["h_link_pin"] = h_pin
+
+        stroke = []
+        for cylinder in CYLINDERS:
+            lo = _positive(_get(g, f"{cylinder}.min_length"), f"{cylinder}.min_length")
+            hi = _positive(_get(g, f"{cylinder}.max_length"), f"{cylinder}.max_length")
+            if not lo < hi:
+                raise ConfigError(f"excavator.{cylinder}: min_length {lo} must be below max_length {hi}")
+            stroke.append((lo, hi))
+        stroke_arr = np.array(stroke)
+        swing_min = _number(_get(g, "swing.min_angle"), "swing.min_angle")
+        swing_max = _number(_get(g, "swing.max_angle"), "swing.max_angle")
+        if not swing_min < swing_max:
+            raise ConfigError(f"excavator.swing: min_angle {swing_min} must be below max_angle {swing_max}")
+        reference = np.array(
+            [_number(g.get("swing", {}).get("reference_angle", 0.0), "swing.reference_angle")]
+            + [
+                _number(g[c].get("reference_length", 0.5 * (lo + hi)), f"{c}.reference_length")
+                for c, (lo, hi) in zip(CYLINDERS, stroke, strict=True)
+            ]
+        )
+        self.limits = Limits(
+            stroke_min=stroke_arr[:, 0],
+            stroke_max=stroke_arr[:, 1],
+            swing_min=swing_min,
+            swing_max=swing_max,
+            max_cylinder_speed=np.array(
+                [_positive(_get(g, f"{c}.max_speed"), f"{c}.max_speed") for c in CYLINDERS]
+            ),
+            max_swing_speed=_positive(_get(g, "swing.max_speed"), "swing.max_speed"),
+            reference=reference,
+        )
+        for i, cylinder in enumerate(CYLINDERS):
+            if not stroke_arr[i, 0] <= reference[i + 1] <= stroke_arr[i, 1]:
+                raise ConfigError(
+                    f"excavator.{cylinder}.reference_length {reference[i + 1]} outside the stroke "
+                    f"[{stroke_arr[i, 0]}, {stroke_arr[i, 1]}]"
+                )
+        self._check_whole_stroke()
+
+    @staticmethod
+    def _triangle(name: str, first: np.ndarray, second: np.ndarray, g: dict[str, Any]) -> _Triangle:
+        return _Triangle(
+            name,
+            float(np.hypot(*first)),
+            float(np.hypot(*second)),
+            _angle(first),
+            _angle(second),
+            _sign(_get(g, f"{name}.orientation"), f"{name}.orientation"),
+        )
+
+    def _check_whole_stroke(self) -> None:
+        """Every length in the stroke box must assemble; a bad pin or length fails here, naming it."""
+        samples = np.linspace(self.limits.stroke_min, self.limits.stroke_max, 2001)
+        try:
+            self.joint_angles(samples)
+        except StrokeError as error:
+            raise ConfigError(f"excavator: the stroke range cannot be assembled: {error}") from None
+
+    @classmethod
+    def from_file(cls, path: str | Path, node_name: str = "/**") -> Excavator:
+        """Load the ``excavator`` section of a ROS 2 parameters file."""
+        parameters = load_parameters(path, node_name)
+        if "excavator" not in parameters:
+            raise ConfigError(f"{path}: no 'excavator' section under ros__parameters")
+        return cls(parameters["excavator"])
+
+    @classmethod
+    def from_parameters(cls, description: dict[str, Any]) -> Excavator:
+        return cls(description)
+
+    @classmethod
+    def default(cls) -> Excavator:
+        """The package's default machine (CET200)."""
+        return cls.from_file(config_path(DEFAULT_CONFIG))
+
+    # ------------------------------------------------------------------ validation
+    def validate(self, D: Any) -> np.ndarray:
+        """D as a float array of shape (4,) or (N, 4); raises StrokeError naming what is wrong."""
+        D = np.asarray(D, dtype=float)
+        if D.shape[-1:] != (4,) or D.ndim not in (1, 2):
+            raise StrokeError(f"expected D = [swing, boom, arm, bucket] of shape (4,) or (N, 4), got {D.shape}")
+        self._check_lengths(D[..., 1:])
+        swing = D[..., 0]
+        if not np.all(np.isfinite(swing)):
+            raise StrokeError(f"swing_joint angle is not finite: {_first_bad(swing, np.isfinite(swing))}")
+        lo, hi = self.limits.swing_min - STROKE_TOLERANCE, self.limits.swing_max + STROKE_TOLERANCE
+        inside = (swing >= lo) & (swing <= hi)
+        if not np.all(inside):
+            raise StrokeError(
+                f"swing_joint angle {_first_bad(swing, inside)} rad outside "
+                f"[{self.limits.swing_min:.6g}, {self.limits.swing_max:.6g}] rad"
+            )
+        return D
+
+    def _check_lengths(self, lengths: np.ndarray) -> None:
+        finite = np.isfinite(lengths)
+        inside = (lengths >= self.limits.stroke_min - STROKE_TOLERANCE) & (
+            lengths <= self.limits.stroke_max + STROKE_TOLERANCE
+        )
+        if np.all(finite & inside):
+            return
+        for i, cylinder in enumerate(CYLINDERS):
+            column = lengths[..., i]
+            if not np.all(finite[..., i]):
+                raise StrokeError(f"{cylinder} length is not finite: {_first_bad(column, finite[..., i])}")
+            if not np.all(inside[..., i]):
+                raise StrokeError(
+                    f"{cylinder} length {_first_bad(column, inside[..., i]):.6g} m outside the stroke "
+                    f"[{self.limits.stroke_min[i]:.6g}, {self.limits.stroke_max[i]:.6g}] m"
+                )
+
+    # ------------------------------------------------------------------ closed loops (eqs. 1-2, 7)
+    def _closed_loops(self, d2: Any, d3: Any, d4: Any, m: SimpleNamespace) -> tuple[Any, ...]:
+        """theta2..4, their first (K) and second (K1) derivatives w.r.t. d2..d4, and the
+        side-link angle phi plus the bucket four-bar's rod pin R and H-link pin H (arm frame)."""
+        boom, arm, side = self._boom, self._arm, self._side_triangle
+        g2, k2, dk2 = boom.closes(d2, m)
+        g3, k3, dk3 = arm.closes(d3, m)
+        theta2 = boom.phi_first + boom.orientation * g2 - boom.phi_second
+        theta3 = arm.phi_first + arm.orientation * g3 - arm.phi_second
+        k2, dk2 = boom.orientation * k2, boom.orientation * dk2
+        k3, dk3 = arm.orientation * k3, arm.orientation * dk3
+
+        # Cylinder four-bar (Fig. 7b): side-link angle phi and its derivatives.
+        gc, kc, dkc = side.closes(d4, m)
+        phi = side.phi_first + side.orientation * gc
+        phi_d, phi_dd = side.orientation * kc, side.orientation * dkc
+        rx, ry = self._side * m.cos(phi), self._side * m.sin(phi)  # R - pivot
+        Rx, Ry = self._pivot[0] + rx, self._pivot[1] + ry
+        # Bucket four-bar (Fig. 7c, eq. 2): H from the triangle (bucket pin, R, H).
+        ex, ey = Rx - self._bucket_pin[0], Ry - self._bucket_pin[1]
+        e = m.sqrt(ex * ex + ey * ey)
+        b, a = self._h_radius, self._h_link
+        ch = (e * e + b * b - a * a) / (2.0 * e * b)
+        _check_closes(ch, "bucket_cylinder (bucket four-bar)")
+        psi = m.atan2(ey, ex) + self._h_orientation * m.acos(ch)
+        ox, oy = b * m.cos(psi), b * m.sin(psi)  # H - bucket pin
+        Hx, Hy = self._bucket_pin[0] + ox, self._bucket_pin[1] + oy
+        theta4 = psi - self._h_phase
+        # Four-bar velocity ratio g1 = dpsi/dphi and g2 = d2psi/dphi2 from the loop constraint
+        # (H - R).(vH - vR) = 0 and its time derivative; closed form, no iteration.
+        cx, cy = Hx - Rx, Hy - Ry
+        den = cy * ox - cx * oy  # (H - R) . perp(H - O4)
+        g1 = (cy * rx - cx * ry) / den
+        wx, wy = g1 * ox - rx, g1 * oy - ry
+        g2 = (g1 * g1 * (cx * ox + cy * oy) - (cx * rx + cy * ry) - (wx * wx + wy * wy)) / den
+        k4 = g1 * phi_d
+        dk4 = g2 * phi_d * phi_d + g1 * phi_dd
+        return theta2, theta3, theta4, k2, k3, k4, dk2, dk3, dk4, (Rx, Ry), (Hx, Hy)
+
+    def joint_angles(self, lengths: Any) -> np.ndarray:
+        """Cylinder lengths [d2, d3, d4] (..., 3) -> [theta2, theta3, theta4] (eqs. 1-2)."""
+        lengths = np.asarray(lengths, dtype=float)
+        if lengths.shape[-1:] != (3,):
+            raise StrokeError(f"expected [boom, arm, bucket] lengths of shape (3,) or (N, 3), got {lengths.shape}")
+        self._check_lengths(lengths)
+        m, cols = _split(lengths)
+        out = self._closed_loops(*cols, m)
+        return _stack(out[:3], lengths.ndim)
+
+    def k_entries(self, lengths: Any) -> tuple[np.ndarray, np.ndarray]:
+        """dtheta_i/dd_i (the diagonal of K, eq. 7) and d2theta_i/dd_i2 (of K1), for i = 2..4."""
+        lengths = np.asarray(lengths, dtype=float)
+        self._check_lengths(lengths)
+        m, cols = _split(lengths)
+        out = self._closed_loops(*cols, m)
+        return _stack(out[3:6], lengths.ndim), _stack(out[6:9], lengths.ndim)
+
+    def cylinder_lengths(self, angles: Any) -> np.ndarray:
+        """Joint angles [theta2, theta3, theta4] (..., 3) -> cylinder lengths (inverse of eqs. 1-2).
+
+        Closed form: eq. 1's second line for boom and arm; for the bucket, H from theta4, then the
+        rod pin R as the intersection of the side-link and H-link circles on the assembly branch.
+        Raises StrokeError when an angle needs a length outside the stroke or cannot be assembled.
+        """
+        angles = np.asarray(angles, dtype=float)
+        if angles.shape[-1:] != (3,) or angles.ndim not in (1, 2):
+            raise StrokeError(f"expected [theta2, theta3, theta4] of shape (3,) or (N, 3), got {angles.shape}")
+        if not np.all(np.isfinite(angles)):
+            raise StrokeError("joint angles are not finite")
+        lengths = np.empty_like(angles)
+        for i, tri in enumerate((self._boom, self._arm)):
+            gamma = tri.orientation * (angles[..., i] + tri.phi_second - tri.phi_first)
+            gamma = (gamma + np.pi) % (2.0 * np.pi) - np.pi
+            if np.any(gamma <= 0.0):
+                raise StrokeError(f"{JOINTS[i + 1]} angle cannot be reached by {tri.name} on this assembly")
+            lengths[..., i] = np.sqrt(tri.a**2 + tri.b**2 - 2.0 * tri.a * tri.b * np.cos(gamma))
+        psi = angles[..., 2] + self._h_phase
+        H = self._bucket_pin + self._h_radius * np.stack((np.cos(psi), np.sin(psi)), axis=-1)
+        to_h = H - self._pivot
+        f = np.hypot(to_h[..., 0], to_h[..., 1])
+        c = (f * f + self._side**2 - self._h_link**2) / (2.0 * f * self._side)
+        if np.any(np.abs(c) > 1.0):
+            raise StrokeError("bucket_joint angle cannot be reached: side link and H-link cannot meet")
+        base = np.arctan2(to_h[..., 1], to_h[..., 0])
+        spread = np.arccos(c)
+        candidates = [
+            self._pivot + self._side * np.stack((np.cos(base + s * spread), np.sin(base + s * spread)), axis=-1)
+            for s in (1.0, -1.0)
+        ]
+        # Keep the rod pin on the bucket four-bar's assembly branch (same orientation as forward).
+        rel_h = H - self._bucket_pin
+        rel_r = candidates[0] - self._bucket_pin
+        branch = np.sign(rel_r[..., 0] * rel_h[..., 1] - rel_r[..., 1] * rel_h[..., 0]) == self._h_orientation
+        R = np.where(branch[..., None], candidates[0], candidates[1])
+        base_pin = self._pins_local["bucket_cylinder_base"]
+        lengths[..., 2] = np.hypot(R[..., 0] - base_pin[0], R[..., 1] - base_pin[1])
+        try:
+            self._check_lengths(lengths)
+        except StrokeError as error:
+            raise StrokeError(f"joint angles out of reach: {error}") from None
+        return lengths
+
+    # ------------------------------------------------------------------ open chain (eqs. 3-5)
+    def pose(self, D: Any) -> np.ndarray:
+        """Q = [x, y, z, alpha] of the bucket tip for D (eqs. 1-3)."""
+        D = self.validate(D)
+        m, (t1, d2, d3, d4) = _split(D)
+        t2, t3, t4 = self._closed_loops(d2, d3, d4, m)[:3]
+        return _stack(self._tip(t1, t2, t3, t4, m), D.ndim)
+
+    def open_chain_pose(self, theta: Any) -> np.ndarray:
+        """Q = [x, y, z, alpha] from the open-chain joints theta1..theta4 (eq. 3), no limits."""
+        theta = np.asarray(theta, dtype=float)
+        m, cols = _split(theta)
+        return _stack(self._tip(*cols, m), theta.ndim)
+
+    def _tip(self, t1: Any, t2: Any, t3: Any, t4: Any, m: SimpleNamespace) -> tuple[Any, ...]:
+        t23, t234 = t2 + t3, t2 + t3 + t4
+        rho = self.l1 + self.l2 * m.cos(t2) + self.l3 * m.cos(t23) + self.l4 * m.cos(t234)
+        z = self.l0 + self.l2 * m.sin(t2) + self.l3 * m.sin(t23) + self.l4 * m.sin(t234)
+        return rho * m.cos(t1), rho * m.sin(t1), z, t234
+
+    def pins(self, D: Any) -> dict[str, np.ndarray]:
+        """Every pin (and the tip) in the base frame, shape (..., 3), for drawing and checking."""
+        D = self.validate(D)
+        t1, d2, d3, d4 = (D[..., i] for i in range(4))
+        t2, t3, t4, *_, R, H = self._closed_loops(d2, d3, d4, _ARRAY)
+        foot = np.array([self.l1, self.l0])
+
+        def place(origin: np.ndarray, angle: Any, local: Any) -> np.ndarray:
+            c, s = np.cos(angle), np.sin(angle)
+            x = np.asarray(local[0]) * c - np.asarray(local[1]) * s
+            y = np.asarray(local[0]) * s + np.asarray(local[1]) * c
+            return np.stack((origin[..., 0] + x, origin[..., 1] + y), axis=-1)
+
+        zero = np.zeros_like(t2)
+        boom = (foot + zero[..., None], t2)
+        arm_pin = place(*boom, (self.l2, 0.0))
+        arm = (arm_pin, t2 + t3)
+        bucket_pin = place(*arm, self._bucket_pin)
+        bucket = (bucket_pin, t2 + t3 + t4)
+        side = {
+            "boom_foot": foot + zero[..., None],
+            "boom_cylinder_base": self._pins_local["boom_cylinder_base"] + zero[..., None],
+            "boom_cylinder_rod": place(*boom, self._pins_local["boom_cylinder_rod"]),
+            "arm_pin": arm_pin,
+            "arm_cylinder_base": place(*boom, self._pins_local["arm_cylinder_base"]),
+            "arm_cylinder_rod": place(*arm, self._pins_local["arm_cylinder_rod"]),
+            "bucket_pin": bucket_pin,
+            "bucket_cylinder_base": place(*arm, self._pins_local["bucket_cylinder_base"]),
+            "side_link_pivot": place(*arm, self._pivot),
+            "bucket_cylinder_rod": place(*arm, R),
+            "h_link_pin": place(*arm, H),
+            "h_link_pin_on_bucket": place(*bucket, self._pins_local["h_link_pin"]),
+            "bucket_tip": place(*bucket, (self.l4, 0.0)),
+        }
+        c1, s1 = np.cos(t1)[..., None], np.sin(t1)[..., None]
+        return {
+            name: np.concatenate((p[..., :1] * c1, p[..., :1] * s1, p[..., 1:]), axis=-1)
+            for name, p in side.items()
+        }
+
+    def _jacobian_terms(self, t1: Any, t2: Any, t3: Any, t4: Any, m: SimpleNamespace) -> tuple[Any, ...]:
+        """a1..a3, b1..b3 of eq. 4, rho = l1 + b1, and cos/sin of theta1."""
+        t23, t234 = t2 + t3, t2 + t3 + t4
+        s2, s23, s234 = m.sin(t2), m.sin(t23), m.sin(t234)
+        c2, c23, c234 = m.cos(t2), m.cos(t23), m.cos(t234)
+        a3, b3 = self.l4 * s234, self.l4 * c234
+        a2, b2 = self.l3 * s23 + a3, self.l3 * c23 + b3
+        a1, b1 = self.l2 * s2 + a2, self.l2 * c2 + b2
+        return a1, a2, a3, b1, b2, b3, self.l1 + b1, m.cos(t1), m.sin(t1)
+
+    def j0(self, theta: Any) -> np.ndarray:
+        """J0(theta) of eq. 5: Qdot = J0 thetadot, rows x, y, z, alpha; columns theta1..theta4."""
+        theta = np.asarray(theta, dtype=float)
+        m, cols = _split(theta)
+        a1, a2, a3, b1, b2, b3, rho, c1, s1 = self._jacobian_terms(*cols, m)
+        return _matrix(
+            [
+                [-rho * s1, -a1 * c1, -a2 * c1, -a3 * c1],
+                [rho * c1, -a1 * s1, -a2 * s1, -a3 * s1],
+                [0.0, b1, b2, b3],
+                [0.0, 1.0, 1.0, 1.0],
+            ],
+            theta.shape[:-1],
+        )
+
+    def k_matrix(self, D: Any) -> np.ndarray:
+        """K = diag(1, dtheta2/dd2, dtheta3/dd3, dtheta4/dd4) of eq. 7 (theta1 is D's own swing)."""
+        D = self.validate(D)
+        k, _ = self.k_entries(D[..., 1:])
+        ones = np.ones(D.shape[:-1] + (1,))
+        diagonal = np.concatenate((ones, k), axis=-1)
+        return diagonal[..., :, None] * np.eye(4)
+
+    def jc0(self, D: Any) -> np.ndarray:
+        """JC0 = J0 K (eq. 8): Qdot = JC0 Ddot."""
+        D = self.validate(D)
+        m, (t1, d2, d3, d4) = _split(D)
+        t2, t3, t4, k2, k3, k4 = self._closed_loops(d2, d3, d4, m)[:6]
+        terms = self._jacobian_terms(t1, t2, t3, t4, m)
+        return _matrix(_jc0_rows(terms, k2, k3, k4), D.shape[:-1])
+
+    # ------------------------------------------------------------------ full state (eqs. 3-11)
+    def state(self, D: Any, D_dot: Any, D_ddot: Any = None) -> BucketState:
+        """Bucket pose, velocity (eq. 8) and acceleration (eqs. 10-11) from cylinder states.
+
+        The acceleration is Qddot = J0 thetaddot + Jdot0 thetadot with thetaddot = K Dddot +
+        K1 Ddot^2, i.e. JC0 Dddot plus the velocity-product terms of eq. 11 (see
+        :meth:`acceleration_matrices` for the paper's JC1_0 / JC2_0 split of those terms).
+        """
+        D = self.validate(D)
+        D_dot = _finite(D_dot, D.shape, "D_dot")
+        D_ddot = np.zeros_like(D) if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot")
+        m, (t1, d2, d3, d4) = _split(D)
+        _, (w1, v2, v3, v4) = _split(D_dot)
+        _, (e1, f2, f3, f4) = _split(D_ddot)
+        t2, t3, t4, k2, k3, k4, dk2, dk3, dk4 = self._closed_loops(d2, d3, d4, m)[:9]
+        terms = self._jacobian_terms(t1, t2, t3, t4, m)
+        rows = _jc0_rows(terms, k2, k3, k4)
+        # thetadot = K Ddot (eq. 7); thetaddot = K Dddot + K1 Ddot^2 (its time derivative).
+        w2, w3, w4 = k2 * v2, k3 * v3, k4 * v4
+        e2, e3, e4 = k2 * f2 + dk2 * v2 * v2, k3 * f3 + dk3 * v3 * v3, k4 * f4 + dk4 * v4 * v4
+        a1, a2, a3, b1, b2, b3, rho, c1, s1 = terms
+        x_vp, y_vp, z_vp = _velocity_products(terms, w1, w2, w3, w4)
+        q_dot = [
+            rows[0][0] * w1 + rows[0][1] * v2 + rows[0][2] * v3 + rows[0][3] * v4,
+            rows[1][0] * w1 + rows[1][1] * v2 + rows[1][2] * v3 + rows[1][3] * v4,
+            rows[2][1] * v2 + rows[2][2] * v3 + rows[2][3] * v4,
+            w2 + w3 + w4,
+        ]
+        # Eq. 10: Qddot = J0 thetaddot + Jdot0 thetadot.
+        q_ddot = [
+            -rho * s1 * e1 - c1 * (a1 * e2 + a2 * e3 + a3 * e4) + x_vp,
+            rho * c1 * e1 - s1 * (a1 * e2 + a2 * e3 + a3 * e4) + y_vp,
+            b1 * e2 + b2 * e3 + b3 * e4 + z_vp,
+            e2 + e3 + e4,
+        ]
+        x, y, z, alpha = rho * c1, rho * s1, self.l0 + a1, t2 + t3 + t4
+        ndim = D.ndim
+        return BucketState(
+            theta=_stack((t1, t2, t3, t4), ndim),
+            theta_dot=_stack((w1, w2, w3, w4), ndim),
+            theta_ddot=_stack((e1, e2, e3, e4), ndim),
+            Q=_stack((x, y, z, alpha), ndim),
+            Q_dot=_stack(q_dot, ndim),
+            Q_ddot=_stack(q_ddot, ndim),
+            jc0=_matrix(rows, D.shape[:-1]),
+        )
+
+    def acceleration_matrices(self, D: Any) -> tuple[np.ndarray, np.ndarray]:
+        """JC1_0 (..., 4, 4) and JC2_0 (..., 4, 6) of eq. 11.
+
+        Qddot = JC0 Dddot + JC1_0 Ddot^2 + JC2_0 DDdot with Ddot^2 = the squared rates and
+        DDdot = [d1 d2, d1 d3, d1 d4, d2 d3, d2 d4, d3 d4] (products of the rates of D).
+        JC1_0 = J0 K1 + J1_0 K^2, JC2_0 = J2_0 K2, where J1_0 / J2_0 hold the pure and mixed
+        second derivatives of eq. 3 and K2 the products k_i k_j. Vectorised numpy path.
+        """
+        D = self.validate(D)
+        t1, d2, d3, d4 = (D[..., i] for i in range(4))
+        t2, t3, t4, k2, k3, k4, dk2, dk3, dk4 = self._closed_loops(d2, d3, d4, _ARRAY)[:9]
+        a1, a2, a3, b1, b2, b3, rho, c1, s1 = self._jacobian_terms(t1, t2, t3, t4, _ARRAY)
+        k = np.stack((np.ones_like(k2), k2, k3, k4), axis=-1)
+        dk = np.stack((np.zeros_like(dk2), dk2, dk3, dk4), axis=-1)
+        # Hessian of Q(theta): d2rho/dthj dthk = -b_max(j,k); d2z = -a_max(j,k); rho = l1 + b1.
+        a = np.stack((a1, a2, a3), axis=-1)
+        b = np.stack((b1, b2, b3), axis=-1)
+        hess = np.zeros(D.shape[:-1] + (4, 4, 4))
+        hess[..., 0, 0, 0], hess[..., 1, 0, 0] = -rho * c1, -rho * s1
+        for j in range(1, 4):
+            hess[..., 0, 0, j] = hess[..., 0, j, 0] = s1 * a[..., j - 1]
+            hess[..., 1, 0, j] = hess[..., 1, j, 0] = -c1 * a[..., j - 1]
+            for i in range(1, 4):
+                top = max(i, j) - 1
+                hess[..., 0, i, j] = -c1 * b[..., top]
+                hess[..., 1, i, j] = -s1 * b[..., top]
+                hess[..., 2, i, j] = -a[..., top]
+        j0 = self.j0(np.stack((t1, t2, t3, t4), axis=-1))
+        diag = np.arange(4)
+        jc1 = j0 * dk[..., None, :] + hess[..., diag, diag] * (k * k)[..., None, :]
+        pairs = [(i, j) for i in range(4) for j in range(i + 1, 4)]
+        jc2 = np.stack([2.0 * hess[..., i, j] * (k[..., i] * k[..., j])[..., None] for i, j in pairs], axis=-1)
+        return jc1, jc2
+
+    # ------------------------------------------------------------------ inverse (eqs. 9, 12-13)
+    def cylinder_rates(self, D: Any, Q_dot: Any) -> RateSolution:
+        """Ddot = JC0^-1 Qdot (eq. 9), solved (LU), with the 2-norm condition number of JC0.
+
+        The condition number is in the mixed units of JC0 (rows m/s, m/s, m/s, rad/s; columns
+        rad/s, m/s, m/s, m/s). Raises StrokeError when JC0 is exactly singular (tip on the swing
+        axis); callers that must always produce a command use damped least squares on jc0().
+        """
+        D = self.validate(D)
+        Q_dot = _finite(Q_dot, D.shape, "Q_dot")
+        jc0 = self.jc0(D)
+        try:
+            rates = np.linalg.solve(jc0, Q_dot[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            raise StrokeError("JC0 is singular at this state (bucket tip on the swing axis)") from None
+        return RateSolution(D_dot=rates, condition=np.linalg.cond(jc0))
+
+    def cylinder_accelerations(self, D: Any, D_dot: Any, Q_ddot: Any) -> np.ndarray:
+        """Dddot = JC0^-1 (Qddot - velocity-product terms) (eq. 13); D_dot from eq. 9."""
+        D = self.validate(D)
+        Q_ddot = _finite(Q_ddot, D.shape, "Q_ddot")
+        free = self.state(D, D_dot)  # Dddot = 0: only the velocity-product terms remain
+        try:
+            return np.linalg.solve(free.jc0, (Q_ddot - free.Q_ddot)[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            raise StrokeError("JC0 is singular at this state (bucket tip on the swing axis)") from None
+
+    def joint_accelerations(self, D: Any, D_dot: Any, Q_ddot: Any) -> np.ndarray:
+        """thetaddot = J0^-1 (Qddot - Jdot0 thetadot) (eq. 12)."""
+        D = self.validate(D)
+        Q_ddot = _finite(Q_ddot, D.shape, "Q_ddot")
+        free = self.state(D, D_dot)
+        j0 = self.j0(free.theta)
+        # free.Q_ddot = J0 K1 Ddot^2 + Jdot0 thetadot; remove the K1 part to keep Jdot0 thetadot.
+        return np.linalg.solve(j0, (Q_ddot - free.Q_ddot)[..., None])[..., 0] + free.theta_ddot
+
+
+@dataclass(frozen=True)
+class BucketState:
+    """Forward kinematic state; arrays of shape (..., 4) (jc0: (..., 4, 4))."""
+
+    theta: np.ndarray  # open-chain joints theta1..theta4 (rad)
+    theta_dot: np.ndarray
+    theta_ddot: np.ndarray
+    Q: np.ndarray  # [x, y, z, alpha] bucket tip (m) and bucket angle (rad)
+    Q_dot: np.ndarray
+    Q_ddot: np.ndarray
+    jc0: np.ndarray
+
+
+@dataclass(frozen=True)
+class RateSolution:
+    """Result of eq. 9."""
+
+    D_dot: np.ndarray  # (..., 4) [swing rate rad/s, boom, arm, bucket cylinder rates m/s]
+    condition: np.ndarray  # (...,) 2-norm condition number of JC0
+
+
+def _jc0_rows(terms: tuple[Any, ...], k2: Any, k3: Any, k4: Any) -> list[list[Any]]:
+    """Rows of JC0 = J0 K (eqs. 5, 7, 8); column 1 is theta1 itself (k1 = 1)."""
+    a1, a2, a3, b1, b2, b3, rho, c1, s1 = terms
+    return [
+        [-rho * s1, -a1 * c1 * k2, -a2 * c1 * k3, -a3 * c1 * k4],
+        [rho * c1, -a1 * s1 * k2, -a2 * s1 * k3, -a3 * s1 * k4],
+        [0.0, b1 * k2, b2 * k3, b3 * k4],
+        [0.0, k2, k3, k4],
+    ]
+
+
+def _velocity_products(terms: tuple[Any, ...], w1: Any, w2: Any, w3: Any, w4: Any) -> tuple[Any, Any, Any]:
+    """Jdot0 thetadot of eq. 10 for x, y, z (alpha is linear in theta, so its term is 0).
+
+    With radial distance rho = l1 + l2 c2 + l3 c23 + l4 c234 and absolute link rates
+    o2 = w2, o23 = w2 + w3, o234 = w2 + w3 + w4: l2 s2 = a1 - a2, l3 s23 = a2 - a3, l4 s234 = a3
+    (and likewise for b), which reuses eq. 4's coefficients instead of new trigonometry.
+    """
+    a1, a2, a3, b1, b2, b3, rho, c1, s1 = terms
+    o2, o23, o234 = w2, w2 + w3, w2 + w3 + w4
+    rho_dot = -((a1 - a2) * o2 + (a2 - a3) * o23 + a3 * o234)
+    rho_vp = -((b1 - b2) * o2 * o2 + (b2 - b3) * o23 * o23 + b3 * o234 * o234)
+    z_vp = -((a1 - a2) * o2 * o2 + (a2 - a3) * o23 * o23 + a3 * o234 * o234)
+    return (
+        rho_vp * c1 - 2.0 * rho_dot * s1 * w1 - rho * c1 * w1 * w1,
+        rho_vp * s1 + 2.0 * rho_dot * c1 * w1 - rho * s1 * w1 * w1,
+        z_vp,
+    )
+
+
+def _split(values: np.ndarray) -> tuple[SimpleNamespace, tuple[Any, ...]]:
+    """Columns of a state as Python floats (one state) or arrays (a batch), with matching math."""
+    if values.ndim == 1:
+        return _SCALAR, tuple(values.tolist())
+    return _ARRAY, tuple(values[..., i] for i in range(values.shape[-1]))
+
+
+def _stack(columns: Any, ndim: int) -> np.ndarray:
+    if ndim == 1:
+        return np.array(columns, dtype=float)
+    return np.stack(np.broadcast_arrays(*columns), axis=-1).astype(float, copy=False)
+
+
+def _matrix(rows: list[list[Any]], batch: tuple[int, ...]) -> np.ndarray:
+    if not batch:
+        return np.array(rows, dtype=float)
+    out = np.empty(batch + (len(rows), len(rows[0])))
+    for i, row in enumerate(rows):
+        for j, entry in enumerate(row):
+            out[..., i, j] = entry
+    return out
+
+
+def _finite(values: Any, shape: tuple[int, ...], name: str) -> np.ndarray:
+    array = np.asarray(values, dtype=float)
+    if array.shape != shape:
+        raise StrokeError(f"{name}: expected shape {shape}, got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise StrokeError(f"{name} is not finite: {array}")
+    return array
+
+
+def _first_bad(values: np.ndarray, good: np.ndarray) -> float:
+    return float(np.asarray(values)[~np.asarray(good)].flat[0])
+
+
+# ---------------------------------------------------------------------- ROS-facing geometry
+def bucket_quaternion(theta1: Any, alpha: Any) -> np.ndarray:
+    """Bucket orientation [x, y, z, w] in the REP 103 base frame: yaw theta1 about z, then
+    the bucket angle alpha about the boom-plane normal, i.e. a rotation about +y by -alpha."""
+    theta1, alpha = np.asarray(theta1, dtype=float), np.asarray(alpha, dtype=float)
+    cy, sy = np.cos(0.5 * theta1), np.sin(0.5 * theta1)
+    cp, sp = np.cos(-0.5 * alpha), np.sin(-0.5 * alpha)
+    # q_z(theta1) * q_y(-alpha)
+    return np.stack((-sy * sp, cy * sp, sy * cp, cy * cp), axis=-1)
+
+
+def bucket_angular_velocity(theta1: Any, theta1_dot: Any, alpha_dot: Any) -> np.ndarray:
+    """omega = theta1dot z - alphadot y', y' = (-sin theta1, cos theta1, 0) the boom-plane normal."""
+    theta1 = np.asarray(theta1, dtype=float)
+    return np.stack(
+        (alpha_dot * np.sin(theta1), -alpha_dot * np.cos(theta1), np.broadcast_to(theta1_dot, theta1.shape)),
+        axis=-1,
+    ).astype(float)
+
+
+def bucket_angular_acceleration(
+    theta1: Any, theta1_dot: Any, theta1_ddot: Any, alpha_dot: Any, alpha_ddot: Any
+) -> np.ndarray:
+    """Time derivative of :func:`bucket_angular_velocity` (y' turns with the swing)."""
+    theta1 = np.asarray(theta1, dtype=float)
+    c, s = np.cos(theta1), np.sin(theta1)
+    return np.stack(
+        (
+            alpha_ddot * s + alpha_dot * theta1_dot * c,
+            -alpha_ddot * c + alpha_dot * theta1_dot * s,
+            np.broadcast_to(theta1_ddot, theta1.shape),
+        ),
+        axis=-1,
+    ).astype(float)

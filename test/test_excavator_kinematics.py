@@ -1,0 +1,354 @@
+"""Excavator core against independent references: the reference note's check values, central
+finite differences of every analytic derivative, rigid-body invariants of the pins, round trips,
+batch == scalar, and the errors bad input must raise."""
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from excavator_kinematics.kinematics import (
+    CYLINDERS,
+    Excavator,
+    StrokeError,
+    bucket_angular_acceleration,
+    bucket_angular_velocity,
+    bucket_quaternion,
+)
+from manipulator_kinematics.params import ConfigError, config_path, load_parameters
+
+EXC = Excavator.default()
+LIM = EXC.limits
+RNG = np.random.default_rng(20261122)
+
+
+def random_states(n: int, margin: float = 0.02) -> np.ndarray:
+    """States inside the stroke box, away from the ends by `margin` of the stroke."""
+    lo, hi = LIM.d_min.copy(), LIM.d_max.copy()
+    span = hi - lo
+    return RNG.uniform(lo + margin * span, hi - margin * span, size=(n, 4))
+
+
+def random_rates(n: int) -> np.ndarray:
+    return RNG.uniform(-1.0, 1.0, size=(n, 4)) * LIM.max_rates
+
+
+def rel_err(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
+
+
+# ---------------------------------------------------------------- the reference note's values
+def test_reference_state_check_values():
+    theta = np.degrees(EXC.joint_angles(LIM.reference[1:]))
+    np.testing.assert_allclose(theta, [34.124, -124.136, -31.496], atol=5e-4)
+    Q = EXC.pose(LIM.reference)
+    np.testing.assert_allclose(Q[:3], [4.209238, 0.0, 1.008412], atol=5e-7)
+    assert Q[3] == pytest.approx(np.radians(34.124 - 124.136 - 31.496), abs=1e-5)
+
+
+def test_reference_assembly_branch_pins():
+    pins = EXC.pins(LIM.reference)
+    # Arm frame at the reference: rod pin (2.55558, 0.61407), H-link pin (3.10344, 0.42369).
+    arm_pin, bucket_pin = pins["arm_pin"], pins["bucket_pin"]
+    axis = (bucket_pin - arm_pin) / np.linalg.norm(bucket_pin - arm_pin)
+    normal = np.array([-axis[2], 0.0, axis[0]])  # swing 0: the boom plane is x-z
+
+    def arm_frame(p: np.ndarray) -> np.ndarray:
+        return np.array([(p - arm_pin) @ axis, (p - arm_pin) @ normal])
+
+    np.testing.assert_allclose(arm_frame(pins["bucket_cylinder_rod"]), [2.55558, 0.61407], atol=5e-6)
+    np.testing.assert_allclose(arm_frame(pins["h_link_pin"]), [3.10344, 0.42369], atol=5e-6)
+
+
+def test_joint_ranges_at_stroke_ends():
+    # The note prints two decimals; its -44.05 is -44.0447 here (0.0053 deg, a rounding of the
+    # note's), so compare at the printed precision.
+    ends = np.degrees(EXC.joint_angles(np.stack((LIM.stroke_min, LIM.stroke_max))))
+    np.testing.assert_allclose(np.sort(ends[:, 0]), [-30.42, 59.53], atol=1e-2)
+    np.testing.assert_allclose(np.sort(ends[:, 1]), [-161.25, -44.05], atol=1e-2)
+    np.testing.assert_allclose(np.sort(ends[:, 2]), [-132.91, 39.32], atol=1e-2)
+
+
+def test_extension_senses():
+    """Boom cylinder out raises the boom; arm and bucket cylinders out curl arm and bucket in."""
+    k, _ = EXC.k_entries(random_states(500)[:, 1:])
+    assert np.all(k[:, 0] > 0) and np.all(k[:, 1] < 0) and np.all(k[:, 2] < 0)
+
+
+# ---------------------------------------------------------------- finite differences
+H = 1e-6
+
+
+@pytest.mark.parametrize("i", range(3))
+def test_k_and_k1_against_central_differences(i):
+    lengths = random_states(200)[:, 1:]
+    step = np.zeros(3)
+    step[i] = H
+    k, dk = EXC.k_entries(lengths)
+    fd_k = (EXC.joint_angles(lengths + step)[:, i] - EXC.joint_angles(lengths - step)[:, i]) / (2 * H)
+    assert rel_err(k[:, i], fd_k) < 1e-6
+    h2 = 1e-5
+    step[i] = h2
+    fd_dk = (EXC.k_entries(lengths + step)[0][:, i] - EXC.k_entries(lengths - step)[0][:, i]) / (2 * h2)
+    assert rel_err(dk[:, i], fd_dk) < 1e-6
+
+
+def test_j0_against_central_differences():
+    theta = EXC.state(random_states(100), np.zeros((100, 4))).theta
+    j0 = EXC.j0(theta)
+    for j in range(4):
+        step = np.zeros(4)
+        step[j] = H
+        fd = (EXC.open_chain_pose(theta + step) - EXC.open_chain_pose(theta - step)) / (2 * H)
+        assert rel_err(j0[:, :, j], fd) < 1e-6
+
+
+def test_jc0_against_central_differences_of_pose():
+    D = random_states(100)
+    jc0 = EXC.jc0(D)
+    for j in range(4):
+        step = np.zeros(4)
+        step[j] = H
+        fd = (EXC.pose(D + step) - EXC.pose(D - step)) / (2 * H)
+        assert rel_err(jc0[:, :, j], fd) < 1e-6
+
+
+def test_jc0_is_j0_times_k():
+    D = random_states(50)
+    theta = EXC.state(D, np.zeros_like(D)).theta
+    np.testing.assert_allclose(EXC.jc0(D), EXC.j0(theta) @ EXC.k_matrix(D), rtol=1e-13, atol=1e-13)
+
+
+def _trajectory(D0, V, A, t):
+    return D0 + V * t + 0.5 * A * t * t, V + A * t
+
+
+def test_velocity_and_acceleration_against_differences_along_a_motion():
+    """Qdot and Qddot of the state, differentiated numerically along D(t) = D0 + V t + A t^2/2."""
+    D0, V = random_states(100, margin=0.1), random_rates(100)
+    A = RNG.uniform(-0.5, 0.5, size=(100, 4))
+    h = 1e-5
+    now = EXC.state(D0, V, A)
+    ahead = EXC.state(*_trajectory(D0, V, A, h), A)
+    behind = EXC.state(*_trajectory(D0, V, A, -h), A)
+    assert rel_err(now.Q_dot, (ahead.Q - behind.Q) / (2 * h)) < 1e-6
+    assert rel_err(now.Q_ddot, (ahead.Q_dot - behind.Q_dot) / (2 * h)) < 1e-6
+    assert rel_err(now.theta_ddot, (ahead.theta_dot - behind.theta_dot) / (2 * h)) < 1e-6
+
+
+def test_paper_acceleration_matrices_match_state():
+    """Eq. 11 (JC0 Dddot + JC1_0 Ddot^2 + JC2_0 DDdot, built from the Hessian) == eq. 10 path."""
+    D, V = random_states(100), random_rates(100)
+    A = RNG.uniform(-0.5, 0.5, size=(100, 4))
+    jc1, jc2 = EXC.acceleration_matrices(D)
+    pairs = np.stack([V[:, i] * V[:, j] for i in range(4) for j in range(i + 1, 4)], axis=-1)
+    eq11 = (EXC.jc0(D) @ A[..., None])[..., 0] + (jc1 @ (V * V)[..., None])[..., 0] + (jc2 @ pairs[..., None])[..., 0]
+    assert rel_err(eq11, EXC.state(D, V, A).Q_ddot) < 1e-12
+
+
+# ---------------------------------------------------------------- rigid bodies
+BODIES = {
+    "upper structure": ("boom_foot", "boom_cylinder_base"),
+    "boom": ("boom_foot", "boom_cylinder_rod", "arm_pin", "arm_cylinder_base"),
+    "arm": ("arm_pin", "arm_cylinder_rod", "bucket_pin", "bucket_cylinder_base", "side_link_pivot"),
+    "bucket": ("bucket_pin", "h_link_pin_on_bucket", "bucket_tip"),
+}
+
+
+def _dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.linalg.norm(a - b, axis=-1)
+
+
+@pytest.mark.parametrize("body", BODIES)
+def test_pin_distances_on_one_body_are_constant(body):
+    pins = EXC.pins(random_states(300, margin=0.0))
+    names = BODIES[body]
+    for i, a in enumerate(names):
+        for b in names[i + 1 :]:
+            d = _dist(pins[a], pins[b])
+            assert np.ptp(d) < 1e-12, (body, a, b)
+
+
+def test_links_and_cylinders_close():
+    D = random_states(300, margin=0.0)
+    pins = EXC.pins(D)
+    np.testing.assert_allclose(_dist(pins["boom_cylinder_base"], pins["boom_cylinder_rod"]), D[:, 1], atol=1e-12)
+    np.testing.assert_allclose(_dist(pins["arm_cylinder_base"], pins["arm_cylinder_rod"]), D[:, 2], atol=1e-12)
+    np.testing.assert_allclose(
+        _dist(pins["bucket_cylinder_base"], pins["bucket_cylinder_rod"]), D[:, 3], atol=1e-12
+    )
+    np.testing.assert_allclose(_dist(pins["side_link_pivot"], pins["bucket_cylinder_rod"]), 0.62, atol=1e-12)
+    np.testing.assert_allclose(_dist(pins["bucket_cylinder_rod"], pins["h_link_pin"]), 0.58, atol=1e-12)
+    # The H-link reaches the bucket's own pin: the bucket four-bar closes.
+    np.testing.assert_allclose(pins["h_link_pin"], pins["h_link_pin_on_bucket"], atol=1e-12)
+    np.testing.assert_allclose(pins["bucket_tip"], EXC.pose(D)[:, :3], atol=1e-12)
+    # Everything lies in the boom plane: normal (-sin t1, cos t1, 0).
+    normal = np.stack((-np.sin(D[:, 0]), np.cos(D[:, 0]), np.zeros(len(D))), axis=-1)
+    for p in pins.values():
+        assert np.max(np.abs(np.sum(p * normal, axis=-1))) < 1e-12
+
+
+def test_bucket_branch_is_continuous_over_the_stroke():
+    d4 = np.linspace(LIM.stroke_min[2], LIM.stroke_max[2], 20001)
+    lengths = np.column_stack((np.full_like(d4, LIM.reference[1]), np.full_like(d4, LIM.reference[2]), d4))
+    theta4 = EXC.joint_angles(lengths)[:, 2]
+    k4 = EXC.k_entries(lengths)[0][:, 2]
+    assert np.max(np.abs(np.diff(theta4))) < 1.1 * np.max(np.abs(k4)) * (d4[1] - d4[0])
+
+
+# ---------------------------------------------------------------- round trips
+def test_lengths_angles_lengths_round_trip():
+    lengths = random_states(10_000, margin=0.0)[:, 1:]
+    lengths = np.vstack((lengths, LIM.stroke_min, LIM.stroke_max))
+    back = EXC.cylinder_lengths(EXC.joint_angles(lengths))
+    assert np.max(np.abs(back - lengths)) < 1e-9
+
+
+def test_rates_round_trip_through_jc0():
+    D, V = random_states(5000), random_rates(5000)
+    q_dot = EXC.state(D, V).Q_dot
+    solution = EXC.cylinder_rates(D, q_dot)
+    assert np.max(np.abs(solution.D_dot - V)) < 1e-9
+    assert np.all(solution.condition > 1.0) and np.all(np.isfinite(solution.condition))
+
+
+def test_accelerations_round_trip_eq12_eq13():
+    D, V = random_states(2000), random_rates(2000)
+    A = RNG.uniform(-0.5, 0.5, size=(2000, 4))
+    state = EXC.state(D, V, A)
+    assert np.max(np.abs(EXC.cylinder_accelerations(D, V, state.Q_ddot) - A)) < 1e-9
+    assert np.max(np.abs(EXC.joint_accelerations(D, V, state.Q_ddot) - state.theta_ddot)) < 1e-9
+
+
+# ---------------------------------------------------------------- batch == scalar
+def test_batch_equals_scalar():
+    D, V = random_states(40), random_rates(40)
+    A = RNG.uniform(-0.5, 0.5, size=(40, 4))
+    batch = EXC.state(D, V, A)
+    rates = EXC.cylinder_rates(D, batch.Q_dot)
+    for i in range(len(D)):
+        one = EXC.state(D[i], V[i], A[i])
+        for field in ("theta", "theta_dot", "theta_ddot", "Q", "Q_dot", "Q_ddot", "jc0"):
+            np.testing.assert_allclose(getattr(one, field), getattr(batch, field)[i], rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(EXC.pose(D[i]), EXC.pose(D)[i], rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(EXC.jc0(D[i]), EXC.jc0(D)[i], rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(EXC.joint_angles(D[i, 1:]), EXC.joint_angles(D[:, 1:])[i], rtol=1e-13)
+        np.testing.assert_allclose(EXC.cylinder_rates(D[i], batch.Q_dot[i]).D_dot, rates.D_dot[i], atol=1e-12)
+
+
+# ---------------------------------------------------------------- ROS-facing geometry
+def _rotation(q: np.ndarray) -> np.ndarray:
+    x, y, z, w = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def test_bucket_orientation_points_along_the_bucket_line():
+    for D in random_states(50):
+        pins = EXC.pins(D)
+        Q = EXC.pose(D)
+        R = _rotation(bucket_quaternion(D[0], Q[3]))
+        line = (pins["bucket_tip"] - pins["bucket_pin"]) / EXC.l4
+        np.testing.assert_allclose(R @ [1.0, 0.0, 0.0], line, atol=1e-12)
+        np.testing.assert_allclose(R @ [0.0, 1.0, 0.0], [-np.sin(D[0]), np.cos(D[0]), 0.0], atol=1e-12)
+
+
+def test_angular_velocity_and_acceleration_against_differences():
+    D0, V = random_states(30, margin=0.1), random_rates(30)
+    A = RNG.uniform(-0.5, 0.5, size=(30, 4))
+    h = 1e-5
+    for i in range(30):
+        states = [EXC.state(*_trajectory(D0[i], V[i], A[i], t), A[i]) for t in (-h, 0.0, h)]
+        rotations = [_rotation(bucket_quaternion(s.theta[0], s.Q[3])) for s in states]
+        skew = (rotations[2] - rotations[0]) / (2 * h) @ rotations[1].T
+        fd_omega = np.array([skew[2, 1], skew[0, 2], skew[1, 0]])
+        now = states[1]
+        omega = bucket_angular_velocity(now.theta[0], now.theta_dot[0], now.Q_dot[3])
+        np.testing.assert_allclose(omega, fd_omega, atol=1e-8)
+        omegas = [bucket_angular_velocity(s.theta[0], s.theta_dot[0], s.Q_dot[3]) for s in states]
+        alpha = bucket_angular_acceleration(now.theta[0], now.theta_dot[0], now.theta_ddot[0], now.Q_dot[3], now.Q_ddot[3])
+        np.testing.assert_allclose(alpha, (omegas[2] - omegas[0]) / (2 * h), atol=1e-8)
+
+
+# ---------------------------------------------------------------- bad input
+@pytest.mark.parametrize("i", range(3))
+@pytest.mark.parametrize("where", ["below", "above"])
+def test_out_of_stroke_names_cylinder_and_range(i, where):
+    D = LIM.reference.copy()
+    D[i + 1] = LIM.stroke_min[i] - 0.01 if where == "below" else LIM.stroke_max[i] + 0.01
+    with pytest.raises(StrokeError, match=CYLINDERS[i]) as info:
+        EXC.pose(D)
+    assert f"{LIM.stroke_min[i]:.6g}" in str(info.value) and f"{LIM.stroke_max[i]:.6g}" in str(info.value)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_input_raises_never_returns_nan(bad):
+    for index in range(4):
+        D = LIM.reference.copy()
+        D[index] = bad
+        with pytest.raises(StrokeError, match="not finite"):
+            EXC.state(D, np.zeros(4))
+    with pytest.raises(StrokeError, match="D_dot"):
+        EXC.state(LIM.reference, [0.0, bad, 0.0, 0.0])
+    with pytest.raises(StrokeError, match="Q_dot"):
+        EXC.cylinder_rates(LIM.reference, [bad, 0.0, 0.0, 0.0])
+
+
+def test_one_bad_state_in_a_batch_is_found():
+    D = random_states(100)
+    D[57, 2] = LIM.stroke_max[1] + 0.5
+    with pytest.raises(StrokeError, match="arm_cylinder length"):
+        EXC.state(D, np.zeros_like(D))
+
+
+def test_swing_limit_and_shape_errors():
+    D = LIM.reference.copy()
+    D[0] = LIM.swing_max + 0.1
+    with pytest.raises(StrokeError, match="swing_joint"):
+        EXC.pose(D)
+    with pytest.raises(StrokeError, match="shape"):
+        EXC.pose([1.0, 2.0, 3.0])
+
+
+def test_unreachable_angles_raise():
+    with pytest.raises(StrokeError, match="boom_cylinder"):
+        EXC.cylinder_lengths([np.radians(80.0), np.radians(-100.0), np.radians(-30.0)])
+
+
+def _description() -> dict:
+    return copy.deepcopy(load_parameters(config_path("excavator_cet200.yaml"))["excavator"])
+
+
+@pytest.mark.parametrize(
+    "mutate, key",
+    [
+        (lambda d: d["boom"].pop("length"), "boom.length"),
+        (lambda d: d["arm"].__setitem__("length", -2.9), "arm.length"),
+        (lambda d: d["bucket_cylinder"].__setitem__("min_length", 3.0), "bucket_cylinder"),
+        (lambda d: d["h_link"].__setitem__("orientation", 0), "h_link.orientation"),
+        (lambda d: d["boom_cylinder"].__setitem__("rod_pin", [1.0]), "boom_cylinder.rod_pin"),
+        (lambda d: d["swing"].__setitem__("max_speed", float("nan")), "swing.max_speed"),
+        (lambda d: d["arm_cylinder"].__setitem__("max_length", 9.0), "arm_cylinder"),
+        (lambda d: d["side_link"].__setitem__("length", 0.05), "bucket_cylinder"),
+    ],
+)
+def test_invalid_machine_description_names_the_key(mutate, key):
+    description = _description()
+    mutate(description)
+    with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
+        Excavator.from_parameters(description)
+
+
+def test_custom_machine_changes_the_numbers():
+    description = _description()
+    description["bucket"]["length"] = 1.5
+    other = Excavator.from_parameters(description)
+    reach = other.pose(LIM.reference)[0] - EXC.pose(LIM.reference)[0]
+    alpha = EXC.pose(LIM.reference)[3]
+    assert reach == pytest.approx((1.5 - EXC.l4) * np.cos(alpha), abs=1e-12)
