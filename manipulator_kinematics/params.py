@@ -20,9 +20,10 @@ class ConfigError(ValueError):
 def config_path(name: str) -> Path:
     """Path of a config file shipped with the package (source tree or installed share/)."""
     candidates = [CONFIG_DIR / name]
-    share = _installed_share()
-    if share is not None:
-        candidates.append(share / "config" / name)
+    if not candidates[0].is_file():
+        share = _installed_share()
+        if share is not None:
+            candidates.append(share / "config" / name)
     for path in candidates:
         if path.is_file():
             return path
@@ -37,7 +38,7 @@ def _installed_share() -> Path | None:
         return None
     try:
         return Path(get_package_share_directory("manipulator_kinematics"))
-    except (PackageNotFoundError, ValueError, LookupError):
+    except (PackageNotFoundError, OSError, ValueError, LookupError):  # OSError: no AMENT_PREFIX_PATH
         return None
 
 
