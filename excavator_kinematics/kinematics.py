@@ -98,7 +98,8 @@ class _Triangle:
 
 def _check_closes(c: Any, name: str) -> None:
     """|cos| < 1 or the linkage cannot be assembled at this length."""
-    if np.any(np.abs(c) >= 1.0):
+    closes = -1.0 < c < 1.0 if isinstance(c, float) else bool(np.all(np.abs(c) < 1.0))
+    if not closes:
         raise StrokeError(f"{name}: the linkage cannot close (triangle inequality violated)")
 
 
@@ -161,7 +162,7 @@ class Excavator:
             raise ConfigError("excavator: the machine description must be a mapping")
         g = description
         self.name = str(g.get("name", "excavator"))
-        self.l1, self.l0 = _point(_get(g, "boom.foot_pin"), "boom.foot_pin")
+        self.l1, self.l0 = _point(_get(g, "boom.foot_pin"), "boom.foot_pin").tolist()
         self.l2 = _positive(_get(g, "boom.length"), "boom.length")
         self.l3 = _positive(_get(g, "arm.length"), "arm.length")
         self.l4 = _positive(_get(g, "bucket.length"), "bucket.length")
@@ -185,6 +186,9 @@ class Excavator:
         bucket_base = _point(_get(g, "bucket_cylinder.base_pin"), "bucket_cylinder.base_pin")
         self._pivot = _point(_get(g, "side_link.pivot"), "side_link.pivot")
         self._side = _positive(_get(g, "side_link.length"), "side_link.length")
+        # Python floats: numpy scalars would make every operation of the one-state path slow.
+        self._pivot_xy = tuple(self._pivot.tolist())
+        self._bucket_pin_xy = tuple(self._bucket_pin.tolist())
         self._pins_local["bucket_cylinder_base"] = bucket_base
         self._pins_local["side_link_pivot"] = self._pivot
         to_base = bucket_base - self._pivot
@@ -241,6 +245,9 @@ class Excavator:
                     f"excavator.{cylinder}.reference_length {reference[i + 1]} outside the stroke "
                     f"[{stroke_arr[i, 0]}, {stroke_arr[i, 1]}]"
                 )
+        # Python floats of the limits with the tolerance applied, for the one-state fast path.
+        self._lo = (self.limits.d_min - STROKE_TOLERANCE).tolist()
+        self._hi = (self.limits.d_max + STROKE_TOLERANCE).tolist()
         self._check_whole_stroke()
 
     @staticmethod
@@ -285,6 +292,13 @@ class Excavator:
         D = np.asarray(D, dtype=float)
         if D.shape[-1:] != (4,) or D.ndim not in (1, 2):
             raise StrokeError(f"expected D = [swing, boom, arm, bucket] of shape (4,) or (N, 4), got {D.shape}")
+        # Fast path: everything inside the limits (NaN fails every comparison, so it falls
+        # through to the checks below, which name what is wrong).
+        if D.ndim == 1:
+            if all(lo <= v <= hi for lo, v, hi in zip(self._lo, D.tolist(), self._hi, strict=True)):
+                return D
+        elif np.all((D >= self._lo) & (D <= self._hi)):
+            return D
         self._check_lengths(D[..., 1:])
         swing = D[..., 0]
         if not np.all(np.isfinite(swing)):
@@ -331,17 +345,19 @@ class Excavator:
         gc, kc, dkc = side.closes(d4, m)
         phi = side.phi_first + side.orientation * gc
         phi_d, phi_dd = side.orientation * kc, side.orientation * dkc
+        px, py = self._pivot_xy
+        bx, by = self._bucket_pin_xy
         rx, ry = self._side * m.cos(phi), self._side * m.sin(phi)  # R - pivot
-        Rx, Ry = self._pivot[0] + rx, self._pivot[1] + ry
+        Rx, Ry = px + rx, py + ry
         # Bucket four-bar (Fig. 7c, eq. 2): H from the triangle (bucket pin, R, H).
-        ex, ey = Rx - self._bucket_pin[0], Ry - self._bucket_pin[1]
+        ex, ey = Rx - bx, Ry - by
         e = m.sqrt(ex * ex + ey * ey)
         b, a = self._h_radius, self._h_link
         ch = (e * e + b * b - a * a) / (2.0 * e * b)
         _check_closes(ch, "bucket_cylinder (bucket four-bar)")
         psi = m.atan2(ey, ex) + self._h_orientation * m.acos(ch)
         ox, oy = b * m.cos(psi), b * m.sin(psi)  # H - bucket pin
-        Hx, Hy = self._bucket_pin[0] + ox, self._bucket_pin[1] + oy
+        Hx, Hy = bx + ox, by + oy
         theta4 = psi - self._h_phase
         # Four-bar velocity ratio g1 = dpsi/dphi and g2 = d2psi/dphi2 from the loop constraint
         # (H - R).(vH - vR) = 0 and its time derivative; closed form, no iteration.
@@ -553,17 +569,20 @@ class Excavator:
             b1 * e2 + b2 * e3 + b3 * e4 + z_vp,
             e2 + e3 + e4,
         ]
-        x, y, z, alpha = rho * c1, rho * s1, self.l0 + a1, t2 + t3 + t4
-        ndim = D.ndim
-        return BucketState(
-            theta=_stack((t1, t2, t3, t4), ndim),
-            theta_dot=_stack((w1, w2, w3, w4), ndim),
-            theta_ddot=_stack((e1, e2, e3, e4), ndim),
-            Q=_stack((x, y, z, alpha), ndim),
-            Q_dot=_stack(q_dot, ndim),
-            Q_ddot=_stack(q_ddot, ndim),
-            jc0=_matrix(rows, D.shape[:-1]),
+        vectors = (
+            (t1, t2, t3, t4),
+            (w1, w2, w3, w4),
+            (e1, e2, e3, e4),
+            (rho * c1, rho * s1, self.l0 + a1, t2 + t3 + t4),
+            q_dot,
+            q_ddot,
         )
+        if D.ndim == 1:
+            # One array for everything, then views: one allocation instead of seven.
+            flat = np.array([v for group in (*vectors, *rows) for v in group], dtype=float)
+            parts = [flat[4 * i : 4 * i + 4] for i in range(6)]
+            return BucketState(*parts, jc0=flat[24:].reshape(4, 4))
+        return BucketState(*(_stack(v, 2) for v in vectors), jc0=_matrix(rows, D.shape[:-1]))
 
     def acceleration_matrices(self, D: Any) -> tuple[np.ndarray, np.ndarray]:
         """JC1_0 (..., 4, 4) and JC2_0 (..., 4, 6) of eq. 11.
@@ -688,33 +707,44 @@ def _velocity_products(terms: tuple[Any, ...], w1: Any, w2: Any, w3: Any, w4: An
 
 
 def _split(values: np.ndarray) -> tuple[SimpleNamespace, tuple[Any, ...]]:
-    """Columns of a state as Python floats (one state) or arrays (a batch), with matching math."""
+    """Columns of a state as Python floats (one state) or arrays (a batch), with matching math.
+
+    Batch columns are copied once into contiguous rows: every later ufunc then streams memory
+    instead of striding through (N, 4) rows.
+    """
     if values.ndim == 1:
         return _SCALAR, tuple(values.tolist())
-    return _ARRAY, tuple(values[..., i] for i in range(values.shape[-1]))
+    return _ARRAY, tuple(np.ascontiguousarray(np.moveaxis(values, -1, 0)))
 
 
 def _stack(columns: Any, ndim: int) -> np.ndarray:
+    """Columns -> array (..., k); a batch is filled row-contiguously and returned as a view."""
     if ndim == 1:
         return np.array(columns, dtype=float)
-    return np.stack(np.broadcast_arrays(*columns), axis=-1).astype(float, copy=False)
+    shape = np.broadcast_shapes(*(np.shape(c) for c in columns))
+    out = np.empty((len(columns), *shape))
+    for i, column in enumerate(columns):
+        out[i] = column
+    return np.moveaxis(out, 0, -1)
 
 
 def _matrix(rows: list[list[Any]], batch: tuple[int, ...]) -> np.ndarray:
+    """Entries -> array (..., r, c), filled entry-contiguously for a batch (see _stack)."""
     if not batch:
         return np.array(rows, dtype=float)
-    out = np.empty(batch + (len(rows), len(rows[0])))
+    out = np.empty((len(rows), len(rows[0]), *batch))
     for i, row in enumerate(rows):
         for j, entry in enumerate(row):
-            out[..., i, j] = entry
-    return out
+            out[i, j] = entry
+    return np.moveaxis(out, (0, 1), (-2, -1))
 
 
 def _finite(values: Any, shape: tuple[int, ...], name: str) -> np.ndarray:
     array = np.asarray(values, dtype=float)
     if array.shape != shape:
         raise StrokeError(f"{name}: expected shape {shape}, got {array.shape}")
-    if not np.all(np.isfinite(array)):
+    finite = all(map(math.isfinite, array.tolist())) if array.ndim == 1 else np.all(np.isfinite(array))
+    if not finite:
         raise StrokeError(f"{name} is not finite: {array}")
     return array
 
