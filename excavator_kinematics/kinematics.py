@@ -15,13 +15,14 @@ Everything is closed form. Every entry point takes one state (shape (4,)) or a b
 (N, 4)); one state runs on Python floats (math), a batch on numpy arrays, through the same code,
 so a single call costs microseconds and a batch runs at millions of states per second.
 """
+
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -30,6 +31,10 @@ from manipulator_kinematics.params import ConfigError, config_path, load_paramet
 CYLINDERS = ("boom_cylinder", "arm_cylinder", "bucket_cylinder")
 JOINTS = ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")
 DEFAULT_CONFIG = "excavator_cet200.yaml"
+
+# States per block of a large batch: the temporaries of one block stay below malloc's mmap
+# threshold and in cache; whole-batch temporaries cost more in page faults than in arithmetic.
+BATCH_BLOCK = 8192
 
 # Lengths this close outside a stroke end still count as inside, so that lengths computed from
 # angles at a stroke end (round-off of a few ulp) are accepted.
@@ -82,18 +87,25 @@ class _Triangle:
     name: str
     a: float  # |first - pivot|
     b: float  # |second - pivot|
-    phi_first: float
-    phi_second: float
+    offset: float  # ang(first) - ang(second)
     orientation: int
 
-    def closes(self, d: Any, m: SimpleNamespace) -> tuple[Any, Any, Any]:
-        """gamma (angle opposite d), dgamma/dd and d2gamma/dd2 (eq. 1: k21, k22)."""
-        a, b = self.a, self.b
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_cos_sin", (math.cos(self.offset), math.sin(self.offset)))
+
+    def closes(self, d: Any, m: SimpleNamespace) -> tuple[Any, ...]:
+        """Joint angle, its derivatives w.r.t. d (eq. 1: k21, k22) and its cosine and sine.
+
+        cos/sin come from cos(gamma) and sin(gamma) = sqrt(1 - cos^2) by angle addition, so
+        callers need no trigonometry for the open chain (np.sin is the costliest ufunc here).
+        """
+        a, b, o = self.a, self.b, self.orientation
         c = (a * a + b * b - d * d) / (2.0 * a * b)
         _check_closes(c, self.name)
-        s = m.sqrt(1.0 - c * c)
-        k = d / (a * b * s)
-        return m.acos(c), k, k / d - k * k * c / s
+        s = o * m.sqrt(1.0 - c * c)  # sin(o * gamma)
+        k = d / (a * b * s)  # o * dgamma/dd
+        cd, sd = self._cos_sin
+        return self.offset + o * m.acos(c), k, k / d - k * k * c / s, cd * c - sd * s, sd * c + cd * s
 
 
 def _check_closes(c: Any, name: str) -> None:
@@ -199,12 +211,12 @@ class Excavator:
             float(np.hypot(*to_base)),
             self._side,
             _angle(to_base),
-            0.0,
             _sign(_get(g, "bucket_cylinder.orientation"), "bucket_cylinder.orientation"),
         )
         h_pin = _point(_get(g, "h_link.bucket_pin"), "h_link.bucket_pin")
         self._h_radius = float(np.hypot(*h_pin))  # bucket pin -> H-link pin
         self._h_phase = _angle(h_pin)
+        self._h_phase_cos_sin = (math.cos(self._h_phase), math.sin(self._h_phase))
         self._h_link = _positive(_get(g, "h_link.length"), "h_link.length")
         self._h_orientation = _sign(_get(g, "h_link.orientation"), "h_link.orientation")
         self._pins_local["h_link_pin"] = h_pin
@@ -256,8 +268,7 @@ class Excavator:
             name,
             float(np.hypot(*first)),
             float(np.hypot(*second)),
-            _angle(first),
-            _angle(second),
+            _angle(first) - _angle(second),
             _sign(_get(g, f"{name}.orientation"), f"{name}.orientation"),
         )
 
@@ -291,13 +302,15 @@ class Excavator:
         """D as a float array of shape (4,) or (N, 4); raises StrokeError naming what is wrong."""
         D = np.asarray(D, dtype=float)
         if D.shape[-1:] != (4,) or D.ndim not in (1, 2):
-            raise StrokeError(f"expected D = [swing, boom, arm, bucket] of shape (4,) or (N, 4), got {D.shape}")
+            raise StrokeError(
+                f"expected D = [swing, boom, arm, bucket] of shape (4,) or (N, 4), got {D.shape}"
+            )
         # Fast path: everything inside the limits (NaN fails every comparison, so it falls
         # through to the checks below, which name what is wrong).
         if D.ndim == 1:
             if all(lo <= v <= hi for lo, v, hi in zip(self._lo, D.tolist(), self._hi, strict=True)):
                 return D
-        elif np.all((D >= self._lo) & (D <= self._hi)):
+        elif np.all((self._lo <= D) & (self._hi >= D)):
             return D
         self._check_lengths(D[..., 1:])
         swing = D[..., 0]
@@ -330,35 +343,30 @@ class Excavator:
                 )
 
     # ------------------------------------------------------------------ closed loops (eqs. 1-2, 7)
-    def _closed_loops(self, d2: Any, d3: Any, d4: Any, m: SimpleNamespace) -> tuple[Any, ...]:
-        """theta2..4, their first (K) and second (K1) derivatives w.r.t. d2..d4, and the
-        side-link angle phi plus the bucket four-bar's rod pin R and H-link pin H (arm frame)."""
-        boom, arm, side = self._boom, self._arm, self._side_triangle
-        g2, k2, dk2 = boom.closes(d2, m)
-        g3, k3, dk3 = arm.closes(d3, m)
-        theta2 = boom.phi_first + boom.orientation * g2 - boom.phi_second
-        theta3 = arm.phi_first + arm.orientation * g3 - arm.phi_second
-        k2, dk2 = boom.orientation * k2, boom.orientation * dk2
-        k3, dk3 = arm.orientation * k3, arm.orientation * dk3
-
-        # Cylinder four-bar (Fig. 7b): side-link angle phi and its derivatives.
-        gc, kc, dkc = side.closes(d4, m)
-        phi = side.phi_first + side.orientation * gc
-        phi_d, phi_dd = side.orientation * kc, side.orientation * dkc
+    def _closed_loops(self, d2: Any, d3: Any, d4: Any, m: SimpleNamespace) -> _Loops:
+        """theta2..4 with their first (K) and second (K1) derivatives w.r.t. d2..d4 and their
+        cosines and sines, plus the bucket linkage's rod pin R and H-link pin H (arm frame)."""
+        theta2, k2, dk2, c2, s2 = self._boom.closes(d2, m)
+        theta3, k3, dk3, c3, s3 = self._arm.closes(d3, m)
+        # Cylinder four-bar (Fig. 7b): side-link angle phi and its derivatives, same form.
+        _, phi_d, phi_dd, cphi, sphi = self._side_triangle.closes(d4, m)
         px, py = self._pivot_xy
         bx, by = self._bucket_pin_xy
-        rx, ry = self._side * m.cos(phi), self._side * m.sin(phi)  # R - pivot
+        rx, ry = self._side * cphi, self._side * sphi  # R - pivot
         Rx, Ry = px + rx, py + ry
         # Bucket four-bar (Fig. 7c, eq. 2): H from the triangle (bucket pin, R, H).
         ex, ey = Rx - bx, Ry - by
         e = m.sqrt(ex * ex + ey * ey)
-        b, a = self._h_radius, self._h_link
+        b, a, o = self._h_radius, self._h_link, self._h_orientation
         ch = (e * e + b * b - a * a) / (2.0 * e * b)
         _check_closes(ch, "bucket_cylinder (bucket four-bar)")
-        psi = m.atan2(ey, ex) + self._h_orientation * m.acos(ch)
-        ox, oy = b * m.cos(psi), b * m.sin(psi)  # H - bucket pin
+        sh = o * m.sqrt(1.0 - ch * ch)
+        ux, uy = ex / e, ey / e
+        ox, oy = b * (ux * ch - uy * sh), b * (uy * ch + ux * sh)  # H - bucket pin
         Hx, Hy = bx + ox, by + oy
-        theta4 = psi - self._h_phase
+        theta4 = m.atan2(ey, ex) + o * m.acos(ch) - self._h_phase
+        cp, sp = self._h_phase_cos_sin
+        c4, s4 = (ox * cp + oy * sp) / b, (oy * cp - ox * sp) / b
         # Four-bar velocity ratio g1 = dpsi/dphi and g2 = d2psi/dphi2 from the loop constraint
         # (H - R).(vH - vR) = 0 and its time derivative; closed form, no iteration.
         cx, cy = Hx - Rx, Hy - Ry
@@ -368,25 +376,31 @@ class Excavator:
         g2 = (g1 * g1 * (cx * ox + cy * oy) - (cx * rx + cy * ry) - (wx * wx + wy * wy)) / den
         k4 = g1 * phi_d
         dk4 = g2 * phi_d * phi_d + g1 * phi_dd
-        return theta2, theta3, theta4, k2, k3, k4, dk2, dk3, dk4, (Rx, Ry), (Hx, Hy)
+        return _Loops(
+            theta2, theta3, theta4, k2, k3, k4, dk2, dk3, dk4, (Rx, Ry), (Hx, Hy), (c2, s2, c3, s3, c4, s4)
+        )
 
     def joint_angles(self, lengths: Any) -> np.ndarray:
         """Cylinder lengths [d2, d3, d4] (..., 3) -> [theta2, theta3, theta4] (eqs. 1-2)."""
         lengths = np.asarray(lengths, dtype=float)
         if lengths.shape[-1:] != (3,):
-            raise StrokeError(f"expected [boom, arm, bucket] lengths of shape (3,) or (N, 3), got {lengths.shape}")
+            raise StrokeError(
+                f"expected [boom, arm, bucket] lengths of shape (3,) or (N, 3), got {lengths.shape}"
+            )
         self._check_lengths(lengths)
         m, cols = _split(lengths)
-        out = self._closed_loops(*cols, m)
-        return _stack(out[:3], lengths.ndim)
+        loops = self._closed_loops(*cols, m)
+        return _stack((loops.theta2, loops.theta3, loops.theta4), lengths.ndim)
 
     def k_entries(self, lengths: Any) -> tuple[np.ndarray, np.ndarray]:
         """dtheta_i/dd_i (the diagonal of K, eq. 7) and d2theta_i/dd_i2 (of K1), for i = 2..4."""
         lengths = np.asarray(lengths, dtype=float)
         self._check_lengths(lengths)
         m, cols = _split(lengths)
-        out = self._closed_loops(*cols, m)
-        return _stack(out[3:6], lengths.ndim), _stack(out[6:9], lengths.ndim)
+        loops = self._closed_loops(*cols, m)
+        return _stack((loops.k2, loops.k3, loops.k4), lengths.ndim), _stack(
+            (loops.dk2, loops.dk3, loops.dk4), lengths.ndim
+        )
 
     def cylinder_lengths(self, angles: Any) -> np.ndarray:
         """Joint angles [theta2, theta3, theta4] (..., 3) -> cylinder lengths (inverse of eqs. 1-2).
@@ -397,12 +411,14 @@ class Excavator:
         """
         angles = np.asarray(angles, dtype=float)
         if angles.shape[-1:] != (3,) or angles.ndim not in (1, 2):
-            raise StrokeError(f"expected [theta2, theta3, theta4] of shape (3,) or (N, 3), got {angles.shape}")
+            raise StrokeError(
+                f"expected [theta2, theta3, theta4] of shape (3,) or (N, 3), got {angles.shape}"
+            )
         if not np.all(np.isfinite(angles)):
             raise StrokeError("joint angles are not finite")
         lengths = np.empty_like(angles)
         for i, tri in enumerate((self._boom, self._arm)):
-            gamma = tri.orientation * (angles[..., i] + tri.phi_second - tri.phi_first)
+            gamma = tri.orientation * (angles[..., i] - tri.offset)
             gamma = (gamma + np.pi) % (2.0 * np.pi) - np.pi
             if np.any(gamma <= 0.0):
                 raise StrokeError(f"{JOINTS[i + 1]} angle cannot be reached by {tri.name} on this assembly")
@@ -417,7 +433,8 @@ class Excavator:
         base = np.arctan2(to_h[..., 1], to_h[..., 0])
         spread = np.arccos(c)
         candidates = [
-            self._pivot + self._side * np.stack((np.cos(base + s * spread), np.sin(base + s * spread)), axis=-1)
+            self._pivot
+            + self._side * np.stack((np.cos(base + s * spread), np.sin(base + s * spread)), axis=-1)
             for s in (1.0, -1.0)
         ]
         # Keep the rod pin on the bucket four-bar's assembly branch (same orientation as forward).
@@ -438,26 +455,27 @@ class Excavator:
         """Q = [x, y, z, alpha] of the bucket tip for D (eqs. 1-3)."""
         D = self.validate(D)
         m, (t1, d2, d3, d4) = _split(D)
-        t2, t3, t4 = self._closed_loops(d2, d3, d4, m)[:3]
-        return _stack(self._tip(t1, t2, t3, t4, m), D.ndim)
+        loops = self._closed_loops(d2, d3, d4, m)
+        terms = self._jacobian_terms(t1, loops.trig, m)
+        return _stack(self._tip(terms, loops.theta2 + loops.theta3 + loops.theta4), D.ndim)
 
     def open_chain_pose(self, theta: Any) -> np.ndarray:
         """Q = [x, y, z, alpha] from the open-chain joints theta1..theta4 (eq. 3), no limits."""
         theta = np.asarray(theta, dtype=float)
-        m, cols = _split(theta)
-        return _stack(self._tip(*cols, m), theta.ndim)
+        m, (t1, t2, t3, t4) = _split(theta)
+        terms = self._jacobian_terms(t1, _trig(t2, t3, t4, m), m)
+        return _stack(self._tip(terms, t2 + t3 + t4), theta.ndim)
 
-    def _tip(self, t1: Any, t2: Any, t3: Any, t4: Any, m: SimpleNamespace) -> tuple[Any, ...]:
-        t23, t234 = t2 + t3, t2 + t3 + t4
-        rho = self.l1 + self.l2 * m.cos(t2) + self.l3 * m.cos(t23) + self.l4 * m.cos(t234)
-        z = self.l0 + self.l2 * m.sin(t2) + self.l3 * m.sin(t23) + self.l4 * m.sin(t234)
-        return rho * m.cos(t1), rho * m.sin(t1), z, t234
+    def _tip(self, terms: tuple[Any, ...], alpha: Any) -> tuple[Any, ...]:
+        """Eq. 3 from eq. 4's coefficients: rho = l1 + b1, z = l0 + a1."""
+        a1, _, _, _, _, _, rho, c1, s1 = terms
+        return rho * c1, rho * s1, self.l0 + a1, alpha
 
     def pins(self, D: Any) -> dict[str, np.ndarray]:
         """Every pin (and the tip) in the base frame, shape (..., 3), for drawing and checking."""
         D = self.validate(D)
         t1, d2, d3, d4 = (D[..., i] for i in range(4))
-        t2, t3, t4, *_, R, H = self._closed_loops(d2, d3, d4, _ARRAY)
+        t2, t3, t4, *_, R, H, _ = self._closed_loops(d2, d3, d4, _ARRAY)
         foot = np.array([self.l1, self.l0])
 
         def place(origin: np.ndarray, angle: Any, local: Any) -> np.ndarray:
@@ -493,11 +511,14 @@ class Excavator:
             for name, p in side.items()
         }
 
-    def _jacobian_terms(self, t1: Any, t2: Any, t3: Any, t4: Any, m: SimpleNamespace) -> tuple[Any, ...]:
-        """a1..a3, b1..b3 of eq. 4, rho = l1 + b1, and cos/sin of theta1."""
-        t23, t234 = t2 + t3, t2 + t3 + t4
-        s2, s23, s234 = m.sin(t2), m.sin(t23), m.sin(t234)
-        c2, c23, c234 = m.cos(t2), m.cos(t23), m.cos(t234)
+    def _jacobian_terms(self, t1: Any, trig: tuple[Any, ...], m: SimpleNamespace) -> tuple[Any, ...]:
+        """a1..a3, b1..b3 of eq. 4, rho = l1 + b1, and cos/sin of theta1.
+
+        ``trig`` = cos/sin of theta2, theta3, theta4; the sums by angle addition.
+        """
+        c2, s2, c3, s3, c4, s4 = trig
+        c23, s23 = c2 * c3 - s2 * s3, s2 * c3 + c2 * s3
+        c234, s234 = c23 * c4 - s23 * s4, s23 * c4 + c23 * s4
         a3, b3 = self.l4 * s234, self.l4 * c234
         a2, b2 = self.l3 * s23 + a3, self.l3 * c23 + b3
         a1, b1 = self.l2 * s2 + a2, self.l2 * c2 + b2
@@ -506,8 +527,8 @@ class Excavator:
     def j0(self, theta: Any) -> np.ndarray:
         """J0(theta) of eq. 5: Qdot = J0 thetadot, rows x, y, z, alpha; columns theta1..theta4."""
         theta = np.asarray(theta, dtype=float)
-        m, cols = _split(theta)
-        a1, a2, a3, b1, b2, b3, rho, c1, s1 = self._jacobian_terms(*cols, m)
+        m, (t1, t2, t3, t4) = _split(theta)
+        a1, a2, a3, b1, b2, b3, rho, c1, s1 = self._jacobian_terms(t1, _trig(t2, t3, t4, m), m)
         return _matrix(
             [
                 [-rho * s1, -a1 * c1, -a2 * c1, -a3 * c1],
@@ -530,9 +551,9 @@ class Excavator:
         """JC0 = J0 K (eq. 8): Qdot = JC0 Ddot."""
         D = self.validate(D)
         m, (t1, d2, d3, d4) = _split(D)
-        t2, t3, t4, k2, k3, k4 = self._closed_loops(d2, d3, d4, m)[:6]
-        terms = self._jacobian_terms(t1, t2, t3, t4, m)
-        return _matrix(_jc0_rows(terms, k2, k3, k4), D.shape[:-1])
+        loops = self._closed_loops(d2, d3, d4, m)
+        terms = self._jacobian_terms(t1, loops.trig, m)
+        return _matrix(_jc0_rows(terms, loops.k2, loops.k3, loops.k4), D.shape[:-1])
 
     # ------------------------------------------------------------------ full state (eqs. 3-11)
     def state(self, D: Any, D_dot: Any, D_ddot: Any = None) -> BucketState:
@@ -545,11 +566,31 @@ class Excavator:
         D = self.validate(D)
         D_dot = _finite(D_dot, D.shape, "D_dot")
         D_ddot = np.zeros_like(D) if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot")
+        if D.ndim == 1:
+            vectors, rows = self._state(D, D_dot, D_ddot)
+            # One array for everything, then views: one allocation instead of seven.
+            flat = np.array([v for group in (*vectors, *rows) for v in group], dtype=float)
+            return BucketState(*(flat[4 * i : 4 * i + 4] for i in range(6)), jc0=flat[24:].reshape(4, 4))
+        n = len(D)
+        vector_out, matrix_out = np.empty((6, 4, n)), np.empty((4, 4, n))
+        for start in range(0, n, BATCH_BLOCK):
+            block = slice(start, start + BATCH_BLOCK)
+            vectors, rows = self._state(D[block], D_dot[block], D_ddot[block])
+            for out, group in zip(vector_out, vectors, strict=True):
+                for i, value in enumerate(group):
+                    out[i, block] = value
+            for i, row in enumerate(rows):
+                for j, value in enumerate(row):
+                    matrix_out[i, j, block] = value
+        return BucketState(*np.moveaxis(vector_out, 1, -1), jc0=np.moveaxis(matrix_out, (0, 1), (-2, -1)))
+
+    def _state(self, D: np.ndarray, D_dot: np.ndarray, D_ddot: np.ndarray) -> tuple[tuple, list]:
+        """Columns of the six state vectors and the rows of JC0 (floats or block arrays)."""
         m, (t1, d2, d3, d4) = _split(D)
         _, (w1, v2, v3, v4) = _split(D_dot)
         _, (e1, f2, f3, f4) = _split(D_ddot)
-        t2, t3, t4, k2, k3, k4, dk2, dk3, dk4 = self._closed_loops(d2, d3, d4, m)[:9]
-        terms = self._jacobian_terms(t1, t2, t3, t4, m)
+        t2, t3, t4, k2, k3, k4, dk2, dk3, dk4, _, _, trig = self._closed_loops(d2, d3, d4, m)
+        terms = self._jacobian_terms(t1, trig, m)
         rows = _jc0_rows(terms, k2, k3, k4)
         # thetadot = K Ddot (eq. 7); thetaddot = K Dddot + K1 Ddot^2 (its time derivative).
         w2, w3, w4 = k2 * v2, k3 * v3, k4 * v4
@@ -577,12 +618,7 @@ class Excavator:
             q_dot,
             q_ddot,
         )
-        if D.ndim == 1:
-            # One array for everything, then views: one allocation instead of seven.
-            flat = np.array([v for group in (*vectors, *rows) for v in group], dtype=float)
-            parts = [flat[4 * i : 4 * i + 4] for i in range(6)]
-            return BucketState(*parts, jc0=flat[24:].reshape(4, 4))
-        return BucketState(*(_stack(v, 2) for v in vectors), jc0=_matrix(rows, D.shape[:-1]))
+        return vectors, rows
 
     def acceleration_matrices(self, D: Any) -> tuple[np.ndarray, np.ndarray]:
         """JC1_0 (..., 4, 4) and JC2_0 (..., 4, 6) of eq. 11.
@@ -594,8 +630,8 @@ class Excavator:
         """
         D = self.validate(D)
         t1, d2, d3, d4 = (D[..., i] for i in range(4))
-        t2, t3, t4, k2, k3, k4, dk2, dk3, dk4 = self._closed_loops(d2, d3, d4, _ARRAY)[:9]
-        a1, a2, a3, b1, b2, b3, rho, c1, s1 = self._jacobian_terms(t1, t2, t3, t4, _ARRAY)
+        t2, t3, t4, k2, k3, k4, dk2, dk3, dk4, _, _, trig = self._closed_loops(d2, d3, d4, _ARRAY)
+        a1, a2, a3, b1, b2, b3, rho, c1, s1 = self._jacobian_terms(t1, trig, _ARRAY)
         k = np.stack((np.ones_like(k2), k2, k3, k4), axis=-1)
         dk = np.stack((np.zeros_like(dk2), dk2, dk3, dk4), axis=-1)
         # Hessian of Q(theta): d2rho/dthj dthk = -b_max(j,k); d2z = -a_max(j,k); rho = l1 + b1.
@@ -615,7 +651,9 @@ class Excavator:
         diag = np.arange(4)
         jc1 = j0 * dk[..., None, :] + hess[..., diag, diag] * (k * k)[..., None, :]
         pairs = [(i, j) for i in range(4) for j in range(i + 1, 4)]
-        jc2 = np.stack([2.0 * hess[..., i, j] * (k[..., i] * k[..., j])[..., None] for i, j in pairs], axis=-1)
+        jc2 = np.stack(
+            [2.0 * hess[..., i, j] * (k[..., i] * k[..., j])[..., None] for i, j in pairs], axis=-1
+        )
         return jc1, jc2
 
     # ------------------------------------------------------------------ inverse (eqs. 9, 12-13)
@@ -655,8 +693,26 @@ class Excavator:
         return np.linalg.solve(j0, (Q_ddot - free.Q_ddot)[..., None])[..., 0] + free.theta_ddot
 
 
-@dataclass(frozen=True)
-class BucketState:
+class _Loops(NamedTuple):
+    theta2: Any
+    theta3: Any
+    theta4: Any
+    k2: Any
+    k3: Any
+    k4: Any
+    dk2: Any
+    dk3: Any
+    dk4: Any
+    R: tuple[Any, Any]
+    H: tuple[Any, Any]
+    trig: tuple[Any, ...]  # cos/sin of theta2, theta3, theta4
+
+
+def _trig(t2: Any, t3: Any, t4: Any, m: SimpleNamespace) -> tuple[Any, ...]:
+    return m.cos(t2), m.sin(t2), m.cos(t3), m.sin(t3), m.cos(t4), m.sin(t4)
+
+
+class BucketState(NamedTuple):
     """Forward kinematic state; arrays of shape (..., 4) (jc0: (..., 4, 4))."""
 
     theta: np.ndarray  # open-chain joints theta1..theta4 (rad)

@@ -1,6 +1,7 @@
 """Excavator core against independent references: the reference note's check values, central
 finite differences of every analytic derivative, rigid-body invariants of the pins, round trips,
 batch == scalar, and the errors bad input must raise."""
+
 from __future__ import annotations
 
 import copy
@@ -143,7 +144,11 @@ def test_paper_acceleration_matrices_match_state():
     A = RNG.uniform(-0.5, 0.5, size=(100, 4))
     jc1, jc2 = EXC.acceleration_matrices(D)
     pairs = np.stack([V[:, i] * V[:, j] for i in range(4) for j in range(i + 1, 4)], axis=-1)
-    eq11 = (EXC.jc0(D) @ A[..., None])[..., 0] + (jc1 @ (V * V)[..., None])[..., 0] + (jc2 @ pairs[..., None])[..., 0]
+    eq11 = (
+        (EXC.jc0(D) @ A[..., None])[..., 0]
+        + (jc1 @ (V * V)[..., None])[..., 0]
+        + (jc2 @ pairs[..., None])[..., 0]
+    )
     assert rel_err(eq11, EXC.state(D, V, A).Q_ddot) < 1e-12
 
 
@@ -173,8 +178,12 @@ def test_pin_distances_on_one_body_are_constant(body):
 def test_links_and_cylinders_close():
     D = random_states(300, margin=0.0)
     pins = EXC.pins(D)
-    np.testing.assert_allclose(_dist(pins["boom_cylinder_base"], pins["boom_cylinder_rod"]), D[:, 1], atol=1e-12)
-    np.testing.assert_allclose(_dist(pins["arm_cylinder_base"], pins["arm_cylinder_rod"]), D[:, 2], atol=1e-12)
+    np.testing.assert_allclose(
+        _dist(pins["boom_cylinder_base"], pins["boom_cylinder_rod"]), D[:, 1], atol=1e-12
+    )
+    np.testing.assert_allclose(
+        _dist(pins["arm_cylinder_base"], pins["arm_cylinder_rod"]), D[:, 2], atol=1e-12
+    )
     np.testing.assert_allclose(
         _dist(pins["bucket_cylinder_base"], pins["bucket_cylinder_rod"]), D[:, 3], atol=1e-12
     )
@@ -272,7 +281,9 @@ def test_angular_velocity_and_acceleration_against_differences():
         omega = bucket_angular_velocity(now.theta[0], now.theta_dot[0], now.Q_dot[3])
         np.testing.assert_allclose(omega, fd_omega, atol=1e-8)
         omegas = [bucket_angular_velocity(s.theta[0], s.theta_dot[0], s.Q_dot[3]) for s in states]
-        alpha = bucket_angular_acceleration(now.theta[0], now.theta_dot[0], now.theta_ddot[0], now.Q_dot[3], now.Q_ddot[3])
+        alpha = bucket_angular_acceleration(
+            now.theta[0], now.theta_dot[0], now.theta_ddot[0], now.Q_dot[3], now.Q_ddot[3]
+        )
         np.testing.assert_allclose(alpha, (omegas[2] - omegas[0]) / (2 * h), atol=1e-8)
 
 
