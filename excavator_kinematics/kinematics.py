@@ -567,10 +567,18 @@ class Excavator:
         D_dot = _finite(D_dot, D.shape, "D_dot")
         D_ddot = np.zeros_like(D) if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot")
         if D.ndim == 1:
-            vectors, rows = self._state(D, D_dot, D_ddot)
+            (v0, v1, v2, v3, v4, v5), (r0, r1, r2, r3) = self._state(D, D_dot, D_ddot)
             # One array for everything, then views: one allocation instead of seven.
-            flat = np.array([v for group in (*vectors, *rows) for v in group], dtype=float)
-            return BucketState(*(flat[4 * i : 4 * i + 4] for i in range(6)), jc0=flat[24:].reshape(4, 4))
+            flat = np.array([*v0, *v1, *v2, *v3, *v4, *v5, *r0, *r1, *r2, *r3], dtype=float)
+            return BucketState(
+                flat[0:4],
+                flat[4:8],
+                flat[8:12],
+                flat[12:16],
+                flat[16:20],
+                flat[20:24],
+                flat[24:].reshape(4, 4),
+            )
         n = len(D)
         vector_out, matrix_out = np.empty((6, 4, n)), np.empty((4, 4, n))
         for start in range(0, n, BATCH_BLOCK):
