@@ -1,0 +1,475 @@
+"""SCARA-type planar arm (P-R-R) of Fu, Zhang and Qiu (2019): position and velocity kinematics.
+
+Numpy only (no rclpy). SI units; REP 103: the arm moves in the base x-y plane, z up, the rail
+along base +x. Joints, in this order (names configurable, these are the defaults):
+
+* ``rail_joint``     x_l    prismatic, carriage travel along base +x (m)
+* ``shoulder_joint`` theta1 revolute about +z, upper arm angle from +x (rad)
+* ``elbow_joint``    theta2 revolute about +z, forearm angle relative to the upper arm (rad)
+
+Forward kinematics, eqs. (9)-(10) in the form consistent with the A matrices of eqs. (3)-(5) (the
+extracted paper's eq. 6 swaps sin and cos and eq. 10 adds a stray "+ l2" to py)::
+
+    px  = l1 + x_l + l2 cos(theta1) + l3 cos(theta1 + theta2)
+    py  =            l2 sin(theta1) + l3 sin(theta1 + theta2)
+    phi = theta1 + theta2                       (tool heading in the plane, wrapped to [-pi, pi))
+
+Inverse kinematics, eqs. (11)-(12) generalised to any tool heading phi (the paper fixes phi = 90
+deg and its eq. 12 drops the arcsin): with the wrist point w = p - l3 (cos phi, sin phi),
+theta1 = asin(wy / l2) (branch ``elbow_a``, upper arm toward +x, cos theta1 >= 0; the paper's) or
+pi - asin(wy / l2) (branch ``elbow_b``, upper arm toward -x), then x_l = wx - l1 - l2 cos theta1
+and theta2 = phi - theta1. Three modes:
+
+* ``fixed_phi``: phi = 90 deg, the paper's eq. (12): theta1 = asin((py - l3) / l2).
+* ``phi``: phi given with the target.
+* ``position``: only (px, py) given; the arm is redundant (3 joints, 2 constraints). Rule: keep
+  the seed's tool heading phi = theta1 + theta2 (no seed: 90 deg, the paper's); if no solution at
+  that phi is inside the joint limits and away from the singularity, take the nearest phi (least
+  |phi - phi_seed|) that has one. The admissible phi form closed intervals whose ends are where a
+  constraint becomes active, each in closed form (|cos theta1| at the singularity threshold,
+  theta1 or theta2 or x_l at a limit; the last by the planar two-link IK from the rail end), so
+  the nearest admissible phi is exact, not searched.
+
+In every mode the branch is the one asked for, else the one closest to the seed (distance
+(dx_l / l2)^2 + dtheta1^2 + dtheta2^2), else ``elbow_a``.
+
+Velocity (the paper's Jacobian, section 2): [px', py', phi'] = J [x_l', theta1', theta2'],
+J = [[1, -l2 s1 - l3 s12, -l3 s12], [0, l2 c1 + l3 c12, l3 c12], [0, 1, 1]], det J = l2 cos theta1:
+singular when the upper arm is perpendicular to the rail. A configuration counts as singular when
+|cos theta1| < ``singularity_threshold`` (default 0.01; joint rates there exceed 100 v / l2 for a
+tool speed v).
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from enum import IntEnum
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from manipulator_kinematics.params import ConfigError, config_path, load_parameters
+from manipulator_kinematics.planar import two_link_ik, wrap_angle
+from manipulator_kinematics.serial_chain import JointLimits, SerialChain, prismatic, revolute, troty
+
+BRANCHES = ("elbow_a", "elbow_b")
+MODES = ("fixed_phi", "phi", "position")
+#: The paper's working tool heading (eq. 11: theta1 + theta2 = 90 deg).
+PAPER_PHI = math.pi / 2
+#: Values this close (m or rad) outside a limit count as on it and are clipped to it.
+LIMIT_TOL = 1e-10
+CONFIG_FILE = "scara.yaml"
+
+
+class IKStatus(IntEnum):
+    """Outcome of an IK target, ordered from best to worst (a batch takes the best branch)."""
+
+    SUCCESS = 0
+    SINGULAR = 1  # a solution inside the limits exists only at or near the singularity
+    JOINT_LIMITS = 2  # geometric solutions exist, every one violates a joint limit or stroke end
+    UNREACHABLE = 3  # no configuration reaches the target, whatever the limits
+    INVALID = 4  # the target is not finite
+
+
+# Plain ints for array work (IntEnum members cost an attribute lookup and a conversion per use).
+_SUCCESS, _SINGULAR, _JOINT_LIMITS, _UNREACHABLE, _INVALID = (int(s) for s in IKStatus)
+
+
+@dataclass(frozen=True)
+class VelocityIK:
+    """Joint rates (..., 3) for a tool velocity; NaN where ``singular`` (...,) is True."""
+
+    qd: np.ndarray
+    singular: np.ndarray
+
+
+@dataclass(frozen=True)
+class IKResult:
+    """Solutions of a batch of targets (leading shape ``...`` of the targets).
+
+    ``q`` (..., 3) is the selected solution (NaN unless ``status`` is SUCCESS); ``branch`` (...,)
+    its index into ``BRANCHES`` (-1 if none); ``phi`` (...,) the tool heading solved for (position
+    mode: the one chosen) and ``preferred_phi`` the one the rule started from. ``candidates``
+    (..., 2, 3) holds both branches at ``phi`` (NaN when not reachable) and ``branch_status``
+    (..., 2) their status, so both are available when both are valid.
+    """
+
+    mode: str
+    q: np.ndarray
+    status: np.ndarray
+    branch: np.ndarray
+    phi: np.ndarray
+    preferred_phi: np.ndarray
+    candidates: np.ndarray
+    branch_status: np.ndarray
+    requested_branch: int | None
+    seeded: bool
+    scara: Scara = field(repr=False, compare=False)
+
+    @property
+    def ok(self) -> np.ndarray:
+        return self.status == IKStatus.SUCCESS
+
+    @property
+    def valid(self) -> np.ndarray:
+        """(..., 2) True for each branch that is a solution (inside limits, not singular)."""
+        return self.branch_status == IKStatus.SUCCESS
+
+    def reason(self, index: tuple[int, ...] | int = ()) -> str:
+        """Human-readable outcome of one target: the branch and rule used, or why it failed."""
+        scara, status = self.scara, IKStatus(int(self.status[index]))
+        phi, preferred = float(self.phi[index]), float(self.preferred_phi[index])
+        if status is IKStatus.SUCCESS:
+            name = BRANCHES[int(self.branch[index])]
+            text = f"{self.mode} mode: branch {name}, phi = {math.degrees(phi):.6g} deg"
+            if self.mode == "position":
+                source = "the seed's" if self.seeded else "the paper's (no seed)"
+                if abs(wrap_angle(phi - preferred)) < 1e-12:
+                    text += f" (kept {source} heading)"
+                else:
+                    text += (f" (moved from {source} heading {math.degrees(preferred):.6g} deg: the nearest"
+                             " one with a solution inside the joint limits, away from the singularity)")
+            return text
+        if status is IKStatus.INVALID:
+            return "target is not finite"
+        candidates, branch_status = self.candidates[index], self.branch_status[index]
+        if self.mode == "position":
+            head = "no tool heading phi gives a solution inside the joint limits away from the singularity"
+            if status is IKStatus.UNREACHABLE:
+                reach = scara.l2 + scara.l3
+                return f"{head}: the target is farther than l2 + l3 = {reach:.6g} m from the rail"
+            head += f"; at phi = {math.degrees(phi):.6g} deg"
+        else:
+            head = f"{self.mode} mode, phi = {math.degrees(phi):.6g} deg"
+        branches = range(2) if self.requested_branch is None else (self.requested_branch,)
+        parts = [f"{BRANCHES[b]}: {scara.describe(candidates[b], IKStatus(int(branch_status[b])), phi)}"
+                 for b in branches]
+        return f"{head}: " + "; ".join(parts)
+
+
+class Scara:
+    """The P-R-R arm: geometry l1, l2, l3 (m), joint limits, singularity threshold."""
+
+    def __init__(self, l1: float, l2: float, l3: float, limits: JointLimits,
+                 singularity_threshold: float = 0.01) -> None:
+        if not (l1 >= 0.0 and l2 > 0.0 and l3 > 0.0):
+            raise ValueError(f"need l1 >= 0, l2 > 0, l3 > 0; got {l1}, {l2}, {l3}")
+        if len(limits.names) != 3:
+            raise ValueError("the SCARA has three joints: rail, shoulder, elbow")
+        if not 0.0 <= singularity_threshold < 1.0:
+            raise ValueError(f"singularity_threshold must be in [0, 1), got {singularity_threshold}")
+        self.l1, self.l2, self.l3 = float(l1), float(l2), float(l3)
+        self.limits = limits
+        self.singularity_threshold = float(singularity_threshold)
+
+    # ---- construction -------------------------------------------------------------------------
+    @classmethod
+    def from_parameters(cls, params: Mapping[str, Any], prefix: str = "scara") -> Scara:
+        """From the nested ``scara:`` section of a parameters file; ConfigError names a bad key."""
+        if not isinstance(params, Mapping):
+            raise ConfigError(f"{prefix}: expected a mapping of parameters, got {type(params).__name__}")
+        l1 = _number(params, "l1", prefix, minimum=0.0)
+        l2 = _number(params, "l2", prefix, minimum=0.0, strict=True)
+        l3 = _number(params, "l3", prefix, minimum=0.0, strict=True)
+        names = params.get("joint_names")
+        if names is None:
+            raise ConfigError(f"{prefix}.joint_names: missing")
+        if (isinstance(names, str) or not isinstance(names, Sequence) or len(names) != 3
+                or not all(isinstance(n, str) and n for n in names) or len(set(names)) != 3):
+            raise ConfigError(f"{prefix}.joint_names: need 3 distinct non-empty names, got {names!r}")
+        lower = _numbers(params, "joint_min", prefix)
+        upper = _numbers(params, "joint_max", prefix)
+        for i in range(3):
+            if not lower[i] < upper[i]:
+                raise ConfigError(f"{prefix}.joint_min[{i}] = {lower[i]} must be below "
+                                  f"{prefix}.joint_max[{i}] = {upper[i]} ({names[i]})")
+        for i in (1, 2):
+            for key, value in (("joint_min", lower[i]), ("joint_max", upper[i])):
+                if abs(value) > math.pi:
+                    raise ConfigError(f"{prefix}.{key}[{i}] = {value} rad ({names[i]}) is outside [-pi, pi]: "
+                                      "limits are radians and the solver returns angles in [-pi, pi)")
+        threshold = _number(params, "singularity_threshold", prefix, minimum=0.0)
+        if threshold >= 1.0:
+            raise ConfigError(f"{prefix}.singularity_threshold = {threshold} must be below 1 "
+                              "(it bounds |cos theta1|)")
+        return cls(l1, l2, l3, JointLimits(tuple(names), np.array(lower), np.array(upper)), threshold)
+
+    @classmethod
+    def default(cls) -> Scara:
+        """The reference machine of ``config/scara.yaml``."""
+        return cls.from_parameters(load_parameters(config_path(CONFIG_FILE)).get("scara", {}))
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return self.limits.names
+
+    @cached_property
+    def chain(self) -> SerialChain:
+        """The same arm as a standard D-H chain (the paper's Table 1 made spatial).
+
+        Base transform Ry(90 deg) turns z_0 along base +x for the rail (D-H prismatic joints move
+        along z); row 1 (theta = 90, alpha = -90 deg, offset l1) brings z_1 back to base +z;
+        the shoulder's offset -90 deg makes theta1 = 0 point along base +x. The tool frame has x
+        along the forearm and z up, so its pose is (px, py, 0) and yaw phi.
+        """
+        rows = [
+            prismatic(theta=math.pi / 2, alpha=-math.pi / 2, offset=self.l1),
+            revolute(a=self.l2, offset=-math.pi / 2),
+            revolute(a=self.l3),
+        ]
+        return SerialChain(rows, base=troty(math.pi / 2))
+
+    # ---- position and velocity ----------------------------------------------------------------
+    def fk(self, q: ArrayLike) -> np.ndarray:
+        """[px, py, phi] (..., 3) of joint values (..., 3), eqs. (9)-(10)."""
+        rail, t1, t2 = _columns(q)
+        t12 = t1 + t2
+        px = self.l1 + rail + self.l2 * np.cos(t1) + self.l3 * np.cos(t12)
+        py = self.l2 * np.sin(t1) + self.l3 * np.sin(t12)
+        return np.stack([px, py, wrap_angle(t12)], axis=-1)
+
+    def jacobian(self, q: ArrayLike) -> np.ndarray:
+        """J (..., 3, 3) with [px', py', phi'] = J [x_l', theta1', theta2'] (the paper's section 2)."""
+        _, t1, t2 = _columns(q)
+        s1, c1 = np.sin(t1), np.cos(t1)
+        s12, c12 = np.sin(t1 + t2), np.cos(t1 + t2)
+        one, zero = np.ones_like(t1), np.zeros_like(t1)
+        return np.stack([
+            np.stack([one, -self.l2 * s1 - self.l3 * s12, -self.l3 * s12], axis=-1),
+            np.stack([zero, self.l2 * c1 + self.l3 * c12, self.l3 * c12], axis=-1),
+            np.stack([zero, one, one], axis=-1),
+        ], axis=-2)
+
+    def manipulability(self, q: ArrayLike) -> np.ndarray:
+        """det J = l2 cos theta1 (...,)."""
+        return self.l2 * np.cos(_columns(q)[1])
+
+    def singular(self, q: ArrayLike) -> np.ndarray:
+        """(...,) True where |cos theta1| < singularity_threshold."""
+        return np.abs(np.cos(_columns(q)[1])) < self.singularity_threshold * (1.0 - 1e-9)
+
+    def velocity_fk(self, q: ArrayLike, qd: ArrayLike) -> np.ndarray:
+        """Tool velocity [px', py', phi'] (..., 3) = J qd."""
+        return np.einsum("...ij,...j->...i", self.jacobian(q), np.asarray(qd, dtype=float))
+
+    def velocity_ik(self, q: ArrayLike, xd: ArrayLike) -> VelocityIK:
+        """Joint rates for tool velocity xd = [px', py', phi'] (..., 3): J^-1 xd in closed form.
+
+        From the last two rows: theta1' = (py' - l3 c12 phi') / (l2 c1), theta2' = phi' - theta1';
+        then x_l' from the first row. NaN where the configuration is singular.
+        """
+        _, t1, t2 = _columns(q)
+        vx, vy, w = _columns(xd)
+        s1, c1 = np.sin(t1), np.cos(t1)
+        s12, c12 = np.sin(t1 + t2), np.cos(t1 + t2)
+        singular = self.singular(q)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t1d = (vy - self.l3 * c12 * w) / (self.l2 * c1)
+        t2d = w - t1d
+        raild = vx + (self.l2 * s1 + self.l3 * s12) * t1d + self.l3 * s12 * t2d
+        qd = np.stack([raild, t1d, t2d], axis=-1)
+        return VelocityIK(qd=np.where(singular[..., None], np.nan, qd), singular=singular)
+
+    def limit_violation(self, q: ArrayLike) -> np.ndarray:
+        """(..., 3): -1 below, +1 above (or NaN), 0 inside each joint's limits (stroke of the rail)."""
+        return self.limits.violation(q, LIMIT_TOL)
+
+    def within_limits(self, q: ArrayLike) -> np.ndarray:
+        return self.limits.within(q, LIMIT_TOL)
+
+    # ---- inverse kinematics -------------------------------------------------------------------
+    def ik(self, position: ArrayLike, *, mode: str = "phi", phi: ArrayLike | None = None,
+           seed: ArrayLike | None = None, branch: str | None = None) -> IKResult:
+        """Joint solutions for tool positions (..., 2) = [px, py] (module docstring: modes, rule).
+
+        ``phi`` (...,) is required in mode ``phi`` and refused otherwise; ``seed`` (3,) or (..., 3)
+        a current joint state; ``branch`` None (closest to the seed) or a name of ``BRANCHES``.
+        Raises ValueError for an unknown mode or branch, a bad shape or a non-finite seed; a
+        non-finite target gives status INVALID.
+        """
+        if mode not in MODES:
+            raise ValueError(f"unknown IK mode {mode!r}; known: {', '.join(MODES)}")
+        if branch is not None and branch not in BRANCHES:
+            raise ValueError(f"unknown branch {branch!r}; known: {', '.join(BRANCHES)}")
+        if (phi is None) == (mode == "phi"):
+            raise ValueError("phi is given in mode 'phi' and only there")
+        position = np.asarray(position, dtype=float)
+        if position.ndim == 0 or position.shape[-1] != 2:
+            raise ValueError(f"positions must have shape (..., 2), got {position.shape}")
+        px, py = position[..., 0], position[..., 1]
+        if phi is not None:
+            phi = np.asarray(phi, dtype=float)
+            if phi.shape != px.shape:
+                px, py, phi = np.broadcast_arrays(px, py, phi)
+        if seed is not None:
+            seed = np.asarray(seed, dtype=float)
+            if seed.ndim == 0 or seed.shape[-1] != 3 or not np.all(np.isfinite(seed)):
+                raise ValueError(f"seed must be finite joint values of shape (..., 3), got {seed!r}")
+        requested = None if branch is None else BRANCHES.index(branch)
+        if mode == "position":
+            preferred = (np.full(px.shape, PAPER_PHI) if seed is None
+                         else wrap_angle(np.broadcast_to(seed[..., 1] + seed[..., 2], px.shape)))
+            phi_used, candidates, branch_status, status = self._position_ik(px, py, preferred, requested)
+        else:
+            phi_used = np.full(px.shape, PAPER_PHI) if phi is None else wrap_angle(phi)
+            preferred = phi_used
+            candidates, branch_status = self._solve_phi(px, py, phi_used)
+            status = _best(branch_status, requested)
+        status = np.asarray(status, dtype=np.int8)
+        status[~(np.isfinite(px) & np.isfinite(py) & np.isfinite(phi_used))] = _INVALID
+        q, chosen = self._select(candidates, branch_status, seed, requested)
+        return IKResult(mode=mode, q=q, status=status, branch=chosen, phi=phi_used, preferred_phi=preferred,
+                        candidates=candidates, branch_status=branch_status, requested_branch=requested,
+                        seeded=seed is not None, scara=self)
+
+    def describe(self, q: np.ndarray, status: IKStatus, phi: float) -> str:
+        """Why one branch's joint values ``q`` (3,) have ``status`` (for messages)."""
+        if status is IKStatus.UNREACHABLE:
+            return (f"wrist point out of the upper arm's reach (|wy| > l2 = {self.l2:.6g} m with "
+                    f"phi = {math.degrees(phi):.6g} deg)")
+        if status is IKStatus.JOINT_LIMITS:
+            violation = self.limit_violation(q)
+            return ", ".join(
+                f"{self.joint_names[i]} = {_show(i, q[i])} "
+                + (f"below its limit {_show(i, self.limits.lower[i])}" if violation[i] < 0
+                   else f"above its limit {_show(i, self.limits.upper[i])}")
+                for i in range(3) if violation[i]
+            )
+        if status is IKStatus.SINGULAR:
+            return (f"singular: |cos theta1| = {abs(math.cos(q[1])):.3g} < {self.singularity_threshold:g} "
+                    "(upper arm perpendicular to the rail)")
+        return f"solution {', '.join(f'{n} = {_show(i, q[i])}' for i, n in enumerate(self.joint_names))}"
+
+    def _solve_phi(self, px: np.ndarray, py: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Both branches (..., 2, 3) and their status (..., 2) for heading phi, eqs. (11)-(12) generalised."""
+        s = (py - self.l3 * np.sin(phi)) / self.l2
+        reachable = np.abs(s) <= 1.0 + 1e-12
+        s = np.minimum(np.maximum(s, -1.0), 1.0)
+        # Written into one preallocated array: np.stack costs more than the arithmetic for one target.
+        q = np.empty(s.shape + (2, 3))
+        asin = np.arcsin(s, out=q[..., 0, 1])
+        # Branch b: pi - asin(s), kept in (-pi, pi]; cos theta1 = +-sqrt(1 - s^2) on the two branches.
+        np.subtract(np.copysign(np.pi, asin), asin, out=q[..., 1, 1])
+        c1 = np.sqrt(1.0 - s * s)
+        shoulder = px - self.l3 * np.cos(phi) - self.l1
+        np.subtract(shoulder, self.l2 * c1, out=q[..., 0, 0])
+        np.add(shoulder, self.l2 * c1, out=q[..., 1, 0])
+        q[..., 2] = wrap_angle(phi[..., None] - q[..., 1])
+        q[~reachable] = np.nan
+        in_limits = self.within_limits(q)
+        q = np.where(in_limits[..., None], self.limits.clip(q), q)
+        singular = (c1 < self.singularity_threshold * (1.0 - 1e-9))[..., None]
+        status = np.where(in_limits, np.where(singular, _SINGULAR, _SUCCESS), _JOINT_LIMITS).astype(np.int8)
+        status[~reachable] = _UNREACHABLE
+        return q, status
+
+    def _position_ik(self, px: np.ndarray, py: np.ndarray, preferred: np.ndarray,
+                     requested: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Position mode: the admissible heading nearest ``preferred`` (module docstring)."""
+        headings = self._candidate_headings(px, py, preferred)
+        candidates, branch_status = self._solve_phi(px[..., None], py[..., None], headings)
+        allowed = _allowed(requested)
+        admissible = np.any((branch_status == _SUCCESS) & allowed, axis=-1)
+        distance = np.where(admissible, np.abs(wrap_angle(headings - preferred[..., None])), np.inf)
+        # Column 0 is the preferred heading itself; with no admissible heading report there.
+        k = np.where(np.any(admissible, axis=-1), np.argmin(distance, axis=-1), 0)
+        phi = np.take_along_axis(headings, k[..., None], axis=-1)[..., 0]
+        picked = np.take_along_axis(candidates, k[..., None, None, None], axis=-3)[..., 0, :, :]
+        picked_status = np.take_along_axis(branch_status, k[..., None, None], axis=-2)[..., 0, :]
+        status = np.min(np.where(allowed, branch_status, _INVALID), axis=(-2, -1))
+        # With the rail unbounded every |py| <= l2 + l3 is reachable: if no candidate reached it,
+        # the rail's stroke (a joint limit) is what stops it.
+        in_band = np.abs(py) <= self.l2 + self.l3 + LIMIT_TOL
+        status = np.where(in_band & (status == _UNREACHABLE), _JOINT_LIMITS, status)
+        return phi, picked, picked_status, status.astype(np.int8)
+
+    def _candidate_headings(self, px: np.ndarray, py: np.ndarray, preferred: np.ndarray) -> np.ndarray:
+        """(..., 17) headings: the preferred one, then every heading where a constraint is active."""
+        wrist_heights, elbow_r2, elbow_turn, rail_ends = self._constraint_constants
+        py_ = py[..., None]
+        with np.errstate(invalid="ignore"):
+            # wy = py - l3 sin phi at a given value: the singularity band and the shoulder limits.
+            wrist = np.arcsin((py_ - wrist_heights) / self.l3)
+            # Elbow at a limit: the shoulder lies at distance r from p on the rail line y = 0.
+            dx = np.sqrt(elbow_r2 - py_ * py_)
+            elbow = np.arctan2(np.broadcast_to(py_, dx.shape[:-1] + (4,)), np.concatenate([dx, -dx], axis=-1))
+            # Rail at a stroke end: the planar two-link arm from that shoulder position.
+            arm = two_link_ik(px[..., None] - self.l1 - rail_ends, py_, self.l2, self.l3)
+        rail = (arm.theta1 + arm.theta2).reshape(arm.theta1.shape[:-2] + (4,))
+        columns = (preferred[..., None], wrist, np.pi - wrist, elbow + elbow_turn, rail)
+        return wrap_angle(np.concatenate(columns, axis=-1))
+
+    @cached_property
+    def _constraint_constants(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per constraint of the position-mode rule: wrist heights l2 sin(theta1) at the singularity band
+        and the shoulder limits (4,); shoulder-to-tool distance^2 at the elbow limits (2,); phi minus the
+        direction shoulder -> tool at those limits, for dx >= 0 then dx <= 0 (4,); the rail ends (2,)."""
+        lower, upper = self.limits.lower, self.limits.upper
+        sin_singular = math.sqrt(1.0 - self.singularity_threshold ** 2)
+        wrist = self.l2 * np.array([sin_singular, -sin_singular, math.sin(lower[1]), math.sin(upper[1])])
+        t2 = np.array([lower[2], upper[2]])
+        r2 = self.l2**2 + self.l3**2 + 2.0 * self.l2 * self.l3 * np.cos(t2)
+        turn = t2 - np.arctan2(self.l3 * np.sin(t2), self.l2 + self.l3 * np.cos(t2))
+        return wrist, r2, np.concatenate([turn, turn]), np.array([lower[0], upper[0]])
+
+    def _select(self, candidates: np.ndarray, branch_status: np.ndarray, seed: np.ndarray | None,
+                requested: int | None) -> tuple[np.ndarray, np.ndarray]:
+        ok = (branch_status == _SUCCESS) & _allowed(requested)
+        ok_a, ok_b = ok[..., 0], ok[..., 1]
+        if seed is None:
+            take_a = ok_a
+        else:
+            difference = candidates - seed[..., None, :]
+            difference[..., 0] /= self.l2
+            cost = np.sum(difference * difference, axis=-1)
+            take_a = ok_a & (~ok_b | (cost[..., 0] <= cost[..., 1]))
+        q = np.where(take_a[..., None], candidates[..., 0, :], candidates[..., 1, :])
+        any_ok = ok_a | ok_b
+        q[~any_ok] = np.nan
+        return q, np.where(any_ok, np.where(take_a, 0, 1), -1).astype(np.int8)
+
+
+def _allowed(requested: int | None) -> np.ndarray:
+    return np.array([True, True]) if requested is None else np.arange(2) == requested
+
+
+def _best(branch_status: np.ndarray, requested: int | None) -> np.ndarray:
+    return np.min(np.where(_allowed(requested), branch_status, _INVALID), axis=-1)
+
+
+def _columns(values: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    values = np.asarray(values, dtype=float)
+    if values.ndim == 0 or values.shape[-1] != 3:
+        raise ValueError(f"expected shape (..., 3), got {values.shape}")
+    return values[..., 0], values[..., 1], values[..., 2]
+
+
+def _show(joint: int, value: float) -> str:
+    return f"{value:.6g} m" if joint == 0 else f"{math.degrees(value):.6g} deg"
+
+
+def _number(params: Mapping[str, Any], key: str, prefix: str, minimum: float, strict: bool = False) -> float:
+    if key not in params:
+        raise ConfigError(f"{prefix}.{key}: missing")
+    value = params[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(f"{prefix}.{key}: expected a finite number, got {value!r}")
+    if value < minimum or (strict and value == minimum):
+        raise ConfigError(f"{prefix}.{key} = {value} must be {'>' if strict else '>='} {minimum:g}")
+    return float(value)
+
+
+def _numbers(params: Mapping[str, Any], key: str, prefix: str) -> list[float]:
+    if key not in params:
+        raise ConfigError(f"{prefix}.{key}: missing")
+    values = params[key]
+    if isinstance(values, str) or not isinstance(values, Sequence) or len(values) != 3:
+        raise ConfigError(f"{prefix}.{key}: expected 3 numbers (rail m, shoulder rad, elbow rad), "
+                          f"got {values!r}")
+    for i, value in enumerate(values):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ConfigError(f"{prefix}.{key}[{i}]: expected a finite number, got {value!r}")
+    return [float(v) for v in values]
