@@ -20,7 +20,6 @@ setup(
     maintainer_email="maintainers@manipulator-kinematics.org",
     description="Kinematics of hydraulic excavators and other manipulators, with rclpy nodes.",
     license="Apache-2.0",
-    tests_require=["pytest"],
     entry_points={
         "console_scripts": [
             "excavator_demo = excavator_kinematics.demo:main",

@@ -6,16 +6,18 @@ its keys; :func:`machine_parameters` turns it back into the nested dict the nump
 """
 from __future__ import annotations
 
+import re
 import signal
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
+import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
-from manipulator_kinematics.params import ConfigError, config_path, load_parameters, unflatten
+from manipulator_kinematics.params import ConfigError, config_path, flatten, load_parameters, unflatten
 
 
 def make_node(name: str) -> Node:
@@ -46,7 +48,8 @@ def machine_parameters(node: Node, prefix: str, default_file: str) -> dict[str, 
 def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     out = dict(base)
     for key, value in over.items():
-        out[key] = _merge(out[key], value) if isinstance(value, dict) and isinstance(out.get(key), dict) else value
+        both_sections = isinstance(value, dict) and isinstance(out.get(key), dict)
+        out[key] = _merge(out[key], value) if both_sections else value
     return out
 
 
@@ -75,3 +78,66 @@ def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
             node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def node_parameters(node: Node, default_file: str, section: str) -> dict[str, Any]:
+    """Settings of a node: every key of ``section`` in the package's ``default_file``, declared on
+    the node with the file's value as default, so values given to the node win and the file stays
+    the one place where defaults live. Keys are dotted (``topics.bucket_pose``)."""
+    defaults = flatten(load_parameters(config_path(default_file), section))
+    return {name: param(node, name, value) for name, value in defaults.items()}
+
+
+class ThrottledLog:
+    """Logs each kind of message at most once per ``period`` seconds of the node's clock.
+
+    Messages that differ only in their numbers are of one kind. rclpy's own throttle is per call
+    site, so different reasons for rejecting an input, logged from one place, would hide each other.
+    """
+
+    _NUMBER = re.compile(r"[-+]?\d[\d.eE+-]*")
+
+    def __init__(self, node: Node, period: float) -> None:
+        self._node = node
+        self._period_ns = int(period * 1e9)
+        self._last: dict[str, int] = {}
+
+    def __call__(self, severity: str, text: str) -> None:
+        """``severity`` is a logger method name: "info", "warning" or "error"."""
+        kind = self._NUMBER.sub("#", text)
+        now = self._node.get_clock().now().nanoseconds
+        last = self._last.get(kind)
+        if last is not None and now - last < self._period_ns:
+            return
+        self._last[kind] = now
+        # One call site per severity: rclpy refuses a call site that changes its severity.
+        logger = self._node.get_logger()
+        if severity == "error":
+            logger.error(text)
+        elif severity == "warning":
+            logger.warning(text)
+        else:
+            logger.info(text)
+
+
+def joint_values(msg: Any, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray | None]:
+    """Positions and velocities (None when the message has none) of joints ``names``, in that
+    order, from a sensor_msgs/JointState matched by name (other joints in it are ignored).
+
+    Raises ValueError naming what is missing, mismatched or not finite.
+    """
+    index = {name: i for i, name in enumerate(msg.name)}
+    missing = [name for name in names if name not in index]
+    if missing:
+        raise ValueError(f"joint names {missing} missing from the joint state (has {list(msg.name)})")
+    if len(msg.position) != len(msg.name):
+        raise ValueError(f"{len(msg.name)} joint names but {len(msg.position)} positions")
+    if len(msg.velocity) not in (0, len(msg.name)):
+        raise ValueError(f"{len(msg.name)} joint names but {len(msg.velocity)} velocities")
+    rows = [index[name] for name in names]
+    positions = np.array([msg.position[i] for i in rows], dtype=float)
+    velocities = np.array([msg.velocity[i] for i in rows], dtype=float) if len(msg.velocity) else None
+    for label, values in (("position", positions), ("velocity", velocities)):
+        if values is not None and not np.all(np.isfinite(values)):
+            raise ValueError(f"non-finite {label} {values.tolist()} of {list(names)}")
+    return positions, velocities
