@@ -1,0 +1,227 @@
+"""End-to-end latency and drops of excavator_forward across processes, beside a bare echo node.
+
+    python benchmarks/bench_excavator_latency.py [--duration 30] [--rates 100 1000] [--depth 100]
+
+For each input rate, first the echo node (JointState in -> TwistStamped out with the input's
+stamp, no math: the transport floor), then excavator_forward, each as its own process. A
+publisher process sends ``cylinder_lengths`` at the rate (and ``joint_states`` at 100 Hz, a
+typical swing encoder) and this process receives ``bucket_twist``; latency = receive time -
+input stamp (one clock), drops = inputs without an output. Both nodes spin rclpy's
+SingleThreadedExecutor (the echo node through rclpy.spin, excavator_forward through
+manipulator_kinematics.node_util.run); the measuring process uses EventsExecutor so that it is
+not the bottleneck. Every queue is reliable keep-last of
+``--depth`` (default 100: 100 ms of 1 kHz input survives a stall). Prints a table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import rclpy
+import yaml
+from geometry_msgs.msg import TwistStamped
+from rclpy.executors import ExternalShutdownException
+from rclpy.experimental import EventsExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+
+from excavator_kinematics import messages
+from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator
+from manipulator_kinematics.params import config_path
+
+
+def echo(depth: int) -> None:
+    """The transport floor: republish each JointState's stamp as a TwistStamped."""
+    rclpy.init()
+    node = Node("bench_echo")
+    qos = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
+    pub = node.create_publisher(TwistStamped, "bucket_twist", qos)
+    out = TwistStamped()
+
+    def on_message(msg: JointState) -> None:
+        out.header.stamp = msg.header.stamp
+        pub.publish(out)
+
+    node.create_subscription(JointState, "cylinder_lengths", on_message, qos)
+    signal.signal(signal.SIGTERM, lambda *_: rclpy.try_shutdown())
+    with contextlib.suppress(KeyboardInterrupt, ExternalShutdownException):
+        rclpy.spin(node)
+    rclpy.try_shutdown()
+
+
+def publish(rate: float, duration: float, depth: int, sent_file: Path) -> None:
+    """Publish cylinder_lengths at ``rate`` (joint_states at 100 Hz) for ``duration`` s after a 1 s
+    warm-up, paced by the clock; the stamps of the measured messages go to ``sent_file``."""
+    rclpy.init()
+    node = Node("bench_publisher")
+    qos = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
+    cylinders = node.create_publisher(JointState, "cylinder_lengths", qos)
+    swing = node.create_publisher(JointState, "joint_states", qos)
+    deadline = time.monotonic() + 20.0
+    while cylinders.get_subscription_count() == 0:  # the echo node does not listen to joint_states
+        if time.monotonic() > deadline:
+            raise RuntimeError("no subscriber for cylinder_lengths")
+        time.sleep(0.01)
+    clock = node.get_clock()
+    reference = Excavator.default().limits.reference
+    cylinder_msg = messages.joint_state(clock.now().to_msg(), CYLINDERS, reference[1:], [0.01, -0.02, 0.015])
+    swing_msg = messages.joint_state(clock.now().to_msg(), JOINTS[:1], [0.0], [0.0])
+    swing_every = max(1, round(rate / 100.0))
+    sent = []
+    warm_up = int(rate)
+    start = time.monotonic()
+    for n in range(warm_up + int(duration * rate)):
+        pause = start + n / rate - time.monotonic()
+        if pause > 0:
+            time.sleep(pause)
+        stamp = clock.now().to_msg()
+        if n % swing_every == 0:
+            swing_msg.header.stamp = stamp
+            swing.publish(swing_msg)
+        cylinder_msg.header.stamp = stamp
+        cylinder_msg.position[0] = reference[1] + 1e-6 * (n % 1000)
+        cylinders.publish(cylinder_msg)
+        if n >= warm_up:
+            sent.append(messages.stamp_ns(stamp))
+    np.save(sent_file, np.array(sent, dtype=np.int64))
+    time.sleep(0.5)  # let the last messages leave before the participant goes
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+def start_node(kind: str, depth: int, work: Path) -> subprocess.Popen:
+    if kind == "echo":
+        command = [sys.executable, __file__, "--echo", "--depth", str(depth)]
+    else:
+        overrides = work / "bench_params.yaml"
+        overrides.write_text(
+            yaml.safe_dump({"/**/excavator_forward": {"ros__parameters": {"qos_depth": depth}}})
+        )
+        exe = Path(sys.executable).parent / "excavator_forward"
+        command = [
+            str(exe),
+            "--ros-args",
+            "--params-file",
+            str(config_path("excavator_cet200.yaml")),
+            "--params-file",
+            str(config_path("excavator_nodes.yaml")),
+            "--params-file",
+            str(overrides),
+        ]
+    return subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def measure(node: Node, kind: str, rate: float, duration: float, depth: int, work: Path) -> dict[str, float]:
+    """Start the node under test and a publisher process; receive bucket_twist here."""
+    qos = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
+    received: dict[int, int] = {}
+    clock = node.get_clock()
+    sub = node.create_subscription(
+        TwistStamped,
+        "bucket_twist",
+        lambda m: received.setdefault(messages.stamp_ns(m.header.stamp), clock.now().nanoseconds),
+        qos,
+    )
+    # The measuring end must not be the bottleneck: rclpy's SingleThreadedExecutor costs a few
+    # hundred microseconds per message here, EventsExecutor (spun in this, the main thread) far less.
+    executor = EventsExecutor()
+    executor.add_node(node)
+    under_test = start_node(kind, depth, work)
+    sent_file = work / "bench_sent.npy"
+    try:
+        deadline = time.monotonic() + 20.0
+        while node.count_publishers("bucket_twist") == 0:
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"{kind} did not show up")
+            executor.spin_once(timeout_sec=0.05)
+        publisher = subprocess.Popen(
+            [
+                sys.executable,
+                __file__,
+                "--publish",
+                str(rate),
+                str(duration),
+                str(sent_file),
+                "--depth",
+                str(depth),
+            ]
+        )
+        while publisher.poll() is None:
+            executor.spin_once(timeout_sec=0.05)
+        if publisher.returncode != 0:
+            raise RuntimeError(f"publisher failed ({publisher.returncode})")
+        sent = np.load(sent_file)
+        drain = time.monotonic() + 2.0
+        while time.monotonic() < drain and not all(int(s) in received for s in sent[-5:]):
+            executor.spin_once(timeout_sec=0.01)
+    finally:
+        under_test.send_signal(signal.SIGINT)
+        under_test.wait(10)
+        executor.remove_node(node)
+        node.destroy_subscription(sub)
+    latencies = np.array([received[s] - s for s in sent.tolist() if s in received]) * 1e-6
+    return {
+        "sent": len(sent),
+        "dropped": len(sent) - len(latencies),
+        "p50": float(np.percentile(latencies, 50)),
+        "p99": float(np.percentile(latencies, 99)),
+        "max": float(latencies.max()),
+    }
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--duration", type=float, default=30.0, help="seconds per measurement")
+    parser.add_argument("--rates", type=float, nargs="+", default=[100.0, 1000.0])
+    parser.add_argument("--depth", type=int, default=100, help="reliable keep-last queue depth")
+    parser.add_argument("--echo", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--publish", nargs=3, metavar=("RATE", "DURATION", "FILE"), help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.echo:
+        echo(args.depth)
+        return 0
+    if args.publish:
+        publish(float(args.publish[0]), float(args.publish[1]), args.depth, Path(args.publish[2]))
+        return 0
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    work = Path(tempfile.mkdtemp(prefix="bench_excavator_"))
+    rclpy.init()
+    node = Node("bench_excavator_latency")
+    rows = []
+    try:
+        for rate in args.rates:
+            for kind in ("echo", "excavator_forward"):
+                rows.append((kind, rate, measure(node, kind, rate, args.duration, args.depth, work)))
+                print(f"{kind:<18} {rate:6.0f} Hz  done", file=sys.stderr, flush=True)
+    finally:
+        node.destroy_node()
+        rclpy.shutdown()
+    print(
+        f"\nend-to-end latency, input stamp -> bucket_twist received, {args.duration:g} s per row, "
+        f"reliable depth {args.depth}"
+    )
+    print(f"{'node':<18} {'rate':>7} {'sent':>7} {'dropped':>8} {'p50 ms':>8} {'p99 ms':>8} {'max ms':>8}")
+    for kind, rate, r in rows:
+        print(
+            f"{kind:<18} {rate:5.0f}Hz {r['sent']:7d} {r['dropped']:8d} {r['p50']:8.3f} {r['p99']:8.3f} "
+            f"{r['max']:8.2f}"
+        )
+    for rate in args.rates:
+        echo_p99 = next(r["p99"] for k, q, r in rows if k == "echo" and q == rate)
+        forward_p99 = next(r["p99"] for k, q, r in rows if k != "echo" and q == rate)
+        print(f"{rate:5.0f} Hz: forward p99 / echo p99 = {forward_p99 / echo_p99:.2f} (target <= 1.5)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

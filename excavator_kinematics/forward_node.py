@@ -1,0 +1,121 @@
+"""excavator_forward: bucket pose, twist and acceleration from cylinder and swing states.
+
+A thin adapter around :meth:`Excavator.state` (paper eqs. 3-11). On each ``cylinder_lengths``
+message it takes the latest swing state from ``joint_states`` (extrapolated to the cylinder stamp,
+at most ``swing_max_age`` apart) and accelerations as finite differences of successive rates
+(:mod:`excavator_kinematics.state_input`), and publishes with the cylinder message's stamp:
+
+* ``bucket_pose`` (PoseStamped), ``bucket_twist`` (TwistStamped), ``bucket_accel`` (AccelStamped,
+  only once accelerations are known: from the second message on);
+* ``open_chain_joint_states`` (JointState theta1..theta4 with rates) for robot_state_publisher.
+
+Bad input is rejected with a logged reason; nothing is published for it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
+
+from excavator_kinematics import messages
+from excavator_kinematics.kinematics import (
+    CYLINDERS,
+    JOINTS,
+    Excavator,
+    StrokeError,
+    bucket_angular_acceleration,
+    bucket_angular_velocity,
+)
+from excavator_kinematics.state_input import InputError, RateDifferentiator, SwingHold
+from manipulator_kinematics.node_util import ThrottledLog, machine_parameters, make_node, node_parameters, run
+
+NODE = "excavator_forward"
+NODES_CONFIG = "excavator_nodes.yaml"
+MACHINE_CONFIG = "excavator_cet200.yaml"
+SWING = JOINTS[0]
+
+
+class ForwardKinematics:
+    """The node's state and callbacks; ``node`` is what the executor spins."""
+
+    def __init__(self) -> None:
+        self.node: Node = make_node(NODE)
+        settings = node_parameters(self.node, NODES_CONFIG, f"/**/{NODE}")
+        self.exc = Excavator.from_parameters(machine_parameters(self.node, "excavator", MACHINE_CONFIG))
+        self.frame = settings["base_frame"]
+        self.swing = SwingHold(settings["swing_max_age"])
+        tau, gap = settings["acceleration_time_constant"], settings["acceleration_max_gap"]
+        self.cylinder_acceleration = RateDifferentiator(tau, gap)
+        self.swing_acceleration = RateDifferentiator(tau, gap)
+        self.log = ThrottledLog(self.node, settings["warning_period"])
+
+        qos = QoSProfile(depth=settings["qos_depth"], reliability=ReliabilityPolicy.RELIABLE)
+        topic = {key[len("topics.") :]: value for key, value in settings.items() if key.startswith("topics.")}
+        # One message per output topic, filled in place for each input (see messages.set_*).
+        self.pose = PoseStamped(header=Header(frame_id=self.frame))
+        self.twist = TwistStamped(header=Header(frame_id=self.frame))
+        self.accel = AccelStamped(header=Header(frame_id=self.frame))
+        self.joints = JointState(name=list(JOINTS))
+        self.pose_pub = self.node.create_publisher(PoseStamped, topic["bucket_pose"], qos)
+        self.twist_pub = self.node.create_publisher(TwistStamped, topic["bucket_twist"], qos)
+        self.accel_pub = self.node.create_publisher(AccelStamped, topic["bucket_accel"], qos)
+        self.joints_pub = self.node.create_publisher(JointState, topic["open_chain_joint_states"], qos)
+        self.node.create_subscription(JointState, topic["joint_states"], self.on_swing, qos)
+        self.node.create_subscription(JointState, topic["cylinder_lengths"], self.on_cylinders, qos)
+        self.node.get_logger().info(
+            f"{self.exc.name}: {topic['cylinder_lengths']} + {topic['joint_states']} -> "
+            f"{topic['bucket_pose']}, {topic['bucket_twist']}, {topic['bucket_accel']}, "
+            f"{topic['open_chain_joint_states']} in frame {self.frame!r}"
+        )
+
+    def on_swing(self, msg: JointState) -> None:
+        try:
+            angle, rate = messages.positions_and_rates(msg, (SWING,))
+        except InputError as error:
+            self.log("error", f"rejected joint_states: {error}")
+            return
+        stamp = messages.stamp_ns(msg.header.stamp)
+        acceleration = self.swing_acceleration.update(stamp, rate)
+        self.swing.update(
+            stamp, float(angle[0]), float(rate[0]), None if acceleration is None else float(acceleration[0])
+        )
+
+    def on_cylinders(self, msg: JointState) -> None:
+        stamp = msg.header.stamp
+        try:
+            lengths, rates = messages.positions_and_rates(msg, CYLINDERS)
+            stamp_ns = messages.stamp_ns(stamp)
+            theta1, theta1_dot, theta1_ddot = self.swing.at(stamp_ns)
+            D = self.exc.validate(np.concatenate(([theta1], lengths)))
+        except (InputError, StrokeError) as error:
+            self.log("error", f"rejected cylinder_lengths: {error}")
+            return
+        # Only accepted messages feed the differencing, so a rejected one cannot spike it.
+        cylinder_ddot = self.cylinder_acceleration.update(stamp_ns, rates)
+        known = cylinder_ddot is not None and theta1_ddot is not None
+        D_ddot = np.concatenate(([theta1_ddot], cylinder_ddot)) if known else None
+        s = self.exc.state(D, np.concatenate(([theta1_dot], rates)), D_ddot)
+
+        self.pose_pub.publish(messages.set_bucket_pose(self.pose, stamp, theta1, s.Q))
+        angular = bucket_angular_velocity(theta1, theta1_dot, s.Q_dot[3])
+        self.twist_pub.publish(messages.set_bucket_twist(self.twist, stamp, s.Q_dot[:3], angular))
+        if known:
+            angular_acc = bucket_angular_acceleration(
+                theta1, theta1_dot, theta1_ddot, s.Q_dot[3], s.Q_ddot[3]
+            )
+            self.accel_pub.publish(messages.set_bucket_accel(self.accel, stamp, s.Q_ddot[:3], angular_acc))
+        self.joints.header.stamp = stamp
+        self.joints.position, self.joints.velocity = s.theta.tolist(), s.theta_dot.tolist()
+        self.joints_pub.publish(self.joints)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(lambda: ForwardKinematics().node, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,113 @@
+"""ROS messages <-> numpy for the excavator nodes (parsing with reasons, building outputs)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped, Vector3
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
+
+from excavator_kinematics.kinematics import bucket_quaternion
+from excavator_kinematics.state_input import InputError
+
+
+def stamp_ns(stamp: Time) -> int:
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def joint_values(msg: JointState, names: Sequence[str]) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Positions and velocities of ``names`` in that order, each None when the message's field is empty.
+
+    Raises InputError naming what is missing, of the wrong length or not finite. Plain Python on
+    purpose: this runs for every message, at up to 1 kHz.
+    """
+    index = {name: i for i, name in enumerate(msg.name)}
+    missing = [name for name in names if name not in index]
+    if missing:
+        raise InputError(f"joint names {missing} missing from the message (has {list(msg.name)})")
+    rows = [index[name] for name in names]
+    out = []
+    for label, field in (("position", msg.position), ("velocity", msg.velocity)):
+        if len(field) == 0:
+            out.append(None)
+            continue
+        if len(field) != len(index):
+            raise InputError(f"{len(index)} names but {len(field)} {label} values")
+        values = [field[i] for i in rows]
+        if not all(map(math.isfinite, values)):
+            raise InputError(f"non-finite {label} {values} for {list(names)}")
+        out.append(np.array(values))
+    return out[0], out[1]
+
+
+def positions_and_rates(msg: JointState, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Both fields of ``names``; InputError when either is empty (a state needs both)."""
+    positions, velocities = joint_values(msg, names)
+    if positions is None or velocities is None:
+        raise InputError(f"a state message needs both position and velocity for {list(names)}")
+    return positions, velocities
+
+
+def joint_state(
+    stamp: Time,
+    names: Sequence[str],
+    positions: np.ndarray | None = None,
+    velocities: np.ndarray | None = None,
+) -> JointState:
+    msg = JointState(header=Header(stamp=stamp), name=list(names))
+    if positions is not None:
+        msg.position = [float(v) for v in positions]
+    if velocities is not None:
+        msg.velocity = [float(v) for v in velocities]
+    return msg
+
+
+def set_vector3(v: Vector3, values: np.ndarray) -> None:
+    v.x, v.y, v.z = float(values[0]), float(values[1]), float(values[2])
+
+
+# The set_* functions fill a message in place, so a node can keep one message per topic and
+# publish it again and again (building a geometry message costs more than the kinematics).
+def set_bucket_pose(msg: PoseStamped, stamp: Time, theta1: float, q: np.ndarray) -> PoseStamped:
+    """Tip position and bucket orientation (yaw theta1, then -alpha about +y; REP 103)."""
+    msg.header.stamp = stamp
+    p, o = msg.pose.position, msg.pose.orientation
+    p.x, p.y, p.z = float(q[0]), float(q[1]), float(q[2])
+    o.x, o.y, o.z, o.w = (float(v) for v in bucket_quaternion(theta1, q[3]))
+    return msg
+
+
+def set_bucket_twist(msg: TwistStamped, stamp: Time, linear: np.ndarray, angular: np.ndarray) -> TwistStamped:
+    msg.header.stamp = stamp
+    set_vector3(msg.twist.linear, linear)
+    set_vector3(msg.twist.angular, angular)
+    return msg
+
+
+def set_bucket_accel(msg: AccelStamped, stamp: Time, linear: np.ndarray, angular: np.ndarray) -> AccelStamped:
+    msg.header.stamp = stamp
+    set_vector3(msg.accel.linear, linear)
+    set_vector3(msg.accel.angular, angular)
+    return msg
+
+
+def bucket_pose(stamp: Time, frame_id: str, theta1: float, q: np.ndarray) -> PoseStamped:
+    return set_bucket_pose(PoseStamped(header=Header(frame_id=frame_id)), stamp, theta1, q)
+
+
+def bucket_twist(stamp: Time, frame_id: str, linear: np.ndarray, angular: np.ndarray) -> TwistStamped:
+    return set_bucket_twist(TwistStamped(header=Header(frame_id=frame_id)), stamp, linear, angular)
+
+
+def twist_arrays(msg: TwistStamped) -> tuple[np.ndarray, np.ndarray]:
+    """(linear, angular) of a twist; InputError when not finite."""
+    t = msg.twist
+    linear = np.array([t.linear.x, t.linear.y, t.linear.z])
+    angular = np.array([t.angular.x, t.angular.y, t.angular.z])
+    if not (np.all(np.isfinite(linear)) and np.all(np.isfinite(angular))):
+        raise InputError(f"non-finite twist: linear {linear.tolist()}, angular {angular.tolist()}")
+    return linear, angular

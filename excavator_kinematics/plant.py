@@ -1,0 +1,53 @@
+"""Simulated excavator actuators: swing and the three cylinders follow rate commands within their
+speed limits and stroke ends. Numpy only; the simulator node wires it to ROS.
+
+Each actuator saturates at its own maximum speed (a valve opens no further), follows the commanded
+rate with a first-order lag of ``time_constant`` seconds (0 = ideal), and stops at its stroke end.
+The lag is integrated exactly for a command held over the step, so the result does not depend on
+the step size.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from excavator_kinematics.kinematics import Limits
+from manipulator_kinematics.params import ConfigError
+
+
+class Plant:
+    """State D = [theta1, d2, d3, d4] and its rate D_dot, advanced by :meth:`step`."""
+
+    def __init__(self, limits: Limits, d0: np.ndarray, time_constant: float = 0.0) -> None:
+        d0 = np.asarray(d0, dtype=float)
+        if d0.shape != (4,) or not np.all(np.isfinite(d0)):
+            raise ConfigError(f"start state must be 4 finite numbers [swing, boom, arm, bucket], got {d0!r}")
+        if np.any(d0 < limits.d_min) or np.any(d0 > limits.d_max):
+            raise ConfigError(
+                f"start state {d0.tolist()} outside the limits "
+                f"[{limits.d_min.tolist()}, {limits.d_max.tolist()}]"
+            )
+        if not time_constant >= 0.0:
+            raise ConfigError(f"time_constant must be >= 0, got {time_constant}")
+        self.limits = limits
+        self.time_constant = float(time_constant)
+        self.d = d0.copy()
+        self.d_dot = np.zeros(4)
+
+    def step(self, command: np.ndarray, dt: float) -> None:
+        """Advance by ``dt`` seconds holding the rate ``command`` (4,)."""
+        if dt <= 0.0:
+            return
+        target = np.clip(command, -self.limits.max_rates, self.limits.max_rates)
+        if self.time_constant > 0.0:
+            decay = np.exp(-dt / self.time_constant)
+            # d(t) for d_dot' = (target - d_dot) / tau, integrated over the step.
+            travel = target * dt + (self.d_dot - target) * self.time_constant * (1.0 - decay)
+            d_dot = target + (self.d_dot - target) * decay
+        else:
+            travel = target * dt
+            d_dot = target
+        d = self.d + travel
+        stopped = (d <= self.limits.d_min) & (d_dot <= 0.0) | (d >= self.limits.d_max) & (d_dot >= 0.0)
+        self.d = np.clip(d, self.limits.d_min, self.limits.d_max)
+        self.d_dot = np.where(stopped, 0.0, d_dot)

@@ -1,0 +1,103 @@
+"""excavator_sim: a simulated excavator for closed-loop runs without hardware.
+
+Integrates the rate commands of ``cylinder_rate_commands`` (JointState velocities of swing_joint,
+boom_cylinder, arm_cylinder, bucket_cylinder) with :class:`excavator_kinematics.plant.Plant`
+(speed limits, stroke ends, optional first-order lag) and publishes, at ``rate`` Hz and with one
+stamp, ``cylinder_lengths`` (position m, velocity m/s) and ``joint_states`` (swing_joint angle
+and rate). A command older than ``command_timeout`` s counts as zero. Steps use the measured time
+between timer calls, so timer jitter does not change the integrated motion.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.time import Time
+from sensor_msgs.msg import JointState
+
+from excavator_kinematics import messages
+from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator
+from excavator_kinematics.plant import Plant
+from excavator_kinematics.state_input import InputError
+from manipulator_kinematics.node_util import (
+    ThrottledLog,
+    machine_parameters,
+    make_node,
+    node_parameters,
+    param,
+    run,
+)
+from manipulator_kinematics.params import ConfigError
+
+NODE = "excavator_sim"
+COMMAND_NAMES = (JOINTS[0], *CYLINDERS)
+
+
+class Simulator:
+    """The node's state and callbacks; ``node`` is what the executor spins."""
+
+    def __init__(self) -> None:
+        self.node: Node = make_node(NODE)
+        s = node_parameters(self.node, "excavator_nodes.yaml", f"/**/{NODE}")
+        self.exc = Excavator.from_parameters(
+            machine_parameters(self.node, "excavator", "excavator_cet200.yaml")
+        )
+        lengths = param(self.node, "initial_cylinder_lengths", self.exc.limits.reference[1:].tolist())
+        if not s["rate"] > 0.0:
+            raise ConfigError(f"{NODE}.rate must be positive, got {s['rate']}")
+        self.plant = Plant(
+            self.exc.limits, np.array([s["initial_swing_angle"], *lengths], dtype=float), s["time_constant"]
+        )
+        self.command_timeout_ns = int(s["command_timeout"] * 1e9)
+        self.command = np.zeros(4)
+        self.command_received_ns: int | None = None
+        self.log = ThrottledLog(self.node, s["warning_period"])
+
+        qos = QoSProfile(depth=s["qos_depth"], reliability=ReliabilityPolicy.RELIABLE)
+        self.cylinder_pub = self.node.create_publisher(JointState, s["topics.cylinder_lengths"], qos)
+        self.swing_pub = self.node.create_publisher(JointState, s["topics.joint_states"], qos)
+        # Only the latest command matters; a queue of old ones would delay the loop.
+        latest = QoSProfile(depth=s["input_queue_depth"], reliability=ReliabilityPolicy.RELIABLE)
+        self.node.create_subscription(JointState, s["topics.rate_commands"], self.on_command, latest)
+        self.last_ns = self.now_ns()
+        self.node.create_timer(1.0 / s["rate"], self.on_timer)
+        self.node.get_logger().info(
+            f"{self.exc.name} simulated at {s['rate']:g} Hz from D = {self.plant.d.round(6).tolist()}"
+        )
+
+    def now_ns(self) -> int:
+        return self.node.get_clock().now().nanoseconds
+
+    def on_command(self, msg: JointState) -> None:
+        try:
+            _, rates = messages.joint_values(msg, COMMAND_NAMES)
+            if rates is None:
+                raise InputError("rate command without velocities")
+        except InputError as error:
+            self.log("error", f"rejected rate command: {error}")
+            return
+        self.command = rates
+        self.command_received_ns = self.now_ns()
+
+    def on_timer(self) -> None:
+        now = self.now_ns()
+        fresh = (
+            self.command_received_ns is not None and now - self.command_received_ns <= self.command_timeout_ns
+        )
+        self.plant.step(self.command if fresh else np.zeros(4), (now - self.last_ns) * 1e-9)
+        self.last_ns = now
+        stamp = Time(nanoseconds=now).to_msg()
+        d, d_dot = self.plant.d, self.plant.d_dot
+        # Swing first: a node combining the two (excavator_forward) then usually holds the swing
+        # state of this very step when the cylinder message arrives.
+        self.swing_pub.publish(messages.joint_state(stamp, JOINTS[:1], d[:1], d_dot[:1]))
+        self.cylinder_pub.publish(messages.joint_state(stamp, CYLINDERS, d[1:], d_dot[1:]))
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(lambda: Simulator().node, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

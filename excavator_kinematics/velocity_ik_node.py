@@ -1,0 +1,185 @@
+"""excavator_velocity_ik: swing and cylinder rate commands for a target bucket twist (paper eq. 9).
+
+Wiring only; the decisions are in numpy modules:
+:func:`excavator_kinematics.twist.split_twist` (6-D twist -> achievable Q_dot + residual) and
+:func:`excavator_kinematics.rate_command.rate_command` (damped inverse, stroke ends, speed limits).
+
+A command is computed when a target arrives and again on each ``cylinder_lengths`` message while
+the target is fresh and no newer target came since the previous one, so JC0 follows the moving
+machine also when targets come slower than states. Rates go out as JointState (names
+swing_joint, boom_cylinder, arm_cylinder, bucket_cylinder; velocity only) and, if
+``publish_array``, as Float64MultiArray in that fixed order.
+
+Stopping: no accepted target for ``command_timeout`` s, or a target/state that cannot be used
+while moving, publishes zero rates once and holds (publishes nothing) until the next good target.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import TwistStamped
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from excavator_kinematics import messages
+from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator
+from excavator_kinematics.rate_command import rate_command
+from excavator_kinematics.state_input import InputError, SwingHold
+from excavator_kinematics.twist import split_twist
+from manipulator_kinematics.node_util import ThrottledLog, machine_parameters, make_node, node_parameters, run
+
+NODE = "excavator_velocity_ik"
+COMMAND_NAMES = (JOINTS[0], *CYLINDERS)  # order of D and of the Float64MultiArray
+
+
+class VelocityIk:
+    """The node's state and callbacks; ``node`` is what the executor spins."""
+
+    def __init__(self) -> None:
+        self.node: Node = make_node(NODE)
+        s = node_parameters(self.node, "excavator_nodes.yaml", f"/**/{NODE}")
+        self.exc = Excavator.from_parameters(
+            machine_parameters(self.node, "excavator", "excavator_cet200.yaml")
+        )
+        self.frame = s["base_frame"]
+        self.command_timeout_ns = int(s["command_timeout"] * 1e9)
+        self.state_timeout_ns = int(s["state_timeout"] * 1e9)
+        self.condition_threshold = float(s["condition_threshold"])
+        self.stroke_horizon = float(s["stroke_horizon"])
+        self.residual_tolerance = float(s["twist_residual_tolerance"])
+        self.log = ThrottledLog(self.node, s["warning_period"])
+        self.swing = SwingHold(s["swing_max_age"])
+        self.cylinders: tuple[int, int, np.ndarray] | None = None  # (stamp ns, receipt ns, lengths)
+        self.target: tuple[int, np.ndarray, np.ndarray] | None = None  # (receipt ns, linear, angular)
+        self.moving = False  # a non-zero command may be in force
+        self.target_since_state = False
+
+        qos = QoSProfile(depth=s["qos_depth"], reliability=ReliabilityPolicy.RELIABLE)
+        # A controller acts on the latest target and state: a short input queue drops what a busy
+        # moment left behind instead of working through it late (a backlog is a delay in the loop).
+        latest = QoSProfile(depth=s["input_queue_depth"], reliability=ReliabilityPolicy.RELIABLE)
+        self.command_pub = self.node.create_publisher(JointState, s["topics.rate_commands"], qos)
+        self.array_pub = (
+            self.node.create_publisher(Float64MultiArray, s["topics.rate_command_array"], qos)
+            if s["publish_array"]
+            else None
+        )
+        self.node.create_subscription(TwistStamped, s["topics.target_bucket_twist"], self.on_target, latest)
+        self.node.create_subscription(JointState, s["topics.joint_states"], self.on_swing, latest)
+        self.node.create_subscription(JointState, s["topics.cylinder_lengths"], self.on_cylinders, latest)
+        self.node.create_timer(s["command_timeout"] / 5.0, self.on_timer)
+        self.node.get_logger().info(
+            f"{self.exc.name}: {s['topics.target_bucket_twist']} (frame {self.frame!r}) -> "
+            f"{s['topics.rate_commands']}"
+            + (f" + {s['topics.rate_command_array']}" if self.array_pub else "")
+        )
+
+    def now_ns(self) -> int:
+        return self.node.get_clock().now().nanoseconds
+
+    def on_swing(self, msg: JointState) -> None:
+        try:
+            angle, rate = messages.positions_and_rates(msg, (JOINTS[0],))
+        except InputError as error:
+            self.log("error", f"rejected joint_states: {error}")
+            return
+        self.swing.update(messages.stamp_ns(msg.header.stamp), float(angle[0]), float(rate[0]), None)
+
+    def on_cylinders(self, msg: JointState) -> None:
+        try:
+            lengths, _ = messages.joint_values(msg, CYLINDERS)
+            if lengths is None:
+                raise InputError("cylinder_lengths without positions")
+        except InputError as error:
+            self.log("error", f"rejected cylinder_lengths: {error}")
+            return
+        self.cylinders = (messages.stamp_ns(msg.header.stamp), self.now_ns(), lengths)
+        # A target that came since the last state was already computed at the newest state but one;
+        # recompute only for a target that is older than that (a slower target stream).
+        if self.target is not None and not self.target_since_state:
+            self.command(msg.header.stamp)
+        self.target_since_state = False
+
+    def on_target(self, msg: TwistStamped) -> None:
+        try:
+            if msg.header.frame_id != self.frame:
+                raise InputError(f"frame_id {msg.header.frame_id!r} is not the base frame {self.frame!r}")
+            linear, angular = messages.twist_arrays(msg)
+        except InputError as error:
+            self.stop(f"rejected target_bucket_twist: {error}")
+            return
+        self.target = (self.now_ns(), linear, angular)
+        self.target_since_state = True
+        self.command(msg.header.stamp)
+
+    def on_timer(self) -> None:
+        if self.target is not None and self.now_ns() - self.target[0] > self.command_timeout_ns:
+            self.stop(f"no target_bucket_twist for {self.command_timeout_ns * 1e-9:g} s", severity="warning")
+
+    def state(self) -> np.ndarray:
+        """D = [theta1, d2, d3, d4] now; InputError when missing or stale."""
+        if self.cylinders is None:
+            raise InputError("no cylinder_lengths received yet")
+        stamp_ns, received_ns, lengths = self.cylinders
+        age = self.now_ns() - received_ns
+        if age > self.state_timeout_ns:
+            raise InputError(
+                f"cylinder_lengths is {age * 1e-9:.3f} s old "
+                f"(state_timeout {self.state_timeout_ns * 1e-9:g} s)"
+            )
+        theta1, _, _ = self.swing.at(stamp_ns)
+        return np.concatenate(([theta1], lengths))
+
+    def command(self, stamp: Time) -> None:
+        """Publish the rates for the current target at the current state (or stop, saying why)."""
+        _, linear, angular = self.target
+        try:
+            D = self.exc.validate(self.state())
+            tip = self.exc.pose(D)[:3]
+            split = split_twist(D[0], tip, linear, angular)
+            residual = float(np.linalg.norm(split.residual))
+            if residual > self.residual_tolerance:
+                self.log(
+                    "warning",
+                    f"target twist not achievable: angular velocity residual {residual:.4f} rad/s "
+                    f"({split.residual.round(4).tolist()}); following its linear velocity and alpha rate",
+                )
+            rates = rate_command(
+                self.exc.jc0(D),
+                D,
+                split.q_dot,
+                self.exc.limits,
+                self.condition_threshold,
+                self.stroke_horizon,
+            )
+        except ValueError as error:  # InputError, StrokeError, an overflowing target
+            self.stop(f"cannot command: {error}")
+            return
+        if rates.damping > 0.0:
+            self.log("warning", f"JC0 badly conditioned (cond {rates.condition:.0f}): damped least squares")
+        self.publish(stamp, rates.d_dot)
+        self.moving = True
+
+    def stop(self, reason: str, severity: str = "error") -> None:
+        """Log ``reason``; drop the target and publish zero rates once if a motion may be in force."""
+        self.log(severity, reason)
+        self.target = None
+        if self.moving:
+            self.publish(self.node.get_clock().now().to_msg(), np.zeros(4))
+            self.moving = False
+
+    def publish(self, stamp: Time, d_dot: np.ndarray) -> None:
+        self.command_pub.publish(messages.joint_state(stamp, COMMAND_NAMES, velocities=d_dot))
+        if self.array_pub is not None:
+            self.array_pub.publish(Float64MultiArray(data=[float(v) for v in d_dot]))
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(lambda: VelocityIk().node, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
