@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -12,44 +11,16 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
 from excavator_kinematics.kinematics import bucket_quaternion
-from excavator_kinematics.state_input import InputError
+from manipulator_kinematics.joint_state import InputError, joint_values
 
 
 def stamp_ns(stamp: Time) -> int:
     return stamp.sec * 1_000_000_000 + stamp.nanosec
 
 
-def joint_values(msg: JointState, names: Sequence[str]) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """Positions and velocities of ``names`` in that order, each None when the message's field is empty.
-
-    Raises InputError naming what is missing, of the wrong length or not finite. Plain Python on
-    purpose: this runs for every message, at up to 1 kHz.
-    """
-    index = {name: i for i, name in enumerate(msg.name)}
-    missing = [name for name in names if name not in index]
-    if missing:
-        raise InputError(f"joint names {missing} missing from the message (has {list(msg.name)})")
-    rows = [index[name] for name in names]
-    out = []
-    for label, field in (("position", msg.position), ("velocity", msg.velocity)):
-        if len(field) == 0:
-            out.append(None)
-            continue
-        if len(field) != len(index):
-            raise InputError(f"{len(index)} names but {len(field)} {label} values")
-        values = [field[i] for i in rows]
-        if not all(map(math.isfinite, values)):
-            raise InputError(f"non-finite {label} {values} for {list(names)}")
-        out.append(np.array(values))
-    return out[0], out[1]
-
-
 def positions_and_rates(msg: JointState, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
     """Both fields of ``names``; InputError when either is empty (a state needs both)."""
-    positions, velocities = joint_values(msg, names)
-    if positions is None or velocities is None:
-        raise InputError(f"a state message needs both position and velocity for {list(names)}")
-    return positions, velocities
+    return joint_values(msg, names, require_position=True, require_velocity=True)
 
 
 def joint_state(

@@ -19,11 +19,8 @@ import math
 
 import numpy as np
 
+from manipulator_kinematics.joint_state import InputError
 from manipulator_kinematics.params import ConfigError
-
-
-class InputError(ValueError):
-    """An input message that cannot be used; the message says why (logged by the node)."""
 
 
 class SwingHold:

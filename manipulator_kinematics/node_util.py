@@ -7,12 +7,10 @@ its keys; :func:`machine_parameters` turns it back into the nested dict the nump
 from __future__ import annotations
 
 import re
-import signal
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
-import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -59,9 +57,9 @@ def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
     A machine description that fails validation ends the process with its message and exit
     code 2 (nothing to serve); everything after start-up is handled inside the node.
     """
+    # rclpy's own handlers (SignalHandlerOptions.ALL) turn SIGINT and SIGTERM into a shutdown of
+    # the context, which ends the spin below.
     rclpy.init(args=list(args) if args is not None else sys.argv)
-    # SIGTERM (what launch and test harnesses send) ends the spin like Ctrl-C does.
-    signal.signal(signal.SIGTERM, lambda *_: rclpy.try_shutdown())
     node = None
     try:
         node = node_factory()
@@ -73,6 +71,11 @@ def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
         return 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        # A signal can shut the context down while the executor builds its wait set or takes a
+        # message; rclpy then raises RCLError or RuntimeError instead of ExternalShutdownException.
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             node.destroy_node()
@@ -118,26 +121,3 @@ class ThrottledLog:
             logger.warning(text)
         else:
             logger.info(text)
-
-
-def joint_values(msg: Any, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray | None]:
-    """Positions and velocities (None when the message has none) of joints ``names``, in that
-    order, from a sensor_msgs/JointState matched by name (other joints in it are ignored).
-
-    Raises ValueError naming what is missing, mismatched or not finite.
-    """
-    index = {name: i for i, name in enumerate(msg.name)}
-    missing = [name for name in names if name not in index]
-    if missing:
-        raise ValueError(f"joint names {missing} missing from the joint state (has {list(msg.name)})")
-    if len(msg.position) != len(msg.name):
-        raise ValueError(f"{len(msg.name)} joint names but {len(msg.position)} positions")
-    if len(msg.velocity) not in (0, len(msg.name)):
-        raise ValueError(f"{len(msg.name)} joint names but {len(msg.velocity)} velocities")
-    rows = [index[name] for name in names]
-    positions = np.array([msg.position[i] for i in rows], dtype=float)
-    velocities = np.array([msg.velocity[i] for i in rows], dtype=float) if len(msg.velocity) else None
-    for label, values in (("position", positions), ("velocity", velocities)):
-        if values is not None and not np.all(np.isfinite(values)):
-            raise ValueError(f"non-finite {label} {values.tolist()} of {list(names)}")
-    return positions, velocities

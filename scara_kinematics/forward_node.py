@@ -20,9 +20,9 @@ from geometry_msgs.msg import PoseStamped, TwistStamped
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
+from manipulator_kinematics.joint_state import joint_values
 from manipulator_kinematics.node_util import (
     ThrottledLog,
-    joint_values,
     machine_parameters,
     make_node,
     node_parameters,
@@ -50,7 +50,7 @@ class ScaraForward:
 
     def on_joint_state(self, msg: JointState) -> None:
         try:
-            q, qd = joint_values(msg, self.scara.joint_names)
+            q, qd = joint_values(msg, self.scara.joint_names, require_position=True)
         except ValueError as error:
             self.log("warning", f"dropped joint_states: {error}")
             return

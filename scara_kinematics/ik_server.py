@@ -23,7 +23,8 @@ from collections.abc import Sequence
 import numpy as np
 from rclpy.node import Node
 
-from manipulator_kinematics.node_util import joint_values, machine_parameters, make_node, node_parameters, run
+from manipulator_kinematics.joint_state import joint_values
+from manipulator_kinematics.node_util import machine_parameters, make_node, node_parameters, run
 from manipulator_kinematics.planar import quaternion_yaw
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes
 from manipulator_kinematics_interfaces.srv import SolveFK, SolveIK
@@ -91,7 +92,7 @@ class ScaraIKServer:
         seed = None
         if len(request.seed.name) or len(request.seed.position):
             try:
-                seed, _ = joint_values(request.seed, self.scara.joint_names)
+                seed, _ = joint_values(request.seed, self.scara.joint_names, require_position=True)
             except ValueError as error:
                 raise Rejected(KinematicsErrorCodes.INVALID_ROBOT_STATE, f"seed: {error}") from None
         result = self.scara.ik([p.x, p.y], mode=mode, phi=phi, seed=seed, branch=branch)
@@ -140,7 +141,7 @@ class ScaraIKServer:
     def _solve_fk(self, request: SolveFK.Request, response: SolveFK.Response) -> None:
         self._check_frame(request.frame_id)
         try:
-            q, qd = joint_values(request.joint_state, self.scara.joint_names)
+            q, qd = joint_values(request.joint_state, self.scara.joint_names, require_position=True)
         except ValueError as error:
             raise Rejected(KinematicsErrorCodes.INVALID_ROBOT_STATE, f"joint_state: {error}") from None
         if not self.scara.within_limits(q):

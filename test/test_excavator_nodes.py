@@ -255,7 +255,7 @@ class TestForwardNode:
             (
                 "no rates",
                 lambda D: (messages.joint_state(stamp(0), CYLINDERS, D[1:]), None),
-                "needs both position and velocity",
+                "no velocity values",
             ),
             (
                 "stale swing",
