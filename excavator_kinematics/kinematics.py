@@ -818,36 +818,39 @@ def _first_bad(values: np.ndarray, good: np.ndarray) -> float:
 
 
 # ---------------------------------------------------------------------- ROS-facing geometry
+def _operands(*values: Any) -> tuple[SimpleNamespace, list[Any]]:
+    """Python floats and math for all-scalar arguments (a node's per-message call), else arrays."""
+    if all(isinstance(v, float | int) for v in values):  # np.float64 is a float
+        return _SCALAR, [float(v) for v in values]
+    return _ARRAY, [np.asarray(v, dtype=float) for v in values]
+
+
+def _vector(components: tuple[Any, ...], m: SimpleNamespace) -> np.ndarray:
+    if m is _SCALAR:
+        return np.array(components)
+    return np.stack(np.broadcast_arrays(*components), axis=-1)
+
+
 def bucket_quaternion(theta1: Any, alpha: Any) -> np.ndarray:
     """Bucket orientation [x, y, z, w] in the REP 103 base frame: yaw theta1 about z, then
     the bucket angle alpha about the boom-plane normal, i.e. a rotation about +y by -alpha."""
-    theta1, alpha = np.asarray(theta1, dtype=float), np.asarray(alpha, dtype=float)
-    cy, sy = np.cos(0.5 * theta1), np.sin(0.5 * theta1)
-    cp, sp = np.cos(-0.5 * alpha), np.sin(-0.5 * alpha)
+    m, (theta1, alpha) = _operands(theta1, alpha)
+    cy, sy = m.cos(0.5 * theta1), m.sin(0.5 * theta1)
+    cp, sp = m.cos(0.5 * alpha), -m.sin(0.5 * alpha)
     # q_z(theta1) * q_y(-alpha)
-    return np.stack((-sy * sp, cy * sp, sy * cp, cy * cp), axis=-1)
+    return _vector((-sy * sp, cy * sp, sy * cp, cy * cp), m)
 
 
 def bucket_angular_velocity(theta1: Any, theta1_dot: Any, alpha_dot: Any) -> np.ndarray:
     """omega = theta1dot z - alphadot y', y' = (-sin theta1, cos theta1, 0) the boom-plane normal."""
-    theta1 = np.asarray(theta1, dtype=float)
-    return np.stack(
-        (alpha_dot * np.sin(theta1), -alpha_dot * np.cos(theta1), np.broadcast_to(theta1_dot, theta1.shape)),
-        axis=-1,
-    ).astype(float)
+    m, (theta1, theta1_dot, alpha_dot) = _operands(theta1, theta1_dot, alpha_dot)
+    return _vector((alpha_dot * m.sin(theta1), -alpha_dot * m.cos(theta1), theta1_dot + 0.0 * theta1), m)
 
 
 def bucket_angular_acceleration(
     theta1: Any, theta1_dot: Any, theta1_ddot: Any, alpha_dot: Any, alpha_ddot: Any
 ) -> np.ndarray:
     """Time derivative of :func:`bucket_angular_velocity` (y' turns with the swing)."""
-    theta1 = np.asarray(theta1, dtype=float)
-    c, s = np.cos(theta1), np.sin(theta1)
-    return np.stack(
-        (
-            alpha_ddot * s + alpha_dot * theta1_dot * c,
-            -alpha_ddot * c + alpha_dot * theta1_dot * s,
-            np.broadcast_to(theta1_ddot, theta1.shape),
-        ),
-        axis=-1,
-    ).astype(float)
+    m, (theta1, w, w_dot, a_dot, a_ddot) = _operands(theta1, theta1_dot, theta1_ddot, alpha_dot, alpha_ddot)
+    c, s = m.cos(theta1), m.sin(theta1)
+    return _vector((a_ddot * s + a_dot * w * c, -a_ddot * c + a_dot * w * s, w_dot + 0.0 * theta1), m)
