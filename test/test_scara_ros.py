@@ -140,7 +140,9 @@ BAD_IK = {
     "frame": (ik_request(0.5, 0.3, frame="map"), Codes.FRAME_TRANSFORM_FAILURE, "'map'"),
     "off plane": (ik_request(0.5, 0.3, z=0.1), Codes.NO_IK_SOLUTION, "z = 0.1 m"),
     "seed nan": (ik_request(0.5, 0.3, seed=[0.1, math.nan, 0.0]), Codes.INVALID_ROBOT_STATE, "non-finite"),
-    "seed short": (ik_request(0.5, 0.3, seed=[0.1, 0.2]), Codes.INVALID_ROBOT_STATE, "3 names but 2 position values"),
+    "seed short": (
+        ik_request(0.5, 0.3, seed=[0.1, 0.2]), Codes.INVALID_ROBOT_STATE, "3 names but 2 position values"
+    ),
     "fixed vs heading": (ik_request(0.5, 0.3, mode="fixed_phi", phi=0.5), Codes.INVALID_GOAL_CONSTRAINTS,
                          "fixed_phi"),
 }

@@ -1,0 +1,394 @@
+"""evaluate: check a bag of the package's topics against the kinematics; table, JSON and plots.
+
+    evaluate BAG [-o DIR] [--params FILE ...] [--no-plots] [--recover]
+
+Finds the machines in the bag (an excavator or SCARA arm per namespace, by their topics and
+joint names), recomputes their kinematics from the recorded inputs with the numpy cores and
+reports the error of the published outputs, the tracking of commanded bucket twists, cylinder
+speed and stroke statistics, and per topic the message rate, gaps and latency (see
+:mod:`manipulator_kinematics.bag.analysis`). Writes ``report.json`` and PNG plots to DIR
+(default: ``<bag>_evaluation`` beside the bag); nothing is written when the bag cannot be read.
+Needs no ROS installation beyond the message definitions that rosbags ships.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from manipulator_kinematics.bag import analysis
+from manipulator_kinematics.bag.analysis import Machines, Panel, Plot
+from manipulator_kinematics.bag.cli import guarded
+from manipulator_kinematics.bag.io import BagError, BagReader, TopicArrays
+from manipulator_kinematics.bag.topics import package_topics
+from manipulator_kinematics.params import ConfigError, flatten, load_parameters, unflatten
+
+NAME = "evaluate"
+# Points per curve in a plot: each bin keeps its min and max, so spikes stay visible.
+PLOT_BINS = 2000
+
+
+def parse_args(argv: Sequence[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog=NAME, description=__doc__.split("\n\n")[0])
+    parser.add_argument("bag", type=Path)
+    parser.add_argument(
+        "-o", "--output", type=Path, help="directory for report.json and plots (default: <bag>_evaluation)"
+    )
+    parser.add_argument(
+        "--params",
+        nargs="+",
+        type=Path,
+        default=[],
+        metavar="FILE",
+        help="ROS parameter files with the machines (excavator:, scara: sections); "
+        "default: the package's default machines",
+    )
+    parser.add_argument("--no-plots", action="store_true", help="write no PNG files")
+    parser.add_argument(
+        "--recover",
+        action="store_true",
+        help="read an mcap bag whose recorder was killed, up to its last flush",
+    )
+    return parser.parse_args(argv)
+
+
+def split_topic(topic: str, names: Sequence[str]) -> tuple[str, str] | None:
+    """(namespace, package topic name) of a recorded topic, or None when it is not one of ours."""
+    for name in sorted(names, key=len, reverse=True):
+        if topic == "/" + name or topic.endswith("/" + name):
+            return topic[: -len(name) - 1] or "/", name
+    return None
+
+
+def load_machines(files: Sequence[Path]) -> Machines:
+    """Machines and node settings from ROS parameter files: ``/**`` sections for the machines,
+    node sections (``excavator_forward``, ``/**/excavator_forward``, ...) for node settings; a
+    later file's value wins key by key, as it does for a node given several files."""
+    params: dict[str, Any] = {}
+    nodes: dict[str, dict[str, Any]] = {}
+    try:
+        for path in files:
+            if not path.is_file():
+                raise BagError(f"--params {path}: no such file")
+            params.update(flatten(load_parameters(path)))
+            for key in yaml.safe_load(path.read_text(encoding="utf-8")) or {}:
+                if key != "/**":
+                    node = nodes.setdefault(str(key).rsplit("/", 1)[-1], {})
+                    node.update(flatten(load_parameters(path, key)))
+        return Machines.from_parameters(unflatten(params), {name: unflatten(v) for name, v in nodes.items()})
+    except (ConfigError, yaml.YAMLError) as error:
+        raise BagError(f"--params: {error}") from None
+
+
+def evaluate_bag(bag: BagReader, machines: Machines) -> tuple[dict[str, Any], list[Plot]]:
+    """The whole report (JSON-ready) and its plots."""
+    if bag.message_count == 0:
+        raise BagError(f"{bag.path}: the bag holds no messages")
+    ours = package_topics()
+    grouped: dict[str, dict[str, str]] = {}
+    for topic, info in bag.topics.items():
+        split = split_topic(topic, list(ours))
+        if split is None or not info.count:
+            continue
+        if info.msgtype != ours[split[1]]:
+            raise BagError(
+                f"{bag.path}: topic {topic} has type {info.msgtype}, but the package's "
+                f"{split[1]} is {ours[split[1]]}"
+            )
+        grouped.setdefault(split[0], {})[split[1]] = topic
+    if not grouped:
+        raise BagError(
+            f"{bag.path}: none of the package's topics ({', '.join(sorted(ours))}) has messages "
+            f"in the bag (it has {', '.join(bag.topics) or 'no topics'})"
+        )
+    arrays = bag.arrays([topic for names in grouped.values() for topic in names.values()])
+    t0 = min(int(bag.log_times(t)[0]) for t, info in bag.topics.items() if info.count)
+    end = max(int(bag.log_times(t)[-1]) for t, info in bag.topics.items() if info.count)
+
+    report: dict[str, Any] = {
+        "bag": str(bag.path),
+        "storage": bag.storage,
+        "messages": bag.message_count,
+        "duration_s": (end - t0) * 1e-9,
+        "recovered": bag.recovered,
+        "topics": {},
+        "machines": [],
+    }
+    for topic, info in bag.topics.items():
+        if topic in arrays:
+            report["topics"][topic] = analysis.topic_stats(arrays[topic])
+        else:
+            report["topics"][topic] = {"type": info.msgtype, "count": info.count, "evaluated": False}
+    plots: list[Plot] = [_latency_plot(arrays, t0)] if arrays else []
+    stamp0 = min(
+        (int(a.stamp_ns().min()) for a in arrays.values() if len(a) and "header.stamp.sec" in a.fields),
+        default=t0,
+    )
+    for namespace, names in sorted(grouped.items()):
+        data: dict[str, TopicArrays] = {name: arrays[topic] for name, topic in names.items()}
+        prefix = "" if namespace == "/" else namespace.strip("/").replace("/", "_") + "_"
+        joints = data.get("joint_states")
+        if any(n in data for n in analysis.EXCAVATOR_TOPICS) or (
+            joints is not None and analysis.has_swing(joints)
+        ):
+            section, figures = analysis.excavator(data, machines, stamp0, prefix)
+            report["machines"].append({"kind": "excavator", "namespace": namespace, **section})
+            plots += figures
+        if any(n in data for n in analysis.SCARA_TOPICS) or (
+            joints is not None and analysis.has_scara_joints(joints, machines)
+        ):
+            section, figures = analysis.scara(data, machines, stamp0, prefix)
+            report["machines"].append({"kind": "scara", "namespace": namespace, **section})
+            plots += figures
+    return report, plots
+
+
+def _latency_plot(arrays: dict[str, TopicArrays], t0: int) -> Plot:
+    curves = {
+        topic: (analysis.since(a.log_time, t0), (a.log_time - a.stamp_ns()) * 1e-9)
+        for topic, a in arrays.items()
+        if len(a) and "header.stamp.sec" in a.fields
+    }
+    return Plot("latency", "Latency: record time - header stamp", [Panel("latency (s)", curves)])
+
+
+# ------------------------------------------------------------------------------------------ output
+
+
+def _number(value: Any, digits: int = 4) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, float) and (value == 0 or 1e-3 <= abs(value) < 1e5):
+        return f"{value:.{digits}g}"
+    return f"{value:.{digits - 1}e}"
+
+
+def _table(header: Sequence[str], rows: list[Sequence[Any]]) -> str:
+    cells = [list(header)] + [[c if isinstance(c, str) else _number(c) for c in row] for row in rows]
+    widths = [max(len(row[i]) for row in cells) for i in range(len(header))]
+    lines = [
+        "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(row, widths)))
+        for row in cells
+    ]
+    return "\n".join([lines[0], "  ".join("-" * w for w in widths), *lines[1:]])
+
+
+def render(report: dict[str, Any]) -> str:
+    """The report as text tables."""
+    out = [
+        f"bag {report['bag']} ({report['storage']}): {report['messages']} messages over "
+        f"{report['duration_s']:.3f} s"
+    ]
+    if report["recovered"]:
+        out.append(f"RECOVERED: {report['recovered']}")
+    rows = []
+    for topic, t in report["topics"].items():
+        latency = t.get("latency_s") or {}
+        rows.append(
+            [
+                topic,
+                t["count"],
+                t.get("rate_hz"),
+                t.get("gap_max_s"),
+                t.get("gaps"),
+                latency.get("median"),
+                latency.get("p99"),
+                latency.get("max"),
+            ]
+        )
+    out += [
+        "",
+        "Topics",
+        _table(["topic", "count", "rate Hz", "max gap s", "gaps", "latency s median", "p99", "max"], rows),
+    ]
+    for machine in report["machines"]:
+        out += ["", f"{machine['kind']} in namespace {machine['namespace']}"]
+        errors = []
+        for topic, entry in {
+            **machine.get("consistency", {}),
+            **{k: v for k, v in machine.items() if k in ("tool_pose", "tool_twist")},
+        }.items():
+            for quantity, stats in entry.items():
+                if isinstance(stats, dict):
+                    errors.append(
+                        [
+                            f"{topic} {quantity}",
+                            entry["matched"],
+                            entry["unmatched"],
+                            stats["max"],
+                            stats["rms"],
+                        ]
+                    )
+        if errors:
+            out += [
+                "consistency with the recomputed kinematics",
+                _table(["output", "matched", "unmatched", "max error", "RMS error"], errors),
+            ]
+            out += [
+                f"  {topic}: {entry['not_compared']}"
+                for topic, entry in machine.get("consistency", {}).items()
+                if "not_compared" in entry
+            ]
+        if "tracking" in machine:
+            tr = machine["tracking"]
+            out += [
+                "tracking: target_bucket_twist vs bucket_twist",
+                _table(
+                    ["quantity", "matched", "no command", "max error", "RMS error"],
+                    [
+                        [q, tr["matched"], tr["without_active_command"], tr[q]["max"], tr[q]["rms"]]
+                        for q in ("linear_mps", "angular_radps")
+                    ],
+                ),
+            ]
+        actuators = machine.get("actuators", {})
+        cylinders = [
+            [
+                name,
+                a["length_min_m"],
+                a["length_max_m"],
+                a["stroke_used"],
+                a["near_end_fraction"],
+                a["beyond_end"],
+                a["speed_max_mps"],
+                a["speed_limit_mps"],
+                a["over_speed"],
+            ]
+            for name, a in actuators.items()
+            if "length_min_m" in a
+        ]
+        if cylinders:
+            out += [
+                "cylinders",
+                _table(
+                    [
+                        "cylinder",
+                        "min m",
+                        "max m",
+                        "stroke used",
+                        "near end",
+                        "beyond end",
+                        "max speed m/s",
+                        "limit",
+                        "over speed",
+                    ],
+                    cylinders,
+                ),
+            ]
+        if "commands" in actuators:
+            out += [
+                "rate commands",
+                _table(
+                    ["actuator", "max |command|", "limit", "saturated"],
+                    [
+                        [n, c["max"], c["limit"], c["saturated_fraction"]]
+                        for n, c in actuators["commands"].items()
+                    ],
+                ),
+            ]
+        if "joint_states" in machine:
+            out.append(
+                f"joint states: {machine['joint_states']}, outside the joint limits: "
+                f"{machine['outside_limits']}"
+            )
+    return "\n".join(out)
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    return value
+
+
+def _decimate(t: np.ndarray, y: np.ndarray, bins: int = PLOT_BINS) -> tuple[np.ndarray, np.ndarray]:
+    """At most 2 * bins points: the min and max of each of ``bins`` equal slices."""
+    keep = np.isfinite(t) & np.isfinite(y)
+    t, y = t[keep], y[keep]
+    if len(t) <= 2 * bins:
+        return t, y
+    edges = np.linspace(0, len(t), bins + 1).astype(int)
+    low = np.minimum.reduceat(y, edges[:-1])
+    high = np.maximum.reduceat(y, edges[:-1])
+    mid = t[(edges[:-1] + edges[1:]) // 2]
+    return np.repeat(mid, 2), np.column_stack([low, high]).ravel()
+
+
+def write_plots(plots: Sequence[Plot], directory: Path) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    written = []
+    for plot in plots:
+        panels = [panel for panel in plot.panels if panel.curves]
+        if not panels:
+            continue
+        height = 1.2 + 2.2 * len(panels)
+        figure, axes = plt.subplots(len(panels), 1, sharex=True, squeeze=False, figsize=(10, height))
+        # Fixed margins: tight_layout measures every tick label and costs seconds per figure.
+        figure.subplots_adjust(left=0.1, right=0.98, top=1 - 0.45 / height, bottom=0.55 / height, hspace=0.15)
+        for ax, panel in zip(axes[:, 0], panels):
+            for label, (t, y) in panel.curves.items():
+                y = np.abs(y) if panel.log else y
+                ax.plot(*_decimate(np.asarray(t, float), np.asarray(y, float)), label=label, linewidth=0.8)
+            for value in panel.limits:
+                ax.axhline(value, color="grey", linestyle="--", linewidth=0.7)
+            if panel.log:
+                ax.set_yscale("symlog", linthresh=1e-12)
+            ax.set_ylabel(panel.ylabel)
+            ax.grid(True, alpha=0.3)
+            ax.legend(fontsize="small", loc="upper right")
+        axes[0, 0].set_title(plot.title)
+        axes[-1, 0].set_xlabel("time (s)")
+        path = directory / f"{plot.name}.png"
+        figure.savefig(path, dpi=90)
+        plt.close(figure)
+        written.append(path)
+    return written
+
+
+def run_evaluate(argv: Sequence[str]) -> int:
+    args = parse_args(argv)
+    machines = load_machines(args.params)
+    bag = BagReader(args.bag, recover=args.recover)
+    report, plots = evaluate_bag(bag, machines)
+    print(render(report))
+    output = args.output or args.bag.parent / f"{args.bag.stem}_evaluation"
+    try:
+        output.mkdir(parents=True, exist_ok=True)
+        tmp = output / "report.json.tmp"
+        tmp.write_text(json.dumps(_jsonable(report), indent=2), encoding="utf-8")
+        tmp.replace(output / "report.json")
+        written = [] if args.no_plots else write_plots(plots, output)
+    except OSError as error:
+        raise BagError(f"cannot write the report to {output}: {error}") from None
+    print(
+        f"\nreport: {output / 'report.json'}" + (f", {len(written)} plots in {output}" if written else ""),
+        file=sys.stderr,
+    )
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return guarded(NAME, run_evaluate, argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

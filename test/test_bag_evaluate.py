@@ -1,0 +1,248 @@
+"""`evaluate` without ROS: reported numbers against errors planted in otherwise exact bags, and
+readable failures (non-zero exit, one line, nothing overwritten) for bags it cannot use."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from excavator_kinematics.kinematics import CYLINDERS, Excavator
+from manipulator_kinematics.bag.analysis import Machines
+from manipulator_kinematics.bag.evaluate import evaluate_bag, load_machines
+from manipulator_kinematics.bag.io import BagReader, BagWriter, decode_messages, encode_messages
+from manipulator_kinematics.bag.synthetic import OUTPUT_DELAY, Topic, excavator_bag, scara_bag, write_bag
+from manipulator_kinematics.params import config_path
+from scara_kinematics.kinematics import Scara
+
+DATA = Path(__file__).resolve().parent / "data"
+EXC = Excavator.default()
+MACHINES = Machines.from_parameters({})
+RATE = 50.0
+
+
+def changed(topic: Topic, change: Callable[[dict[str, np.ndarray]], None]) -> Topic:
+    """``topic`` with its messages decoded, changed in place by ``change`` and encoded again."""
+    fields = {path: np.array(values) for path, values in decode_messages(topic.msgtype, topic.raw).items()}
+    change(fields)
+    values = {
+        path: (v[0] if v.ndim == 1 else list(v[0])) if v.dtype.kind == "U" else v
+        for path, v in fields.items()
+    }
+    return Topic(topic.msgtype, topic.log_time, encode_messages(topic.msgtype, len(topic.raw), values))
+
+
+def evaluated(tmp_path: Path, topics: dict[str, Topic]) -> dict:
+    write_bag(tmp_path / "bag", topics, overwrite=True)
+    report, _ = evaluate_bag(BagReader(tmp_path / "bag"), MACHINES)
+    return report
+
+
+def only(report: dict, kind: str) -> dict:
+    (machine,) = [m for m in report["machines"] if m["kind"] == kind]
+    return machine
+
+
+def test_golden_bags_are_consistent_to_rounding() -> None:
+    report, plots = evaluate_bag(BagReader(DATA / "excavator_forward_golden"), MACHINES)
+    consistency = only(report, "excavator")["consistency"]
+    assert {t: c["matched"] for t, c in consistency.items()} == {
+        "bucket_pose": 100,
+        "bucket_twist": 100,
+        "bucket_accel": 99,
+        "open_chain_joint_states": 100,
+    }
+    for entry in consistency.values():
+        assert entry["unmatched"] == 0
+        for stats in (v for v in entry.values() if isinstance(v, dict)):
+            assert stats["max"] < 1e-12
+    scara = only(evaluate_bag(BagReader(DATA / "scara_forward_golden"), MACHINES)[0], "scara")
+    assert scara["tool_pose"]["matched"] == scara["tool_twist"]["matched"] == 100
+    assert (
+        scara["tool_pose"]["position_m"]["max"] < 1e-12 and scara["tool_twist"]["linear_mps"]["max"] < 1e-12
+    )
+    assert {p.name for p in plots} >= {"latency", "excavator_consistency", "excavator_cylinders"}
+
+
+def test_planted_pose_errors_are_reported_exactly(tmp_path: Path) -> None:
+    topics = excavator_bag(EXC, 100, RATE)
+
+    def shift_and_turn(f: dict[str, np.ndarray]) -> None:
+        f["pose.position.x"][10:20] += 1e-3  # 10 of 100 messages 1 mm off
+        # Message 50 turned by 0.02 rad about z: q' = q * (0, 0, sin 0.01, cos 0.01).
+        x, y, z, w = (f[f"pose.orientation.{a}"][50] for a in "xyzw")
+        s, c = np.sin(0.01), np.cos(0.01)
+        for a, v in zip("xyzw", (x * c + y * s, y * c - x * s, z * c + w * s, w * c - z * s)):
+            f[f"pose.orientation.{a}"][50] = v
+
+    topics["/bucket_pose"] = changed(topics["/bucket_pose"], shift_and_turn)
+    pose = only(evaluated(tmp_path, topics), "excavator")["consistency"]["bucket_pose"]
+    assert pose["position_m"]["max"] == pytest.approx(1e-3, abs=1e-12)
+    assert pose["position_m"]["rms"] == pytest.approx(1e-3 * np.sqrt(10 / 100), abs=1e-12)
+    assert pose["orientation_rad"]["max"] == pytest.approx(0.02, abs=1e-10)
+    assert pose["orientation_rad"]["rms"] == pytest.approx(0.02 / np.sqrt(100), abs=1e-10)
+
+
+def test_tracking_error_of_a_planted_command_offset(tmp_path: Path) -> None:
+    topics = excavator_bag(EXC, 100, RATE, target_every=1, target_lead=0.0)
+    exact = only(evaluated(tmp_path, topics), "excavator")["tracking"]
+    assert exact["matched"] == 100 and exact["linear_mps"]["max"] < 1e-12
+
+    def offset(f: dict[str, np.ndarray]) -> None:
+        f["twist.linear.x"][:50] += 0.02
+        f["twist.angular.z"][:] -= 0.1
+
+    topics["/target_bucket_twist"] = changed(topics["/target_bucket_twist"], offset)
+    tracking = only(evaluated(tmp_path, topics), "excavator")["tracking"]
+    assert tracking["linear_mps"]["max"] == pytest.approx(0.02, abs=1e-12)
+    assert tracking["linear_mps"]["rms"] == pytest.approx(0.02 * np.sqrt(0.5), abs=1e-12)
+    assert tracking["angular_radps"]["rms"] == pytest.approx(0.1, abs=1e-12)
+
+
+def test_rates_gaps_and_latency_of_topics(tmp_path: Path) -> None:
+    topics = excavator_bag(EXC, 100, RATE)
+    keep = np.r_[0:50, 55:100]  # 5 cylinder messages lost: one gap of 6 periods
+    cyl = topics["/cylinder_lengths"]
+    topics["/cylinder_lengths"] = Topic(cyl.msgtype, cyl.log_time[keep], [cyl.raw[i] for i in keep])
+    report = evaluated(tmp_path, topics)
+    stats = report["topics"]["/cylinder_lengths"]
+    assert stats["count"] == 95 and stats["gaps"] == 1
+    assert stats["gap_max_s"] == pytest.approx(6 / RATE)
+    assert report["topics"]["/bucket_pose"]["rate_hz"] == pytest.approx(RATE)
+    assert report["topics"]["/bucket_pose"]["latency_s"]["median"] == pytest.approx(OUTPUT_DELAY * 1e-9)
+    # Outputs of the lost inputs have nothing to be compared with.
+    assert only(report, "excavator")["consistency"]["bucket_pose"]["unmatched"] == 5
+
+
+def test_cylinder_speed_and_stroke_statistics(tmp_path: Path) -> None:
+    topics = excavator_bag(EXC, 100, RATE)
+    lim = EXC.limits
+
+    def abuse(f: dict[str, np.ndarray]) -> None:
+        f["velocity"][[3, 4, 5], 0] = 1.5 * lim.max_cylinder_speed[0]  # boom over speed 3 times
+        f["position"][[7, 8], 2] = lim.stroke_max[2] + 0.01  # bucket beyond its stroke twice
+
+    topics["/cylinder_lengths"] = changed(topics["/cylinder_lengths"], abuse)
+    lengths = decode_messages(topics["/cylinder_lengths"].msgtype, topics["/cylinder_lengths"].raw)[
+        "position"
+    ]
+    machine = only(evaluated(tmp_path, topics), "excavator")
+    boom, bucket = (machine["actuators"][name] for name in (CYLINDERS[0], CYLINDERS[2]))
+    assert boom["over_speed"] == 3 and boom["speed_max_mps"] == pytest.approx(1.5 * lim.max_cylinder_speed[0])
+    assert bucket["beyond_end"] == 2 and bucket["length_max_m"] == pytest.approx(lim.stroke_max[2] + 0.01)
+    used = (lengths[:, 0].max() - lengths[:, 0].min()) / (lim.stroke_max[0] - lim.stroke_min[0])
+    assert boom["stroke_used"] == pytest.approx(used)
+    # The node rejects states beyond a stroke end; so does the recomputation.
+    assert machine["accepted_inputs"] == 98
+
+
+def test_machines_are_found_per_namespace(tmp_path: Path) -> None:
+    named = {f"/site/exc1{t}": v for t, v in excavator_bag(EXC, 60, RATE).items()}
+    named |= {f"/arm{t}": v for t, v in scara_bag(Scara.default(), 60, RATE).items()}
+    report = evaluated(tmp_path, named)
+    assert [(m["kind"], m["namespace"]) for m in report["machines"]] == [
+        ("scara", "/arm"),
+        ("excavator", "/site/exc1"),
+    ]
+    assert only(report, "excavator")["consistency"]["bucket_pose"]["position_m"]["max"] < 1e-12
+    assert only(report, "scara")["tool_pose"]["matched"] == 60
+
+
+# ------------------------------------------------------------------------------------------ command line
+
+
+def evaluate_cli(*args: str) -> subprocess.CompletedProcess:
+    script = Path(sys.executable).parent / "evaluate"
+    command = (
+        [str(script)] if script.exists() else [sys.executable, "-m", "manipulator_kinematics.bag.evaluate"]
+    )
+    return subprocess.run([*command, *args], capture_output=True, text=True, timeout=120)
+
+
+def test_command_writes_table_json_and_plots(tmp_path: Path) -> None:
+    result = evaluate_cli(str(DATA / "excavator_forward_golden"), "-o", str(tmp_path / "out"))
+    assert result.returncode == 0, result.stderr
+    assert (
+        "consistency with the recomputed kinematics" in result.stdout
+        and "bucket_pose position_m" in result.stdout
+    )
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["messages"] == 599 and report["machines"][0]["kind"] == "excavator"
+    for name in ("latency", "excavator_consistency", "excavator_cylinders"):
+        assert (tmp_path / "out" / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def bad_bags(tmp_path: Path) -> dict[str, tuple[Path, str]]:
+    """Bags evaluate must refuse, with the words its message must contain."""
+    golden = excavator_bag(EXC, 100, RATE)
+    bags: dict[str, tuple[Path, str]] = {}
+    write_bag(tmp_path / "truncated", golden)
+    data = tmp_path / "truncated" / "truncated.mcap"
+    data.write_bytes(data.read_bytes()[:30000])
+    bags["truncated"] = (tmp_path / "truncated", "--recover")
+    write_bag(tmp_path / "corrupt", golden)
+    data = tmp_path / "corrupt" / "corrupt.mcap"
+    raw = bytearray(data.read_bytes())
+    middle = len(raw) // 2
+    raw[middle : middle + 400] = b"\xff" * 400  # longer than a message record: hits record headers
+    data.write_bytes(bytes(raw))
+    bags["corrupt"] = (tmp_path / "corrupt", "corrupt")
+    with BagWriter(tmp_path / "empty") as writer:
+        writer.add_topic("/cylinder_lengths", "sensor_msgs/msg/JointState")
+    bags["empty"] = (tmp_path / "empty", "holds no messages")
+    write_bag(tmp_path / "foreign", {"/chatter": golden["/joint_states"]})
+    bags["missing topics"] = (tmp_path / "foreign", "none of the package's topics")
+    write_bag(tmp_path / "wrong_type", {"/bucket_pose": golden["/bucket_twist"]})
+    bags["wrong type"] = (tmp_path / "wrong_type", "has type geometry_msgs/msg/TwistStamped")
+    bags["no bag"] = (tmp_path / "nothing_here", "no such bag")
+    return bags
+
+
+def test_bad_bags_fail_in_one_line_and_overwrite_nothing(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "report.json").write_text("earlier report")
+    for what, (bag, words) in bad_bags(tmp_path).items():
+        result = evaluate_cli(str(bag), "-o", str(out))
+        assert result.returncode == 1, what
+        assert result.stderr.startswith("evaluate: error: ") and words in result.stderr, (what, result.stderr)
+        assert "Traceback" not in result.stderr and result.stderr.count("\n") == 1, what
+        assert (out / "report.json").read_text() == "earlier report" and len(list(out.iterdir())) == 1, what
+
+
+def test_params_files_set_the_machine_and_the_node_settings(tmp_path: Path) -> None:
+    params = tmp_path / "params.yaml"
+    params.write_text(
+        "/**:\n  ros__parameters:\n    excavator:\n      boom:\n        length: 5.75\n"
+        "/**/excavator_forward:\n  ros__parameters:\n    acceleration_time_constant: 0.03\n"
+    )
+    base = yaml.safe_load(config_path("excavator_cet200.yaml").read_text())["/**"]["ros__parameters"]
+    full = tmp_path / "machine.yaml"
+    full.write_text(yaml.safe_dump({"/**": {"ros__parameters": base}}))
+    machines = load_machines([full, params])
+    assert machines.acceleration_time_constant == 0.03
+    report, _ = evaluate_bag(BagReader(DATA / "excavator_forward_golden"), machines)
+    consistency = only(report, "excavator")["consistency"]
+    # The golden outputs are for the 5.694 m boom: 56 mm longer moves the tip by centimetres.
+    assert consistency["bucket_pose"]["position_m"]["max"] > 0.01
+    assert "acceleration_time_constant 0.03" in consistency["bucket_accel"]["not_compared"]
+
+
+def test_recover_evaluates_a_bag_without_its_summary(tmp_path: Path) -> None:
+    write_bag(tmp_path / "bag", excavator_bag(EXC, 100, RATE))
+    data = tmp_path / "bag" / "bag.mcap"
+    data.write_bytes(data.read_bytes()[:-100])  # footer and part of the summary gone
+    refused = evaluate_cli(str(tmp_path / "bag"), "--no-plots")
+    assert refused.returncode == 1 and "--recover reads the 599 messages" in refused.stderr
+    result = evaluate_cli(str(tmp_path / "bag"), "--no-plots", "--recover")
+    assert result.returncode == 0, result.stderr
+    assert "RECOVERED" in result.stdout and "599 messages" in result.stdout
+    report = json.loads((tmp_path / "bag_evaluation" / "report.json").read_text())
+    assert report["recovered"] and only(report, "excavator")["consistency"]["bucket_pose"]["matched"] == 100
+    assert not list((tmp_path / "bag_evaluation").glob("*.png"))

@@ -1,0 +1,348 @@
+"""record and replay as real processes over DDS: golden bags replayed into the real forward nodes,
+recorded bags read by an independent reader, a recorder killed with SIGKILL, replay timing and
+topic handling. Every wait is on a condition with a timeout."""
+
+from __future__ import annotations
+
+import subprocess
+import time
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from ros_harness import NodeProcess, Probe, executable
+from sensor_msgs.msg import JointState
+
+from manipulator_kinematics.bag.io import BagError, BagReader, BagWriter, TopicArrays, encode_messages
+from manipulator_kinematics.bag.synthetic import Topic, stamp_fields, write_bag
+from manipulator_kinematics.bag.topics import package_topics
+
+DATA = Path(__file__).resolve().parent / "data"
+QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+TIMEOUT = 60.0
+# Outputs equal to the stored ones up to rounding; a changed machine is off by millimetres.
+MATCH = 1e-9
+TYPES = {
+    "geometry_msgs/msg/PoseStamped": PoseStamped,
+    "geometry_msgs/msg/TwistStamped": TwistStamped,
+    "geometry_msgs/msg/AccelStamped": AccelStamped,
+    "sensor_msgs/msg/JointState": JointState,
+}
+
+
+@pytest.fixture
+def probe() -> Iterator[Probe]:
+    probe = Probe("bag_test_probe")
+    yield probe
+    probe.close()
+
+
+def stamp_ns(msg: object) -> int:
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
+def values(msg: object) -> np.ndarray:
+    """The numbers of a received output message, in the order of :func:`expected_values`."""
+    if isinstance(msg, PoseStamped):
+        p, o = msg.pose.position, msg.pose.orientation
+        return np.array([p.x, p.y, p.z, o.x, o.y, o.z, o.w])
+    if isinstance(msg, JointState):
+        return np.concatenate([msg.position, msg.velocity])
+    part = msg.twist if isinstance(msg, TwistStamped) else msg.accel
+    return np.array(
+        [part.linear.x, part.linear.y, part.linear.z, part.angular.x, part.angular.y, part.angular.z]
+    )
+
+
+def expected_values(arrays: TopicArrays) -> np.ndarray:
+    f = arrays.fields
+    if "pose.position.x" in f:
+        keys = [f"pose.position.{a}" for a in "xyz"] + [f"pose.orientation.{a}" for a in "xyzw"]
+    elif "position" in f:
+        return np.hstack([f["position"], f["velocity"]])
+    else:
+        part = "twist" if "twist.linear.x" in f else "accel"
+        keys = [f"{part}.{kind}.{a}" for kind in ("linear", "angular") for a in "xyz"]
+    return np.column_stack([f[k] for k in keys])
+
+
+def replay_into(
+    probe: Probe, node: Sequence[str], bag: Path, inputs: Sequence[str], outputs: Sequence[str]
+) -> dict[str, float]:
+    """Run the node, replay ``inputs`` of ``bag`` into it, and return per output topic the largest
+    difference between what it published and what the bag stores for the same stamp."""
+    expected = BagReader(bag).arrays(outputs)
+    received: dict[str, list] = {t: [] for t in outputs}
+    for topic in outputs:
+        probe.node.create_subscription(TYPES[expected[topic].msgtype], topic, received[topic].append, QOS)
+    with NodeProcess(*node) as process:
+        probe.wait_until(
+            lambda: all(probe.node.count_publishers(t) for t in outputs) or not process.alive(),
+            TIMEOUT,
+            "the node's publishers",
+        )
+        assert process.alive(), process.log()
+        player = NodeProcess("replay", args=(str(bag), "--topics", *inputs, "--wait-for-subscribers", "30"))
+        try:
+            probe.wait_until(
+                lambda: (
+                    all(len(received[t]) >= len(expected[t]) for t in outputs)
+                    or player.process.poll() not in (None, 0)
+                ),
+                TIMEOUT,
+                "every expected output",
+            )
+            assert player.process.wait(TIMEOUT) == 0, player.log()
+        finally:
+            player.stop()
+        assert "Traceback" not in process.log()
+    errors = {}
+    for topic in outputs:
+        want = expected[topic]
+        rows = {s: i for i, s in enumerate(want.stamp_ns().tolist())}
+        got = {stamp_ns(m): values(m) for m in received[topic]}
+        assert set(got) == set(rows), f"{topic}: stamps differ from the bag's"
+        errors[topic] = max(float(np.max(np.abs(v - expected_values(want)[rows[s]]))) for s, v in got.items())
+    return errors
+
+
+EXCAVATOR_OUTPUTS = ("/bucket_pose", "/bucket_twist", "/bucket_accel", "/open_chain_joint_states")
+
+
+def test_excavator_forward_reproduces_the_golden_bag(probe: Probe) -> None:
+    errors = replay_into(
+        probe,
+        ["excavator_forward"],
+        DATA / "excavator_forward_golden",
+        ["/joint_states", "/cylinder_lengths"],
+        EXCAVATOR_OUTPUTS,
+    )
+    assert max(errors.values()) < MATCH, errors
+
+
+def test_a_changed_boom_length_fails_the_golden_comparison(probe: Probe) -> None:
+    errors = replay_into(
+        probe,
+        ["excavator_forward", "-p", "excavator.boom.length:=5.75"],
+        DATA / "excavator_forward_golden",
+        ["/joint_states", "/cylinder_lengths"],
+        ("/bucket_pose", "/open_chain_joint_states"),
+    )
+    # 5.6944 m -> 5.75 m moves the tip by centimetres (and the arm angle: its cylinder's base pin
+    # is fixed in the boom frame, measured from the arm pin).
+    assert errors["/bucket_pose"] > 1e-2 and errors["/open_chain_joint_states"] > 1e-2, errors
+
+
+def test_scara_forward_reproduces_the_golden_bag_and_notices_a_change(probe: Probe) -> None:
+    bag, inputs, outputs = DATA / "scara_forward_golden", ["/joint_states"], ("/tool_pose", "/tool_twist")
+    errors = replay_into(probe, ["scara_forward"], bag, inputs, outputs)
+    assert max(errors.values()) < MATCH, errors
+    changed = replay_into(probe, ["scara_forward", "-p", "scara.l2:=0.31"], bag, inputs, outputs)
+    assert min(changed.values()) > 1e-3, changed
+
+
+# ------------------------------------------------------------------------------------------ record
+
+
+def joint_state(i: int) -> JointState:
+    names = ["boom_cylinder", "arm_cylinder", "bucket_cylinder"] if i % 3 else ["swing_joint"]
+    msg = JointState(
+        name=names, position=[i + 0.5 * k for k in range(len(names))], velocity=[-float(i)] * len(names)
+    )
+    msg.header.stamp.sec, msg.header.frame_id = i, "base_link" if i % 2 else ""
+    return msg
+
+
+def flushed_count(bag: Path) -> int:
+    try:
+        return yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"][
+            "message_count"
+        ]
+    except (OSError, TypeError, KeyError, yaml.YAMLError):
+        return -1
+
+
+def record_some(probe: Probe, bag: Path, topic: str, count: int, *extra: str) -> NodeProcess:
+    """A recorder of ``topic`` that has stored (flushed) ``count`` messages from this probe.
+
+    The publisher exists first and the recorder finds its type in the graph, so the recorder's
+    reader matches it when created; a reader created first can be matched by the writer before it
+    matches the writer, and DDS drops what is sent in between.
+    """
+    publisher = probe.node.create_publisher(JointState, topic, QOS)
+    recorder = NodeProcess("record", args=("-o", str(bag), "--topics", topic, *extra))
+    probe.wait_until(
+        lambda: publisher.get_subscription_count() > 0 or not recorder.alive(), TIMEOUT, "the recorder"
+    )
+    assert recorder.alive(), recorder.stop()
+    for i in range(count):
+        publisher.publish(joint_state(i))
+    probe.wait_until(lambda: flushed_count(bag) == count, TIMEOUT, f"{count} messages flushed to {bag}")
+    return recorder
+
+
+def test_recorded_bag_reads_back_with_the_mcap_library(probe: Probe, tmp_path: Path) -> None:
+    recorder = record_some(probe, tmp_path / "bag", "/record_test", 200)
+    log = recorder.stop()
+    assert "200 messages on 1 topics" in log, log
+    with open(tmp_path / "bag" / "bag.mcap", "rb") as stream:
+        decoded = [
+            m
+            for _, _, _, m in make_reader(
+                stream, decoder_factories=[DecoderFactory()]
+            ).iter_decoded_messages()
+        ]
+    assert len(decoded) == 200
+    for i, msg in enumerate(decoded):
+        sent = joint_state(i)
+        assert (msg.header.stamp.sec, msg.header.frame_id, list(msg.name)) == (
+            i,
+            sent.header.frame_id,
+            sent.name,
+        )
+        assert list(msg.position) == list(sent.position) and list(msg.velocity) == list(sent.velocity)
+    ours = BagReader(tmp_path / "bag").arrays()["/record_test"]
+    np.testing.assert_array_equal(ours["header.stamp.sec"], np.arange(200))
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_a_recorder_killed_with_sigkill_leaves_its_flushed_messages(
+    probe: Probe, tmp_path: Path, storage: str
+) -> None:
+    recorder = record_some(probe, tmp_path / "bag", "/kill_test", 300, "-s", storage)
+    recorder.process.kill()
+    recorder.process.wait(TIMEOUT)
+    recorder.stop()
+    if storage == "mcap":  # no summary and footer; sqlite had committed all and has nothing to roll back
+        with pytest.raises(BagError, match="--recover"):
+            BagReader(tmp_path / "bag")
+    arrays = BagReader(tmp_path / "bag", recover=True).arrays()["/kill_test"]
+    np.testing.assert_array_equal(arrays["header.stamp.sec"], np.arange(300))
+    np.testing.assert_array_equal(arrays["velocity"][:, 0], -np.arange(300.0))
+
+
+def test_record_discovers_types_resolves_namespaces_and_refuses_to_overwrite(
+    probe: Probe, tmp_path: Path
+) -> None:
+    publisher = probe.node.create_publisher(PoseStamped, "/discovered", QOS)
+    with NodeProcess("record", args=("-o", str(tmp_path / "a"), "--topics", "/discovered")) as recorder:
+        probe.wait_until(
+            lambda: publisher.get_subscription_count() > 0 or not recorder.alive(), TIMEOUT, "recorder"
+        )
+    assert BagReader(tmp_path / "a").topics["/discovered"].msgtype == "geometry_msgs/msg/PoseStamped"
+
+    # Default topics: every topic of the package's nodes, in the recorder's namespace.
+    expected = {f"/machine7/{t}" for t in package_topics()}
+    with NodeProcess("record", "-r", "__ns:=/machine7", args=("-o", str(tmp_path / "b"))) as recorder:
+        probe.wait_until(
+            lambda: all(probe.node.count_subscribers(t) > 0 for t in expected) or not recorder.alive(),
+            TIMEOUT,
+            "recorder",
+        )
+    assert set(BagReader(tmp_path / "b").topics) == expected
+
+    before = sorted((p.name, p.stat().st_size) for p in (tmp_path / "a").iterdir())
+    for args, words in (
+        ([str(tmp_path / "a")], "exists; not overwriting"),
+        (
+            [str(tmp_path / "c"), "--topics", "/nobody", "--discovery-timeout", "0.5"],
+            "no publisher of /nobody within 0.5 s",
+        ),
+    ):
+        result = subprocess.run(
+            [executable("record"), "-o", *args], capture_output=True, text=True, timeout=TIMEOUT
+        )
+        assert result.returncode == 1 and words in result.stderr and "Traceback" not in result.stderr, (
+            result.stderr
+        )
+    assert sorted((p.name, p.stat().st_size) for p in (tmp_path / "a").iterdir()) == before
+    assert not (tmp_path / "c").exists()
+
+
+# ------------------------------------------------------------------------------------------ replay
+
+
+def numbered_bag(path: Path, topics: Sequence[str], count: int, period_ns: int) -> None:
+    stamp = 10**18 + np.arange(count) * period_ns
+    raws = encode_messages(
+        "sensor_msgs/msg/JointState",
+        count,
+        {**stamp_fields(stamp), "name": ["n"], "position": np.arange(count)[:, None] * 1.0},
+    )
+    write_bag(path, {t: Topic("sensor_msgs/msg/JointState", stamp, raws) for t in topics})
+
+
+def test_replay_keeps_timing_with_rate_offset_selection_and_remapping(probe: Probe, tmp_path: Path) -> None:
+    numbered_bag(tmp_path / "bag", ["/rp_a", "/rp_b"], 40, 25_000_000)
+    arrivals: dict[str, list[tuple[float, float]]] = {t: [] for t in ("/rp_out", "/rp_a", "/rp_b")}
+    for topic, log in arrivals.items():
+        probe.node.create_subscription(
+            JointState, topic, lambda m, log=log: log.append((time.monotonic(), m.position[0])), QOS
+        )
+    player = NodeProcess(
+        "replay",
+        args=(
+            str(tmp_path / "bag"),
+            "--topics",
+            "/rp_a",
+            "--remap",
+            "/rp_a:=/rp_out",
+            "--rate",
+            "2",
+            "--start-offset",
+            "0.25",
+            "--wait-for-subscribers",
+            "30",
+        ),
+    )
+    try:
+        probe.wait_until(
+            lambda: len(arrivals["/rp_out"]) >= 30 or player.process.poll() not in (None, 0),
+            TIMEOUT,
+            "30 replayed messages",
+        )
+        assert player.process.wait(TIMEOUT) == 0, player.log()
+    finally:
+        player.stop()
+    times, numbers = np.array(arrivals["/rp_out"]).T
+    # Messages at 0..225 ms are before the 0.25 s offset; the rest come at 12.5 ms (25 ms / 2).
+    np.testing.assert_array_equal(numbers, np.arange(10, 40))
+    # 29 intervals of 12.5 ms; rate 1 would take 725 ms, no timing a few ms.
+    assert 0.6 * 29 * 0.0125 < times[-1] - times[0] < 1.6 * 29 * 0.0125
+    assert arrivals["/rp_a"] == [] and arrivals["/rp_b"] == []
+
+
+def test_replay_loops_until_stopped(probe: Probe, tmp_path: Path) -> None:
+    numbered_bag(tmp_path / "bag", ["/loop"], 5, 10_000_000)
+    numbers: list[float] = []
+    probe.node.create_subscription(JointState, "/loop", lambda m: numbers.append(m.position[0]), QOS)
+    with NodeProcess(
+        "replay", args=(str(tmp_path / "bag"), "--loop", "--wait-for-subscribers", "30")
+    ) as player:
+        probe.wait_until(lambda: len(numbers) >= 12 or not player.alive(), TIMEOUT, "three passes")
+    assert numbers[:12] == [0, 1, 2, 3, 4] * 2 + [0, 1]
+
+
+def test_replay_refuses_what_it_cannot_play(tmp_path: Path) -> None:
+    numbered_bag(tmp_path / "bag", ["/x"], 5, 10_000_000)
+    with BagWriter(tmp_path / "empty") as writer:
+        writer.add_topic("/x", "sensor_msgs/msg/JointState")
+    cases = (
+        ([str(tmp_path / "bag"), "--topics", "/nope"], "no topic /nope in the bag"),
+        ([str(tmp_path / "bag"), "--start-offset", "9"], "past the end"),
+        ([str(tmp_path / "empty")], "no messages to play"),
+        ([str(tmp_path / "missing")], "no such bag"),
+    )
+    for args, words in cases:
+        result = subprocess.run(
+            [executable("replay"), *args], capture_output=True, text=True, timeout=TIMEOUT
+        )
+        assert result.returncode == 1 and words in result.stderr and "Traceback" not in result.stderr, (
+            result.stderr
+        )
