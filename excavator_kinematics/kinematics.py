@@ -308,7 +308,14 @@ class Excavator:
         # Fast path: everything inside the limits (NaN fails every comparison, so it falls
         # through to the checks below, which name what is wrong).
         if D.ndim == 1:
-            if all(lo <= v <= hi for lo, v, hi in zip(self._lo, D.tolist(), self._hi, strict=True)):
+            t1, d2, d3, d4 = D.tolist()
+            lo, hi = self._lo, self._hi
+            if (
+                lo[0] <= t1 <= hi[0]
+                and lo[1] <= d2 <= hi[1]
+                and lo[2] <= d3 <= hi[2]
+                and lo[3] <= d4 <= hi[3]
+            ):
                 return D
         elif np.all((self._lo <= D) & (self._hi >= D)):
             return D
@@ -564,10 +571,13 @@ class Excavator:
         :meth:`acceleration_matrices` for the paper's JC1_0 / JC2_0 split of those terms).
         """
         D = self.validate(D)
-        D_dot = _finite(D_dot, D.shape, "D_dot")
-        D_ddot = np.zeros_like(D) if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot")
         if D.ndim == 1:
-            (v0, v1, v2, v3, v4, v5), (r0, r1, r2, r3) = self._state(D, D_dot, D_ddot)
+            # One state: Python floats end to end (a 1 kHz node calls this per message).
+            rates = _finite_floats(D_dot, "D_dot")
+            accelerations = (0.0, 0.0, 0.0, 0.0) if D_ddot is None else _finite_floats(D_ddot, "D_ddot")
+            (v0, v1, v2, v3, v4, v5), (r0, r1, r2, r3) = self._state(
+                D.tolist(), rates, accelerations, _SCALAR
+            )
             # One array for everything, then views: one allocation instead of seven.
             flat = np.array([*v0, *v1, *v2, *v3, *v4, *v5, *r0, *r1, *r2, *r3], dtype=float)
             return BucketState(
@@ -579,11 +589,15 @@ class Excavator:
                 flat[20:24],
                 flat[24:].reshape(4, 4),
             )
+        D_dot = _finite(D_dot, D.shape, "D_dot")
+        D_ddot = np.zeros_like(D) if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot")
         n = len(D)
         vector_out, matrix_out = np.empty((6, 4, n)), np.empty((4, 4, n))
         for start in range(0, n, BATCH_BLOCK):
             block = slice(start, start + BATCH_BLOCK)
-            vectors, rows = self._state(D[block], D_dot[block], D_ddot[block])
+            vectors, rows = self._state(
+                _split(D[block])[1], _split(D_dot[block])[1], _split(D_ddot[block])[1], _ARRAY
+            )
             for out, group in zip(vector_out, vectors, strict=True):
                 for i, value in enumerate(group):
                     out[i, block] = value
@@ -592,11 +606,12 @@ class Excavator:
                     matrix_out[i, j, block] = value
         return BucketState(*np.moveaxis(vector_out, 1, -1), jc0=np.moveaxis(matrix_out, (0, 1), (-2, -1)))
 
-    def _state(self, D: np.ndarray, D_dot: np.ndarray, D_ddot: np.ndarray) -> tuple[tuple, list]:
-        """Columns of the six state vectors and the rows of JC0 (floats or block arrays)."""
-        m, (t1, d2, d3, d4) = _split(D)
-        _, (w1, v2, v3, v4) = _split(D_dot)
-        _, (e1, f2, f3, f4) = _split(D_ddot)
+    def _state(self, D: Any, D_dot: Any, D_ddot: Any, m: SimpleNamespace) -> tuple[tuple, list]:
+        """Columns of the six state vectors and the rows of JC0, from the columns of D, Ddot and
+        Dddot (Python floats with math, or block arrays with numpy)."""
+        t1, d2, d3, d4 = D
+        w1, v2, v3, v4 = D_dot
+        e1, f2, f3, f4 = D_ddot
         t2, t3, t4, k2, k3, k4, dk2, dk3, dk4, _, _, trig = self._closed_loops(d2, d3, d4, m)
         terms = self._jacobian_terms(t1, trig, m)
         rows = _jc0_rows(terms, k2, k3, k4)
@@ -811,6 +826,14 @@ def _finite(values: Any, shape: tuple[int, ...], name: str) -> np.ndarray:
     if not finite:
         raise StrokeError(f"{name} is not finite: {array}")
     return array
+
+
+def _finite_floats(values: Any, name: str) -> list[float]:
+    """Four finite Python floats, or StrokeError naming ``name`` (the one-state path)."""
+    floats = values.tolist() if isinstance(values, np.ndarray) else [float(v) for v in values]
+    if len(floats) != 4 or not all(map(math.isfinite, floats)):
+        raise StrokeError(f"{name}: expected 4 finite numbers, got {floats}")
+    return floats
 
 
 def _first_bad(values: np.ndarray, good: np.ndarray) -> float:
