@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -37,6 +36,7 @@ from excavator_kinematics import messages
 from excavator_kinematics.bucket_path import BucketPath, digging_cycle, follow, natural_coordinates, to_task
 from excavator_kinematics.kinematics import Excavator
 from excavator_kinematics.twist import bucket_angles, twist_from_q_dot
+from manipulator_kinematics.node_util import console_script
 from manipulator_kinematics.params import config_path
 
 FRAME = "base_link"
@@ -72,15 +72,6 @@ RECORDED = {
     "reference_bucket_pose": "geometry_msgs/msg/PoseStamped",
     "reference_bucket_twist": "geometry_msgs/msg/TwistStamped",
 }
-
-
-def executable(name: str) -> str:
-    """A console script of the package: beside this interpreter, else on PATH."""
-    beside = Path(sys.executable).parent / name
-    found = str(beside) if beside.exists() else shutil.which(name)
-    if not found:
-        raise FileNotFoundError(f"console script {name!r} not found; install the package (pip install -e .)")
-    return found
 
 
 class Driver:
@@ -151,11 +142,11 @@ def start_processes(output: Path) -> list[tuple[str, subprocess.Popen]]:
         str(overrides),
     ]
     commands = {
-        name: [executable(name), "--ros-args", *params]
+        name: [console_script(name), "--ros-args", *params]
         for name in ("excavator_sim", "excavator_forward", "excavator_velocity_ik")
     }
     commands["record"] = [
-        executable("record"),
+        console_script("record"),
         "-o",
         str(output / "bag"),
         "--overwrite",

@@ -30,6 +30,8 @@ from manipulator_kinematics.params import ConfigError, config_path, load_paramet
 
 CYLINDERS = ("boom_cylinder", "arm_cylinder", "bucket_cylinder")
 JOINTS = ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")
+# Names of D's components in D's order: the actuators (swing drive and the three cylinders).
+ACTUATORS = (JOINTS[0], *CYLINDERS)
 DEFAULT_CONFIG = "excavator_cet200.yaml"
 
 # States per block of a large batch: the temporaries of one block stay below malloc's mmap

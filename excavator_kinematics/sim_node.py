@@ -17,7 +17,7 @@ from rclpy.time import Time
 from sensor_msgs.msg import JointState
 
 from excavator_kinematics import messages
-from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator
+from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
 from excavator_kinematics.plant import Plant
 from excavator_kinematics.state_input import InputError
 from manipulator_kinematics.node_util import (
@@ -31,7 +31,6 @@ from manipulator_kinematics.node_util import (
 from manipulator_kinematics.params import ConfigError
 
 NODE = "excavator_sim"
-COMMAND_NAMES = (JOINTS[0], *CYLINDERS)
 
 
 class Simulator:
@@ -71,7 +70,7 @@ class Simulator:
 
     def on_command(self, msg: JointState) -> None:
         try:
-            _, rates = messages.joint_values(msg, COMMAND_NAMES)
+            _, rates = messages.joint_values(msg, ACTUATORS)
             if rates is None:
                 raise InputError("rate command without velocities")
         except InputError as error:

@@ -25,14 +25,13 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from excavator_kinematics import messages
-from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator
+from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
 from excavator_kinematics.rate_command import rate_command
 from excavator_kinematics.state_input import InputError, SwingHold
 from excavator_kinematics.twist import split_twist
 from manipulator_kinematics.node_util import ThrottledLog, machine_parameters, make_node, node_parameters, run
 
 NODE = "excavator_velocity_ik"
-COMMAND_NAMES = (JOINTS[0], *CYLINDERS)  # order of D and of the Float64MultiArray
 
 
 class VelocityIk:
@@ -172,7 +171,7 @@ class VelocityIk:
             self.moving = False
 
     def publish(self, stamp: Time, d_dot: np.ndarray) -> None:
-        self.command_pub.publish(messages.joint_state(stamp, COMMAND_NAMES, velocities=d_dot))
+        self.command_pub.publish(messages.joint_state(stamp, ACTUATORS, velocities=d_dot))
         if self.array_pub is not None:
             self.array_pub.publish(Float64MultiArray(data=[float(v) for v in d_dot]))
 

@@ -4,11 +4,14 @@ Nodes are created with ``automatically_declare_parameters_from_overrides`` so a 
 description given by ``--ros-args --params-file config/<machine>.yaml`` arrives whole, whatever
 its keys; :func:`machine_parameters` turns it back into the nested dict the numpy cores take.
 """
+
 from __future__ import annotations
 
 import re
+import shutil
 import sys
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import rclpy
@@ -16,6 +19,17 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 from manipulator_kinematics.params import ConfigError, config_path, flatten, load_parameters, unflatten
+
+
+def console_script(name: str) -> str:
+    """Path of a console script of the package: beside this interpreter (the venv), else on PATH."""
+    beside = Path(sys.executable).parent / name
+    found = str(beside) if beside.exists() else shutil.which(name)
+    if not found:
+        raise FileNotFoundError(
+            f"console script {name!r} not found; run the set-up command (scripts/bootstrap.sh)"
+        )
+    return found
 
 
 def make_node(name: str) -> Node:
@@ -37,9 +51,7 @@ def machine_parameters(node: Node, prefix: str, default_file: str) -> dict[str, 
     config file, so ``-p excavator.boom.length:=6.0`` changes one value of the default machine.
     """
     defaults = load_parameters(config_path(default_file), node.get_name()).get(prefix, {})
-    given = unflatten(
-        {name: p.value for name, p in node.get_parameters_by_prefix(prefix).items()}
-    )
+    given = unflatten({name: p.value for name, p in node.get_parameters_by_prefix(prefix).items()})
     return _merge(defaults, given)
 
 

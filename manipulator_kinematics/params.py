@@ -3,6 +3,7 @@
 A parameters file looks like ``{node_or_/**: {ros__parameters: {...}}}``; nested keys become
 dotted parameter names in ROS (``excavator.boom.length``). Cores take the nested dict.
 """
+
 from __future__ import annotations
 
 from pathlib import Path

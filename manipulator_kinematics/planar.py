@@ -11,6 +11,7 @@ from +x, theta2 the second link's angle relative to the first (counter-clockwise
 tip is l1 (cos t1, sin t1) + l2 (cos(t1 + t2), sin(t1 + t2)). Branch 0 has theta2 >= 0, branch 1
 theta2 <= 0 (law of cosines: cos t2 = (r^2 - l1^2 - l2^2) / (2 l1 l2)).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass

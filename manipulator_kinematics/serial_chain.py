@@ -19,6 +19,7 @@ Row semantics (the Robotics Toolbox's ``RevoluteDH``/``PrismaticDH`` and ``...MD
 * revolute joint: theta_i = q_i + offset_i with d_i constant; prismatic joint: d_i = q_i +
   offset_i with theta_i constant.
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -91,8 +92,14 @@ def trotz(angle: float) -> np.ndarray:
 class SerialChain:
     """Forward kinematics and geometric Jacobian of a D-H chain, vectorised over configurations."""
 
-    def __init__(self, rows: Sequence[DHRow], *, modified: bool = False,
-                 base: ArrayLike | None = None, tool: ArrayLike | None = None) -> None:
+    def __init__(
+        self,
+        rows: Sequence[DHRow],
+        *,
+        modified: bool = False,
+        base: ArrayLike | None = None,
+        tool: ArrayLike | None = None,
+    ) -> None:
         if not rows:
             raise ValueError("a serial chain needs at least one D-H row")
         self.rows = tuple(rows)

@@ -6,6 +6,7 @@
 * :func:`straight_line`: points along a straight Cartesian segment at a given step, as the
   pump-boom paper interpolates its pours: N = ceil(L / step), p_i = p0 + i (p1 - p0) / N.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -24,8 +25,14 @@ class JointTrajectory:
     qdd: np.ndarray
 
 
-def quintic(q0: ArrayLike, qf: ArrayLike, t: ArrayLike, duration: float | None = None,
-            qd0: ArrayLike | None = None, qdf: ArrayLike | None = None) -> JointTrajectory:
+def quintic(
+    q0: ArrayLike,
+    qf: ArrayLike,
+    t: ArrayLike,
+    duration: float | None = None,
+    qd0: ArrayLike | None = None,
+    qdf: ArrayLike | None = None,
+) -> JointTrajectory:
     """Quintic q(t) from ``q0`` at t = 0 to ``qf`` at t = ``duration`` (default: max(t)).
 
     With tau = t / T and Delta = qf - q0 (jtraj's coefficients):

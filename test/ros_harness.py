@@ -1,12 +1,11 @@
 """Real nodes over real DDS for integration tests: start console scripts as processes, talk
 to them from an in-test node, and wait on conditions with timeouts (never fixed sleeps)."""
+
 from __future__ import annotations
 
 import os
-import shutil
 import signal
 import subprocess
-import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -17,16 +16,9 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
+from manipulator_kinematics.node_util import console_script
+
 REPO = Path(__file__).resolve().parent.parent
-
-
-def executable(name: str) -> str:
-    """Console script installed beside this interpreter (the project's venv)."""
-    path = Path(sys.executable).parent / name
-    found = str(path) if path.exists() else shutil.which(name)
-    if not found:
-        raise FileNotFoundError(f"console script {name!r} is not installed; run the set-up command")
-    return found
 
 
 class NodeProcess:
@@ -34,7 +26,7 @@ class NodeProcess:
 
     def __init__(self, exe: str, *ros_args: str, args: tuple[str, ...] = ()) -> None:
         self._log = tempfile.NamedTemporaryFile("w+", prefix=f"{exe}-", suffix=".log", delete=False)  # noqa: SIM115
-        command = [executable(exe), *args]
+        command = [console_script(exe), *args]
         if ros_args:
             command += ["--ros-args", *ros_args]
         self.process = subprocess.Popen(

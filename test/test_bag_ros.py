@@ -16,12 +16,13 @@ from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from ros_harness import NodeProcess, Probe, executable
+from ros_harness import NodeProcess, Probe
 from sensor_msgs.msg import JointState
 
 from manipulator_kinematics.bag.io import BagError, BagReader, BagWriter, TopicArrays, encode_messages
 from manipulator_kinematics.bag.synthetic import Topic, stamp_fields, write_bag
 from manipulator_kinematics.bag.topics import package_topics
+from manipulator_kinematics.node_util import console_script
 
 DATA = Path(__file__).resolve().parent / "data"
 QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
@@ -256,7 +257,7 @@ def test_record_discovers_types_resolves_namespaces_and_refuses_to_overwrite(
         ),
     ):
         result = subprocess.run(
-            [executable("record"), "-o", *args], capture_output=True, text=True, timeout=TIMEOUT
+            [console_script("record"), "-o", *args], capture_output=True, text=True, timeout=TIMEOUT
         )
         assert result.returncode == 1 and words in result.stderr and "Traceback" not in result.stderr, (
             result.stderr
@@ -341,7 +342,7 @@ def test_replay_refuses_what_it_cannot_play(tmp_path: Path) -> None:
     )
     for args, words in cases:
         result = subprocess.run(
-            [executable("replay"), *args], capture_output=True, text=True, timeout=TIMEOUT
+            [console_script("replay"), *args], capture_output=True, text=True, timeout=TIMEOUT
         )
         assert result.returncode == 1 and words in result.stderr and "Traceback" not in result.stderr, (
             result.stderr

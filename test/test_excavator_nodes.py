@@ -471,7 +471,9 @@ class TestVelocityIkNode:
         sent_at = ik.probe.node.get_clock().now().nanoseconds  # the target was sent before this
         ik.wait_stopped()
         stopped_at = ik.probe.node.get_clock().now().nanoseconds
-        assert (stopped_at - sent_at) * 1e-9 + 0.02 >= 0.5 and (stopped_at - sent_at) * 1e-9 < 0.5 + 0.1 + 0.3
+        # Not before the 0.5 s timeout; the upper slack allows for scheduling delays of a loaded
+        # 2-core CI machine (0.9 s was exceeded there) while still catching a late or missing stop.
+        assert (stopped_at - sent_at) * 1e-9 + 0.02 >= 0.5 and (stopped_at - sent_at) * 1e-9 < 0.5 + 2.0
         zeros = len(ik.commands.messages)
         # Holding: the state keeps arriving at 50 Hz, yet nothing is published for another timeout.
         with pytest.raises(TimeoutError):
