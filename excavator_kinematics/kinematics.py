@@ -124,16 +124,6 @@ def _point(value: Any, key: str) -> np.ndarray:
     return point
 
 
-def _positive(value: Any, key: str) -> float:
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"excavator.{key}: expected a number, got {value!r}") from None
-    if not math.isfinite(number) or number <= 0.0:
-        raise ConfigError(f"excavator.{key}: must be a positive finite number, got {value!r}")
-    return number
-
-
 def _number(value: Any, key: str) -> float:
     try:
         number = float(value)
@@ -141,6 +131,13 @@ def _number(value: Any, key: str) -> float:
         raise ConfigError(f"excavator.{key}: expected a number, got {value!r}") from None
     if not math.isfinite(number):
         raise ConfigError(f"excavator.{key}: must be finite, got {value!r}")
+    return number
+
+
+def _positive(value: Any, key: str) -> float:
+    number = _number(value, key)
+    if number <= 0.0:
+        raise ConfigError(f"excavator.{key}: must be positive, got {value!r}")
     return number
 
 
