@@ -201,7 +201,6 @@ class Excavator:
         self._pivot_xy = tuple(self._pivot.tolist())
         self._bucket_pin_xy = tuple(self._bucket_pin.tolist())
         self._pins_local["bucket_cylinder_base"] = bucket_base
-        self._pins_local["side_link_pivot"] = self._pivot
         to_base = bucket_base - self._pivot
         # Side-link angle phi in the arm frame comes from the same triangle form with the rod
         # pin at (side length, 0) of a frame turning with the side link (eq. 1 applied to Fig. 7b).

@@ -20,6 +20,7 @@ from excavator_kinematics import messages
 from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
 from excavator_kinematics.plant import Plant
 from excavator_kinematics.state_input import InputError
+from manipulator_kinematics.joint_state import joint_values
 from manipulator_kinematics.node_util import (
     ThrottledLog,
     machine_parameters,
@@ -70,9 +71,7 @@ class Simulator:
 
     def on_command(self, msg: JointState) -> None:
         try:
-            _, rates = messages.joint_values(msg, ACTUATORS)
-            if rates is None:
-                raise InputError("rate command without velocities")
+            _, rates = joint_values(msg, ACTUATORS, require_velocity=True)
         except InputError as error:
             self.log("error", f"rejected rate command: {error}")
             return

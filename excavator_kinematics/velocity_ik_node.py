@@ -29,6 +29,7 @@ from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excava
 from excavator_kinematics.rate_command import rate_command
 from excavator_kinematics.state_input import InputError, SwingHold
 from excavator_kinematics.twist import split_twist
+from manipulator_kinematics.joint_state import joint_values
 from manipulator_kinematics.node_util import ThrottledLog, machine_parameters, make_node, node_parameters, run
 
 NODE = "excavator_velocity_ik"
@@ -89,9 +90,7 @@ class VelocityIk:
 
     def on_cylinders(self, msg: JointState) -> None:
         try:
-            lengths, _ = messages.joint_values(msg, CYLINDERS)
-            if lengths is None:
-                raise InputError("cylinder_lengths without positions")
+            lengths, _ = joint_values(msg, CYLINDERS, require_position=True)
         except InputError as error:
             self.log("error", f"rejected cylinder_lengths: {error}")
             return
