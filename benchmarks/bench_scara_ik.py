@@ -228,10 +228,8 @@ def service_rows(scara, targets, calls: int) -> list[tuple[str, str, str, str]]:
             o = request.target.pose.orientation
             o.x, o.y, o.z, o.w = (float(v) for v in yaw_quaternion(phi[k]))
             start = time.perf_counter_ns()
-            future = client.call_async(request)
-            probe.wait_until(future.done, 10.0, "SolveIK response")
+            response = probe.call(client, request, 10.0, "SolveIK response")
             elapsed = (time.perf_counter_ns() - start) / 1e3
-            response = future.result()
             assert response.success, response.message
             if i >= 0:
                 micro[i] = elapsed

@@ -77,6 +77,26 @@ class Probe:
                 raise TimeoutError(f"timed out after {timeout} s waiting for {what}")
             self.executor.spin_once(timeout_sec=0.01)
 
+    def call(self, client, request, timeout: float, what: str = "service response",
+             resend_after: float = 2.0):
+        """One service round trip, re-sending the request every ``resend_after`` seconds without a reply.
+
+        rmw_fastrtps drops a response when the client's response reader has not matched the server
+        within 100 ms ("client will not receive response", ros2/rmw_fastrtps#390 and #467), which
+        ``service_is_ready()`` cannot see; on a loaded machine the first request can be lost that way.
+        Our services are idempotent, so re-sending is safe; only a server that never answers fails.
+        """
+        deadline = time.monotonic() + timeout
+        while True:
+            future = client.call_async(request)
+            try:
+                self.wait_until(future.done, min(resend_after, max(deadline - time.monotonic(), 0.0)), what)
+                return future.result()
+            except TimeoutError:
+                client.remove_pending_request(future)
+                if time.monotonic() >= deadline:
+                    raise TimeoutError(f"timed out after {timeout} s waiting for {what}") from None
+
     def close(self) -> None:
         self.executor.shutdown()
         self.node.destroy_node()

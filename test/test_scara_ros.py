@@ -52,9 +52,7 @@ def server(probe: Probe) -> Iterator[tuple[NodeProcess, object, object]]:
 
 
 def call(probe: Probe, client, request):
-    future = client.call_async(request)
-    probe.wait_until(future.done, TIMEOUT, "service response")
-    return future.result()
+    return probe.call(client, request, TIMEOUT)
 
 
 def ik_request(x: float, y: float, mode: str = "", phi: float | None = None, seed: list[float] | None = None,
