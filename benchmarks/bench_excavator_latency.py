@@ -2,14 +2,15 @@
 
     python benchmarks/bench_excavator_latency.py [--duration 30] [--rates 100 1000] [--depth 100]
 
-For each input rate, first the echo node (JointState in -> TwistStamped out with the input's
-stamp, no math: the transport floor), then excavator_forward, each as its own process. A
-publisher process sends ``cylinder_lengths`` at the rate (and ``joint_states`` at 100 Hz, a
-typical swing encoder) and this process receives ``bucket_twist``; latency = receive time -
-input stamp (one clock), drops = inputs without an output. Both nodes spin rclpy's
-SingleThreadedExecutor (the echo node through rclpy.spin, excavator_forward through
-manipulator_kinematics.node_util.run); the measuring process uses EventsExecutor so that it is
-not the bottleneck. Every queue is reliable keep-last of
+For each input rate three nodes run in turn, each as its own process: the echo node (JointState in
+-> TwistStamped out with the input's stamp, no math: the transport floor) spun by rclpy's
+SingleThreadedExecutor (``rclpy.spin``, what a plain rclpy node does), the same echo node spun by
+:func:`manipulator_kinematics.spin.spin` (what our nodes use), and excavator_forward. A publisher
+process sends ``cylinder_lengths`` at the rate (and ``joint_states`` at 100 Hz, a typical swing
+encoder) and this process receives ``bucket_twist``; latency = receive time - input stamp (one
+clock), drops = inputs without an output. The target compares excavator_forward with the echo on
+the same spin, so the ratio is the cost of the kinematics, not of the executor. The measuring
+process uses EventsExecutor so that it is not the bottleneck. Every queue is reliable keep-last of
 ``--depth`` (default 100: 100 ms of 1 kHz input survives a stall). Prints a table.
 """
 
@@ -38,9 +39,14 @@ from sensor_msgs.msg import JointState
 from excavator_kinematics import messages
 from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator
 from manipulator_kinematics.params import config_path
+from manipulator_kinematics.spin import spin
+
+# Echo node rows of the table, and the executor each one spins.
+ECHOES = {"echo, rclpy.spin": "rclpy", "echo, spin()": "spin"}
+FORWARD = "excavator_forward"
 
 
-def echo(depth: int) -> None:
+def echo(depth: int, executor: str) -> None:
     """The transport floor: republish each JointState's stamp as a TwistStamped."""
     rclpy.init()
     node = Node("bench_echo")
@@ -55,7 +61,10 @@ def echo(depth: int) -> None:
     node.create_subscription(JointState, "cylinder_lengths", on_message, qos)
     signal.signal(signal.SIGTERM, lambda *_: rclpy.try_shutdown())
     with contextlib.suppress(KeyboardInterrupt, ExternalShutdownException):
-        rclpy.spin(node)
+        if executor == "rclpy":
+            rclpy.spin(node)
+        else:
+            spin(node)
     rclpy.try_shutdown()
 
 
@@ -100,8 +109,8 @@ def publish(rate: float, duration: float, depth: int, sent_file: Path) -> None:
 
 
 def start_node(kind: str, depth: int, work: Path) -> subprocess.Popen:
-    if kind == "echo":
-        command = [sys.executable, __file__, "--echo", "--depth", str(depth)]
+    if kind in ECHOES:
+        command = [sys.executable, __file__, "--echo", ECHOES[kind], "--depth", str(depth)]
     else:
         overrides = work / "bench_params.yaml"
         overrides.write_text(
@@ -184,11 +193,11 @@ def main() -> int:
     parser.add_argument("--duration", type=float, default=30.0, help="seconds per measurement")
     parser.add_argument("--rates", type=float, nargs="+", default=[100.0, 1000.0])
     parser.add_argument("--depth", type=int, default=100, help="reliable keep-last queue depth")
-    parser.add_argument("--echo", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--echo", choices=sorted(ECHOES.values()), help=argparse.SUPPRESS)
     parser.add_argument("--publish", nargs=3, metavar=("RATE", "DURATION", "FILE"), help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.echo:
-        echo(args.depth)
+        echo(args.depth, args.echo)
         return 0
     if args.publish:
         publish(float(args.publish[0]), float(args.publish[1]), args.depth, Path(args.publish[2]))
@@ -200,9 +209,9 @@ def main() -> int:
     rows = []
     try:
         for rate in args.rates:
-            for kind in ("echo", "excavator_forward"):
+            for kind in (*ECHOES, FORWARD):
                 rows.append((kind, rate, measure(node, kind, rate, args.duration, args.depth, work)))
-                print(f"{kind:<18} {rate:6.0f} Hz  done", file=sys.stderr, flush=True)
+                print(f"{kind:<17} {rate:6.0f} Hz  done", file=sys.stderr, flush=True)
     finally:
         node.destroy_node()
         rclpy.shutdown()
@@ -210,16 +219,17 @@ def main() -> int:
         f"\nend-to-end latency, input stamp -> bucket_twist received, {args.duration:g} s per row, "
         f"reliable depth {args.depth}"
     )
-    print(f"{'node':<18} {'rate':>7} {'sent':>7} {'dropped':>8} {'p50 ms':>8} {'p99 ms':>8} {'max ms':>8}")
+    print(f"{'node':<17} {'rate':>7} {'sent':>7} {'dropped':>8} {'p50 ms':>8} {'p99 ms':>8} {'max ms':>8}")
     for kind, rate, r in rows:
         print(
-            f"{kind:<18} {rate:5.0f}Hz {r['sent']:7d} {r['dropped']:8d} {r['p50']:8.3f} {r['p99']:8.3f} "
+            f"{kind:<17} {rate:5.0f}Hz {r['sent']:7d} {r['dropped']:8d} {r['p50']:8.3f} {r['p99']:8.3f} "
             f"{r['max']:8.2f}"
         )
+    p99 = {(kind, rate): r["p99"] for kind, rate, r in rows}
     for rate in args.rates:
-        echo_p99 = next(r["p99"] for k, q, r in rows if k == "echo" and q == rate)
-        forward_p99 = next(r["p99"] for k, q, r in rows if k != "echo" and q == rate)
-        print(f"{rate:5.0f} Hz: forward p99 / echo p99 = {forward_p99 / echo_p99:.2f} (target <= 1.5)")
+        forward = p99[FORWARD, rate]
+        ratios = ", ".join(f"/ {kind} p99 = {forward / p99[kind, rate]:.2f}" for kind in ECHOES)
+        print(f"{rate:5.0f} Hz: forward p99 {ratios} (target <= 1.5 against echo, spin())")
     return 0
 
 

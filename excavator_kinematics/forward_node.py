@@ -32,11 +32,14 @@ from excavator_kinematics.kinematics import (
 )
 from excavator_kinematics.state_input import InputError, RateDifferentiator, SwingHold
 from manipulator_kinematics.node_util import ThrottledLog, machine_parameters, make_node, node_parameters, run
+from manipulator_kinematics.packed import PackedMessage
 
 NODE = "excavator_forward"
 NODES_CONFIG = "excavator_nodes.yaml"
 MACHINE_CONFIG = "excavator_cet200.yaml"
 SWING = JOINTS[0]
+# What changes in a stamped geometry message from one input to the next: everything but frame_id.
+STAMPED = ("header.stamp", "pose", "twist", "accel")
 
 
 class ForwardKinematics:
@@ -55,11 +58,16 @@ class ForwardKinematics:
 
         qos = QoSProfile(depth=settings["qos_depth"], reliability=ReliabilityPolicy.RELIABLE)
         topic = {key[len("topics.") :]: value for key, value in settings.items() if key.startswith("topics.")}
-        # One message per output topic, filled in place for each input (see messages.set_*).
-        self.pose = PoseStamped(header=Header(frame_id=self.frame))
-        self.twist = TwistStamped(header=Header(frame_id=self.frame))
-        self.accel = AccelStamped(header=Header(frame_id=self.frame))
-        self.joints = JointState(name=list(JOINTS))
+        # Outputs go out as bytes of a fixed layout: building them as rclpy messages would cost
+        # more than the kinematics (see manipulator_kinematics.packed).
+        header = Header(frame_id=self.frame)
+        self.pose = PackedMessage(PoseStamped(header=header), STAMPED)
+        self.twist = PackedMessage(TwistStamped(header=header), STAMPED)
+        self.accel = PackedMessage(AccelStamped(header=header), STAMPED)
+        self.joints = PackedMessage(
+            JointState(name=list(JOINTS), position=[0.0] * 4, velocity=[0.0] * 4),
+            ("header.stamp", "position", "velocity"),
+        )
         self.pose_pub = self.node.create_publisher(PoseStamped, topic["bucket_pose"], qos)
         self.twist_pub = self.node.create_publisher(TwistStamped, topic["bucket_twist"], qos)
         self.accel_pub = self.node.create_publisher(AccelStamped, topic["bucket_accel"], qos)
@@ -100,17 +108,16 @@ class ForwardKinematics:
         D_ddot = np.concatenate(([theta1_ddot], cylinder_ddot)) if known else None
         s = self.exc.state(D, np.concatenate(([theta1_dot], rates)), D_ddot)
 
-        self.pose_pub.publish(messages.set_bucket_pose(self.pose, stamp, theta1, s.Q))
+        sec_nanosec = (stamp.sec, stamp.nanosec)
+        self.pose_pub.publish(self.pose.pack((*sec_nanosec, *messages.bucket_pose_values(theta1, s.Q))))
         angular = bucket_angular_velocity(theta1, theta1_dot, s.Q_dot[3])
-        self.twist_pub.publish(messages.set_bucket_twist(self.twist, stamp, s.Q_dot[:3], angular))
+        self.twist_pub.publish(self.twist.pack((*sec_nanosec, *s.Q_dot[:3], *angular)))
         if known:
             angular_acc = bucket_angular_acceleration(
                 theta1, theta1_dot, theta1_ddot, s.Q_dot[3], s.Q_ddot[3]
             )
-            self.accel_pub.publish(messages.set_bucket_accel(self.accel, stamp, s.Q_ddot[:3], angular_acc))
-        self.joints.header.stamp = stamp
-        self.joints.position, self.joints.velocity = s.theta.tolist(), s.theta_dot.tolist()
-        self.joints_pub.publish(self.joints)
+            self.accel_pub.publish(self.accel.pack((*sec_nanosec, *s.Q_ddot[:3], *angular_acc)))
+        self.joints_pub.publish(self.joints.pack((*sec_nanosec, *s.theta, *s.theta_dot)))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -19,6 +19,8 @@ so a single call costs microseconds and a batch runs at millions of states per s
 from __future__ import annotations
 
 import math
+import struct
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
@@ -38,16 +40,70 @@ DEFAULT_CONFIG = "excavator_cet200.yaml"
 # threshold and in cache; whole-batch temporaries cost more in page faults than in arithmetic.
 BATCH_BLOCK = 8192
 
+# Entries of a BucketState: six vectors of four, then JC0's 16.
+_STATE_SIZE = 40
+_STATE_STRUCT = struct.Struct(f"{_STATE_SIZE}d")
+_NO_ACCELERATION = (0.0, 0.0, 0.0, 0.0)
+
 # Lengths this close outside a stroke end still count as inside, so that lengths computed from
 # angles at a stroke end (round-off of a few ulp) are accepted.
 STROKE_TOLERANCE = 1e-9
 
-_SCALAR = SimpleNamespace(sqrt=math.sqrt, acos=math.acos, atan2=math.atan2, sin=math.sin, cos=math.cos)
-_ARRAY = SimpleNamespace(sqrt=np.sqrt, acos=np.arccos, atan2=np.arctan2, sin=np.sin, cos=np.cos)
-
 
 class StrokeError(ValueError):
     """A state outside the machine's strokes/limits, non-finite, or geometrically impossible."""
+
+
+def _cos_sin(angle: float) -> tuple[float, float]:
+    return math.cos(angle), math.sin(angle)
+
+
+def _cos_sin_of_array(angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """cos and sin by the tangent half-angle formulas, within 2.3e-16 of np.cos and np.sin.
+
+    numpy runs float64 sin and cos element by element through libm but has a vectorised tan:
+    one tan and a few products cost a fraction of the pair. t * t cannot overflow: |tan| of
+    any double stays below 1e19.
+    """
+    t = np.tan(0.5 * angle)
+    t2 = t * t
+    scale = 1.0 / (1.0 + t2)
+    return (1.0 - t2) * scale, 2.0 * t * scale
+
+
+def _closing_sine(c: float, name: str) -> float:
+    """sqrt(1 - c^2), the sine for the cosine c of a linkage angle (one state).
+
+    |c| < 1 or the linkage cannot be assembled at this length. Checked here, in one call with
+    the root, because a separate check per linkage is a measurable share of a one-state call.
+    """
+    if -1.0 < c < 1.0:
+        return math.sqrt(1.0 - c * c)
+    raise _cannot_close(name)
+
+
+def _closing_sine_of_array(c: np.ndarray, name: str) -> np.ndarray:
+    """:func:`_closing_sine` for a batch: every |c| < 1 (in floats as in reals, 1 - c^2 > 0
+    exactly when |c| < 1, which saves a pass) or StrokeError."""
+    radicand = 1.0 - c * c
+    if np.all(radicand > 0.0):
+        return np.sqrt(radicand)
+    raise _cannot_close(name)
+
+
+def _cannot_close(name: str) -> StrokeError:
+    return StrokeError(f"{name}: the linkage cannot close (triangle inequality violated)")
+
+
+# The math of the shared code: Python floats for one state, numpy arrays for a batch.
+_SCALAR = SimpleNamespace(
+    sqrt=math.sqrt, acos=math.acos, atan2=math.atan2, sin=math.sin, cos=math.cos,
+    cos_sin=_cos_sin, closing_sine=_closing_sine,
+)
+_ARRAY = SimpleNamespace(
+    sqrt=np.sqrt, acos=np.arccos, atan2=np.arctan2, sin=np.sin, cos=np.cos,
+    cos_sin=_cos_sin_of_array, closing_sine=_closing_sine_of_array,
+)
 
 
 @dataclass(frozen=True)
@@ -91,30 +147,29 @@ class _Triangle:
     b: float  # |second - pivot|
     offset: float  # ang(first) - ang(second)
     orientation: int
+    radius: float = 1.0  # scale of the cosine and sine that closes() returns
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "_cos_sin", (math.cos(self.offset), math.sin(self.offset)))
+        # Eq. 1's constants, folded once: cos(gamma) = (a^2 + b^2 - d^2) / (2ab) = c0 - c1 d^2.
+        # The orientation as a float: Python's float-by-float operations are the fast ones.
+        ab = self.a * self.b
+        c0, c1 = (self.a * self.a + self.b * self.b) / (2.0 * ab), 0.5 / ab
+        cd, sd = self.radius * math.cos(self.offset), self.radius * math.sin(self.offset)
+        object.__setattr__(self, "_constants", (c0, c1, ab, float(self.orientation), cd, sd))
 
-    def closes(self, d: Any, m: SimpleNamespace) -> tuple[Any, ...]:
-        """Joint angle, its derivatives w.r.t. d (eq. 1: k21, k22) and its cosine and sine.
+    def closes(self, d: Any, m: SimpleNamespace, angle: bool = True) -> tuple[Any, ...]:
+        """Joint angle (None unless ``angle``), its derivatives w.r.t. d (eq. 1: k21, k22) and
+        its cosine and sine times ``radius``.
 
         cos/sin come from cos(gamma) and sin(gamma) = sqrt(1 - cos^2) by angle addition, so
         callers need no trigonometry for the open chain (np.sin is the costliest ufunc here).
         """
-        a, b, o = self.a, self.b, self.orientation
-        c = (a * a + b * b - d * d) / (2.0 * a * b)
-        _check_closes(c, self.name)
-        s = o * m.sqrt(1.0 - c * c)  # sin(o * gamma)
-        k = d / (a * b * s)  # o * dgamma/dd
-        cd, sd = self._cos_sin
-        return self.offset + o * m.acos(c), k, k / d - k * k * c / s, cd * c - sd * s, sd * c + cd * s
-
-
-def _check_closes(c: Any, name: str) -> None:
-    """|cos| < 1 or the linkage cannot be assembled at this length."""
-    closes = -1.0 < c < 1.0 if isinstance(c, float) else bool(np.all(np.abs(c) < 1.0))
-    if not closes:
-        raise StrokeError(f"{name}: the linkage cannot close (triangle inequality violated)")
+        c0, c1, ab, o, cd, sd = self._constants
+        c = c0 - c1 * d * d
+        s = o * m.closing_sine(c, self.name)  # sin(o * gamma)
+        k = d / (ab * s)  # o * dgamma/dd
+        theta = self.offset + o * m.acos(c) if angle else None
+        return theta, k, k / d - k * k * c / s, cd * c - sd * s, sd * c + cd * s
 
 
 def _point(value: Any, key: str) -> np.ndarray:
@@ -198,8 +253,8 @@ class Excavator:
         self._pivot = _point(_get(g, "side_link.pivot"), "side_link.pivot")
         self._side = _positive(_get(g, "side_link.length"), "side_link.length")
         # Python floats: numpy scalars would make every operation of the one-state path slow.
-        self._pivot_xy = tuple(self._pivot.tolist())
         self._bucket_pin_xy = tuple(self._bucket_pin.tolist())
+        self._pivot_from_bucket_pin = tuple((self._pivot - self._bucket_pin).tolist())
         self._pins_local["bucket_cylinder_base"] = bucket_base
         to_base = bucket_base - self._pivot
         # Side-link angle phi in the arm frame comes from the same triangle form with the rod
@@ -210,13 +265,25 @@ class Excavator:
             self._side,
             _angle(to_base),
             _sign(_get(g, "bucket_cylinder.orientation"), "bucket_cylinder.orientation"),
+            radius=self._side,  # closes() then gives the rod pin R relative to the pivot
         )
         h_pin = _point(_get(g, "h_link.bucket_pin"), "h_link.bucket_pin")
         self._h_radius = float(np.hypot(*h_pin))  # bucket pin -> H-link pin
         self._h_phase = _angle(h_pin)
-        self._h_phase_cos_sin = (math.cos(self._h_phase), math.sin(self._h_phase))
         self._h_link = _positive(_get(g, "h_link.length"), "h_link.length")
         self._h_orientation = _sign(_get(g, "h_link.orientation"), "h_link.orientation")
+        b, a = self._h_radius, self._h_link
+        # cos of the H angle = (e^2 + b^2 - a^2) / (2 b e) (law of cosines, e = |R - bucket pin|);
+        # (H - bucket pin) / b turned back by the H phase is the bucket direction (cos, sin theta4).
+        self._h_constants = (
+            b,
+            b * b,
+            float(self._h_orientation),
+            b * b - a * a,
+            2.0 * b,
+            math.cos(self._h_phase) / b,
+            math.sin(self._h_phase) / b,
+        )
         self._pins_local["h_link_pin"] = h_pin
 
         stroke = []
@@ -258,6 +325,7 @@ class Excavator:
         # Python floats of the limits with the tolerance applied, for the one-state fast path.
         self._lo = (self.limits.d_min - STROKE_TOLERANCE).tolist()
         self._hi = (self.limits.d_max + STROKE_TOLERANCE).tolist()
+        self._lo_column, self._hi_column = np.array(self._lo)[:, None], np.array(self._hi)[:, None]
         self._check_whole_stroke()
 
     @staticmethod
@@ -298,15 +366,17 @@ class Excavator:
     # ------------------------------------------------------------------ validation
     def validate(self, D: Any) -> np.ndarray:
         """D as a float array of shape (4,) or (N, 4); raises StrokeError naming what is wrong."""
+        return self._columns(D)[0]
+
+    def _columns(self, D: Any) -> tuple[np.ndarray, SimpleNamespace, Sequence[Any]]:
+        """D checked as by :meth:`validate`, with the math for it and its columns as _split
+        makes them (the checks read those columns too, which is faster for a batch)."""
         D = np.asarray(D, dtype=float)
-        if D.shape[-1:] != (4,) or D.ndim not in (1, 2):
-            raise StrokeError(
-                f"expected D = [swing, boom, arm, bucket] of shape (4,) or (N, 4), got {D.shape}"
-            )
         # Fast path: everything inside the limits (NaN fails every comparison, so it falls
         # through to the checks below, which name what is wrong).
-        if D.ndim == 1:
-            t1, d2, d3, d4 = D.tolist()
+        if D.shape == (4,):
+            m, columns = _SCALAR, D.tolist()
+            t1, d2, d3, d4 = columns
             lo, hi = self._lo, self._hi
             if (
                 lo[0] <= t1 <= hi[0]
@@ -314,9 +384,15 @@ class Excavator:
                 and lo[2] <= d3 <= hi[2]
                 and lo[3] <= d4 <= hi[3]
             ):
-                return D
-        elif np.all((self._lo <= D) & (self._hi >= D)):
-            return D
+                return D, m, columns
+        elif D.ndim == 2 and D.shape[1] == 4:
+            m, columns = _split(D)
+            if np.all((self._lo_column <= columns) & (columns <= self._hi_column)):
+                return D, m, columns
+        else:
+            raise StrokeError(
+                f"expected D = [swing, boom, arm, bucket] of shape (4,) or (N, 4), got {D.shape}"
+            )
         self._check_lengths(D[..., 1:])
         swing = D[..., 0]
         if not np.all(np.isfinite(swing)):
@@ -328,7 +404,7 @@ class Excavator:
                 f"swing_joint angle {_first_bad(swing, inside)} rad outside "
                 f"[{self.limits.swing_min:.6g}, {self.limits.swing_max:.6g}] rad"
             )
-        return D
+        return D, m, columns
 
     def _check_lengths(self, lengths: np.ndarray) -> None:
         finite = np.isfinite(lengths)
@@ -348,41 +424,44 @@ class Excavator:
                 )
 
     # ------------------------------------------------------------------ closed loops (eqs. 1-2, 7)
-    def _closed_loops(self, d2: Any, d3: Any, d4: Any, m: SimpleNamespace) -> _Loops:
+    def _closed_loops(self, d2: Any, d3: Any, d4: Any, m: SimpleNamespace) -> tuple[tuple[Any, ...], ...]:
         """theta2..4 with their first (K) and second (K1) derivatives w.r.t. d2..d4 and their
-        cosines and sines, plus the bucket linkage's rod pin R and H-link pin H (arm frame)."""
+        cosines and sines, plus the bucket linkage's rod pin R and H-link pin H relative to the
+        bucket pin (arm frame): ``(theta, k, dk, trig, (R, H))``, a tuple of tuples."""
         theta2, k2, dk2, c2, s2 = self._boom.closes(d2, m)
         theta3, k3, dk3, c3, s3 = self._arm.closes(d3, m)
-        # Cylinder four-bar (Fig. 7b): side-link angle phi and its derivatives, same form.
-        _, phi_d, phi_dd, cphi, sphi = self._side_triangle.closes(d4, m)
-        px, py = self._pivot_xy
-        bx, by = self._bucket_pin_xy
-        rx, ry = self._side * cphi, self._side * sphi  # R - pivot
-        Rx, Ry = px + rx, py + ry
+        # Cylinder four-bar (Fig. 7b): side-link angle phi's derivatives, same form; phi itself is
+        # never needed, only R - pivot = side length * (cos, sin) phi.
+        _, phi_d, phi_dd, rx, ry = self._side_triangle.closes(d4, m, angle=False)
+        fx, fy = self._pivot_from_bucket_pin
+        ex, ey = fx + rx, fy + ry  # R - bucket pin
         # Bucket four-bar (Fig. 7c, eq. 2): H from the triangle (bucket pin, R, H).
-        ex, ey = Rx - bx, Ry - by
-        e = m.sqrt(ex * ex + ey * ey)
-        b, a, o = self._h_radius, self._h_link, self._h_orientation
-        ch = (e * e + b * b - a * a) / (2.0 * e * b)
-        _check_closes(ch, "bucket_cylinder (bucket four-bar)")
-        sh = o * m.sqrt(1.0 - ch * ch)
-        ux, uy = ex / e, ey / e
-        ox, oy = b * (ux * ch - uy * sh), b * (uy * ch + ux * sh)  # H - bucket pin
-        Hx, Hy = bx + ox, by + oy
+        b, bb, o, b2_a2, two_b, cp, sp = self._h_constants
+        e2 = ex * ex + ey * ey
+        e = m.sqrt(e2)
+        ch = (e2 + b2_a2) / (two_b * e)
+        sh = o * m.closing_sine(ch, "bucket_cylinder (bucket four-bar)")
+        # H - bucket pin = fc (R - bucket pin) + fs perp(R - bucket pin): turned by the H angle
+        # and scaled to length b.
+        f = b / e
+        fc, fs = f * ch, f * sh
+        ox, oy = fc * ex - fs * ey, fc * ey + fs * ex
         theta4 = m.atan2(ey, ex) + o * m.acos(ch) - self._h_phase
-        cp, sp = self._h_phase_cos_sin
-        c4, s4 = (ox * cp + oy * sp) / b, (oy * cp - ox * sp) / b
+        c4, s4 = ox * cp + oy * sp, oy * cp - ox * sp
         # Four-bar velocity ratio g1 = dpsi/dphi and g2 = d2psi/dphi2 from the loop constraint
-        # (H - R).(vH - vR) = 0 and its time derivative; closed form, no iteration.
-        cx, cy = Hx - Rx, Hy - Ry
-        den = cy * ox - cx * oy  # (H - R) . perp(H - O4)
+        # (H - R).(vH - vR) = 0 and its time derivative; closed form, no iteration. With the
+        # form of H above, (H - R) . perp(H - O4) = fs e^2 and (H - R) . (H - O4) = b^2 - fc e^2.
+        cx, cy = ox - ex, oy - ey  # H - R
+        den = fs * e2
         g1 = (cy * rx - cx * ry) / den
         wx, wy = g1 * ox - rx, g1 * oy - ry
-        g2 = (g1 * g1 * (cx * ox + cy * oy) - (cx * rx + cy * ry) - (wx * wx + wy * wy)) / den
-        k4 = g1 * phi_d
-        dk4 = g2 * phi_d * phi_d + g1 * phi_dd
-        return _Loops(
-            theta2, theta3, theta4, k2, k3, k4, dk2, dk3, dk4, (Rx, Ry), (Hx, Hy), (c2, s2, c3, s3, c4, s4)
+        g2 = (g1 * g1 * (bb - fc * e2) - (cx * rx + cy * ry) - (wx * wx + wy * wy)) / den
+        return (
+            (theta2, theta3, theta4),
+            (k2, k3, g1 * phi_d),
+            (dk2, dk3, g2 * phi_d * phi_d + g1 * phi_dd),
+            (c2, s2, c3, s3, c4, s4),
+            ((ex, ey), (ox, oy)),
         )
 
     def joint_angles(self, lengths: Any) -> np.ndarray:
@@ -394,18 +473,15 @@ class Excavator:
             )
         self._check_lengths(lengths)
         m, cols = _split(lengths)
-        loops = self._closed_loops(*cols, m)
-        return _stack((loops.theta2, loops.theta3, loops.theta4), lengths.ndim)
+        return _stack(self._closed_loops(*cols, m)[0], lengths.ndim)
 
     def k_entries(self, lengths: Any) -> tuple[np.ndarray, np.ndarray]:
         """dtheta_i/dd_i (the diagonal of K, eq. 7) and d2theta_i/dd_i2 (of K1), for i = 2..4."""
         lengths = np.asarray(lengths, dtype=float)
         self._check_lengths(lengths)
         m, cols = _split(lengths)
-        loops = self._closed_loops(*cols, m)
-        return _stack((loops.k2, loops.k3, loops.k4), lengths.ndim), _stack(
-            (loops.dk2, loops.dk3, loops.dk4), lengths.ndim
-        )
+        _, k, dk, _, _ = self._closed_loops(*cols, m)
+        return _stack(k, lengths.ndim), _stack(dk, lengths.ndim)
 
     def cylinder_lengths(self, angles: Any) -> np.ndarray:
         """Joint angles [theta2, theta3, theta4] (..., 3) -> cylinder lengths (inverse of eqs. 1-2).
@@ -458,11 +534,9 @@ class Excavator:
     # ------------------------------------------------------------------ open chain (eqs. 3-5)
     def pose(self, D: Any) -> np.ndarray:
         """Q = [x, y, z, alpha] of the bucket tip for D (eqs. 1-3)."""
-        D = self.validate(D)
-        m, (t1, d2, d3, d4) = _split(D)
-        loops = self._closed_loops(d2, d3, d4, m)
-        terms = self._jacobian_terms(t1, loops.trig, m)
-        return _stack(self._tip(terms, loops.theta2 + loops.theta3 + loops.theta4), D.ndim)
+        D, m, (t1, d2, d3, d4) = self._columns(D)
+        (t2, t3, t4), _, _, trig, _ = self._closed_loops(d2, d3, d4, m)
+        return _stack(self._tip(self._jacobian_terms(t1, trig, m), t2 + t3 + t4), D.ndim)
 
     def open_chain_pose(self, theta: Any) -> np.ndarray:
         """Q = [x, y, z, alpha] from the open-chain joints theta1..theta4 (eq. 3), no limits."""
@@ -480,7 +554,8 @@ class Excavator:
         """Every pin (and the tip) in the base frame, shape (..., 3), for drawing and checking."""
         D = self.validate(D)
         t1, d2, d3, d4 = (D[..., i] for i in range(4))
-        t2, t3, t4, *_, R, H, _ = self._closed_loops(d2, d3, d4, _ARRAY)
+        (t2, t3, t4), _, _, _, ((ex, ey), (ox, oy)) = self._closed_loops(d2, d3, d4, _ARRAY)
+        bx, by = self._bucket_pin_xy
         foot = np.array([self.l1, self.l0])
 
         def place(origin: np.ndarray, angle: Any, local: Any) -> np.ndarray:
@@ -505,8 +580,8 @@ class Excavator:
             "bucket_pin": bucket_pin,
             "bucket_cylinder_base": place(*arm, self._pins_local["bucket_cylinder_base"]),
             "side_link_pivot": place(*arm, self._pivot),
-            "bucket_cylinder_rod": place(*arm, R),
-            "h_link_pin": place(*arm, H),
+            "bucket_cylinder_rod": place(*arm, (bx + ex, by + ey)),
+            "h_link_pin": place(*arm, (bx + ox, by + oy)),
             "h_link_pin_on_bucket": place(*bucket, self._pins_local["h_link_pin"]),
             "bucket_tip": place(*bucket, (self.l4, 0.0)),
         }
@@ -527,7 +602,8 @@ class Excavator:
         a3, b3 = self.l4 * s234, self.l4 * c234
         a2, b2 = self.l3 * s23 + a3, self.l3 * c23 + b3
         a1, b1 = self.l2 * s2 + a2, self.l2 * c2 + b2
-        return a1, a2, a3, b1, b2, b3, self.l1 + b1, m.cos(t1), m.sin(t1)
+        c1, s1 = m.cos_sin(t1)
+        return a1, a2, a3, b1, b2, b3, self.l1 + b1, c1, s1
 
     def j0(self, theta: Any) -> np.ndarray:
         """J0(theta) of eq. 5: Qdot = J0 thetadot, rows x, y, z, alpha; columns theta1..theta4."""
@@ -536,10 +612,10 @@ class Excavator:
         a1, a2, a3, b1, b2, b3, rho, c1, s1 = self._jacobian_terms(t1, _trig(t2, t3, t4, m), m)
         return _matrix(
             [
-                [-rho * s1, -a1 * c1, -a2 * c1, -a3 * c1],
-                [rho * c1, -a1 * s1, -a2 * s1, -a3 * s1],
-                [0.0, b1, b2, b3],
-                [0.0, 1.0, 1.0, 1.0],
+                -rho * s1, -a1 * c1, -a2 * c1, -a3 * c1,
+                rho * c1, -a1 * s1, -a2 * s1, -a3 * s1,
+                0.0, b1, b2, b3,
+                0.0, 1.0, 1.0, 1.0,
             ],
             theta.shape[:-1],
         )
@@ -554,11 +630,9 @@ class Excavator:
 
     def jc0(self, D: Any) -> np.ndarray:
         """JC0 = J0 K (eq. 8): Qdot = JC0 Ddot."""
-        D = self.validate(D)
-        m, (t1, d2, d3, d4) = _split(D)
-        loops = self._closed_loops(d2, d3, d4, m)
-        terms = self._jacobian_terms(t1, loops.trig, m)
-        return _matrix(_jc0_rows(terms, loops.k2, loops.k3, loops.k4), D.shape[:-1])
+        D, m, (t1, d2, d3, d4) = self._columns(D)
+        _, k, _, trig, _ = self._closed_loops(d2, d3, d4, m)
+        return _matrix(_jc0_entries(self._jacobian_terms(t1, trig, m), *k), D.shape[:-1])
 
     # ------------------------------------------------------------------ full state (eqs. 3-11)
     def state(self, D: Any, D_dot: Any, D_ddot: Any = None) -> BucketState:
@@ -568,78 +642,64 @@ class Excavator:
         K1 Ddot^2, i.e. JC0 Dddot plus the velocity-product terms of eq. 11 (see
         :meth:`acceleration_matrices` for the paper's JC1_0 / JC2_0 split of those terms).
         """
-        D = self.validate(D)
-        if D.ndim == 1:
+        D, m, columns = self._columns(D)
+        if m is _SCALAR:
             # One state: Python floats end to end (a 1 kHz node calls this per message).
             rates = _finite_floats(D_dot, "D_dot")
-            accelerations = (0.0, 0.0, 0.0, 0.0) if D_ddot is None else _finite_floats(D_ddot, "D_ddot")
-            (v0, v1, v2, v3, v4, v5), (r0, r1, r2, r3) = self._state(
-                D.tolist(), rates, accelerations, _SCALAR
-            )
-            # One array for everything, then views: one allocation instead of seven.
-            flat = np.array([*v0, *v1, *v2, *v3, *v4, *v5, *r0, *r1, *r2, *r3], dtype=float)
-            return BucketState(
-                flat[0:4],
-                flat[4:8],
-                flat[8:12],
-                flat[12:16],
-                flat[16:20],
-                flat[20:24],
-                flat[24:].reshape(4, 4),
-            )
-        D_dot = _finite(D_dot, D.shape, "D_dot")
-        D_ddot = np.zeros_like(D) if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot")
+            accelerations = _NO_ACCELERATION if D_ddot is None else _finite_floats(D_ddot, "D_ddot")
+            return _bucket_state(_table(self._state(columns, rates, accelerations, m)))
+        rates = _split(_finite(D_dot, D.shape, "D_dot"))[1]
+        if D_ddot is None:
+            accelerations = np.zeros_like(columns)
+        else:
+            accelerations = _split(_finite(D_ddot, D.shape, "D_ddot"))[1]
         n = len(D)
-        vector_out, matrix_out = np.empty((6, 4, n)), np.empty((4, 4, n))
+        out = np.empty((_STATE_SIZE, n))
         for start in range(0, n, BATCH_BLOCK):
             block = slice(start, start + BATCH_BLOCK)
-            vectors, rows = self._state(
-                _split(D[block])[1], _split(D_dot[block])[1], _split(D_ddot[block])[1], _ARRAY
-            )
-            for out, group in zip(vector_out, vectors, strict=True):
-                for i, value in enumerate(group):
-                    out[i, block] = value
-            for i, row in enumerate(rows):
-                for j, value in enumerate(row):
-                    matrix_out[i, j, block] = value
-        return BucketState(*np.moveaxis(vector_out, 1, -1), jc0=np.moveaxis(matrix_out, (0, 1), (-2, -1)))
+            values = self._state(columns[:, block], rates[:, block], accelerations[:, block], m)
+            for row, value in zip(out, values, strict=True):
+                row[block] = value
+        return _bucket_state(np.moveaxis(out.reshape(10, 4, n), -1, 1))
 
-    def _state(self, D: Any, D_dot: Any, D_ddot: Any, m: SimpleNamespace) -> tuple[tuple, list]:
-        """Columns of the six state vectors and the rows of JC0, from the columns of D, Ddot and
-        Dddot (Python floats with math, or block arrays with numpy)."""
+    def _state(self, D: Any, D_dot: Any, D_ddot: Any, m: SimpleNamespace) -> list[Any]:
+        """The entries of a BucketState (theta, theta_dot, theta_ddot, Q, Q_dot, Q_ddot, then
+        JC0 row by row) from the columns of D, Ddot and Dddot (Python floats with math, or block
+        arrays with numpy)."""
         t1, d2, d3, d4 = D
         w1, v2, v3, v4 = D_dot
         e1, f2, f3, f4 = D_ddot
-        t2, t3, t4, k2, k3, k4, dk2, dk3, dk4, _, _, trig = self._closed_loops(d2, d3, d4, m)
+        (t2, t3, t4), (k2, k3, k4), (dk2, dk3, dk4), trig, _ = self._closed_loops(d2, d3, d4, m)
         terms = self._jacobian_terms(t1, trig, m)
-        rows = _jc0_rows(terms, k2, k3, k4)
+        a1, a2, a3, b1, b2, b3, rho, c1, s1 = terms
         # thetadot = K Ddot (eq. 7); thetaddot = K Dddot + K1 Ddot^2 (its time derivative).
         w2, w3, w4 = k2 * v2, k3 * v3, k4 * v4
         e2, e3, e4 = k2 * f2 + dk2 * v2 * v2, k3 * f3 + dk3 * v3 * v3, k4 * f4 + dk4 * v4 * v4
-        a1, a2, a3, b1, b2, b3, rho, c1, s1 = terms
-        x_vp, y_vp, z_vp = _velocity_products(terms, w1, w2, w3, w4)
-        q_dot = [
-            rows[0][0] * w1 + rows[0][1] * v2 + rows[0][2] * v3 + rows[0][3] * v4,
-            rows[1][0] * w1 + rows[1][1] * v2 + rows[1][2] * v3 + rows[1][3] * v4,
-            rows[2][1] * v2 + rows[2][2] * v3 + rows[2][3] * v4,
-            w2 + w3 + w4,
+        # Eqs. 8 and 10 in the boom plane: rho = l1 + l2 c2 + l3 c23 + l4 c234 and z = l0 +
+        # l2 s2 + l3 s23 + l4 s234, whose links turn at w2, o23 = w2 + w3 and alphadot = o23 + w4.
+        # The rates are eq. 4's columns times thetadot; the accelerations add each link's
+        # centripetal term -(l c, l s) o^2, where l2 c2 = b1 - b2, l3 c23 = b2 - b3, l4 c234 = b3
+        # (likewise a for the sines): eq. 4's coefficients, no new trigonometry.
+        o23 = w2 + w3
+        alpha_dot = o23 + w4
+        q2, q23, q234 = w2 * w2, o23 * o23, alpha_dot * alpha_dot
+        rho_dot, z_dot = -(a1 * w2 + a2 * w3 + a3 * w4), b1 * w2 + b2 * w3 + b3 * w4
+        rho_ddot = -(a1 * e2 + a2 * e3 + a3 * e4 + (b1 - b2) * q2 + (b2 - b3) * q23 + b3 * q234)
+        z_ddot = b1 * e2 + b2 * e3 + b3 * e4 - ((a1 - a2) * q2 + (a2 - a3) * q23 + a3 * q234)
+        # x, y = rho (cos, sin) theta1: the boom plane's motion turned by the swing; d/dt of
+        # (c1, s1) brings in the swing rate w1 and acceleration e1.
+        x, y = rho * c1, rho * s1
+        radial = rho_ddot - rho * w1 * w1
+        tangential = 2.0 * rho_dot * w1 + rho * e1
+        return [
+            t1, t2, t3, t4,
+            w1, w2, w3, w4,
+            e1, e2, e3, e4,
+            x, y, self.l0 + a1, t2 + t3 + t4,
+            rho_dot * c1 - y * w1, rho_dot * s1 + x * w1, z_dot, alpha_dot,
+            c1 * radial - s1 * tangential, s1 * radial + c1 * tangential, z_ddot, e2 + e3 + e4,
+            *_jc0_entries(terms, k2, k3, k4),
         ]
-        # Eq. 10: Qddot = J0 thetaddot + Jdot0 thetadot.
-        q_ddot = [
-            -rho * s1 * e1 - c1 * (a1 * e2 + a2 * e3 + a3 * e4) + x_vp,
-            rho * c1 * e1 - s1 * (a1 * e2 + a2 * e3 + a3 * e4) + y_vp,
-            b1 * e2 + b2 * e3 + b3 * e4 + z_vp,
-            e2 + e3 + e4,
-        ]
-        vectors = (
-            (t1, t2, t3, t4),
-            (w1, w2, w3, w4),
-            (e1, e2, e3, e4),
-            (rho * c1, rho * s1, self.l0 + a1, t2 + t3 + t4),
-            q_dot,
-            q_ddot,
-        )
-        return vectors, rows
 
     def acceleration_matrices(self, D: Any) -> tuple[np.ndarray, np.ndarray]:
         """JC1_0 (..., 4, 4) and JC2_0 (..., 4, 6) of eq. 11.
@@ -651,7 +711,7 @@ class Excavator:
         """
         D = self.validate(D)
         t1, d2, d3, d4 = (D[..., i] for i in range(4))
-        t2, t3, t4, k2, k3, k4, dk2, dk3, dk4, _, _, trig = self._closed_loops(d2, d3, d4, _ARRAY)
+        (t2, t3, t4), (k2, k3, k4), (dk2, dk3, dk4), trig, _ = self._closed_loops(d2, d3, d4, _ARRAY)
         a1, a2, a3, b1, b2, b3, rho, c1, s1 = self._jacobian_terms(t1, trig, _ARRAY)
         k = np.stack((np.ones_like(k2), k2, k3, k4), axis=-1)
         dk = np.stack((np.zeros_like(dk2), dk2, dk3, dk4), axis=-1)
@@ -714,23 +774,8 @@ class Excavator:
         return np.linalg.solve(j0, (Q_ddot - free.Q_ddot)[..., None])[..., 0] + free.theta_ddot
 
 
-class _Loops(NamedTuple):
-    theta2: Any
-    theta3: Any
-    theta4: Any
-    k2: Any
-    k3: Any
-    k4: Any
-    dk2: Any
-    dk3: Any
-    dk4: Any
-    R: tuple[Any, Any]
-    H: tuple[Any, Any]
-    trig: tuple[Any, ...]  # cos/sin of theta2, theta3, theta4
-
-
 def _trig(t2: Any, t3: Any, t4: Any, m: SimpleNamespace) -> tuple[Any, ...]:
-    return m.cos(t2), m.sin(t2), m.cos(t3), m.sin(t3), m.cos(t4), m.sin(t4)
+    return (*m.cos_sin(t2), *m.cos_sin(t3), *m.cos_sin(t4))
 
 
 class BucketState(NamedTuple):
@@ -753,45 +798,31 @@ class RateSolution:
     condition: np.ndarray  # (...,) 2-norm condition number of JC0
 
 
-def _jc0_rows(terms: tuple[Any, ...], k2: Any, k3: Any, k4: Any) -> list[list[Any]]:
-    """Rows of JC0 = J0 K (eqs. 5, 7, 8); column 1 is theta1 itself (k1 = 1)."""
+def _jc0_entries(terms: tuple[Any, ...], k2: Any, k3: Any, k4: Any) -> list[Any]:
+    """JC0 = J0 K (eqs. 5, 7, 8), row by row; column 1 is theta1 itself (k1 = 1).
+
+    The boom-plane columns are -a_i k_i (d rho / d D_i, eq. 4) turned by the swing.
+    """
     a1, a2, a3, b1, b2, b3, rho, c1, s1 = terms
+    r2, r3, r4 = a1 * k2, a2 * k3, a3 * k4
+    nc1, ns1 = -c1, -s1
     return [
-        [-rho * s1, -a1 * c1 * k2, -a2 * c1 * k3, -a3 * c1 * k4],
-        [rho * c1, -a1 * s1 * k2, -a2 * s1 * k3, -a3 * s1 * k4],
-        [0.0, b1 * k2, b2 * k3, b3 * k4],
-        [0.0, k2, k3, k4],
+        ns1 * rho, nc1 * r2, nc1 * r3, nc1 * r4,
+        c1 * rho, ns1 * r2, ns1 * r3, ns1 * r4,
+        0.0, b1 * k2, b2 * k3, b3 * k4,
+        0.0, k2, k3, k4,
     ]
 
 
-def _velocity_products(terms: tuple[Any, ...], w1: Any, w2: Any, w3: Any, w4: Any) -> tuple[Any, Any, Any]:
-    """Jdot0 thetadot of eq. 10 for x, y, z (alpha is linear in theta, so its term is 0).
-
-    With radial distance rho = l1 + l2 c2 + l3 c23 + l4 c234 and absolute link rates
-    o2 = w2, o23 = w2 + w3, o234 = w2 + w3 + w4: l2 s2 = a1 - a2, l3 s23 = a2 - a3, l4 s234 = a3
-    (and likewise for b), which reuses eq. 4's coefficients instead of new trigonometry.
-    """
-    a1, a2, a3, b1, b2, b3, rho, c1, s1 = terms
-    o2, o23, o234 = w2, w2 + w3, w2 + w3 + w4
-    rho_dot = -((a1 - a2) * o2 + (a2 - a3) * o23 + a3 * o234)
-    rho_vp = -((b1 - b2) * o2 * o2 + (b2 - b3) * o23 * o23 + b3 * o234 * o234)
-    z_vp = -((a1 - a2) * o2 * o2 + (a2 - a3) * o23 * o23 + a3 * o234 * o234)
-    return (
-        rho_vp * c1 - 2.0 * rho_dot * s1 * w1 - rho * c1 * w1 * w1,
-        rho_vp * s1 + 2.0 * rho_dot * c1 * w1 - rho * s1 * w1 * w1,
-        z_vp,
-    )
-
-
-def _split(values: np.ndarray) -> tuple[SimpleNamespace, tuple[Any, ...]]:
+def _split(values: np.ndarray) -> tuple[SimpleNamespace, Sequence[Any]]:
     """Columns of a state as Python floats (one state) or arrays (a batch), with matching math.
 
-    Batch columns are copied once into contiguous rows: every later ufunc then streams memory
-    instead of striding through (N, 4) rows.
+    Batch columns are copied once into the contiguous rows of one array (k, ...): every later
+    ufunc then streams memory instead of striding through (..., k) rows.
     """
     if values.ndim == 1:
-        return _SCALAR, tuple(values.tolist())
-    return _ARRAY, tuple(np.ascontiguousarray(np.moveaxis(values, -1, 0)))
+        return _SCALAR, values.tolist()
+    return _ARRAY, np.ascontiguousarray(np.moveaxis(values, -1, 0))
 
 
 def _stack(columns: Any, ndim: int) -> np.ndarray:
@@ -805,15 +836,32 @@ def _stack(columns: Any, ndim: int) -> np.ndarray:
     return np.moveaxis(out, 0, -1)
 
 
-def _matrix(rows: list[list[Any]], batch: tuple[int, ...]) -> np.ndarray:
-    """Entries -> array (..., r, c), filled entry-contiguously for a batch (see _stack)."""
+def _matrix(entries: list[Any], batch: tuple[int, ...]) -> np.ndarray:
+    """Entries of a 4 x 4 matrix, row by row -> array (..., 4, 4), filled entry-contiguously for
+    a batch (see _stack)."""
     if not batch:
-        return np.array(rows, dtype=float)
-    out = np.empty((len(rows), len(rows[0]), *batch))
-    for i, row in enumerate(rows):
-        for j, entry in enumerate(row):
-            out[i, j] = entry
-    return np.moveaxis(out, (0, 1), (-2, -1))
+        return np.array(entries, dtype=float).reshape(4, 4)
+    out = np.empty((len(entries), *batch))
+    for row, entry in zip(out, entries, strict=True):
+        row[...] = entry
+    return np.moveaxis(out.reshape(4, 4, *batch), (0, 1), (-2, -1))
+
+
+def _table(entries: list[float]) -> np.ndarray:
+    """_state's entries of one state as a (10, 4) array. struct packs the Python floats straight
+    into the array's memory in one C loop, much faster than np.array's per-item type discovery
+    (packing is a large share of a one-state call)."""
+    table = np.empty((10, 4))
+    _STATE_STRUCT.pack_into(table, 0, *entries)
+    return table
+
+
+def _bucket_state(table: np.ndarray) -> BucketState:
+    """BucketState as views of a table of _state's entries: (10, 4) for one state, (10, N, 4)
+    for a batch (rows: the six vectors, then JC0's rows)."""
+    jc0 = table[6:] if table.ndim == 2 else np.moveaxis(table[6:], 1, 0)
+    # tuple.__new__ skips the NamedTuple's Python-level __new__, a measurable cost per state.
+    return tuple.__new__(BucketState, (table[0], table[1], table[2], table[3], table[4], table[5], jc0))
 
 
 def _finite(values: Any, shape: tuple[int, ...], name: str) -> np.ndarray:
@@ -829,9 +877,12 @@ def _finite(values: Any, shape: tuple[int, ...], name: str) -> np.ndarray:
 def _finite_floats(values: Any, name: str) -> list[float]:
     """Four finite Python floats, or StrokeError naming ``name`` (the one-state path)."""
     floats = values.tolist() if isinstance(values, np.ndarray) else [float(v) for v in values]
-    if len(floats) != 4 or not all(map(math.isfinite, floats)):
-        raise StrokeError(f"{name}: expected 4 finite numbers, got {floats}")
-    return floats
+    if len(floats) == 4:
+        a, b, c, d = floats
+        # Four isfinite calls: a third faster than all(map(...)) at this size.
+        if math.isfinite(a) and math.isfinite(b) and math.isfinite(c) and math.isfinite(d):
+            return floats
+    raise StrokeError(f"{name}: expected 4 finite numbers, got {floats}")
 
 
 def _first_bad(values: np.ndarray, good: np.ndarray) -> float:

@@ -6,7 +6,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped, Vector3
+from geometry_msgs.msg import PoseStamped, TwistStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
@@ -37,41 +37,25 @@ def joint_state(
     return msg
 
 
-def set_vector3(v: Vector3, values: np.ndarray) -> None:
-    v.x, v.y, v.z = float(values[0]), float(values[1]), float(values[2])
-
-
-# The set_* functions fill a message in place, so a node can keep one message per topic and
-# publish it again and again (building a geometry message costs more than the kinematics).
-def set_bucket_pose(msg: PoseStamped, stamp: Time, theta1: float, q: np.ndarray) -> PoseStamped:
-    """Tip position and bucket orientation (yaw theta1, then -alpha about +y; REP 103)."""
-    msg.header.stamp = stamp
-    p, o = msg.pose.position, msg.pose.orientation
-    p.x, p.y, p.z = float(q[0]), float(q[1]), float(q[2])
-    o.x, o.y, o.z, o.w = (float(v) for v in bucket_quaternion(theta1, q[3]))
-    return msg
-
-
-def set_bucket_twist(msg: TwistStamped, stamp: Time, linear: np.ndarray, angular: np.ndarray) -> TwistStamped:
-    msg.header.stamp = stamp
-    set_vector3(msg.twist.linear, linear)
-    set_vector3(msg.twist.angular, angular)
-    return msg
-
-
-def set_bucket_accel(msg: AccelStamped, stamp: Time, linear: np.ndarray, angular: np.ndarray) -> AccelStamped:
-    msg.header.stamp = stamp
-    set_vector3(msg.accel.linear, linear)
-    set_vector3(msg.accel.angular, angular)
-    return msg
+def bucket_pose_values(theta1: float, q: np.ndarray) -> list[float]:
+    """Tip position and bucket orientation quaternion (x, y, z, w: yaw theta1, then -alpha about +y;
+    REP 103), in the order of geometry_msgs/Pose."""
+    return [float(q[0]), float(q[1]), float(q[2]), *(float(v) for v in bucket_quaternion(theta1, q[3]))]
 
 
 def bucket_pose(stamp: Time, frame_id: str, theta1: float, q: np.ndarray) -> PoseStamped:
-    return set_bucket_pose(PoseStamped(header=Header(frame_id=frame_id)), stamp, theta1, q)
+    msg = PoseStamped(header=Header(stamp=stamp, frame_id=frame_id))
+    p, o = msg.pose.position, msg.pose.orientation
+    p.x, p.y, p.z, o.x, o.y, o.z, o.w = bucket_pose_values(theta1, q)
+    return msg
 
 
 def bucket_twist(stamp: Time, frame_id: str, linear: np.ndarray, angular: np.ndarray) -> TwistStamped:
-    return set_bucket_twist(TwistStamped(header=Header(frame_id=frame_id)), stamp, linear, angular)
+    msg = TwistStamped(header=Header(stamp=stamp, frame_id=frame_id))
+    t = msg.twist
+    t.linear.x, t.linear.y, t.linear.z = (float(v) for v in linear)
+    t.angular.x, t.angular.y, t.angular.z = (float(v) for v in angular)
+    return msg
 
 
 def twist_arrays(msg: TwistStamped) -> tuple[np.ndarray, np.ndarray]:

@@ -15,9 +15,10 @@ from pathlib import Path
 from typing import Any
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
+from manipulator_kinematics import spin
 from manipulator_kinematics.params import ConfigError, config_path, flatten, load_parameters, unflatten
 
 
@@ -75,9 +76,7 @@ def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
     node = None
     try:
         node = node_factory()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
+        spin.spin(node)
     except ConfigError as error:
         print(f"configuration error: {error}", file=sys.stderr)
         return 2

@@ -64,13 +64,14 @@ Schemas = Mapping[str, Sequence[Field]]
 
 
 @dataclass
-class _Layout:
+class Layout:
     """Where one message's values are: numbers (path, dtype, byte offset, count, is_array),
     strings (path, values, is_array), and the structural byte offsets that fix all of it."""
 
     numbers: list[tuple[str, np.dtype, int, int, bool]] = field(default_factory=list)
     strings: list[tuple[str, list[str], bool]] = field(default_factory=list)
     structural: list[int] = field(default_factory=lambda: [0, 1])
+    end: int = 0  # where the message's last value ends (serializers may pad after it)
 
 
 class _Walker:
@@ -81,7 +82,7 @@ class _Walker:
             raise CdrError(f"not plain CDR: encapsulation header {raw[:_HEADER].hex() or 'missing'}")
         self.raw, self.schemas = raw, schemas
         self.order = "<" if raw[1] == _LITTLE else ">"
-        self.layout = _Layout()
+        self.layout = Layout()
         self.pos = _HEADER
 
     def _align(self, size: int) -> None:
@@ -137,12 +138,14 @@ class _Walker:
                 self.message(f.type, path + ".")
 
 
-def _walk(raw: bytes, msgtype: str, schemas: Schemas) -> _Layout:
+def walk(raw: bytes, msgtype: str, schemas: Schemas, max_padding: int = 3) -> Layout:
+    """Where the values of one serialized ``msgtype`` message are; CdrError when it is not one."""
     walker = _Walker(raw, schemas)
     walker.message(msgtype)
-    # The serializer may pad the end to a multiple of 4 bytes; anything longer is not this type.
-    if len(raw) - walker.pos > 3:
+    # Serializers may pad the end, to a multiple of 4 bytes on the wire; anything longer is not this type.
+    if len(raw) - walker.pos > max_padding:
         raise CdrError(f"{len(raw) - walker.pos} bytes left over after the message ends at byte {walker.pos}")
+    walker.layout.end = walker.pos
     return walker.layout
 
 
@@ -183,7 +186,7 @@ def decode(
         while len(rows):
             first = int(rows[0])
             try:
-                layout = _walk(block[0].tobytes(), msgtype, schemas)
+                layout = walk(block[0].tobytes(), msgtype, schemas)
             except CdrError as error:
                 raise CdrError(f"message {first} ({size} bytes) is not a valid {msgtype}: {error}") from None
             same = np.ones(len(rows), dtype=bool)
