@@ -37,10 +37,10 @@ def joint_state(
     return msg
 
 
-def bucket_pose_values(theta1: float, q: np.ndarray) -> list[float]:
+def bucket_pose_values(theta1: float, q: Sequence[float]) -> list[float]:
     """Tip position and bucket orientation quaternion (x, y, z, w: yaw theta1, then -alpha about +y;
-    REP 103), in the order of geometry_msgs/Pose."""
-    return [float(q[0]), float(q[1]), float(q[2]), *(float(v) for v in bucket_quaternion(theta1, q[3]))]
+    REP 103) from Q = [x, y, z, alpha], in the order of geometry_msgs/Pose."""
+    return [float(q[0]), float(q[1]), float(q[2]), *bucket_quaternion(theta1, q[3]).tolist()]
 
 
 def bucket_pose(stamp: Time, frame_id: str, theta1: float, q: np.ndarray) -> PoseStamped:

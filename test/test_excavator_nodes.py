@@ -262,19 +262,26 @@ class TestForwardNode:
                 lambda D: (state_messages(stamp(0), D, np.zeros(4))[0], None),
                 "from the cylinder stamp",
             ),
+            (
+                "not cdr",  # published as bytes: the node decodes what it receives itself
+                lambda D: (bytes([0, 1, 0, 0]) + b"\xff" * 40, None),
+                "not a sensor_msgs/JointState",
+            ),
         ],
     )
     def test_forward_rejects_bad_input_and_keeps_serving(
         self, forward: Forward, name: str, make: Callable, reason: str
     ) -> None:
-        base = {"nan": 1_100, "stroke": 1_200, "names": 1_300, "no rates": 1_400, "stale swing": 1_500}[name]
+        base = {"nan": 1_100, "stroke": 1_200, "names": 1_300, "no rates": 1_400, "stale swing": 1_500,
+                "not cdr": 1_600}[name]
         primed_ns = base * 1_000_000_000
         # The stale case comes 0.5 s after the swing state (swing_max_age 0.1 s), the others 1 ms.
         bad_ns = primed_ns + (500_000_000 if name == "stale swing" else 1_000_000)
         D = LIMITS.reference.copy()
         forward.prime(primed_ns, D, np.zeros(4))
         bad, _ = make(D)
-        bad.header.stamp = stamp(bad_ns)
+        if not isinstance(bad, bytes):
+            bad.header.stamp = stamp(bad_ns)
         forward.cylinders.publish(bad)
         wait_for_log(forward.probe, forward.process, reason)
         good_ns = primed_ns + 2_000_000

@@ -39,12 +39,15 @@ class Spun:
         self.node.create_subscription(Int64, "numbers", self.on_number, QOS)
         self.node.create_timer(0.01, self.on_timer)
         self.node.create_service(Trigger, "trigger", self.on_trigger)
+        self.node.create_service(Trigger, "explode", self.on_explode)
         self.outcome: BaseException | None = None
         self.thread = threading.Thread(target=self.run, daemon=True)
 
     def on_number(self, msg: Int64) -> None:
         # Holding the first message makes the rest pile up in the queue: a backlog to catch up on.
         self.release.wait(TIMEOUT)
+        if msg.data < 0:
+            raise RuntimeError("a negative number")
         self.received.append(msg.data)
         self.echo.publish(msg)
 
@@ -54,6 +57,9 @@ class Spun:
     def on_trigger(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         response.success, response.message = True, f"{len(self.received)} received"
         return response
+
+    def on_explode(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        raise RuntimeError("a service callback failed")
 
     def run(self) -> None:
         try:
@@ -126,6 +132,23 @@ def test_shutdown_from_another_thread_ends_the_spin(spun: Spun) -> None:
     spun.thread.join(TIMEOUT)
     assert not spun.thread.is_alive()
     assert isinstance(spun.outcome, ExternalShutdownException)
+
+
+def test_a_subscription_callback_exception_ends_the_spin_and_is_raised(probe: Probe, spun: Spun) -> None:
+    spun.release.set()
+    publisher = probe.node.create_publisher(Int64, "numbers", QOS)
+    probe.wait_until(lambda: publisher.get_subscription_count() == 1, TIMEOUT, "matching")
+    publisher.publish(Int64(data=-1))
+    probe.wait_until(lambda: not spun.thread.is_alive(), TIMEOUT, "the end of the spin")
+    assert isinstance(spun.outcome, RuntimeError) and str(spun.outcome) == "a negative number"
+
+
+def test_a_service_callback_exception_ends_the_spin_and_is_raised(probe: Probe, spun: Spun) -> None:
+    client = probe.node.create_client(Trigger, "explode")
+    probe.wait_until(client.service_is_ready, TIMEOUT, "explode service")
+    client.call_async(Trigger.Request())
+    probe.wait_until(lambda: not spun.thread.is_alive(), TIMEOUT, "the end of the spin")
+    assert isinstance(spun.outcome, RuntimeError) and str(spun.outcome) == "a service callback failed"
 
 
 def test_a_node_with_a_client_is_refused() -> None:
