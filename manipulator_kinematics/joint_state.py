@@ -74,6 +74,7 @@ def decode_joint_state(raw: bytes) -> RawJointState:
     encapsulation header, then values aligned to their size, at most 8, from its end).
 
     Raises InputError when the bytes are not a JointState (truncated, bad lengths or strings).
+    Bytes after the last field are ignored: serializers pad the end (rclpy's by up to 8 bytes).
     """
     try:
         if len(raw) < 4 or raw[0] != 0 or raw[1] not in (0, 1):
@@ -96,9 +97,6 @@ def decode_joint_state(raw: bytes) -> RawJointState:
                 pos += 8 * count
             else:
                 sequences.append(())
-        # Serializers pad the end to a multiple of 4 (or 8) bytes; more left over is not this type.
-        if len(raw) - pos > 7:
-            raise ValueError(f"{len(raw) - pos} bytes left over after the message")
     except (struct.error, UnicodeDecodeError, ValueError) as error:
         raise InputError(f"not a sensor_msgs/JointState ({len(raw)} bytes): {error}") from None
     return RawJointState(sec, nanosec, frame_id, names, *sequences)
