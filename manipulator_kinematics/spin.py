@@ -6,14 +6,14 @@ callback in a Task (a coroutine) on every wake-up: about 0.2-0.3 ms of Python pe
 so a node falls behind when the machine is loaded and its keep-last queue starts dropping.
 
 :func:`spin` waits in rcl on plain wait sets and serves every entity a node of this package has:
-subscriptions (every queued message of a ready subscription in one pass, so a node that fell
-behind catches up at once), timers, services (the node's own and the parameter services
-``ros2 param`` talks to) and waitables (the QoS event handlers rclpy attaches to publishers and
-subscriptions). rcl needs a wait set filled anew for every wait, and a node has a dozen services
-and event handlers that are rarely ready, which would double the cost of each wake-up for a
-message. So the data path (subscriptions and timers) waits in the calling thread and everything
-else in a second thread; a lock runs the callbacks one at a time, as a SingleThreadedExecutor
-(or one mutually exclusive callback group) does.
+subscriptions (every queued message of the ready ones in one pass, so a node that fell behind
+catches up at once, handed over in the order they were sent across topics), timers, services
+(the node's own and the parameter services ``ros2 param`` talks to) and waitables (the QoS event
+handlers rclpy attaches to publishers and subscriptions). rcl needs a wait set filled anew for
+every wait, and a node has a dozen services and event handlers that are rarely ready, which would
+double the cost of each wake-up for a message. So the data path (subscriptions and timers) waits
+in the calling thread and everything else in a second thread; a lock runs the callbacks one at a
+time, as a SingleThreadedExecutor (or one mutually exclusive callback group) does.
 
 Limits, checked or documented: the set of entities is the node's at the start of :func:`spin`
 (our nodes create everything in their constructors); clients and guard conditions are not
@@ -161,8 +161,7 @@ class _Loop:
                 with lock:
                     # Only the kinds this loop has: each query costs as much as a small callback.
                     if subscriptions:
-                        for pointer in wait_set.get_ready_entities("subscription"):
-                            _take_messages(by_pointer[pointer])
+                        _take_messages([by_pointer[p] for p in wait_set.get_ready_entities("subscription")])
                     if timers:
                         for pointer in wait_set.get_ready_entities("timer"):
                             timer = by_pointer[pointer]
@@ -176,16 +175,22 @@ class _Loop:
                             _run_to_completion(waitable.execute(waitable.take_data()))
 
 
-def _take_messages(subscription: Any) -> None:
-    handle, msg_type, raw, callback = (
-        subscription.handle, subscription.msg_type, subscription.raw, subscription.callback
-    )
-    with_info = subscription._callback_type is not subscription.CallbackType.MessageOnly
-    while (taken := handle.take_message(msg_type, raw)) is not None:
-        if with_info:
-            callback(*taken)
+def _take_messages(ready: list[Any]) -> None:
+    """Every queued message of the ready subscriptions, to their callbacks in the order they were
+    sent (source timestamp): a node that fell behind sees its inputs interleaved as they came,
+    so a message of one topic is never handled ahead of an older one of another."""
+    taken = []
+    for subscription in ready:
+        handle, msg_type, raw = subscription.handle, subscription.msg_type, subscription.raw
+        while (item := handle.take_message(msg_type, raw)) is not None:
+            taken.append((item[1]["source_timestamp"], len(taken), subscription, item))
+    if len(ready) > 1:
+        taken.sort()  # by source timestamp, then take order (never reaches the subscriptions)
+    for _, _, subscription, (message, info) in taken:
+        if subscription._callback_type is subscription.CallbackType.MessageOnly:
+            subscription.callback(message)
         else:
-            callback(taken[0])
+            subscription.callback(message, info)
 
 
 def _serve(service: Any) -> None:

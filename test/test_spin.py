@@ -33,10 +33,13 @@ class Spun:
         self.node = Node("spun", context=self.context)
         self.node.declare_parameter("answer", 42)
         self.received: list[int] = []
+        self.sequence: list[tuple[str, int]] = []  # (topic, data) in callback order
+        self.holding = threading.Event()
         self.ticks = 0
         self.release = threading.Event()
         self.echo = self.node.create_publisher(Int64, "echo", QOS)
         self.node.create_subscription(Int64, "numbers", self.on_number, QOS)
+        self.node.create_subscription(Int64, "others", self.on_other, QOS)
         self.node.create_timer(0.01, self.on_timer)
         self.node.create_service(Trigger, "trigger", self.on_trigger)
         self.node.create_service(Trigger, "explode", self.on_explode)
@@ -45,11 +48,16 @@ class Spun:
 
     def on_number(self, msg: Int64) -> None:
         # Holding the first message makes the rest pile up in the queue: a backlog to catch up on.
+        self.holding.set()
         self.release.wait(TIMEOUT)
         if msg.data < 0:
             raise RuntimeError("a negative number")
         self.received.append(msg.data)
+        self.sequence.append(("numbers", msg.data))
         self.echo.publish(msg)
+
+    def on_other(self, msg: Int64) -> None:
+        self.sequence.append(("others", msg.data))
 
     def on_timer(self) -> None:
         self.ticks += 1
@@ -124,6 +132,22 @@ def test_a_backlog_is_delivered_whole_and_in_order(probe: Probe, spun: Spun) -> 
     spun.release.set()
     probe.wait_until(lambda: len(spun.received) == BACKLOG, TIMEOUT, f"{BACKLOG} messages")
     assert spun.received == list(range(BACKLOG))
+
+
+def test_a_backlog_on_two_topics_is_delivered_in_the_order_it_was_sent(probe: Probe, spun: Spun) -> None:
+    publishers = {topic: probe.node.create_publisher(Int64, topic, QOS) for topic in ("numbers", "others")}
+    probe.wait_until(lambda: all(p.get_subscription_count() == 1 for p in publishers.values()), TIMEOUT,
+                     "matching")
+    sent = [("numbers", 0)] + [("others" if n % 3 else "numbers", n) for n in range(1, 60)]
+    publishers["numbers"].publish(Int64(data=0))
+    probe.wait_until(spun.holding.is_set, TIMEOUT, "the spun thread held in its first callback")
+    for topic, n in sent[1:]:
+        publishers[topic].publish(Int64(data=n))
+    for publisher in publishers.values():
+        probe.wait_until(lambda p=publisher: p.wait_for_all_acked(Duration(seconds=0.01)), TIMEOUT, "acks")
+    spun.release.set()
+    probe.wait_until(lambda: len(spun.sequence) == len(sent), TIMEOUT, f"{len(sent)} messages")
+    assert spun.sequence == sent
 
 
 def test_shutdown_from_another_thread_ends_the_spin(spun: Spun) -> None:
