@@ -33,6 +33,7 @@ import numpy as np
 import rclpy
 import yaml
 from geometry_msgs.msg import TwistStamped
+from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
@@ -108,7 +109,9 @@ def publish(rate: float, duration: float, depth: int, sent_file: Path, swing_lis
         if n >= warm_up:
             sent.append(messages.stamp_ns(stamp))
     np.save(sent_file, np.array(sent, dtype=np.int64))
-    time.sleep(0.5)  # let the last messages leave before the participant goes
+    # The participant must not go while a stalled subscriber still lacks messages: they would be lost.
+    for publisher in (cylinders, swing):
+        publisher.wait_for_all_acked(Duration(seconds=10.0))
     node.destroy_node()
     rclpy.shutdown()
 
