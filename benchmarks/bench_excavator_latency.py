@@ -41,8 +41,8 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 from excavator_kinematics import messages
+from excavator_kinematics.demo import node_command
 from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator
-from manipulator_kinematics.params import config_path
 from manipulator_kinematics.spin import spin
 
 # Echo node rows of the table, and the executor each one spins.
@@ -124,17 +124,7 @@ def start_node(kind: str, depth: int, work: Path) -> subprocess.Popen:
         overrides.write_text(
             yaml.safe_dump({"/**/excavator_forward": {"ros__parameters": {"qos_depth": depth}}})
         )
-        exe = Path(sys.executable).parent / "excavator_forward"
-        command = [
-            str(exe),
-            "--ros-args",
-            "--params-file",
-            str(config_path("excavator_cet200.yaml")),
-            "--params-file",
-            str(config_path("excavator_nodes.yaml")),
-            "--params-file",
-            str(overrides),
-        ]
+        command = node_command(FORWARD, overrides)
     log = (work / "node.log").open("w")
     return subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
 

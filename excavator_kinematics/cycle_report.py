@@ -237,13 +237,7 @@ def _figure_bucket(
         loc="upper right", ncol=4, fontsize=8, title="solid: measured, dashed: reference", title_fontsize=8
     )
     axes[0, 1].legend(loc="upper right", fontsize=8)
-    for ax in axes[-1]:
-        ax.set_xlabel("time (s)")
-    _shade(axes, path, axes[0, :1])
-    fig.suptitle("Bucket tip in the base frame during a digging cycle (cf. paper Fig. 11)", y=0.995)
-    fig.tight_layout()
-    fig.savefig(file, dpi=110)
-    plt.close(fig)
+    _finish(fig, axes, path, "Bucket tip in the base frame during a digging cycle (cf. paper Fig. 11)", file)
 
 
 def _figure_cylinders(
@@ -291,10 +285,15 @@ def _figure_cylinders(
     axes[0, 0].legend(
         loc="upper right", ncol=3, fontsize=8, title="dotted: stroke ends / max speeds", title_fontsize=8
     )
+    _finish(fig, axes, path, "Swing and cylinders for the commanded bucket motion (cf. paper Fig. 12)", file)
+
+
+def _finish(fig: plt.Figure, axes: np.ndarray, path: BucketPath, title: str, file: Path) -> None:
+    """Time axis labels, the phases shaded, the title; saved and closed."""
     for ax in axes[-1]:
         ax.set_xlabel("time (s)")
     _shade(axes, path, axes[0, :1])
-    fig.suptitle("Swing and cylinders for the commanded bucket motion (cf. paper Fig. 12)", y=0.995)
+    fig.suptitle(title, y=0.995)
     fig.tight_layout()
     fig.savefig(file, dpi=110)
     plt.close(fig)

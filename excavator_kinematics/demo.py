@@ -130,19 +130,18 @@ class Driver:
         )
 
 
+def node_command(name: str, overrides: Path) -> list[str]:
+    """Command line of an excavator node on the default machine and node settings, then the
+    settings in the params file ``overrides`` (a later file wins)."""
+    files = (config_path("excavator_cet200.yaml"), config_path("excavator_nodes.yaml"), overrides)
+    return [console_script(name), "--ros-args", *(arg for f in files for arg in ("--params-file", str(f)))]
+
+
 def start_processes(output: Path) -> list[tuple[str, subprocess.Popen]]:
     overrides = output / "demo_params.yaml"
     overrides.write_text(yaml.safe_dump(OVERRIDES), encoding="utf-8")
-    params = [
-        "--params-file",
-        str(config_path("excavator_cet200.yaml")),
-        "--params-file",
-        str(config_path("excavator_nodes.yaml")),
-        "--params-file",
-        str(overrides),
-    ]
     commands = {
-        name: [console_script(name), "--ros-args", *params]
+        name: node_command(name, overrides)
         for name in ("excavator_sim", "excavator_forward", "excavator_velocity_ik")
     }
     commands["record"] = [

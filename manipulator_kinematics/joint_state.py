@@ -15,6 +15,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from manipulator_kinematics.bag import cdr
+
 
 class InputError(ValueError):
     """An input message that cannot be used; the text says why (for a logged rejection)."""
@@ -70,16 +72,14 @@ class RawJointState(NamedTuple):
 
 
 def decode_joint_state(raw: bytes) -> RawJointState:
-    """A sensor_msgs/JointState from its plain CDR bytes (as ROS 2 writes them: a 4-byte
-    encapsulation header, then values aligned to their size, at most 8, from its end).
+    """A sensor_msgs/JointState from its plain CDR bytes (as ROS 2 writes them; the layout rules are
+    :mod:`manipulator_kinematics.bag.cdr`'s, read here with struct for one message at a time).
 
     Raises InputError when the bytes are not a JointState (truncated, bad lengths or strings).
     Bytes after the last field are ignored: serializers pad the end (rclpy's by up to 8 bytes).
     """
     try:
-        if len(raw) < 4 or raw[0] != 0 or raw[1] not in (0, 1):
-            raise ValueError(f"encapsulation header {raw[:4].hex() or 'missing'} is not plain CDR")
-        order = "<" if raw[1] == 1 else ">"
+        order = cdr.byte_order(raw)
         u32 = _U32[order]
         sec, nanosec = _STAMP[order].unpack_from(raw, 4)
         frame_id, pos = _string(raw, 12, u32)
@@ -92,7 +92,7 @@ def decode_joint_state(raw: bytes) -> RawJointState:
         for _ in range(3):
             count, pos = _count(raw, pos, u32)
             if count:
-                pos = 4 + ((pos - 4 + 7) & -8)
+                pos = 4 + ((pos - 4 + 7) & -8)  # cdr.aligned(pos, 8), inlined: this runs per message
                 sequences.append(struct.unpack_from(f"{order}{count}d", raw, pos))
                 pos += 8 * count
             else:
@@ -108,7 +108,7 @@ _STAMP = {order: struct.Struct(order + "iI") for order in "<>"}
 
 def _count(raw: bytes, pos: int, u32: struct.Struct) -> tuple[int, int]:
     """A length at ``pos`` (aligned to 4) and the position after it."""
-    pos = 4 + ((pos - 4 + 3) & -4)
+    pos = 4 + ((pos - 4 + 3) & -4)  # cdr.aligned(pos, 4), inlined: this runs per message
     (n,) = u32.unpack_from(raw, pos)
     if n > len(raw):
         raise ValueError(f"a length of {n} in a message of {len(raw)} bytes")

@@ -87,7 +87,7 @@ class PackedMessage:
                 runs[-1][2] += count
             else:
                 runs.append([offset, code, count])
-        order = "<" if raw[1] == 1 else ">"  # the encapsulation header's byte order
+        order = cdr.byte_order(raw)
         self._buffer = bytearray(raw)
         self._runs = []
         start = 0

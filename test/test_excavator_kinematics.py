@@ -81,17 +81,20 @@ def test_extension_senses():
 H = 1e-6
 
 
+def central_difference(f, x: np.ndarray, j: int, h: float = H) -> np.ndarray:
+    """(f(x + h e_j) - f(x - h e_j)) / 2h for the last axis of a batch x."""
+    step = np.zeros(x.shape[-1])
+    step[j] = h
+    return (f(x + step) - f(x - step)) / (2 * h)
+
+
 @pytest.mark.parametrize("i", range(3))
 def test_k_and_k1_against_central_differences(i):
     lengths = random_states(200)[:, 1:]
-    step = np.zeros(3)
-    step[i] = H
     k, dk = EXC.k_entries(lengths)
-    fd_k = (EXC.joint_angles(lengths + step)[:, i] - EXC.joint_angles(lengths - step)[:, i]) / (2 * H)
+    fd_k = central_difference(EXC.joint_angles, lengths, i)[:, i]
     assert rel_err(k[:, i], fd_k) < 1e-6
-    h2 = 1e-5
-    step[i] = h2
-    fd_dk = (EXC.k_entries(lengths + step)[0][:, i] - EXC.k_entries(lengths - step)[0][:, i]) / (2 * h2)
+    fd_dk = central_difference(lambda d: EXC.k_entries(d)[0], lengths, i, h=1e-5)[:, i]
     assert rel_err(dk[:, i], fd_dk) < 1e-6
 
 
@@ -99,20 +102,14 @@ def test_j0_against_central_differences():
     theta = EXC.state(random_states(100), np.zeros((100, 4))).theta
     j0 = EXC.j0(theta)
     for j in range(4):
-        step = np.zeros(4)
-        step[j] = H
-        fd = (EXC.open_chain_pose(theta + step) - EXC.open_chain_pose(theta - step)) / (2 * H)
-        assert rel_err(j0[:, :, j], fd) < 1e-6
+        assert rel_err(j0[:, :, j], central_difference(EXC.open_chain_pose, theta, j)) < 1e-6
 
 
 def test_jc0_against_central_differences_of_pose():
     D = random_states(100)
     jc0 = EXC.jc0(D)
     for j in range(4):
-        step = np.zeros(4)
-        step[j] = H
-        fd = (EXC.pose(D + step) - EXC.pose(D - step)) / (2 * H)
-        assert rel_err(jc0[:, :, j], fd) < 1e-6
+        assert rel_err(jc0[:, :, j], central_difference(EXC.pose, D, j)) < 1e-6
 
 
 def test_jc0_is_j0_times_k():

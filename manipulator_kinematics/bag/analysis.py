@@ -258,6 +258,13 @@ def _excavator_inputs(cylinders: TopicArrays, joints: TopicArrays, m: Machines) 
     return _ExcavatorInputs(stamp, D, D_dot, known, D[:, 0], state)
 
 
+def _consistency_plot(plots: list[Plot], name: str, curves: dict[str, tuple[np.ndarray, np.ndarray]]) -> None:
+    """The |error| curves of a machine's outputs against the recomputed kinematics, if any."""
+    if curves:
+        panel = Panel("|error|", curves, log=True)
+        plots.append(Plot(name, "Published outputs vs recomputed kinematics", [panel]))
+
+
 def _excavator_consistency(
     data: dict[str, TopicArrays],
     inputs: _ExcavatorInputs,
@@ -317,14 +324,7 @@ def _excavator_consistency(
         rates = np.abs(arrays.by_name("velocity", JOINTS)[rows] - s.theta_dot[k]).max(axis=1)
         entry.update(angle_rad=error_stats(angles), rate_radps=error_stats(rates))
         curves["open_chain_joint_states angle (rad)"] = (since(arrays.stamp_ns()[rows], t0), angles)
-    if curves:
-        plots.append(
-            Plot(
-                f"{prefix}excavator_consistency",
-                "Published outputs vs recomputed kinematics",
-                [Panel("|error|", curves, log=True)],
-            )
-        )
+    _consistency_plot(plots, f"{prefix}excavator_consistency", curves)
     return out
 
 
@@ -509,14 +509,7 @@ def scara(
             "angular_radps": error_stats(angular),
         }
         curves["tool_twist linear (m/s)"] = (since(twist.stamp_ns()[got], t0), linear)
-    if curves:
-        plots.append(
-            Plot(
-                f"{prefix}scara_consistency",
-                "Published outputs vs recomputed kinematics",
-                [Panel("|error|", curves, log=True)],
-            )
-        )
+    _consistency_plot(plots, f"{prefix}scara_consistency", curves)
     return report, plots
 
 

@@ -74,21 +74,32 @@ class Layout:
     end: int = 0  # where the message's last value ends (serializers may pad after it)
 
 
+def byte_order(raw: bytes) -> str:
+    """``<`` or ``>`` (struct/numpy notation) from the encapsulation header; CdrError unless the
+    bytes start with plain CDR's."""
+    if len(raw) < _HEADER or raw[0] != 0 or raw[1] not in (_LITTLE, _BIG):
+        raise CdrError(f"not plain CDR: encapsulation header {raw[:_HEADER].hex() or 'missing'}")
+    return "<" if raw[1] == _LITTLE else ">"
+
+
+def aligned(pos: int, size: int) -> int:
+    """``pos`` moved on to where a value of ``size`` bytes starts: alignment counts from the end of
+    the encapsulation header and never exceeds 8."""
+    size = min(size, 8)
+    return _HEADER + ((pos - _HEADER + size - 1) & -size)
+
+
 class _Walker:
     """Follows one message through its type, recording the layout."""
 
     def __init__(self, raw: bytes, schemas: Schemas) -> None:
-        if len(raw) < _HEADER or raw[0] != 0 or raw[1] not in (_LITTLE, _BIG):
-            raise CdrError(f"not plain CDR: encapsulation header {raw[:_HEADER].hex() or 'missing'}")
+        self.order = byte_order(raw)
         self.raw, self.schemas = raw, schemas
-        self.order = "<" if raw[1] == _LITTLE else ">"
         self.layout = Layout()
         self.pos = _HEADER
 
     def _align(self, size: int) -> None:
-        # Alignment counts from the end of the encapsulation header and never exceeds 8.
-        size = min(size, 8)
-        self.pos = _HEADER + ((self.pos - _HEADER + size - 1) & -size)
+        self.pos = aligned(self.pos, size)
 
     def _need(self, size: int, what: str) -> None:
         if self.pos + size > len(self.raw):
