@@ -22,15 +22,27 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
+            # excavator (paper 000)
             "excavator_demo = excavator_kinematics.demo:main",
             "excavator_forward = excavator_kinematics.forward_node:main",
             "excavator_velocity_ik = excavator_kinematics.velocity_ik_node:main",
             "excavator_sim = excavator_kinematics.sim_node:main",
-            "scara_ik_server = scara_kinematics.ik_server:main",
-            "scara_forward = scara_kinematics.forward_node:main",
+            # SCARA-type arm (paper 002)
+            "scara_ik_server = scara_kinematics.nodes:ik_server",
+            "scara_forward = scara_kinematics.nodes:forward",
+            # pump-truck boom (paper 001)
+            # tool changer (paper 003)
+            # palletizer (paper 004)
+            # bag tools
             "record = manipulator_kinematics.bag.record:main",
             "replay = manipulator_kinematics.bag.replay:main",
             "evaluate = manipulator_kinematics.bag.evaluate:main",
+        ],
+        # The machine registry (manipulator_kinematics.registry): one Machine per machine package.
+        "manipulator_kinematics.machines": [
+            "excavator = excavator_kinematics.machine:MACHINE",
+            "scara = scara_kinematics.machine:MACHINE",
+            # pump_boom, tool_changer, palletizer: added by their packages
         ],
     },
 )

@@ -44,16 +44,23 @@ def _installed_share() -> Path | None:
 
 
 def load_parameters(path: str | Path, node_name: str = "/**") -> dict[str, Any]:
-    """Merge the ``ros__parameters`` of ``/**`` and of ``node_name`` (node entry wins)."""
+    """Merge the ``ros__parameters`` that apply to ``node_name`` (plain or fully qualified), the
+    more specific section winning: ``/**``, then ``/**/<name>``, then ``<name>`` / ``/<ns>/<name>``.
+    """
     with open(path, encoding="utf-8") as stream:
         document = yaml.safe_load(stream) or {}
     if not isinstance(document, dict):
         raise ConfigError(f"{path}: not a ROS parameters file (top level is not a mapping)")
+    base = node_name.rsplit("/", 1)[-1]
+    keys = ["/**"] if base in ("**", "") else ["/**", f"/**/{base}", base, f"/{base}", node_name]
     merged: dict[str, Any] = {}
-    for key in ("/**", node_name, node_name.lstrip("/")):
+    for key in dict.fromkeys(keys):
         section = document.get(key)
         if isinstance(section, dict):
-            _deep_update(merged, section.get("ros__parameters") or {})
+            parameters = section.get("ros__parameters") or {}
+            if not isinstance(parameters, dict):
+                raise ConfigError(f"{path}: {key}: ros__parameters is not a mapping")
+            _deep_update(merged, parameters)
     return merged
 
 

@@ -16,8 +16,14 @@ Row semantics (the Robotics Toolbox's ``RevoluteDH``/``PrismaticDH`` and ``...MD
   along z_{i-1};
 * modified D-H, row i:  A_i = Rx(alpha_{i-1}) Tx(a_{i-1}) Rz(theta_i) Tz(d_i) (the row holds
   a_{i-1} and alpha_{i-1} in its ``a`` and ``alpha``); joint i moves about or along z_i;
-* revolute joint: theta_i = q_i + offset_i with d_i constant; prismatic joint: d_i = q_i +
-  offset_i with theta_i constant.
+* revolute joint: theta_i = v_i + offset_i with d_i constant; prismatic joint: d_i = v_i +
+  offset_i with theta_i constant. ``offset`` carries a paper's zero convention: the pump boom's
+  unfolding angle theta_k (180 deg = straight on) is the row variable with offset -180 deg.
+
+Coupled (passive) joints: the row variables v (n_rows) are a linear function v = C q of the
+independent joint values q (n), given as the ``coupling`` matrix C (n_rows x n; identity by
+default). The palletizer's passive flange joint theta4 = -(theta2 + theta3) is the row
+``[0, -1, -1, 0]`` of C. FK and Jacobian are then functions of q: J_q = J_v C.
 """
 
 from __future__ import annotations
@@ -99,10 +105,17 @@ class SerialChain:
         modified: bool = False,
         base: ArrayLike | None = None,
         tool: ArrayLike | None = None,
+        coupling: ArrayLike | None = None,
     ) -> None:
         if not rows:
             raise ValueError("a serial chain needs at least one D-H row")
         self.rows = tuple(rows)
+        self.coupling = np.eye(len(rows)) if coupling is None else np.array(coupling, dtype=float)
+        if (self.coupling.ndim != 2 or self.coupling.shape[0] != len(rows)
+                or not np.all(np.isfinite(self.coupling))):
+            raise ValueError(f"coupling must be a finite ({len(rows)}, n) matrix, got {self.coupling.shape}")
+        self._identity = self.coupling.shape == (len(rows), len(rows)) and bool(
+            np.array_equal(self.coupling, np.eye(len(rows))))
         self.modified = bool(modified)
         self.base = _homogeneous(base, "base")
         self.tool = _homogeneous(tool, "tool")
@@ -115,18 +128,27 @@ class SerialChain:
 
     @property
     def n(self) -> int:
-        """Number of joints."""
+        """Number of independent joints (the length of q)."""
+        return self.coupling.shape[1]
+
+    @property
+    def n_rows(self) -> int:
+        """Number of D-H rows (joints, passive ones included)."""
         return len(self.rows)
 
     @property
     def prismatic(self) -> np.ndarray:
-        """(n,) True where the joint is prismatic."""
+        """(n_rows,) True where the row's joint is prismatic."""
         return self._prismatic.copy()
 
-    def link_transforms(self, q: ArrayLike) -> np.ndarray:
-        """A_i(q_i) of every row, shape (..., n, 4, 4), in the chain's D-H convention."""
+    def row_variables(self, q: ArrayLike) -> np.ndarray:
+        """v = C q (..., n_rows): the joint variable of every row, offsets not added."""
         q = self._joint_array(q)
-        variable = q + self._offset
+        return q if self._identity else q @ self.coupling.T
+
+    def link_transforms(self, q: ArrayLike) -> np.ndarray:
+        """A_i(v_i) of every row, shape (..., n_rows, 4, 4), in the chain's D-H convention."""
+        variable = self.row_variables(q) + self._offset
         theta = self._theta + np.where(self._prismatic, 0.0, variable)
         d = self._d + np.where(self._prismatic, variable, 0.0)
         ct, st = np.cos(theta), np.sin(theta)
@@ -153,7 +175,7 @@ class SerialChain:
     def fkine(self, q: ArrayLike, all_frames: bool = False) -> np.ndarray:
         """Tool pose base A_1 ... A_n tool, shape (..., 4, 4).
 
-        With ``all_frames`` the link frames instead, shape (..., n + 1, 4, 4): index 0 is the base
+        With ``all_frames`` the link frames instead, shape (..., n_rows + 1, 4, 4): index 0 is the base
         frame, index i the frame of link i (base A_1 ... A_i; the tool transform not applied).
         """
         frames = self._frames(q)
@@ -164,9 +186,10 @@ class SerialChain:
     def jacob0(self, q: ArrayLike) -> np.ndarray:
         """Geometric Jacobian in the world frame, shape (..., 6, n): rows vx, vy, vz, wx, wy, wz.
 
-        Column i is (z x (p_tool - o), z) for a revolute and (z, 0) for a prismatic joint, where z
-        and o are the joint's axis direction and a point on it: frame i-1 in standard D-H, frame i
-        in modified D-H (after Rz(theta_i) Tz(d_i), which leave z_i in place).
+        Column i of the rows' Jacobian is (z x (p_tool - o), z) for a revolute and (z, 0) for a
+        prismatic row, where z and o are the joint's axis direction and a point on it: frame i-1
+        in standard D-H, frame i in modified D-H (after Rz(theta_i) Tz(d_i), which leave z_i in
+        place); coupled joints multiply it by C.
         """
         frames = self._frames(q)
         tool = frames[..., -1, :, :] @ self.tool
@@ -177,13 +200,14 @@ class SerialChain:
         prismatic = self._prismatic[:, None]
         linear = np.where(prismatic, z, moment)
         angular = np.where(prismatic, 0.0, z)
-        return np.concatenate([np.swapaxes(linear, -1, -2), np.swapaxes(angular, -1, -2)], axis=-2)
+        rows = np.concatenate([np.swapaxes(linear, -1, -2), np.swapaxes(angular, -1, -2)], axis=-2)
+        return rows if self._identity else rows @ self.coupling
 
     def _frames(self, q: ArrayLike) -> np.ndarray:
         links = self.link_transforms(q)
-        frames = np.empty(links.shape[:-3] + (self.n + 1, 4, 4))
+        frames = np.empty(links.shape[:-3] + (self.n_rows + 1, 4, 4))
         frames[..., 0, :, :] = self.base
-        for i in range(self.n):
+        for i in range(self.n_rows):
             frames[..., i + 1, :, :] = frames[..., i, :, :] @ links[..., i, :, :]
         return frames
 
@@ -196,11 +220,15 @@ class SerialChain:
 
 @dataclass(frozen=True)
 class JointLimits:
-    """Closed intervals [lower_i, upper_i] per joint (m for prismatic, rad for revolute joints)."""
+    """Closed intervals [lower_i, upper_i] per joint (m for prismatic, rad for revolute joints).
+
+    ``prismatic`` marks the joints whose values are lengths (for messages); empty = none.
+    """
 
     names: tuple[str, ...]
     lower: np.ndarray
     upper: np.ndarray
+    prismatic: tuple[bool, ...] = ()
 
     def __post_init__(self) -> None:
         lower = np.asarray(self.lower, dtype=float)

@@ -42,16 +42,17 @@ tool speed v).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from enum import IntEnum
 from functools import cached_property
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from manipulator_kinematics.params import ConfigError, config_path, load_parameters
+from manipulator_kinematics.config import Names, Number, Numbers, require, validate
+from manipulator_kinematics.model import IKSolutions, IKStatus, RequestError
+from manipulator_kinematics.params import config_path, load_parameters
 from manipulator_kinematics.planar import two_link_ik, wrap_angle
 from manipulator_kinematics.serial_chain import JointLimits, SerialChain, prismatic, revolute, troty
 
@@ -61,17 +62,20 @@ MODES = ("fixed_phi", "phi", "position")
 PAPER_PHI = math.pi / 2
 #: Values this close (m or rad) outside a limit count as on it and are clipped to it.
 LIMIT_TOL = 1e-10
+#: |z| of a target (m) and tilt / heading mismatch of a target orientation (rad) taken as zero.
+PLANE_TOL = 1e-6
 CONFIG_FILE = "scara.yaml"
 
-
-class IKStatus(IntEnum):
-    """Outcome of an IK target, ordered from best to worst (a batch takes the best branch)."""
-
-    SUCCESS = 0
-    SINGULAR = 1  # a solution inside the limits exists only at or near the singularity
-    JOINT_LIMITS = 2  # geometric solutions exist, every one violates a joint limit or stroke end
-    UNREACHABLE = 3  # no configuration reaches the target, whatever the limits
-    INVALID = 4  # the target is not finite
+#: The ``scara:`` section of a parameters file (manipulator_kinematics.config).
+SCHEMA = {
+    "l1": Number(min=0.0, max=100.0, unit="m", doc="base offset: shoulder x at rail_joint = 0 (m)"),
+    "l2": Number(min=0.0, max=100.0, unit="m", exclusive_min=True, doc="upper arm, shoulder to elbow (m)"),
+    "l3": Number(min=0.0, max=100.0, unit="m", exclusive_min=True, doc="forearm, elbow to tool point (m)"),
+    "joint_names": Names(3, doc="rail, shoulder, elbow joint names"),
+    "joint_min": Numbers(3, doc="lower limits: rail (m), shoulder and elbow (rad)"),
+    "joint_max": Numbers(3, doc="upper limits: rail (m), shoulder and elbow (rad)"),
+    "singularity_threshold": Number(min=0.0, max=1.0, doc="singular where |cos theta1| is below this"),
+}
 
 
 # Plain ints for array work (IntEnum members cost an attribute lookup and a conversion per use).
@@ -169,33 +173,20 @@ class Scara:
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any], prefix: str = "scara") -> Scara:
         """From the nested ``scara:`` section of a parameters file; ConfigError names a bad key."""
-        if not isinstance(params, Mapping):
-            raise ConfigError(f"{prefix}: expected a mapping of parameters, got {type(params).__name__}")
-        l1 = _number(params, "l1", prefix, minimum=0.0)
-        l2 = _number(params, "l2", prefix, minimum=0.0, strict=True)
-        l3 = _number(params, "l3", prefix, minimum=0.0, strict=True)
-        names = params.get("joint_names")
-        if names is None:
-            raise ConfigError(f"{prefix}.joint_names: missing")
-        if (isinstance(names, str) or not isinstance(names, Sequence) or len(names) != 3
-                or not all(isinstance(n, str) and n for n in names) or len(set(names)) != 3):
-            raise ConfigError(f"{prefix}.joint_names: need 3 distinct non-empty names, got {names!r}")
-        lower = _numbers(params, "joint_min", prefix)
-        upper = _numbers(params, "joint_max", prefix)
+        p = validate(params, SCHEMA, prefix)
+        names, lower, upper = p["joint_names"], p["joint_min"], p["joint_max"]
         for i in range(3):
-            if not lower[i] < upper[i]:
-                raise ConfigError(f"{prefix}.joint_min[{i}] = {lower[i]} must be below "
-                                  f"{prefix}.joint_max[{i}] = {upper[i]} ({names[i]})")
+            require(lower[i] < upper[i], f"{prefix}.joint_min[{i}]",
+                    f"{lower[i]} must be below {prefix}.joint_max[{i}] = {upper[i]} ({names[i]})")
         for i in (1, 2):
             for key, value in (("joint_min", lower[i]), ("joint_max", upper[i])):
-                if abs(value) > math.pi:
-                    raise ConfigError(f"{prefix}.{key}[{i}] = {value} rad ({names[i]}) is outside [-pi, pi]: "
-                                      "limits are radians and the solver returns angles in [-pi, pi)")
-        threshold = _number(params, "singularity_threshold", prefix, minimum=0.0)
-        if threshold >= 1.0:
-            raise ConfigError(f"{prefix}.singularity_threshold = {threshold} must be below 1 "
-                              "(it bounds |cos theta1|)")
-        return cls(l1, l2, l3, JointLimits(tuple(names), np.array(lower), np.array(upper)), threshold)
+                require(abs(value) <= math.pi, f"{prefix}.{key}[{i}]",
+                        f"{value} rad ({names[i]}) is outside [-pi, pi]: limits are radians and the "
+                        "solver returns angles in [-pi, pi)")
+        require(p["singularity_threshold"] < 1.0, f"{prefix}.singularity_threshold",
+                f"{p['singularity_threshold']} must be below 1 (it bounds |cos theta1|)")
+        limits = JointLimits(tuple(names), np.array(lower), np.array(upper), prismatic=(True, False, False))
+        return cls(p["l1"], p["l2"], p["l3"], limits, p["singularity_threshold"])
 
     @classmethod
     def default(cls) -> Scara:
@@ -279,6 +270,94 @@ class Scara:
 
     def within_limits(self, q: ArrayLike) -> np.ndarray:
         return self.limits.within(q, LIMIT_TOL)
+
+    # ---- the shared model protocol (manipulator_kinematics.model.SerialModel) -----------------
+    ik_modes = MODES
+    ik_branches = BRANCHES
+
+    def fkine(self, q: ArrayLike) -> np.ndarray:
+        """Tool pose (..., 4, 4): the point (px, py, 0) with heading phi about base +z (eqs. 9-10)."""
+        x = self.fk(q)
+        c, s = np.cos(x[..., 2]), np.sin(x[..., 2])
+        pose = np.zeros(x.shape[:-1] + (4, 4))
+        pose[..., 0, 0], pose[..., 0, 1], pose[..., 1, 0], pose[..., 1, 1] = c, -s, s, c
+        pose[..., 2, 2] = pose[..., 3, 3] = 1.0
+        pose[..., 0, 3], pose[..., 1, 3] = x[..., 0], x[..., 1]
+        return pose
+
+    def frames(self, q: ArrayLike) -> np.ndarray:
+        """Base, carriage, upper arm, forearm and tool frames (..., 5, 4, 4) of the D-H chain."""
+        links = self.chain.fkine(q, all_frames=True)
+        return np.concatenate([links, self.fkine(q)[..., None, :, :]], axis=-3)
+
+    def jacob0(self, q: ArrayLike) -> np.ndarray:
+        """Geometric Jacobian (..., 6, 3) of the tool point; rows vx, vy, wz are :meth:`jacobian`'s."""
+        rows = self.jacobian(q)
+        out = np.zeros(rows.shape[:-2] + (6, 3))
+        out[..., 0, :], out[..., 1, :], out[..., 5, :] = rows[..., 0, :], rows[..., 1, :], rows[..., 2, :]
+        return out
+
+    def solve_ik(self, target: ArrayLike, *, use_orientation: bool = True, mode: str | None = None,
+                 seed: ArrayLike | None = None, branch: str | None = None) -> IKSolutions:
+        """:meth:`ik` for target poses (..., 4, 4): the protocol's entry (SolveIK).
+
+        Mode default: ``phi`` with an orientation, ``position`` without. A target off the plane
+        z = 0 or whose tool z axis is tilted is UNREACHABLE; mode ``phi`` without an orientation,
+        ``position`` with one, or ``fixed_phi`` with a heading other than 90 deg are refused.
+        """
+        mode = mode or ("phi" if use_orientation else "position")
+        if mode not in MODES:
+            raise RequestError(f"unknown mode {mode!r}; known: {', '.join(MODES)}")
+        if branch is not None and branch not in BRANCHES:
+            raise RequestError(f"unknown branch {branch!r}; known: {', '.join(BRANCHES)} "
+                               "(empty = closest to the seed)")
+        if mode == "phi" and not use_orientation:
+            raise RequestError("mode 'phi' takes the heading from the target orientation: set "
+                               "use_orientation", IKStatus.INVALID)
+        if mode == "position" and use_orientation:
+            raise RequestError("mode 'position' leaves the heading free: use mode 'phi' to give an "
+                               "orientation", IKStatus.INVALID)
+        target = np.asarray(target, dtype=float)
+        finite = np.all(np.isfinite(target), axis=(-2, -1))
+        position = target[..., :3, 3]
+        heading = np.arctan2(target[..., 1, 0], target[..., 0, 0])
+        with np.errstate(invalid="ignore"):
+            tilt = np.arccos(np.clip(target[..., 2, 2], -1.0, 1.0))
+        if mode == "fixed_phi" and use_orientation:
+            off = finite & (np.abs(wrap_angle(heading - PAPER_PHI)) > PLANE_TOL)
+            if np.any(off):
+                raise RequestError(f"mode 'fixed_phi' holds phi = 90 deg but the target heading is "
+                                   f"{np.degrees(heading[off]).ravel()[0]:.6g} deg: use mode 'phi' or clear "
+                                   "use_orientation", IKStatus.INVALID)
+        result = self.ik(position[..., :2], mode=mode, phi=heading if mode == "phi" else None,
+                         seed=seed, branch=branch)
+        off_plane = finite & (np.abs(position[..., 2]) > PLANE_TOL)
+        tilted = finite & (tilt > PLANE_TOL) if use_orientation else np.zeros_like(off_plane)
+        refused = off_plane | tilted
+        status = result.branch_status.copy()
+        status[refused] = _UNREACHABLE
+        status[~finite] = _INVALID
+        if branch is not None:  # the other branch is no solution of this request
+            status[..., 1 - BRANCHES.index(branch)] = np.maximum(status[..., 1 - BRANCHES.index(branch)],
+                                                                 _JOINT_LIMITS)
+        selected = np.where(refused | ~finite, -1, result.branch).astype(np.int8)
+
+        def explain(solutions: IKSolutions, index: tuple[int, ...]) -> str:
+            if off_plane[index]:
+                return (f"target z = {position[index + (2,)]:.6g} m: the arm moves in the plane z = 0 of "
+                        "its base frame")
+            if tilted[index]:
+                return (f"target orientation tilts the tool z axis by {math.degrees(tilt[index]):.6g} deg: "
+                        "the arm only turns about base z")
+            return result.reason(index)
+
+        return IKSolutions(q=result.candidates, status=status, branches=BRANCHES, selected=selected,
+                           tie=np.zeros(selected.shape, dtype=bool), explain=explain)
+
+    def state_note(self, q: ArrayLike) -> str:
+        """A remark on one joint state for FK answers: near the singularity, or nothing."""
+        return (f"near the singularity: |cos theta1| = {abs(math.cos(float(np.asarray(q)[1]))):.3g}"
+                if self.singular(q) else "")
 
     # ---- inverse kinematics -------------------------------------------------------------------
     def ik(self, position: ArrayLike, *, mode: str = "phi", phi: ArrayLike | None = None,
@@ -449,27 +528,3 @@ def _columns(values: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def _show(joint: int, value: float) -> str:
     return f"{value:.6g} m" if joint == 0 else f"{math.degrees(value):.6g} deg"
-
-
-def _number(params: Mapping[str, Any], key: str, prefix: str, minimum: float, strict: bool = False) -> float:
-    if key not in params:
-        raise ConfigError(f"{prefix}.{key}: missing")
-    value = params[key]
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ConfigError(f"{prefix}.{key}: expected a finite number, got {value!r}")
-    if value < minimum or (strict and value == minimum):
-        raise ConfigError(f"{prefix}.{key} = {value} must be {'>' if strict else '>='} {minimum:g}")
-    return float(value)
-
-
-def _numbers(params: Mapping[str, Any], key: str, prefix: str) -> list[float]:
-    if key not in params:
-        raise ConfigError(f"{prefix}.{key}: missing")
-    values = params[key]
-    if isinstance(values, str) or not isinstance(values, Sequence) or len(values) != 3:
-        raise ConfigError(f"{prefix}.{key}: expected 3 numbers (rail m, shoulder rad, elbow rad), "
-                          f"got {values!r}")
-    for i, value in enumerate(values):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise ConfigError(f"{prefix}.{key}[{i}]: expected a finite number, got {value!r}")
-    return [float(v) for v in values]

@@ -249,17 +249,21 @@ def reference_parameters() -> dict:
 
 @pytest.mark.parametrize(("change", "key"), [
     (lambda p: p.pop("l2"), "scara.l2: missing"),
-    (lambda p: p.update(l3=-0.25), "scara.l3 = -0.25 must be > 0"),
-    (lambda p: p.update(l1=-0.1), "scara.l1 = -0.1 must be >= 0"),
-    (lambda p: p.update(l2="0.3"), "scara.l2: expected a finite number"),
+    (lambda p: p.update(l3=-0.25), "scara.l3 = -0.25 is outside (0, 100] (m)"),
+    (lambda p: p.update(l1=-0.1), "scara.l1 = -0.1 is outside [0, 100] (m)"),
+    (lambda p: p.update(l2="0.3"), "scara.l2: expected a number (m), got '0.3'"),
+    (lambda p: p.update(l2=True), "scara.l2: expected a number (m), got True"),
+    (lambda p: p.update(l2=1e300), "scara.l2 = 1e+300 is outside (0, 100] (m)"),
+    (lambda p: p.update(l22=0.3), "scara.l22: unknown key (did you mean 'l2'?)"),
     (lambda p: p.update(joint_min=[0.5, -2.0, -2.0]),
-     "scara.joint_min[0] = 0.5 must be below scara.joint_max[0] = 0.4"),
-    (lambda p: p.update(joint_max=[0.4, 200.0, 2.0]), "scara.joint_max[1] = 200.0 rad"),
+     "scara.joint_min[0]: 0.5 must be below scara.joint_max[0] = 0.4"),
+    (lambda p: p.update(joint_max=[0.4, 200.0, 2.0]), "scara.joint_max[1]: 200.0 rad"),
     (lambda p: p.update(joint_max=[0.4, 2.0]), "scara.joint_max: expected 3 numbers"),
     (lambda p: p.update(joint_min=[0.0, float("nan"), -2.0]), "scara.joint_min[1]: expected a finite number"),
     (lambda p: p.update(joint_names=["a", "a", "b"]), "scara.joint_names"),
     (lambda p: p.pop("singularity_threshold"), "scara.singularity_threshold: missing"),
-    (lambda p: p.update(singularity_threshold=1.5), "scara.singularity_threshold = 1.5 must be below 1"),
+    (lambda p: p.update(singularity_threshold=1.5), "scara.singularity_threshold = 1.5 is outside [0, 1]"),
+    (lambda p: p.update(singularity_threshold=1.0), "scara.singularity_threshold: 1.0 must be below 1"),
 ])
 def test_config_errors_name_the_key(change, key: str) -> None:
     params = reference_parameters()

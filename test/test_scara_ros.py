@@ -198,8 +198,8 @@ def test_forward_node_publishes_pose_and_twist(probe: Probe, scara: Scara) -> No
     # Topic names by parameter (node-scoped, so they win over the params file's section) and by remapping.
     process = NodeProcess(
         "scara_forward", "--params-file", PARAMS,
-        "-p", "scara_forward:joint_states_topic:=scara_test/joint_states",
-        "-p", "scara_forward:pose_topic:=scara_test/pose",
+        "-p", "scara_forward:topics.joint_states:=scara_test/joint_states",
+        "-p", "scara_forward:topics.tool_pose:=scara_test/pose",
         "-p", "scara_forward:base_frame:=arm_base",
         "-r", "tool_twist:=twist_remapped",
     )

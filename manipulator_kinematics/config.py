@@ -1,0 +1,205 @@
+"""One validation for every machine description and node setting (numpy cores, nodes, ``evaluate``).
+
+A schema is a nested mapping ``{key: Field or schema}``. :func:`validate` walks a nested parameter
+dict against it and returns the values converted to plain Python (floats, ints, lists, strings);
+anything else raises :class:`ConfigError` naming the dotted key:
+
+* a key the schema does not know (with "did you mean ..." for a near miss: ``boom.lenght``);
+* a key the schema requires that is missing (every field is required unless it has a default);
+* a value of the wrong type (``true`` for a number, a string inside a point list), not finite,
+  outside its range, or a list of the wrong length.
+
+Consistency between keys (a reference angle inside its limits, lower below upper) is checked by
+the model that reads them, with :func:`require`, so the message still names the key.
+
+Each field's ``doc`` becomes the description of the ROS parameter a node declares for it.
+
+Ranges are sanity bounds, not the machine's limits: ``Number(min=0, max=100, unit="m")`` refuses a
+link length of 1e300 m that no machine of this package can have.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Union
+
+from manipulator_kinematics.params import ConfigError
+
+__all__ = [
+    "ConfigError",
+    "Flag",
+    "Names",
+    "Number",
+    "Numbers",
+    "Schema",
+    "Text",
+    "defaults",
+    "require",
+    "validate",
+]
+
+#: Marks a field without a default: the key must be given.
+REQUIRED: Any = object()
+
+
+@dataclass(frozen=True)
+class Number:
+    """A finite real number in [min, max] (``integer`` for whole numbers)."""
+
+    min: float = -math.inf
+    max: float = math.inf
+    unit: str = ""
+    integer: bool = False
+    default: Any = REQUIRED
+    exclusive_min: bool = False
+    doc: str = ""
+
+    def check(self, value: Any, key: str) -> float | int:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{key}: expected a number{_unit(self.unit)}, got {value!r}")
+        if not math.isfinite(value):
+            raise ConfigError(f"{key}: expected a finite number, got {value!r}")
+        if self.integer and float(value) != int(value):
+            raise ConfigError(f"{key}: expected a whole number, got {value!r}")
+        below = value <= self.min if self.exclusive_min else value < self.min
+        if below or value > self.max:
+            low = "(" if self.exclusive_min else "["
+            interval = f"{low}{self.min:g}, {self.max:g}]"
+            raise ConfigError(f"{key} = {value!r} is outside {interval}{_unit(self.unit)}")
+        return int(value) if self.integer else float(value)
+
+
+@dataclass(frozen=True)
+class Numbers:
+    """A list of ``count`` numbers (any length when count is None), each checked as ``item``."""
+
+    count: int | None = None
+    item: Number = Number()
+    default: Any = REQUIRED
+    doc: str = ""
+
+    def check(self, value: Any, key: str) -> list[float | int]:
+        if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, Sequence):
+            raise ConfigError(f"{key}: expected a list of {self._what()}, got {value!r}")
+        if self.count is not None and len(value) != self.count:
+            raise ConfigError(f"{key}: expected {self._what()}, got {len(value)}: {list(value)!r}")
+        return [self.item.check(v, f"{key}[{i}]") for i, v in enumerate(value)]
+
+    def _what(self) -> str:
+        return f"{self.count} numbers" if self.count is not None else "numbers"
+
+
+@dataclass(frozen=True)
+class Names:
+    """A list of ``count`` distinct non-empty strings (joint names)."""
+
+    count: int | None = None
+    default: Any = REQUIRED
+    doc: str = ""
+
+    def check(self, value: Any, key: str) -> list[str]:
+        if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, Sequence):
+            raise ConfigError(f"{key}: expected a list of names, got {value!r}")
+        if self.count is not None and len(value) != self.count:
+            raise ConfigError(f"{key}: expected {self.count} names, got {len(value)}: {list(value)!r}")
+        if not all(isinstance(v, str) and v for v in value) or len(set(value)) != len(value):
+            raise ConfigError(f"{key}: names must be distinct non-empty strings, got {list(value)!r}")
+        return list(value)
+
+
+@dataclass(frozen=True)
+class Text:
+    """A string; ``choices`` restricts it, ``empty`` allows ''."""
+
+    choices: tuple[str, ...] | None = None
+    empty: bool = True
+    default: Any = REQUIRED
+    doc: str = ""
+
+    def check(self, value: Any, key: str) -> str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{key}: expected a string, got {value!r}")
+        if self.choices is not None and value not in self.choices:
+            raise ConfigError(f"{key} = {value!r}: expected one of {', '.join(map(repr, self.choices))}")
+        if not self.empty and not value:
+            raise ConfigError(f"{key}: must not be empty")
+        return value
+
+
+@dataclass(frozen=True)
+class Flag:
+    """true or false (not 0/1, not a string)."""
+
+    default: Any = REQUIRED
+    doc: str = ""
+
+    def check(self, value: Any, key: str) -> bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{key}: expected true or false, got {value!r}")
+        return value
+
+
+Field = Number | Numbers | Names | Text | Flag
+Schema = Mapping[str, Union[Field, "Schema"]]
+
+
+def validate(values: Any, schema: Schema, prefix: str = "") -> dict[str, Any]:
+    """``values`` checked against ``schema``: plain Python values, defaults filled in.
+
+    Raises ConfigError naming the first unknown, missing or invalid key (dotted, under ``prefix``).
+    """
+    if not isinstance(values, Mapping):
+        raise ConfigError(f"{prefix or 'parameters'}: expected a mapping of keys, got {values!r}")
+    for key in values:
+        if key not in schema:
+            raise ConfigError(f"{_join(prefix, key)}: unknown key{_did_you_mean(str(key), schema)}")
+    out: dict[str, Any] = {}
+    for key, spec in schema.items():
+        name = _join(prefix, key)
+        if isinstance(spec, Mapping):
+            if key not in values:
+                if _all_defaulted(spec):
+                    out[key] = validate({}, spec, name)
+                    continue
+                raise ConfigError(f"{name}: missing (a section with keys {', '.join(spec)})")
+            out[key] = validate(values[key], spec, name)
+        elif key in values:
+            out[key] = spec.check(values[key], name)
+        elif spec.default is REQUIRED:
+            raise ConfigError(f"{name}: missing")
+        else:
+            out[key] = spec.default
+    return out
+
+
+def require(condition: bool, key: str, message: str) -> None:
+    """Raise ConfigError ``"<key>: <message>"`` unless ``condition`` (a consistency check)."""
+    if not condition:
+        raise ConfigError(f"{key}: {message}")
+
+
+def defaults(schema: Schema) -> dict[str, Any]:
+    """The nested defaults of a schema whose every field has one."""
+    return validate({}, schema)
+
+
+def _all_defaulted(schema: Schema) -> bool:
+    return all(_all_defaulted(s) if isinstance(s, Mapping) else s.default is not REQUIRED
+               for s in schema.values())
+
+
+def _join(prefix: str, key: Any) -> str:
+    return f"{prefix}.{key}" if prefix else str(key)
+
+
+def _unit(unit: str) -> str:
+    return f" ({unit})" if unit else ""
+
+
+def _did_you_mean(key: str, schema: Schema) -> str:
+    close = difflib.get_close_matches(key, [str(k) for k in schema], n=1, cutoff=0.6)
+    known = ", ".join(map(str, schema))
+    return f" (did you mean {close[0]!r}?)" if close else f" (known: {known})"

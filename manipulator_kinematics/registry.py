@@ -1,0 +1,103 @@
+"""Machines found through Python entry points: the shared package never imports a machine package.
+
+Each machine package declares one :class:`Machine` in the entry-point group
+``manipulator_kinematics.machines`` (``setup.py``)::
+
+    "manipulator_kinematics.machines": ["scara = scara_kinematics.machine:MACHINE"]
+
+A Machine says what the bag tools, the generic nodes and the tests need to know: the parameter
+section and default config file of the machine, the schema that validates it, the model factory,
+its joints and limits, the topics its nodes use (for ``record``), how to check a recorded run
+against the recomputed kinematics (``evaluate``) and how to write a synthetic bag (golden bags).
+Adding a machine touches only its own package, its config and the entry point.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from functools import cache
+from importlib.metadata import entry_points
+from pathlib import Path
+from typing import Any
+
+from manipulator_kinematics.config import Schema, validate
+from manipulator_kinematics.params import ConfigError, config_path, load_parameters
+from manipulator_kinematics.serial_chain import JointLimits
+
+GROUP = "manipulator_kinematics.machines"
+
+
+def _joint_names(model: Any) -> tuple[str, ...]:
+    return tuple(model.joint_names)
+
+
+def _limits(model: Any) -> JointLimits:
+    return model.limits
+
+
+@dataclass(frozen=True)
+class Machine:
+    """One machine kind, as its package declares it.
+
+    ``factory`` builds the model from the validated parameter section; ``topics`` maps each
+    topic its nodes use (relative name) to its message type (``pkg/msg/Type``); ``analyse`` and
+    ``synthesize`` are the bag hooks (see :mod:`manipulator_kinematics.bag.evaluate` and
+    ``scripts/make_golden_bags.py`` for their signatures), None where the machine has none.
+    """
+
+    name: str
+    summary: str
+    section: str
+    config_file: str
+    schema: Schema
+    factory: Callable[[dict[str, Any]], Any]
+    topics: Mapping[str, str] = field(default_factory=dict)
+    joint_names: Callable[[Any], tuple[str, ...]] = _joint_names
+    limits: Callable[[Any], JointLimits] = _limits
+    analyse: Callable[..., Any] | None = None
+    synthesize: Callable[..., Any] | None = None
+
+    def parameters(self, path: str | Path | None = None, node_name: str = "/**") -> dict[str, Any]:
+        """The machine's section of ``path`` (default: its shipped config file), validated."""
+        path = config_path(self.config_file) if path is None else Path(path)
+        params = load_parameters(path, node_name)
+        if self.section not in params:
+            raise ConfigError(f"{path}: no {self.section!r} section under /**: ros__parameters")
+        return validate(params[self.section], self.schema, self.section)
+
+    def model(self, path: str | Path | None = None) -> Any:
+        """The model described by ``path`` (default: the shipped machine)."""
+        return self.factory(self.parameters(path))
+
+    def model_from(self, section: Mapping[str, Any]) -> Any:
+        """The model of a nested parameter section (validated here)."""
+        return self.factory(validate(section, self.schema, self.section))
+
+
+@cache
+def machines() -> dict[str, Machine]:
+    """Every installed machine by name (entry points of :data:`GROUP`)."""
+    found: dict[str, Machine] = {}
+    for entry in entry_points(group=GROUP):
+        machine = entry.load()
+        if not isinstance(machine, Machine) or machine.name != entry.name:
+            raise TypeError(f"entry point {entry.name} = {entry.value} is not a Machine named {entry.name!r}")
+        found[entry.name] = machine
+    return dict(sorted(found.items()))
+
+
+def machine(name: str) -> Machine:
+    """The machine ``name``; KeyError with the known names (and a near miss) otherwise."""
+    known = machines()
+    if name in known:
+        return known[name]
+    close = difflib.get_close_matches(name, list(known), n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    raise KeyError(f"no machine {name!r}{hint}; installed: {', '.join(known) or 'none'}")
+
+
+def by_section(section: str) -> Machine | None:
+    """The machine whose parameter section is ``section`` (a params file's top-level key)."""
+    return next((m for m in machines().values() if m.section == section), None)

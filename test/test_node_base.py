@@ -1,0 +1,106 @@
+"""The one node style (manipulator_kinematics.nodes.base): machine and settings rules, read-only
+parameters, across processes with the SCARA's generic nodes (any registered machine behaves alike)."""
+from __future__ import annotations
+
+import subprocess
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import yaml
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
+from ros_harness import NodeProcess, Probe
+
+from manipulator_kinematics.node_util import console_script
+from manipulator_kinematics.nodes.base import params_files
+from manipulator_kinematics.params import config_path, load_parameters
+
+TIMEOUT = 15.0
+SCARA = load_parameters(config_path("scara.yaml"))["scara"]
+
+
+@pytest.fixture(scope="module")
+def probe() -> Iterator[Probe]:
+    probe = Probe("node_base_probe")
+    yield probe
+    probe.close()
+
+
+def machine_file(tmp_path: Path, section: dict, name: str = "machine.yaml") -> str:
+    path = tmp_path / name
+    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"scara": section}}}))
+    return str(path)
+
+
+def start_fails(*ros_args: str, exe: str = "scara_ik_server") -> str:
+    """Run ``exe`` with ``ros_args``; it must refuse to start: exit 2, one line on stderr."""
+    result = subprocess.run([console_script(exe), "--ros-args", *ros_args],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2, (result.returncode, result.stdout, result.stderr)
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
+    return lines[0]
+
+
+def get(probe: Probe, node: str, names: list[str]) -> list:
+    client = probe.node.create_client(GetParameters, f"/{node}/get_parameters")
+    probe.wait_until(client.service_is_ready, TIMEOUT, "get_parameters")
+    return probe.call(client, GetParameters.Request(names=names), TIMEOUT).values
+
+
+def test_params_files_are_read_from_ros_args_only() -> None:
+    argv = ["exe", "--params-file", "not_ros.yaml", "--ros-args", "-p", "a:=1", "--params-file", "a.yaml",
+            "--", "--ros-args", "--params-file", "b.yaml"]
+    assert params_files(argv) == [Path("a.yaml"), Path("b.yaml")]
+
+
+def test_without_a_machine_file_the_default_runs_and_p_changes_one_value(probe: Probe) -> None:
+    with NodeProcess("scara_ik_server", "-p", "scara.l2:=0.35") as process:
+        values = get(probe, "scara_ik_server", ["scara.l1", "scara.l2", "scara.l3"])
+        assert [v.double_value for v in values] == [SCARA["l1"], 0.35, SCARA["l3"]], process.log()
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    (lambda s: s.pop("l3"), "scara.l3: missing"),
+    (lambda s: s.update(l22=0.3), "scara.l22: unknown key (did you mean 'l2'?)"),
+    (lambda s: s.update(l1=True), "scara.l1: expected a number (m), got True"),
+])
+def test_a_given_machine_file_must_be_complete_and_known(tmp_path: Path, change, message: str) -> None:
+    section = dict(SCARA)
+    change(section)
+    assert message in start_fails("--params-file", machine_file(tmp_path, section))
+
+
+def test_a_given_machine_file_is_completed_by_p_never_by_the_default(tmp_path: Path, probe: Probe) -> None:
+    section = {k: v for k, v in SCARA.items() if k != "l3"} | {"l2": 0.33}
+    with NodeProcess("scara_ik_server", "--params-file", machine_file(tmp_path, section),
+                     "-p", "scara.l3:=0.2") as process:
+        values = get(probe, "scara_ik_server", ["scara.l1", "scara.l2", "scara.l3"])
+        assert [v.double_value for v in values] == [SCARA["l1"], 0.33, 0.2], process.log()
+
+
+def test_unknown_and_invalid_settings_are_refused() -> None:
+    assert "topics.joint_state: unknown key (did you mean 'joint_states'?)" in start_fails(
+        "-p", "topics.joint_state:=js", exe="scara_forward")
+    assert "qos_depth = 0 is outside [1, 100000]" in start_fails("-p", "qos_depth:=0", exe="scara_forward")
+    assert "base_frame: must not be empty" in start_fails("-p", "base_frame:=''")
+
+
+def test_parameters_are_read_only_and_a_set_is_refused_with_a_reason(probe: Probe) -> None:
+    with NodeProcess("scara_ik_server") as process:
+        describe = probe.node.create_client(DescribeParameters, "/scara_ik_server/describe_parameters")
+        setter = probe.node.create_client(SetParameters, "/scara_ik_server/set_parameters")
+        probe.wait_until(lambda: describe.service_is_ready() and setter.service_is_ready(), TIMEOUT, "services")
+        descriptors = probe.call(describe, DescribeParameters.Request(names=["scara.l2", "base_frame"]),
+                                 TIMEOUT).descriptors
+        assert all(d.read_only for d in descriptors)
+        assert descriptors[0].description == "upper arm, shoulder to elbow (m)"
+        assert descriptors[1].description.startswith("frame of targets and results")
+        value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=0.5)
+        result = probe.call(setter, SetParameters.Request(parameters=[ParameterMsg(name="scara.l2", value=value)]),
+                            TIMEOUT).results[0]
+        assert not result.successful and "read-only" in result.reason, result.reason
+        assert get(probe, "scara_ik_server", ["scara.l2"])[0].double_value == SCARA["l2"]
+        assert process.alive()
