@@ -245,5 +245,9 @@ class SerialModel(Protocol):
     ) -> IKSolutions:
         """Every candidate for target poses (..., 4, 4); raises RequestError for an unknown mode
         or branch; a target it cannot take (not finite, outside the machine's plane) gets status
-        INVALID or UNREACHABLE with a note, never an exception."""
+        INVALID or UNREACHABLE with a note, never an exception.
+
+        A machine whose candidates are other joints in some mode (the palletizer's D-H angles
+        beside its axis angles) also has ``joint_names_for(mode)``, which the IK server uses to
+        name the seed and the solutions."""
         ...

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
@@ -59,7 +59,9 @@ def machine_section(node: Node, machine: Machine, argv: Sequence[str]) -> dict[s
     return validate(_merge(default, given), machine.schema, machine.section)
 
 
-def node_settings(node: Node, schema: Schema, defaults_file: str, ignore: Sequence[str] = ()) -> dict[str, Any]:
+def node_settings(
+    node: Node, schema: Schema, defaults_file: str, ignore: Sequence[str] = ()
+) -> dict[str, Any]:
     """The node's settings: the package's ``defaults_file`` section for this node, overridden by
     the parameters given to the node, validated against ``schema``. ``ignore`` lists parameter
     prefixes that are not settings (the machine section)."""
@@ -97,7 +99,7 @@ class MachineNode(Node):
     ``/**/<node>`` section holds their defaults (the machine's own file unless given).
     """
 
-    SETTINGS: Schema = {}
+    SETTINGS: ClassVar[Schema] = {}
     DEFAULTS_FILE: str | None = None
 
     def __init__(self, node_name: str, machine: Machine, argv: Sequence[str]) -> None:

@@ -67,7 +67,8 @@ class IKServerNode(MachineNode):
         self.create_service(SolveFK, "solve_fk", self.solve_fk)
         self.get_logger().info(
             f"{machine.name}: joints {list(self.joint_names)}, frame {self.frame!r}, modes "
-            f"{list(self.model.ik_modes)}, branches {list(self.model.ik_branches)}: serving solve_ik, solve_fk")
+            f"{list(self.model.ik_modes)}, branches {list(self.model.ik_branches)}: "
+            "serving solve_ik, solve_fk")
 
     # ---- SolveIK ------------------------------------------------------------------------------
     def solve_ik(self, request: SolveIK.Request, response: SolveIK.Response) -> SolveIK.Response:
@@ -83,16 +84,20 @@ class IKServerNode(MachineNode):
                                         or np.linalg.norm(quaternion) < 1e-9):
             raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
                            f"target orientation is not a rotation: {quaternion.tolist()}")
-        seed = None
-        if len(request.seed.name) or len(request.seed.position):
-            try:
-                seed, _ = joint_values(request.seed, self.joint_names, require_position=True)
-            except InputError as error:
-                raise Rejected(KinematicsErrorCodes.INVALID_ROBOT_STATE, f"seed: {error}") from None
-        target = pose_matrix(position, quaternion if request.use_orientation else None)
+        mode = request.mode or None
         try:
-            result = self.model.solve_ik(target, use_orientation=request.use_orientation,
-                                         mode=request.mode or None, seed=seed, branch=request.branch or None)
+            # A machine may answer some modes in other joints (the palletizer's D-H angles).
+            names_for = getattr(self.model, "joint_names_for", None)
+            names = self.joint_names if names_for is None else tuple(names_for(mode))
+            seed = None
+            if len(request.seed.name) or len(request.seed.position):
+                try:
+                    seed, _ = joint_values(request.seed, names, require_position=True)
+                except InputError as error:
+                    raise Rejected(KinematicsErrorCodes.INVALID_ROBOT_STATE, f"seed: {error}") from None
+            target = pose_matrix(position, quaternion if request.use_orientation else None)
+            result = self.model.solve_ik(target, use_orientation=request.use_orientation, mode=mode,
+                                         seed=seed, branch=request.branch or None)
         except RequestError as error:
             code = KinematicsErrorCodes.INVALID_MODE if error.status is None else CODES[error.status]
             raise Rejected(code, str(error)) from None
@@ -100,8 +105,8 @@ class IKServerNode(MachineNode):
         if not bool(result.ok):
             raise Rejected(CODES[IKStatus(int(result.outcome))], response.message)
         stamp = self.get_clock().now().to_msg()
-        response.solution = joint_state(stamp, self.joint_names, result.solution)
-        response.solutions = [joint_state(stamp, self.joint_names, result.q[i]) for i in result.ordered()]
+        response.solution = joint_state(stamp, names, result.solution)
+        response.solutions = [joint_state(stamp, names, result.q[i]) for i in result.ordered()]
         response.success = True
         response.error_code.val = KinematicsErrorCodes.SUCCESS
 
@@ -122,7 +127,8 @@ class IKServerNode(MachineNode):
             pose = self.model.fkine(q)
             twist = np.zeros(6) if qd is None else self.model.jacob0(q) @ qd
         if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(twist))):
-            raise Rejected(KinematicsErrorCodes.INVALID_ROBOT_STATE, "joint_state gives a non-finite pose or twist")
+            raise Rejected(KinematicsErrorCodes.INVALID_ROBOT_STATE,
+                           "joint_state gives a non-finite pose or twist")
         stamp = request.joint_state.header.stamp
         response.pose = pose_stamped(stamp, self.frame, pose)
         response.twist = twist_stamped(stamp, self.frame, twist)

@@ -1,0 +1,237 @@
+"""Benchmark (not a test): tool changer closed-form IK and the shared chain's FK + Jacobian, against
+Robotics Toolbox for Python and Pinocchio on the same standard D-H model, in one run.
+
+Rows (medians over ``--rounds`` rounds, each timing every row once, so machine drift hits all):
+* IK: ours (all 8 solutions + selection) one target per call and batched (10^5 targets), against
+  RTB's ``ikine_LM`` (Python) and ``ik_LM`` (C++), one answer each from a random in-limit seed;
+* FK + Jacobian: ours (``SerialChain.fkine`` + ``jacob0``) one configuration per call and one batched
+  call of 10^5; RTB ``DHRobot.fkine``/``jacob0`` and its C-backed ETS; Pinocchio
+  ``forwardKinematics`` + ``computeJointJacobians`` + frame Jacobian in a Python loop.
+
+RTB and Pinocchio are not dependencies of the project: they run in their own venv, as in
+bench_scara_ik.py (``$MK_BENCH_PYTHON`` names an interpreter that has ``roboticstoolbox`` and
+``pinocchio``; otherwise ``/tmp/tool_changer_bench_venv`` is created with pip on first use).
+
+Run: .venv/bin/python benchmarks/bench_tool_changer_ik.py [--rounds 3] [--batch 100000]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+VENV = Path(os.environ.get("MK_BENCH_VENV", "/tmp/tool_changer_bench_venv"))
+PACKAGES = ("roboticstoolbox-python", "pin")
+
+
+def per_call(function, items, repeat: int = 1) -> float:
+    """Median microseconds of ``function(item)`` over the items."""
+    import numpy as np
+
+    times = np.empty(len(items))
+    for i, item in enumerate(items):
+        start = time.perf_counter_ns()
+        for _ in range(repeat):
+            function(item)
+        times[i] = (time.perf_counter_ns() - start) / 1e3 / repeat
+    return float(np.median(times))
+
+
+# ---- peers, in their own interpreter (no project imports there) -----------------------------------
+def peer_worker() -> None:
+    """Reads the D-H rows, targets, seeds and joint samples as JSON; prints timings as JSON."""
+    import numpy as np
+    import pinocchio as pin
+    import roboticstoolbox as rtb
+    from spatialmath import SE3
+
+    job = json.load(sys.stdin)
+    rows = job["rows"]
+    robot = rtb.DHRobot([rtb.RevoluteDH(a=r["a"], alpha=r["alpha"], d=r["d"], qlim=lim)
+                         for r, lim in zip(rows, job["qlim"], strict=True)], name="tool_changer")
+    ets = robot.ets()
+    # Pinocchio: joint i+1 sits at the fixed part Tz(d_i) Tx(a_i) Rx(alpha_i) of row i; the tool frame
+    # at that of the last row.
+    model = pin.Model()
+    parent = 0
+    placement = pin.SE3.Identity()
+    for i, r in enumerate(rows):
+        parent = model.addJoint(parent, pin.JointModelRZ(), placement, f"j{i + 1}")
+        fixed = SE3.Tz(r["d"]) * SE3.Tx(r["a"]) * SE3.Rx(r["alpha"])
+        placement = pin.SE3(fixed.R, fixed.t)
+    tool = model.addFrame(pin.Frame("tool", parent, placement, pin.FrameType.OP_FRAME))
+    data = model.createData()
+    world = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+    def pin_fk_jacobian(q):
+        pin.forwardKinematics(model, data, q)
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacement(model, data, tool)
+        return data.oMf[tool], pin.getFrameJacobian(model, data, tool, world)
+
+    q_all = np.array(job["q"])
+    single = q_all[: job["single"]]
+    out = {"rtb": rtb.__version__, "pin": pin.__version__, "rounds": []}
+    check_q = single[0]
+    oMf, jac = pin_fk_jacobian(check_q)
+    pose_ref, jacobian_ref = (np.array(m) for m in job["check"])
+    out["check"] = {
+        "pinocchio": float(max(np.abs(oMf.homogeneous - pose_ref).max(), np.abs(jac - jacobian_ref).max())),
+        "rtb_ets": float(max(np.abs(ets.fkine(check_q).A - pose_ref).max(),
+                             np.abs(ets.jacob0(check_q) - jacobian_ref).max())),
+    }
+    poses = [SE3(np.array(T), check=False) for T in job["targets"]]
+    seeds = np.array(job["seeds"])
+    for _ in range(job["rounds"]):
+        result = {}
+        result["rtb_dh"] = per_call(lambda q: (robot.fkine(q), robot.jacob0(q)), single[:300])
+        result["rtb_ets"] = per_call(lambda q: (ets.fkine(q), ets.jacob0(q)), single)
+        result["pin"] = per_call(pin_fk_jacobian, single)
+        start = time.perf_counter()
+        for q in q_all:
+            ets.fkine(q)
+            ets.jacob0(q)
+        result["rtb_ets_batch"] = time.perf_counter() - start
+        start = time.perf_counter()
+        for q in q_all:
+            pin_fk_jacobian(q)
+        result["pin_batch"] = time.perf_counter() - start
+        for name in ("ikine_LM", "ik_LM"):
+            solve = getattr(robot, name)
+            micro, found, errors = [], 0, []
+            for pose, seed in zip(poses, seeds, strict=True):
+                start = time.perf_counter_ns()
+                solution = solve(pose, q0=seed, joint_limits=True)
+                micro.append((time.perf_counter_ns() - start) / 1e3)
+                found += bool(solution.success)
+                if solution.success:
+                    errors.append(float(np.abs(robot.fkine(solution.q).A - pose.A).max()))
+            result[name] = {"micro": float(np.median(micro)), "success": found / len(poses),
+                            "max_error": max(errors, default=float("nan"))}
+        out["rounds"].append(result)
+    json.dump(out, sys.stdout)
+
+
+def run_peers(job: dict) -> tuple[dict | None, str]:
+    python = os.environ.get("MK_BENCH_PYTHON") or str(VENV / "bin" / "python")
+    check = "import roboticstoolbox, pinocchio"
+    ready = Path(python).exists() and subprocess.run([python, "-c", check],
+                                                     capture_output=True).returncode == 0
+    if not ready and not os.environ.get("MK_BENCH_PYTHON"):
+        print(f"installing {', '.join(PACKAGES)} into {VENV} (benchmark only) ...", file=sys.stderr)
+        try:
+            subprocess.run([sys.executable, "-m", "venv", str(VENV)], check=True, capture_output=True)
+            subprocess.run([str(VENV / "bin" / "pip"), "install", "-q", *PACKAGES], check=True,
+                           capture_output=True, timeout=1800)
+            ready = True
+        except (subprocess.SubprocessError, OSError) as error:
+            return None, f"{', '.join(PACKAGES)} could not be installed: {error}"
+    if not ready:
+        return None, f"roboticstoolbox / pinocchio not available at {python}"
+    done = subprocess.run([python, __file__, "--peer-worker"], input=json.dumps(job), capture_output=True,
+                          text=True, timeout=3600)
+    if done.returncode != 0:
+        return None, f"peer worker failed: {done.stderr.strip().splitlines()[-1:]}"
+    return json.loads(done.stdout), ""
+
+
+# ---- the project's side ----------------------------------------------------------------------------
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--batch", type=int, default=100_000, help="targets / configurations per batch")
+    parser.add_argument("--single", type=int, default=2000, help="one-call samples per row")
+    parser.add_argument("--ik-targets", type=int, default=200, help="targets for the numerical IKs")
+    args = parser.parse_args()
+
+    import numpy as np
+
+    sys.path.insert(0, str(REPO))
+    from tool_changer_kinematics.kinematics import ToolChanger
+
+    arm = ToolChanger.default()
+    chain = arm.chain
+    rng = np.random.default_rng(2023)
+    q = rng.uniform(arm.limits.lower, arm.limits.upper, (args.batch, 6))
+    T = arm.fkine(q)
+    seeds = rng.uniform(arm.limits.lower, arm.limits.upper, (args.batch, 6))
+    single = q[: args.single]
+    job = {
+        "rows": [{"a": r.a, "alpha": r.alpha, "d": r.d} for r in chain.rows],
+        "qlim": np.column_stack([arm.limits.lower, arm.limits.upper]).tolist(),
+        "q": q.tolist(), "single": args.single, "rounds": args.rounds,
+        "targets": T[: args.ik_targets].tolist(), "seeds": seeds[: args.ik_targets].tolist(),
+        "check": [chain.fkine(single[0]).tolist(), chain.jacob0(single[0]).tolist()],
+    }
+    peers, why = run_peers(job)
+    ours = []
+    for _ in range(args.rounds):
+        r = {}
+        r["ik_one"] = per_call(lambda i: arm.solve_ik(T[i], seed=seeds[i]), range(args.single))
+        start = time.perf_counter()
+        batch = arm.solve_ik(T, seed=seeds)
+        r["ik_batch"] = time.perf_counter() - start
+        found = np.isfinite(batch.q).all(axis=-1)
+        reached = arm.fkine(np.where(found[..., None], batch.q, 0.0))
+        r["ik_error"] = float(np.where(found, np.abs(reached - T[:, None]).max(axis=(-2, -1)), 0.0).max())
+        r["fkj_one"] = per_call(lambda x: (chain.fkine(x), chain.jacob0(x)), single)
+        start = time.perf_counter()
+        chain.fkine(q)
+        chain.jacob0(q)
+        r["fkj_batch"] = time.perf_counter() - start
+        ours.append(r)
+
+    def med(values) -> float:
+        return float(np.median(list(values)))
+
+    n = args.batch
+    ik_one, ik_batch = med(r["ik_one"] for r in ours), med(r["ik_batch"] for r in ours)
+    rows = [
+        ("IK, ours: all 8 solutions + selection, one target per call", f"{ik_one:.1f} us",
+         f"max FK(IK) error {max(r['ik_error'] for r in ours):.1e}"),
+        (f"IK, ours: batch of {n}", f"{ik_batch:.3f} s", f"{n / ik_batch:,.0f} poses/s (target >= 200,000)"),
+    ]
+    fkj_one, fkj_batch = med(r["fkj_one"] for r in ours), med(r["fkj_batch"] for r in ours)
+    rows += [("FK + Jacobian, ours (SerialChain), one call", f"{fkj_one:.1f} us", "target <= 10 us"),
+             (f"FK + Jacobian, ours, one batched call of {n}", f"{fkj_batch:.3f} s", "")]
+    if peers is None:
+        rows.append(("Robotics Toolbox / Pinocchio", "-", why))
+    else:
+        p = peers["rounds"]
+        for name, label in (("ikine_LM", "ikine_LM (Python)"), ("ik_LM", "ik_LM (C++)")):
+            micro = med(r[name]["micro"] for r in p)
+            rows.append((f"IK, RTB {peers['rtb']} {label}, one answer", f"{micro:.1f} us",
+                         f"ours {micro / ik_one:.0f}x faster per call, {micro / (ik_batch / n * 1e6):.0f}x "
+                         f"batched; solved {p[0][name]['success']:.0%}"))
+        pin_batch = med(r["pin_batch"] for r in p)
+        rows += [
+            ("FK + Jacobian, RTB DHRobot fkine + jacob0", f"{med(r['rtb_dh'] for r in p):.1f} us", ""),
+            ("FK + Jacobian, RTB ETS (C) fkine + jacob0", f"{med(r['rtb_ets'] for r in p):.1f} us",
+             f"max |difference| to ours {peers['check']['rtb_ets']:.0e}"),
+            (f"FK + Jacobian, RTB ETS, loop of {n}", f"{med(r['rtb_ets_batch'] for r in p):.3f} s", ""),
+            (f"FK + Jacobian, Pinocchio {peers['pin']}", f"{med(r['pin'] for r in p):.2f} us",
+             f"max |difference| to ours {peers['check']['pinocchio']:.0e}"),
+            (f"FK + Jacobian, Pinocchio, loop of {n}", f"{pin_batch:.3f} s",
+             f"ours batched / Pinocchio loop = {fkj_batch / pin_batch:.2f} (target <= 1)"),
+        ]
+    load = ", ".join(f"{v:.1f}" for v in os.getloadavg())
+    print(f"\nTool changer benchmark: {os.cpu_count()} cores (load {load}), Python {sys.version.split()[0]}, "
+          f"numpy {np.__version__}; medians over {args.rounds} rounds.\n")
+    widths = [max(len(row[i]) for row in rows) for i in range(3)]
+    header = ("what", "time", "notes")
+    print("| " + " | ".join(h.ljust(w) for h, w in zip(header, widths, strict=True)) + " |")
+    print("|" + "|".join("-" * (w + 2) for w in widths) + "|")
+    for row in rows:
+        print("| " + " | ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) + " |")
+
+
+if __name__ == "__main__":
+    if "--peer-worker" in sys.argv:
+        peer_worker()
+    else:
+        main()
