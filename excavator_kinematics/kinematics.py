@@ -2,25 +2,44 @@
 
 The manipulator is an open main chain (swing theta1, boom theta2, arm theta3, bucket theta4)
 driven by independent closed-loop cylinder mechanisms with secondary coordinates
-D = [theta1, d2, d3, d4] (swing angle and the boom, arm and bucket cylinder lengths):
+D = [theta1, d2, d3, d4] (swing angle and the boom, arm and bucket cylinder lengths). The
+bucket tip is Q = [x, y, z, alpha] (m, rad). Frames and conventions: docs/excavator.md.
 
-* boom and arm: one cylinder closes a triangle (eq. 1);
-* bucket: a six-bar split into the cylinder four-bar (arm, cylinder, side link) and the bucket
-  four-bar (arm, side link, H-link, bucket) in series (eq. 2);
-* the open chain gives the bucket tip Q = [x, y, z, alpha] (eq. 3), J0 (eq. 5);
-* thetadot = K Ddot (eq. 7), Qdot = JC0 Ddot with JC0 = J0 K (eq. 8) and its inverse (eq. 9);
-* accelerations forward (eqs. 10-11) and inverse (eqs. 12-13).
+Paper equation -> where it is computed:
+
+====  ===========================================  ==============================================
+eq.   relation                                     function
+====  ===========================================  ==============================================
+1     boom/arm triangle: theta(d), d(theta),       ``_Triangle.closes`` (via ``joint_angles``,
+      k21 = dtheta/dd, k22 = d2theta/dd2           ``k_entries``); inverse: ``cylinder_lengths``
+2     bucket six-bar = cylinder four-bar + bucket  ``Excavator._closed_loops`` (via
+      four-bar in series: theta4(d4) and rates     ``joint_angles``); inverse: ``cylinder_lengths``
+3     Q(theta), open chain                         ``pose``, ``open_chain_pose`` (``_tip``)
+4     Qdot by columns: coefficients a_i, b_i       ``Excavator._jacobian_terms``
+5     Qdot = J0 thetadot                           ``j0``
+6     thetadot = J0^-1 Qdot                        ``joint_rates``
+7     thetadot = K Ddot                            ``k_matrix``, ``k_entries``; ``state.theta_dot``
+8     Qdot = JC0 Ddot, JC0 = J0 K                  ``jc0``; ``state.Q_dot``, ``state.jc0``
+9     Ddot = JC0^-1 Qdot                           ``cylinder_rates``
+10    Qddot = J0 thetaddot + Jdot0 thetadot        ``state.Q_ddot`` (``Excavator._state``)
+11    Qddot = JC0 Dddot + JC1_0 Ddot^2 + JC2_0 DD  ``acceleration_matrices`` (same value as eq. 10)
+12    thetaddot = J0^-1 (Qddot - Jdot0 thetadot)   ``joint_accelerations``
+13    Dddot = JC0^-1 (Qddot - JC1_0 .. - JC2_0 ..) ``cylinder_accelerations``
+====  ===========================================  ==============================================
 
 Everything is closed form. Every entry point takes one state (shape (4,)) or a batch (shape
-(N, 4)); one state runs on Python floats (math), a batch on numpy arrays, through the same code,
-so a single call costs microseconds and a batch runs at millions of states per second.
+(N, 4)); rates and accelerations have D's shape or (4,), broadcast over a batch. One state runs
+on Python floats (math), a batch on numpy arrays, through the same code, so a single call costs
+microseconds and a batch runs at millions of states per second. Errors: a wrong shape is a
+``ValueError`` saying "shape"; a state the machine cannot take (outside a stroke or the swing
+range, not finite, a linkage that cannot close, a singular JC0) is a :class:`StrokeError` (also a
+ValueError). The machine file is read by :mod:`excavator_kinematics.parameters`.
 """
 
 from __future__ import annotations
 
 import math
-import struct
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
@@ -28,9 +47,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from excavator_kinematics.parameters import CYLINDERS, SECTION, Description, parse
 from manipulator_kinematics.params import ConfigError, config_path, load_parameters
 
-CYLINDERS = ("boom_cylinder", "arm_cylinder", "bucket_cylinder")
 JOINTS = ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")
 # Names of D's components in D's order: the actuators (swing drive and the three cylinders).
 ACTUATORS = (JOINTS[0], *CYLINDERS)
@@ -42,7 +61,6 @@ BATCH_BLOCK = 8192
 
 # Entries of a BucketState: six vectors of four, then JC0's 16.
 _STATE_SIZE = 40
-_STATE_STRUCT = struct.Struct(f"{_STATE_SIZE}d")
 _NO_ACCELERATION = (0.0, 0.0, 0.0, 0.0)
 
 # Lengths this close outside a stroke end still count as inside, so that lengths computed from
@@ -157,6 +175,12 @@ class _Triangle:
         cd, sd = self.radius * math.cos(self.offset), self.radius * math.sin(self.offset)
         object.__setattr__(self, "_constants", (c0, c1, ab, float(self.orientation), cd, sd))
 
+    @classmethod
+    def of(cls, name: str, first: np.ndarray, second: np.ndarray, orientation: int) -> _Triangle:
+        """The triangle of a cylinder whose pins are ``first`` and ``second`` from the pivot."""
+        return cls(name, float(np.hypot(*first)), float(np.hypot(*second)),
+                   _angle(first) - _angle(second), orientation)
+
     def closes(self, d: Any, m: SimpleNamespace, angle: bool = True) -> tuple[Any, ...]:
         """Joint angle (None unless ``angle``), its derivatives w.r.t. d (eq. 1: k21, k22) and
         its cosine and sine times ``radius``.
@@ -172,45 +196,6 @@ class _Triangle:
         return theta, k, k / d - k * k * c / s, cd * c - sd * s, sd * c + cd * s
 
 
-def _point(value: Any, key: str) -> np.ndarray:
-    point = np.asarray(value, dtype=float)
-    if point.shape != (2,) or not np.all(np.isfinite(point)):
-        raise ConfigError(f"excavator.{key}: expected a point [x, z] of two finite numbers, got {value!r}")
-    return point
-
-
-def _number(value: Any, key: str) -> float:
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"excavator.{key}: expected a number, got {value!r}") from None
-    if not math.isfinite(number):
-        raise ConfigError(f"excavator.{key}: must be finite, got {value!r}")
-    return number
-
-
-def _positive(value: Any, key: str) -> float:
-    number = _number(value, key)
-    if number <= 0.0:
-        raise ConfigError(f"excavator.{key}: must be positive, got {value!r}")
-    return number
-
-
-def _sign(value: Any, key: str) -> int:
-    if value not in (1, -1):
-        raise ConfigError(f"excavator.{key}: orientation must be 1 or -1, got {value!r}")
-    return int(value)
-
-
-def _get(section: dict[str, Any], path: str) -> Any:
-    node: Any = section
-    for part in path.split("."):
-        if not isinstance(node, dict) or part not in node:
-            raise ConfigError(f"excavator.{path}: missing from the machine description")
-        node = node[part]
-    return node
-
-
 def _angle(v: np.ndarray) -> float:
     return math.atan2(v[1], v[0])
 
@@ -222,36 +207,33 @@ class Excavator:
     Q = [x, y, z, alpha]: bucket tip in the base frame (m) and bucket line angle (rad).
     """
 
-    def __init__(self, description: dict[str, Any]) -> None:
-        """Build from the nested ``excavator`` section of a parameters file; validates it."""
-        if not isinstance(description, dict):
-            raise ConfigError("excavator: the machine description must be a mapping")
+    def __init__(self, description: Description) -> None:
+        """Build from a machine description (:func:`excavator_kinematics.parameters.parse` makes
+        one from a parameters file's section); raises ConfigError unless the linkage assembles
+        over the whole stroke box."""
         g = description
-        self.name = str(g.get("name", "excavator"))
-        self.l1, self.l0 = _point(_get(g, "boom.foot_pin"), "boom.foot_pin").tolist()
-        self.l2 = _positive(_get(g, "boom.length"), "boom.length")
-        self.l3 = _positive(_get(g, "arm.length"), "arm.length")
-        self.l4 = _positive(_get(g, "bucket.length"), "bucket.length")
-        foot = np.array([self.l1, self.l0])
+        self.name = g.name
+        self.l1, self.l0 = g.foot
+        self.l2, self.l3, self.l4 = g.boom_length, g.arm_length, g.bucket_length
+        foot = np.array(g.foot)
         arm_pin = np.array([self.l2, 0.0])  # boom frame
         self._bucket_pin = np.array([self.l3, 0.0])  # arm frame
+        boom_orientation, arm_orientation, bucket_orientation, h_orientation = g.orientations
 
-        boom_base = _point(_get(g, "boom_cylinder.base_pin"), "boom_cylinder.base_pin") - foot
-        boom_rod = _point(_get(g, "boom_cylinder.rod_pin"), "boom_cylinder.rod_pin")
-        arm_base = _point(_get(g, "arm_cylinder.base_pin"), "arm_cylinder.base_pin") - arm_pin
-        arm_rod = _point(_get(g, "arm_cylinder.rod_pin"), "arm_cylinder.rod_pin")
+        boom_base, boom_rod = (np.array(p) for p in g.boom_cylinder_pins)
+        arm_base, arm_rod = (np.array(p) for p in g.arm_cylinder_pins)
         self._pins_local = {
-            "boom_cylinder_base": boom_base + foot,
+            "boom_cylinder_base": boom_base,
             "boom_cylinder_rod": boom_rod,
-            "arm_cylinder_base": arm_base + arm_pin,
+            "arm_cylinder_base": arm_base,
             "arm_cylinder_rod": arm_rod,
         }
-        self._boom = self._triangle("boom_cylinder", boom_base, boom_rod, g)
-        self._arm = self._triangle("arm_cylinder", arm_base, arm_rod, g)
+        self._boom = _Triangle.of("boom_cylinder", boom_base - foot, boom_rod, boom_orientation)
+        self._arm = _Triangle.of("arm_cylinder", arm_base - arm_pin, arm_rod, arm_orientation)
 
-        bucket_base = _point(_get(g, "bucket_cylinder.base_pin"), "bucket_cylinder.base_pin")
-        self._pivot = _point(_get(g, "side_link.pivot"), "side_link.pivot")
-        self._side = _positive(_get(g, "side_link.length"), "side_link.length")
+        bucket_base = np.array(g.bucket_cylinder_base)
+        self._pivot = np.array(g.side_link_pivot)
+        self._side = g.side_link_length
         # Python floats: numpy scalars would make every operation of the one-state path slow.
         self._bucket_pin_xy = tuple(self._bucket_pin.tolist())
         self._pivot_from_bucket_pin = tuple((self._pivot - self._bucket_pin).tolist())
@@ -264,14 +246,14 @@ class Excavator:
             float(np.hypot(*to_base)),
             self._side,
             _angle(to_base),
-            _sign(_get(g, "bucket_cylinder.orientation"), "bucket_cylinder.orientation"),
+            bucket_orientation,
             radius=self._side,  # closes() then gives the rod pin R relative to the pivot
         )
-        h_pin = _point(_get(g, "h_link.bucket_pin"), "h_link.bucket_pin")
+        h_pin = np.array(g.h_link_pin)
         self._h_radius = float(np.hypot(*h_pin))  # bucket pin -> H-link pin
         self._h_phase = _angle(h_pin)
-        self._h_link = _positive(_get(g, "h_link.length"), "h_link.length")
-        self._h_orientation = _sign(_get(g, "h_link.orientation"), "h_link.orientation")
+        self._h_link = g.h_link_length
+        self._h_orientation = h_orientation
         b, a = self._h_radius, self._h_link
         # cos of the H angle = (e^2 + b^2 - a^2) / (2 b e) (law of cosines, e = |R - bucket pin|);
         # (H - bucket pin) / b turned back by the H phase is the bucket direction (cos, sin theta4).
@@ -286,57 +268,20 @@ class Excavator:
         )
         self._pins_local["h_link_pin"] = h_pin
 
-        stroke = []
-        for cylinder in CYLINDERS:
-            lo = _positive(_get(g, f"{cylinder}.min_length"), f"{cylinder}.min_length")
-            hi = _positive(_get(g, f"{cylinder}.max_length"), f"{cylinder}.max_length")
-            if not lo < hi:
-                raise ConfigError(f"excavator.{cylinder}: min_length {lo} must be below max_length {hi}")
-            stroke.append((lo, hi))
-        stroke_arr = np.array(stroke)
-        swing_min = _number(_get(g, "swing.min_angle"), "swing.min_angle")
-        swing_max = _number(_get(g, "swing.max_angle"), "swing.max_angle")
-        if not swing_min < swing_max:
-            raise ConfigError(f"excavator.swing: min_angle {swing_min} must be below max_angle {swing_max}")
-        reference = np.array(
-            [_number(g.get("swing", {}).get("reference_angle", 0.0), "swing.reference_angle")]
-            + [
-                _number(g[c].get("reference_length", 0.5 * (lo + hi)), f"{c}.reference_length")
-                for c, (lo, hi) in zip(CYLINDERS, stroke, strict=True)
-            ]
-        )
         self.limits = Limits(
-            stroke_min=stroke_arr[:, 0],
-            stroke_max=stroke_arr[:, 1],
-            swing_min=swing_min,
-            swing_max=swing_max,
-            max_cylinder_speed=np.array(
-                [_positive(_get(g, f"{c}.max_speed"), f"{c}.max_speed") for c in CYLINDERS]
-            ),
-            max_swing_speed=_positive(_get(g, "swing.max_speed"), "swing.max_speed"),
-            reference=reference,
+            stroke_min=g.stroke_min,
+            stroke_max=g.stroke_max,
+            swing_min=g.swing_min,
+            swing_max=g.swing_max,
+            max_cylinder_speed=g.max_cylinder_speed,
+            max_swing_speed=g.max_swing_speed,
+            reference=g.reference,
         )
-        for i, cylinder in enumerate(CYLINDERS):
-            if not stroke_arr[i, 0] <= reference[i + 1] <= stroke_arr[i, 1]:
-                raise ConfigError(
-                    f"excavator.{cylinder}.reference_length {reference[i + 1]} outside the stroke "
-                    f"[{stroke_arr[i, 0]}, {stroke_arr[i, 1]}]"
-                )
         # Python floats of the limits with the tolerance applied, for the one-state fast path.
         self._lo = (self.limits.d_min - STROKE_TOLERANCE).tolist()
         self._hi = (self.limits.d_max + STROKE_TOLERANCE).tolist()
         self._lo_column, self._hi_column = np.array(self._lo)[:, None], np.array(self._hi)[:, None]
         self._check_whole_stroke()
-
-    @staticmethod
-    def _triangle(name: str, first: np.ndarray, second: np.ndarray, g: dict[str, Any]) -> _Triangle:
-        return _Triangle(
-            name,
-            float(np.hypot(*first)),
-            float(np.hypot(*second)),
-            _angle(first) - _angle(second),
-            _sign(_get(g, f"{name}.orientation"), f"{name}.orientation"),
-        )
 
     def _check_whole_stroke(self) -> None:
         """Every length in the stroke box must assemble; a bad pin or length fails here, naming it."""
@@ -344,19 +289,25 @@ class Excavator:
         try:
             self.joint_angles(samples)
         except StrokeError as error:
-            raise ConfigError(f"excavator: the stroke range cannot be assembled: {error}") from None
+            # Each linkage depends on its own cylinder only: the error names the culprit.
+            i = next(i for i, name in enumerate(CYLINDERS) if str(error).startswith(name))
+            raise ConfigError(
+                f"{SECTION}.{CYLINDERS[i]}: the stroke [{self.limits.stroke_min[i]:g}, "
+                f"{self.limits.stroke_max[i]:g}] m cannot be assembled with these pins and links: {error}"
+            ) from None
 
     @classmethod
     def from_file(cls, path: str | Path, node_name: str = "/**") -> Excavator:
-        """Load the ``excavator`` section of a ROS 2 parameters file."""
+        """The machine of the ``excavator`` section of a ROS 2 parameters file."""
         parameters = load_parameters(path, node_name)
-        if "excavator" not in parameters:
-            raise ConfigError(f"{path}: no 'excavator' section under ros__parameters")
-        return cls(parameters["excavator"])
+        if SECTION not in parameters:
+            raise ConfigError(f"{path}: no {SECTION!r} section under /**: ros__parameters")
+        return cls(parse(parameters[SECTION]))
 
     @classmethod
-    def from_parameters(cls, description: dict[str, Any]) -> Excavator:
-        return cls(description)
+    def from_parameters(cls, section: Mapping[str, Any]) -> Excavator:
+        """The machine of a nested ``excavator`` section; ConfigError names a bad key."""
+        return cls(parse(section))
 
     @classmethod
     def default(cls) -> Excavator:
@@ -390,8 +341,8 @@ class Excavator:
             if np.all((self._lo_column <= columns) & (columns <= self._hi_column)):
                 return D, m, columns
         else:
-            raise StrokeError(
-                f"expected D = [swing, boom, arm, bucket] of shape (4,) or (N, 4), got {D.shape}"
+            raise ValueError(
+                f"expected D = [swing, boom, arm, bucket] of shape (4,) or (N, 4), got shape {D.shape}"
             )
         self._check_lengths(D[..., 1:])
         swing = D[..., 0]
@@ -466,18 +417,14 @@ class Excavator:
 
     def joint_angles(self, lengths: Any) -> np.ndarray:
         """Cylinder lengths [d2, d3, d4] (..., 3) -> [theta2, theta3, theta4] (eqs. 1-2)."""
-        lengths = np.asarray(lengths, dtype=float)
-        if lengths.shape[-1:] != (3,):
-            raise StrokeError(
-                f"expected [boom, arm, bucket] lengths of shape (3,) or (N, 3), got {lengths.shape}"
-            )
+        lengths = _vectors(lengths, 3, "[boom, arm, bucket] lengths")
         self._check_lengths(lengths)
         m, cols = _split(lengths)
         return _stack(self._closed_loops(*cols, m)[0], lengths.ndim)
 
     def k_entries(self, lengths: Any) -> tuple[np.ndarray, np.ndarray]:
         """dtheta_i/dd_i (the diagonal of K, eq. 7) and d2theta_i/dd_i2 (of K1), for i = 2..4."""
-        lengths = np.asarray(lengths, dtype=float)
+        lengths = _vectors(lengths, 3, "[boom, arm, bucket] lengths")
         self._check_lengths(lengths)
         m, cols = _split(lengths)
         _, k, dk, _, _ = self._closed_loops(*cols, m)
@@ -490,11 +437,7 @@ class Excavator:
         rod pin R as the intersection of the side-link and H-link circles on the assembly branch.
         Raises StrokeError when an angle needs a length outside the stroke or cannot be assembled.
         """
-        angles = np.asarray(angles, dtype=float)
-        if angles.shape[-1:] != (3,) or angles.ndim not in (1, 2):
-            raise StrokeError(
-                f"expected [theta2, theta3, theta4] of shape (3,) or (N, 3), got {angles.shape}"
-            )
+        angles = _vectors(angles, 3, "[theta2, theta3, theta4]")
         if not np.all(np.isfinite(angles)):
             raise StrokeError("joint angles are not finite")
         lengths = np.empty_like(angles)
@@ -540,7 +483,7 @@ class Excavator:
 
     def open_chain_pose(self, theta: Any) -> np.ndarray:
         """Q = [x, y, z, alpha] from the open-chain joints theta1..theta4 (eq. 3), no limits."""
-        theta = np.asarray(theta, dtype=float)
+        theta = _vectors(theta, 4, "theta = [theta1, theta2, theta3, theta4]")
         m, (t1, t2, t3, t4) = _split(theta)
         terms = self._jacobian_terms(t1, _trig(t2, t3, t4, m), m)
         return _stack(self._tip(terms, t2 + t3 + t4), theta.ndim)
@@ -607,7 +550,7 @@ class Excavator:
 
     def j0(self, theta: Any) -> np.ndarray:
         """J0(theta) of eq. 5: Qdot = J0 thetadot, rows x, y, z, alpha; columns theta1..theta4."""
-        theta = np.asarray(theta, dtype=float)
+        theta = _vectors(theta, 4, "theta = [theta1, theta2, theta3, theta4]")
         m, (t1, t2, t3, t4) = _split(theta)
         a1, a2, a3, b1, b2, b3, rho, c1, s1 = self._jacobian_terms(t1, _trig(t2, t3, t4, m), m)
         return _matrix(
@@ -619,6 +562,19 @@ class Excavator:
             ],
             theta.shape[:-1],
         )
+
+    def joint_rates(self, theta: Any, Q_dot: Any) -> np.ndarray:
+        """thetadot = J0^-1 Qdot (eq. 6): open-chain joint rates for a tip velocity.
+
+        StrokeError where J0 is exactly singular: det J0 = rho l2 l3 sin(theta3) up to sign, zero
+        with the tip on the swing axis or the arm in line with the boom.
+        """
+        theta = _vectors(theta, 4, "theta = [theta1, theta2, theta3, theta4]")
+        Q_dot = _finite(Q_dot, theta.shape, "Q_dot")
+        try:
+            return np.linalg.solve(self.j0(theta), Q_dot[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            raise StrokeError("J0 is singular at this state (bucket tip on the swing axis)") from None
 
     def k_matrix(self, D: Any) -> np.ndarray:
         """K = diag(1, dtheta2/dd2, dtheta3/dd3, dtheta4/dd4) of eq. 7 (theta1 is D's own swing)."""
@@ -647,7 +603,8 @@ class Excavator:
             # One state: Python floats end to end (a 1 kHz node calls this per message).
             rates = _finite_floats(D_dot, "D_dot")
             accelerations = _NO_ACCELERATION if D_ddot is None else _finite_floats(D_ddot, "D_ddot")
-            return _bucket_state(_table(self._state(columns, rates, accelerations, m)))
+            table = np.array(self._state(columns, rates, accelerations, m), dtype=float)
+            return _bucket_state(table.reshape(10, 4))
         rates = _split(_finite(D_dot, D.shape, "D_dot"))[1]
         if D_ddot is None:
             accelerations = np.zeros_like(columns)
@@ -847,27 +804,21 @@ def _matrix(entries: list[Any], batch: tuple[int, ...]) -> np.ndarray:
     return np.moveaxis(out.reshape(4, 4, *batch), (0, 1), (-2, -1))
 
 
-def _table(entries: list[float]) -> np.ndarray:
-    """_state's entries of one state as a (10, 4) array. struct packs the Python floats straight
-    into the array's memory in one C loop, much faster than np.array's per-item type discovery
-    (packing is a large share of a one-state call)."""
-    table = np.empty((10, 4))
-    _STATE_STRUCT.pack_into(table, 0, *entries)
-    return table
-
-
 def _bucket_state(table: np.ndarray) -> BucketState:
     """BucketState as views of a table of _state's entries: (10, 4) for one state, (10, N, 4)
     for a batch (rows: the six vectors, then JC0's rows)."""
     jc0 = table[6:] if table.ndim == 2 else np.moveaxis(table[6:], 1, 0)
-    # tuple.__new__ skips the NamedTuple's Python-level __new__, a measurable cost per state.
-    return tuple.__new__(BucketState, (table[0], table[1], table[2], table[3], table[4], table[5], jc0))
+    return BucketState(table[0], table[1], table[2], table[3], table[4], table[5], jc0)
 
 
 def _finite(values: Any, shape: tuple[int, ...], name: str) -> np.ndarray:
+    """``values`` as a finite float array of ``shape`` = D's shape; one vector of four is
+    broadcast over a batch. ValueError (shape) or StrokeError (not finite) naming ``name``."""
     array = np.asarray(values, dtype=float)
     if array.shape != shape:
-        raise StrokeError(f"{name}: expected shape {shape}, got {array.shape}")
+        if array.shape != (4,):
+            raise ValueError(f"{name}: expected shape (4,) or {shape} (D's), got shape {array.shape}")
+        array = np.broadcast_to(array, shape)
     finite = all(map(math.isfinite, array.tolist())) if array.ndim == 1 else np.all(np.isfinite(array))
     if not finite:
         raise StrokeError(f"{name} is not finite: {array}")
@@ -875,14 +826,23 @@ def _finite(values: Any, shape: tuple[int, ...], name: str) -> np.ndarray:
 
 
 def _finite_floats(values: Any, name: str) -> list[float]:
-    """Four finite Python floats, or StrokeError naming ``name`` (the one-state path)."""
-    floats = values.tolist() if isinstance(values, np.ndarray) else [float(v) for v in values]
-    if len(floats) == 4:
-        a, b, c, d = floats
-        # Four isfinite calls: a third faster than all(map(...)) at this size.
-        if math.isfinite(a) and math.isfinite(b) and math.isfinite(c) and math.isfinite(d):
-            return floats
-    raise StrokeError(f"{name}: expected 4 finite numbers, got {floats}")
+    """Four finite Python floats (the one-state path); ValueError (shape) or StrokeError (not
+    finite) naming ``name``."""
+    array = np.asarray(values, dtype=float)
+    if array.shape != (4,):
+        raise ValueError(f"{name}: expected shape (4,) like D's, got shape {array.shape}")
+    floats = array.tolist()
+    if not all(map(math.isfinite, floats)):
+        raise StrokeError(f"{name} is not finite: {floats}")
+    return floats
+
+
+def _vectors(values: Any, k: int, what: str) -> np.ndarray:
+    """``values`` as a float array of shape (k,) or (N, k), else ValueError saying the shape."""
+    array = np.asarray(values, dtype=float)
+    if array.ndim not in (1, 2) or array.shape[-1] != k:
+        raise ValueError(f"expected {what} of shape ({k},) or (N, {k}), got shape {array.shape}")
+    return array
 
 
 def _first_bad(values: np.ndarray, good: np.ndarray) -> float:

@@ -5,11 +5,14 @@ batch == scalar, and the errors bad input must raise."""
 from __future__ import annotations
 
 import copy
+from importlib.metadata import entry_points
 
 import numpy as np
 import pytest
+import yaml
 
 from excavator_kinematics.kinematics import (
+    ACTUATORS,
     CYLINDERS,
     Excavator,
     StrokeError,
@@ -17,6 +20,10 @@ from excavator_kinematics.kinematics import (
     bucket_angular_velocity,
     bucket_quaternion,
 )
+from excavator_kinematics.machine import MACHINE
+from excavator_kinematics.parameters import SCHEMA
+from manipulator_kinematics.bag.topics import ACCEL, JOINT_STATE, POSE, TWIST
+from manipulator_kinematics.config import validate
 from manipulator_kinematics.params import ConfigError, config_path, load_parameters
 
 EXC = Excavator.default()
@@ -315,13 +322,70 @@ def test_one_bad_state_in_a_batch_is_found():
         EXC.state(D, np.zeros_like(D))
 
 
-def test_swing_limit_and_shape_errors():
+def test_swing_limit_raises():
     D = LIM.reference.copy()
     D[0] = LIM.swing_max + 0.1
     with pytest.raises(StrokeError, match="swing_joint"):
         EXC.pose(D)
-    with pytest.raises(StrokeError, match="shape"):
-        EXC.pose([1.0, 2.0, 3.0])
+
+
+BATCH = random_states(6)
+STATE = LIM.reference
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda: EXC.pose([1.0, 2.0, 3.0]),
+        lambda: EXC.pose(np.zeros((2, 3, 4))),
+        lambda: EXC.jc0(np.zeros((5, 3))),
+        lambda: EXC.state(BATCH, np.zeros((5, 4))),
+        lambda: EXC.state(BATCH, np.zeros(4), np.zeros(3)),
+        lambda: EXC.state(STATE, np.zeros(3)),
+        lambda: EXC.state(STATE, np.zeros((6, 4))),
+        lambda: EXC.state(STATE, np.zeros(4), np.zeros(5)),
+        lambda: EXC.cylinder_rates(BATCH, np.zeros((6, 3))),
+        lambda: EXC.cylinder_rates(STATE, np.zeros((2, 4))),
+        lambda: EXC.cylinder_accelerations(BATCH, np.zeros(4), np.zeros((6, 2))),
+        lambda: EXC.joint_accelerations(BATCH, np.zeros((6, 5)), np.zeros(4)),
+        lambda: EXC.joint_angles(np.zeros(4)),
+        lambda: EXC.k_entries(np.zeros((3, 2))),
+        lambda: EXC.cylinder_lengths(np.zeros(2)),
+        lambda: EXC.j0(np.zeros(3)),
+        lambda: EXC.open_chain_pose(np.zeros((2, 5))),
+        lambda: EXC.joint_rates(np.zeros(4), np.zeros(3)),
+    ],
+)
+def test_shape_errors_are_value_errors_saying_shape(call):
+    with pytest.raises(ValueError, match="shape") as info:
+        call()
+    assert not isinstance(info.value, StrokeError)  # a wrong shape is the caller's bug, not a state
+
+
+def test_a_vector_of_rates_is_broadcast_over_a_batch():
+    D, V, A = random_states(50), random_rates(1)[0], RNG.uniform(-0.5, 0.5, size=4)
+    tiled = np.tile(V, (50, 1)), np.tile(A, (50, 1))
+    broadcast, explicit = EXC.state(D, V, A), EXC.state(D, *tiled)
+    for field in broadcast._fields:
+        np.testing.assert_array_equal(getattr(broadcast, field), getattr(explicit, field))
+    q_dot = broadcast.Q_dot[7]
+    np.testing.assert_array_equal(
+        EXC.cylinder_rates(D, q_dot).D_dot, EXC.cylinder_rates(D, np.tile(q_dot, (50, 1))).D_dot
+    )
+    np.testing.assert_array_equal(
+        EXC.cylinder_accelerations(D, V, A), EXC.cylinder_accelerations(D, tiled[0], tiled[1])
+    )
+    np.testing.assert_array_equal(EXC.joint_accelerations(D, V, A), EXC.joint_accelerations(D, *tiled))
+    # The README's batch call, as written there.
+    assert EXC.state(np.tile(STATE, (1000, 1)), [0.1, 0.05, -0.05, 0.08]).Q.shape == (1000, 4)
+
+
+def test_eq6_joint_rates_invert_j0():
+    D, V = random_states(200), random_rates(200)
+    state = EXC.state(D, V)
+    np.testing.assert_allclose(EXC.joint_rates(state.theta, state.Q_dot), state.theta_dot, atol=1e-10)
+    one = EXC.state(STATE, V[0])
+    np.testing.assert_allclose(EXC.joint_rates(one.theta, one.Q_dot), one.theta_dot, atol=1e-10)
 
 
 def test_unreachable_angles_raise():
@@ -333,24 +397,116 @@ def _description() -> dict:
     return copy.deepcopy(load_parameters(config_path("excavator_cet200.yaml"))["excavator"])
 
 
-@pytest.mark.parametrize(
-    "mutate, key",
-    [
-        (lambda d: d["boom"].pop("length"), "boom.length"),
-        (lambda d: d["arm"].__setitem__("length", -2.9), "arm.length"),
-        (lambda d: d["bucket_cylinder"].__setitem__("min_length", 3.0), "bucket_cylinder"),
-        (lambda d: d["h_link"].__setitem__("orientation", 0), "h_link.orientation"),
-        (lambda d: d["boom_cylinder"].__setitem__("rod_pin", [1.0]), "boom_cylinder.rod_pin"),
-        (lambda d: d["swing"].__setitem__("max_speed", float("nan")), "swing.max_speed"),
-        (lambda d: d["arm_cylinder"].__setitem__("max_length", 9.0), "arm_cylinder"),
-        (lambda d: d["side_link"].__setitem__("length", 0.05), "bucket_cylinder"),
-    ],
-)
-def test_invalid_machine_description_names_the_key(mutate, key):
+def _set(section: str, key: str, value):
+    return lambda d: d[section].__setitem__(key, value)
+
+
+def _pop(section: str, key: str):
+    return lambda d: d[section].pop(key)
+
+
+def _rename(section: str, key: str, new: str):
+    return lambda d: d[section].__setitem__(new, d[section].pop(key))
+
+
+# (change to the shipped CET200 section, the key under excavator. the error must name, more of its message)
+INVALID = {
+    "misspelt key": (_rename("boom", "length", "lenght"), "boom.lenght", "did you mean 'length'"),
+    "unknown section": (lambda d: d.__setitem__("stick", {}), "stick", "unknown key"),
+    "missing key": (_pop("boom", "length"), "boom.length", "missing"),
+    "missing reference angle": (_pop("swing", "reference_angle"), "swing.reference_angle", "missing"),
+    "missing reference length": (
+        _pop("arm_cylinder", "reference_length"), "arm_cylinder.reference_length", "missing"
+    ),
+    "missing section": (lambda d: d.pop("side_link"), "side_link", "missing"),
+    "missing name": (lambda d: d.pop("name"), "name", "missing"),
+    "empty name": (lambda d: d.__setitem__("name", ""), "name", "empty"),
+    "string in a point": (_set("boom", "foot_pin", [0.18, "x"]), "boom.foot_pin[1]", "number"),
+    "short point": (_set("boom_cylinder", "rod_pin", [1.0]), "boom_cylinder.rod_pin", "2 numbers"),
+    "point not a list": (_set("side_link", "pivot", "2.47, 0"), "side_link.pivot", "list"),
+    "true for a number": (_set("arm", "length", True), "arm.length", "number"),
+    "true for an orientation": (_set("h_link", "orientation", True), "h_link.orientation", "number"),
+    "string for a number": (_set("swing", "max_speed", "fast"), "swing.max_speed", "number"),
+    "negative length": (_set("arm", "length", -2.9), "arm.length", "outside"),
+    "zero length": (_set("h_link", "length", 0.0), "h_link.length", "outside"),
+    "absurd length": (_set("bucket", "length", 1e300), "bucket.length", "outside"),
+    "absurd swing limit": (_set("swing", "max_angle", 1e12), "swing.max_angle", "outside"),
+    "absurd stroke": (_set("boom_cylinder", "max_length", 1e6), "boom_cylinder.max_length", "outside"),
+    "absurd speed": (_set("arm_cylinder", "max_speed", 50.0), "arm_cylinder.max_speed", "outside"),
+    "not finite": (_set("swing", "max_speed", float("nan")), "swing.max_speed", "finite"),
+    "orientation 0": (_set("h_link", "orientation", 0), "h_link.orientation", "1 or -1"),
+    "orientation 2": (_set("boom_cylinder", "orientation", 2), "boom_cylinder.orientation", "outside"),
+    "fractional orientation": (_set("arm_cylinder", "orientation", 0.5), "arm_cylinder.orientation", "whole"),
+    "reference angle outside the swing limits": (
+        _set("swing", "reference_angle", 3.5), "swing.reference_angle", "outside [min_angle, max_angle]"
+    ),
+    "swing limits reversed": (_set("swing", "min_angle", 3.2), "swing.max_angle", "above min_angle"),
+    "reference length outside the stroke": (
+        _set("boom_cylinder", "reference_length", 3.5), "boom_cylinder.reference_length", "outside the stroke"
+    ),
+    "stroke reversed": (_set("bucket_cylinder", "min_length", 3.0), "bucket_cylinder.max_length", "above"),
+    # Whole-stroke assembly: every length of the stroke box must close the linkages.
+    "arm stroke cannot assemble": (_set("arm_cylinder", "max_length", 9.0), "arm_cylinder", "assembled"),
+    "side link too short": (_set("side_link", "length", 0.05), "bucket_cylinder", "assembled"),
+}
+
+
+@pytest.mark.parametrize("case", INVALID)
+def test_invalid_machine_description_names_the_key(case):
+    mutate, key, message = INVALID[case]
     description = _description()
     mutate(description)
-    with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
+    with pytest.raises(ConfigError) as info:
         Excavator.from_parameters(description)
+    assert f"excavator.{key}" in str(info.value) and message in str(info.value), str(info.value)
+
+
+def test_the_shipped_file_is_complete_and_exact():
+    """Every key of the schema is given (none falls back to a default) and the file loads
+    through the registered machine as through the class."""
+    assert validate(_description(), SCHEMA, "excavator") == _description()
+    assert MACHINE.parameters() == _description()
+    np.testing.assert_array_equal(MACHINE.model().pose(LIM.reference), EXC.pose(LIM.reference))
+
+
+def test_registered_machine():
+    found = [e for e in entry_points(group="manipulator_kinematics.machines") if e.name == "excavator"]
+    assert len(found) == 1 and found[0].load() is MACHINE
+    model = MACHINE.model()
+    assert MACHINE.joint_names(model) == ACTUATORS == ("swing_joint", *CYLINDERS)
+    limits = MACHINE.limits(model)
+    assert limits.names == ACTUATORS and limits.prismatic == (False, True, True, True)
+    np.testing.assert_array_equal(limits.lower, [LIM.swing_min, *LIM.stroke_min])
+    np.testing.assert_array_equal(limits.upper, [LIM.swing_max, *LIM.stroke_max])
+    assert limits.within(LIM.reference) and not limits.within(LIM.d_max + 0.01)
+    with pytest.raises(ConfigError, match=r"excavator\.bucket\.length"):
+        MACHINE.model_from({**_description(), "bucket": {"length": 1e300}})
+
+
+# What flows on each topic key of the excavator nodes' settings (their publishers/subscriptions).
+TYPE_OF_TOPIC_KEY = {
+    "cylinder_lengths": JOINT_STATE,
+    "joint_states": JOINT_STATE,
+    "open_chain_joint_states": JOINT_STATE,
+    "rate_commands": JOINT_STATE,
+    "rate_command_array": "std_msgs/msg/Float64MultiArray",
+    "bucket_pose": POSE,
+    "bucket_twist": TWIST,
+    "bucket_accel": ACCEL,
+    "target_bucket_twist": TWIST,
+}
+
+
+def test_registered_topics_are_the_nodes_topics():
+    """Every topic named in config/excavator_nodes.yaml, typed by its key, and no other."""
+    with open(config_path("excavator_nodes.yaml"), encoding="utf-8") as stream:
+        document = yaml.safe_load(stream)
+    topics = {
+        name: TYPE_OF_TOPIC_KEY[key]
+        for section in document.values()
+        for key, name in section["ros__parameters"]["topics"].items()
+    }
+    assert MACHINE.topics == topics
 
 
 def test_custom_machine_changes_the_numbers():

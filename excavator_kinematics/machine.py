@@ -1,0 +1,56 @@
+"""The excavator as a registered machine (entry point ``excavator`` of
+``manipulator_kinematics.machines``, see :mod:`manipulator_kinematics.registry`).
+
+Its joints are the actuators, in the order of D = [theta1, d2, d3, d4]: the swing drive and the
+boom, arm and bucket cylinders; its limits are the swing range and the strokes.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from excavator_kinematics import evaluation, synthetic
+from excavator_kinematics.kinematics import ACTUATORS, Excavator
+from excavator_kinematics.parameters import SCHEMA, SECTION, describe
+from manipulator_kinematics.registry import Machine
+from manipulator_kinematics.serial_chain import JointLimits
+
+_JOINT_STATE = "sensor_msgs/msg/JointState"
+_TWIST = "geometry_msgs/msg/TwistStamped"
+
+
+def _model(params: dict[str, Any]) -> Excavator:
+    return Excavator(describe(params, SECTION))
+
+
+def _limits(model: Excavator) -> JointLimits:
+    # The cylinders' values are lengths (m), the swing an angle (rad).
+    return JointLimits(ACTUATORS, model.limits.d_min, model.limits.d_max, prismatic=(False, True, True, True))
+
+
+MACHINE = Machine(
+    name="excavator",
+    summary="hydraulic excavator (paper 000): swing + boom/arm/bucket cylinders -> bucket tip, "
+    "velocity and acceleration, and the cylinder rates for a bucket velocity",
+    section=SECTION,
+    config_file="excavator_cet200.yaml",
+    schema=SCHEMA,
+    factory=_model,
+    # Every topic of the excavator nodes (config/excavator_nodes.yaml, default names).
+    topics={
+        "cylinder_lengths": _JOINT_STATE,
+        "joint_states": _JOINT_STATE,
+        "open_chain_joint_states": _JOINT_STATE,
+        "cylinder_rate_commands": _JOINT_STATE,
+        "velocity_controller/commands": "std_msgs/msg/Float64MultiArray",
+        "bucket_pose": "geometry_msgs/msg/PoseStamped",
+        "bucket_twist": _TWIST,
+        "bucket_accel": "geometry_msgs/msg/AccelStamped",
+        "target_bucket_twist": _TWIST,
+    },
+    joint_names=lambda model: ACTUATORS,
+    limits=_limits,
+    analyse=evaluation.analyse,
+    synthesize=synthetic.excavator_bag,
+    forward_node="excavator_forward",
+)
