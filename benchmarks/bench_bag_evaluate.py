@@ -2,7 +2,7 @@
 
     python benchmarks/bench_bag_evaluate.py [--hours 1.0] [--storage mcap|sqlite3] [--keep DIR]
 
-The bag is synthesised with the bag writer from core-library numbers (manipulator_kinematics.bag
+The bag is synthesised with the bag writer from core-library numbers (excavator_kinematics
 .synthetic): cylinder_lengths, joint_states, bucket_pose and bucket_twist at 100 Hz and
 target_bucket_twist at 20 Hz. Then the `evaluate` console script runs on it as a separate process
 (wall time, imports included), and its phases are timed in-process. Prints a table. The goal is
@@ -19,10 +19,10 @@ import time
 from pathlib import Path
 
 from excavator_kinematics.kinematics import Excavator
-from manipulator_kinematics.bag.analysis import Machines
+from excavator_kinematics.synthetic import excavator_bag
 from manipulator_kinematics.bag.evaluate import evaluate_bag, render, write_plots
-from manipulator_kinematics.bag.io import BagReader
-from manipulator_kinematics.bag.synthetic import excavator_bag, write_bag
+from manipulator_kinematics.bag.reader import BagReader
+from manipulator_kinematics.bag.synthetic import write_bag
 
 RATE_HZ = 100.0
 TARGET_EVERY = 5  # 20 Hz commands
@@ -75,7 +75,7 @@ def main() -> int:
         bag.arrays()
         rows.append(("  decode all topics", time.perf_counter() - start))
         start = time.perf_counter()
-        report, plots = evaluate_bag(bag, Machines.from_parameters({}))
+        report, plots = evaluate_bag(bag)
         rows.append(("  evaluate_bag (decode + analysis)", time.perf_counter() - start))
         start = time.perf_counter()
         render(report)

@@ -33,7 +33,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from manipulator_kinematics.bag.io import BagReader
+from manipulator_kinematics.bag.reader import BagReader
 
 # History of the publishers, as the package's nodes have it (qos_depth in config/excavator_nodes.yaml).
 DEPTH = 100

@@ -21,7 +21,7 @@ import numpy as np
 from excavator_kinematics.bucket_path import BucketPath
 from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator
 from excavator_kinematics.twist import boom_plane_normal, bucket_angles
-from manipulator_kinematics.bag.io import BagReader, TopicArrays
+from manipulator_kinematics.bag.reader import BagReader, TopicArrays
 
 AT_LIMIT_SPEED = 0.99  # fraction of the maximum speed that counts as "at the speed limit"
 AT_LIMIT_STROKE = 1e-3  # m (rad for the swing) from an end that counts as "at the stroke end"

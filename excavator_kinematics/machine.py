@@ -9,9 +9,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from excavator_kinematics import evaluation, synthetic
+from excavator_kinematics import evaluation, synthetic, urdf_joints
 from excavator_kinematics.kinematics import ACTUATORS, Excavator
 from excavator_kinematics.parameters import SCHEMA, SECTION, describe
+from excavator_kinematics.scene import excavator_scene
 from manipulator_kinematics.registry import Machine
 from manipulator_kinematics.serial_chain import JointLimits
 
@@ -53,4 +54,6 @@ MACHINE = Machine(
     analyse=evaluation.analyse,
     synthesize=synthetic.excavator_bag,
     forward_node="excavator_forward",
+    urdf=urdf_joints.excavator_urdf,
+    scene=excavator_scene,
 )

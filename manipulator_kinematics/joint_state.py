@@ -15,7 +15,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from manipulator_kinematics.bag import cdr
+from manipulator_kinematics.codec import cdr
 
 
 class InputError(ValueError):
@@ -73,7 +73,7 @@ class RawJointState(NamedTuple):
 
 def decode_joint_state(raw: bytes) -> RawJointState:
     """A sensor_msgs/JointState from its plain CDR bytes (as ROS 2 writes them; the layout rules are
-    :mod:`manipulator_kinematics.bag.cdr`'s, read here with struct for one message at a time).
+    :mod:`manipulator_kinematics.codec.cdr`'s, read here with struct for one message at a time).
 
     Raises InputError when the bytes are not a JointState (truncated, bad lengths or strings).
     Bytes after the last field are ignored: serializers pad the end (rclpy's by up to 8 bytes).

@@ -34,6 +34,8 @@ from numpy.typing import ArrayLike
 
 from manipulator_kinematics.serial_chain import JointLimits
 
+#: Quaternion components below this count as zero when the sign of a quaternion is fixed.
+QUATERNION_ZERO = 1e-12
 #: Two seed distances closer than this (relative) count as a tie.
 TIE_TOLERANCE = 1e-9
 
@@ -190,10 +192,12 @@ def quaternion_matrix(quaternion: ArrayLike) -> np.ndarray:
 
 
 def matrix_quaternion(rotation: ArrayLike) -> np.ndarray:
-    """Unit quaternions (..., 4) (x, y, z, w), w >= 0, of rotation matrices (..., 3, 3).
+    """Unit quaternions (..., 4) (x, y, z, w) of rotation matrices (..., 3, 3), sign fixed.
 
     Shepperd's method: the largest of the four squared components is taken from the trace, so
-    the result is accurate for every rotation (no division by a small number).
+    the result is accurate for every rotation (no division by a small number). Of q and -q the
+    one with w > 0 is returned; for a half turn (|w| below 1e-12, e.g. a tool pointing straight
+    down) the one whose first non-zero of x, y, z is positive, so round-off in w cannot flip it.
     """
     r = np.asarray(rotation, dtype=float)
     m00, m11, m22 = r[..., 0, 0], r[..., 1, 1], r[..., 2, 2]
@@ -210,7 +214,11 @@ def matrix_quaternion(rotation: ArrayLike) -> np.ndarray:
     ws = np.stack([(r[..., 2, 1] - r[..., 1, 2]) / s, (r[..., 0, 2] - r[..., 2, 0]) / s,
                    (r[..., 1, 0] - r[..., 0, 1]) / s, s / 4], axis=-1)
     q = np.choose(k[..., None], [xs, ys, zs, ws])
-    return np.where(q[..., 3:4] < 0, -q, q)
+    leading = np.where(np.abs(q) > QUATERNION_ZERO, q, 0.0)
+    # The sign of the first component (w, then x, y, z) that is not zero decides.
+    order = leading[..., [3, 0, 1, 2]]
+    first = np.take_along_axis(order, np.argmax(order != 0.0, axis=-1)[..., None], axis=-1)
+    return np.where(first < 0, -q, q)
 
 
 @runtime_checkable

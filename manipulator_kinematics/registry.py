@@ -10,6 +10,41 @@ section and default config file of the machine, the schema that validates it, th
 its joints and limits, the topics its nodes use (for ``record``), how to check a recorded run
 against the recomputed kinematics (``evaluate``) and how to write a synthetic bag (golden bags).
 Adding a machine touches only its own package, its config and the entry point.
+
+The bag hooks (None where a machine has none):
+
+* ``analyse(data, model, context) -> (report, plots)``: ``data: dict[str, TopicArrays]`` maps
+  the machine's topic names (relative, as in ``topics``) of one namespace of a bag to their
+  messages; ``model`` is the machine's model (``--params`` or the default); ``context`` an
+  :class:`manipulator_kinematics.bag.analysis.AnalysisContext` (``t0``: stamp origin in ns,
+  ``prefix``: plot-name prefix of the namespace and machine, ``node_settings``: node name ->
+  settings of the package's config files merged with ``evaluate --params`` files, so an analysis
+  can mirror its nodes' thresholds). Returns a JSON-ready dict (a ``consistency`` entry of
+  ``{topic: {matched, unmatched, <quantity>: error_stats}}`` is shown as a table) and a list of
+  :class:`manipulator_kinematics.bag.analysis.Plot`. Serial machines use
+  :func:`manipulator_kinematics.bag.analysis.serial`.
+* ``synthesize(model, samples, rate_hz) -> dict[str, Topic]``: a bag's topics (absolute names ->
+  :class:`manipulator_kinematics.bag.synthetic.Topic`): the inputs of the forward node along a
+  smooth motion and the outputs it must publish for them (``scripts/make_golden_bags.py`` writes
+  ``test/data/<name>_forward_golden``). Serial machines use
+  :func:`manipulator_kinematics.bag.synthetic.serial_bag`.
+* ``forward_node``: console script (= node name) of the machine's forward node; the golden-bag
+  replay test (test/test_bag_ros.py) runs it on the golden bag, which must exist.
+
+The description hook:
+
+* ``urdf(model) -> str``: the URDF (XML text) of the machine described by ``model``, for
+  robot_state_publisher and ``/robot_description``; :func:`manipulator_kinematics.urdf.machine_urdf`
+  calls it and ``mk_urdf`` writes it. Serial machines use
+  :func:`manipulator_kinematics.urdf.serial_urdf`.
+
+The drawing hook:
+
+* ``scene(model, state) -> Scene``: the machine as solids in its base frame
+  (:class:`manipulator_kinematics.scene.Scene`) for states (..., n) in the order of
+  ``joint_names(model)``; markers (``machine_markers``), Foxglove-ready bags
+  (:mod:`manipulator_kinematics.bag.visual`) and animations draw it. Serial machines use
+  :func:`manipulator_kinematics.scene.serial_scene`.
 """
 
 from __future__ import annotations
@@ -42,9 +77,10 @@ class Machine:
     """One machine kind, as its package declares it.
 
     ``factory`` builds the model from the validated parameter section; ``topics`` maps each
-    topic its nodes use (relative name) to its message type (``pkg/msg/Type``); ``analyse`` and
-    ``synthesize`` are the bag hooks (see :mod:`manipulator_kinematics.bag.evaluate` and
-    ``scripts/make_golden_bags.py`` for their signatures), None where the machine has none.
+    topic its nodes use (relative name) to its message type (``pkg/msg/Type``); ``analyse``,
+    ``synthesize`` and ``forward_node`` are the bag hooks (module docstring), None where the
+    machine has none; ``urdf`` builds the machine's URDF from a model (module docstring);
+    ``scene`` draws it (module docstring).
     """
 
     name: str
@@ -58,6 +94,9 @@ class Machine:
     limits: Callable[[Any], JointLimits] = _limits
     analyse: Callable[..., Any] | None = None
     synthesize: Callable[..., Any] | None = None
+    forward_node: str | None = None
+    urdf: Callable[[Any], str] | None = None
+    scene: Callable[[Any, Any], Any] | None = None  # (model, state array) -> scene.Scene
 
     def parameters(self, path: str | Path | None = None, node_name: str = "/**") -> dict[str, Any]:
         """The machine's section of ``path`` (default: its shipped config file), validated."""

@@ -8,6 +8,8 @@ tool_twist from joint_states; golden bag test/data/palletizer_forward_golden).
 
 from manipulator_kinematics.bag import analysis, synthetic
 from manipulator_kinematics.registry import Machine
+from manipulator_kinematics.urdf import serial_urdf
+from manipulator_kinematics.scene import serial_scene
 from palletizer_kinematics.kinematics import CONFIG_FILE, SCHEMA, SECTION, Palletizer
 
 MACHINE = Machine(
@@ -26,4 +28,7 @@ MACHINE = Machine(
     analyse=analysis.serial,
     synthesize=synthetic.serial_bag,
     forward_node="palletizer_forward",
+    # axis angles -> D-H angles (affine); the passive flange joint becomes two mimic joints
+    urdf=lambda model: serial_urdf("palletizer", model, to_chain=model.dh_angles),
+    scene=serial_scene,
 )

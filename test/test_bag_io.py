@@ -12,20 +12,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mcap.reader import make_reader
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Writer
 from rosbags.rosbag2.enums import StoragePlugin
 from rosbags.typesys import Stores, get_typestore
 
-from manipulator_kinematics.bag.io import (
-    BagError,
-    BagReader,
-    BagWriter,
-    TopicQos,
-    decode_messages,
-    encode_messages,
-)
+from manipulator_kinematics.bag.reader import BagReader
+from manipulator_kinematics.bag.types import BagError, TopicQos, decode_messages, encode_messages
+from manipulator_kinematics.bag.writer import BagWriter
 
 STORE = get_typestore(Stores.ROS2_JAZZY)
 T = STORE.types
@@ -225,7 +222,8 @@ def test_writer_refuses_to_overwrite_and_removes_only_bags(tmp_path: Path) -> No
 
 KILLED_WRITER = textwrap.dedent("""
     import os, signal, sys
-    from manipulator_kinematics.bag.io import BagWriter, encode_messages
+    from manipulator_kinematics.bag.types import encode_messages
+    from manipulator_kinematics.bag.writer import BagWriter
     path, storage = sys.argv[1], sys.argv[2]
     raws = encode_messages("sensor_msgs/msg/JointState", 300, {"header.stamp.sec": list(range(300)),
                                                              "position": [[float(i)] for i in range(300)]})
@@ -257,6 +255,31 @@ def test_a_killed_writer_leaves_everything_up_to_its_last_flush(tmp_path: Path, 
     x = bag.arrays()["/x"]
     np.testing.assert_array_equal(x["position"][:, 0], np.arange(200.0))
     np.testing.assert_array_equal(x.log_time, np.arange(200))
+
+
+@pytest.mark.parametrize("compression", [CompressionType.ZSTD, CompressionType.LZ4])
+def test_compressed_chunks_with_checksums_read_and_damage_is_caught(tmp_path: Path, compression: int) -> None:
+    # What ROS 2's own mcap plugin writes by default: compressed chunks, CRCs.
+    position = np.random.default_rng(3).normal(size=(500, 3))
+    raws = encode_messages(JOINT_STATE, 500, {"name": NAMES, "position": position})
+    path = tmp_path / "ros2.mcap"
+    with path.open("wb") as stream:
+        writer = McapWriter(stream, chunk_size=4096, compression=compression, enable_data_crcs=True)
+        writer.start(profile="ros2", library="test")
+        definition = STORE.generate_msgdef(JOINT_STATE, ros_version=2)[0]
+        schema = writer.register_schema(JOINT_STATE, "ros2msg", definition.encode())
+        channel = writer.register_channel("/cylinder_lengths", "cdr", schema)
+        for i, raw in enumerate(raws):
+            writer.add_message(channel, 1000 + i, raw, 1000 + i)
+        writer.finish()
+    arrays = BagReader(path).arrays()["/cylinder_lengths"]
+    np.testing.assert_array_equal(arrays["position"], position)
+    np.testing.assert_array_equal(arrays.log_time, 1000 + np.arange(500))
+    damaged = bytearray(path.read_bytes())
+    damaged[len(damaged) // 3] ^= 0x10  # inside a compressed chunk
+    path.write_bytes(bytes(damaged))
+    with pytest.raises(BagError, match=r"ros2\.mcap: corrupt: "):
+        BagReader(path)
 
 
 # ------------------------------------------------------------------------------------------ bad bags

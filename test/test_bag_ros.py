@@ -1,4 +1,5 @@
-"""record and replay as real processes over DDS: golden bags replayed into the real forward nodes,
+"""record and replay as real processes over DDS: golden bags replayed into the real forward nodes
+of every registered machine (a machine with a forward node and no golden bag fails),
 recorded bags read by an independent reader, a recorder killed with SIGKILL, replay timing and
 topic handling. Every wait is on a condition with a timeout."""
 
@@ -19,10 +20,22 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_harness import NodeProcess, Probe
 from sensor_msgs.msg import JointState
 
-from manipulator_kinematics.bag.io import BagError, BagReader, BagWriter, TopicArrays, encode_messages
-from manipulator_kinematics.bag.synthetic import Topic, stamp_fields, write_bag
+from manipulator_kinematics.bag.reader import BagReader, TopicArrays
+from manipulator_kinematics.bag.synthetic import (
+    GOLDEN_RATE_HZ,
+    GOLDEN_SAMPLES,
+    OUTPUT_DELAY,
+    Topic,
+    golden_name,
+    stamp_fields,
+    write_bag,
+)
 from manipulator_kinematics.bag.topics import package_topics
+from manipulator_kinematics.bag.types import BagError, decode_messages, encode_messages
+from manipulator_kinematics.bag.writer import BagWriter
 from manipulator_kinematics.node_util import console_script
+from manipulator_kinematics.params import flatten, unflatten
+from manipulator_kinematics.registry import Machine, machines
 
 DATA = Path(__file__).resolve().parent / "data"
 QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
@@ -113,39 +126,93 @@ def replay_into(
     return errors
 
 
-EXCAVATOR_OUTPUTS = ("/bucket_pose", "/bucket_twist", "/bucket_accel", "/open_chain_joint_states")
+def golden(name: str) -> Path:
+    return DATA / golden_name(name)
 
 
-def test_excavator_forward_reproduces_the_golden_bag(probe: Probe) -> None:
-    errors = replay_into(
-        probe,
-        ["excavator_forward"],
-        DATA / "excavator_forward_golden",
-        ["/joint_states", "/cylinder_lengths"],
-        EXCAVATOR_OUTPUTS,
-    )
+def split_golden(bag: Path) -> tuple[list[str], list[str]]:
+    """(inputs, outputs) of a golden bag: outputs are recorded OUTPUT_DELAY after their stamp
+    (bag/synthetic.py), inputs at or just after it."""
+    arrays = BagReader(bag).arrays()
+    outputs = sorted(t for t, a in arrays.items() if np.all(a.log_time - a.stamp_ns() == OUTPUT_DELAY))
+    return sorted(set(arrays) - set(outputs)), outputs
+
+
+def output_differences(a: dict[str, Topic], b: dict[str, Topic]) -> dict[str, float]:
+    """Per topic the largest difference of the values of equal stamps of two synthetic bags."""
+    def arrays(topic: str, t: Topic) -> TopicArrays:
+        return TopicArrays(topic, t.msgtype, t.log_time, decode_messages(t.msgtype, t.raw))
+
+    out = {}
+    for topic in a:
+        x, y = arrays(topic, a[topic]), arrays(topic, b[topic])
+        assert np.array_equal(x.stamp_ns(), y.stamp_ns()), topic
+        out[topic] = float(np.max(np.abs(expected_values(x) - expected_values(y))))
+    return out
+
+
+def _numbers(value: object) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _changes(base: dict) -> Iterator[tuple[str, object]]:
+    """(key, value) with one number of the section 2 % larger: scalars, then list items."""
+    for key, value in flatten(base).items():
+        if _numbers(value) and value:
+            yield key, float(f"{value * 1.02:.6g}")
+        elif isinstance(value, list) and value and all(_numbers(v) for v in value):
+            for i, item in enumerate(value):
+                if item:
+                    items = [float(v) for v in value]
+                    items[i] = float(f"{item * 1.02:.6g}")
+                    yield key, items
+
+
+def changed_value(machine: Machine) -> tuple[str, dict[str, float]]:
+    """``-p`` argument changing the first number of the machine's shipped section (by 2 %) that
+    leaves the golden inputs alone and moves an output by over 1 mm (or 1 mrad), and the output
+    differences the numpy core predicts for it."""
+    base = machine.parameters()
+    reference = machine.synthesize(machine.model(), GOLDEN_SAMPLES, GOLDEN_RATE_HZ)
+    inputs, _ = split_golden(golden(machine.name))
+    for key, new in _changes(base):
+        try:  # a value the schema or the model refuses, or a motion the changed machine cannot make
+            model = machine.model_from(unflatten({**flatten(base), key: new}))
+            topics = machine.synthesize(model, GOLDEN_SAMPLES, GOLDEN_RATE_HZ)
+        except ValueError:
+            continue
+        if any(topics[t].raw != reference[t].raw for t in inputs):
+            continue
+        differences = output_differences(topics, reference)
+        if max(differences.values()) > 1e-3:
+            text = f"[{', '.join(map(repr, new))}]" if isinstance(new, list) else repr(new)
+            outputs = {t: d for t, d in differences.items() if t not in inputs}
+            return f"{machine.section}.{key}:={text}", outputs
+    raise AssertionError(f"{machine.name}: no number of its section changes its outputs")
+
+
+FORWARD = [m for m in machines().values() if m.forward_node]
+
+
+@pytest.mark.parametrize("machine", FORWARD, ids=[m.name for m in FORWARD])
+def test_forward_node_reproduces_its_golden_bag(probe: Probe, machine: Machine) -> None:
+    bag = golden(machine.name)
+    assert bag.is_dir(), f"{machine.name}: a forward node but no golden bag (scripts/make_golden_bags.py)"
+    inputs, outputs = split_golden(bag)
+    assert inputs and outputs
+    errors = replay_into(probe, [machine.forward_node], bag, inputs, outputs)
     assert max(errors.values()) < MATCH, errors
 
 
-def test_a_changed_boom_length_fails_the_golden_comparison(probe: Probe) -> None:
-    errors = replay_into(
-        probe,
-        ["excavator_forward", "-p", "excavator.boom.length:=5.75"],
-        DATA / "excavator_forward_golden",
-        ["/joint_states", "/cylinder_lengths"],
-        ("/bucket_pose", "/open_chain_joint_states"),
-    )
-    # 5.6944 m -> 5.75 m moves the tip by centimetres (and the arm angle: its cylinder's base pin
-    # is fixed in the boom frame, measured from the arm pin).
-    assert errors["/bucket_pose"] > 1e-2 and errors["/open_chain_joint_states"] > 1e-2, errors
-
-
-def test_scara_forward_reproduces_the_golden_bag_and_notices_a_change(probe: Probe) -> None:
-    bag, inputs, outputs = DATA / "scara_forward_golden", ["/joint_states"], ("/tool_pose", "/tool_twist")
-    errors = replay_into(probe, ["scara_forward"], bag, inputs, outputs)
-    assert max(errors.values()) < MATCH, errors
-    changed = replay_into(probe, ["scara_forward", "-p", "scara.l2:=0.31"], bag, inputs, outputs)
-    assert min(changed.values()) > 1e-3, changed
+@pytest.mark.parametrize("machine", FORWARD, ids=[m.name for m in FORWARD])
+def test_a_changed_machine_value_fails_the_golden_comparison(probe: Probe, machine: Machine) -> None:
+    change, predicted = changed_value(machine)
+    inputs, outputs = split_golden(golden(machine.name))
+    errors = replay_into(probe, [machine.forward_node, "-p", change], golden(machine.name), inputs, outputs)
+    # The node runs the changed machine: each output is off by what the numpy core predicts.
+    assert max(errors.values()) > 1e-3, (change, errors)
+    for topic in outputs:
+        assert errors[topic] == pytest.approx(predicted[topic], abs=1e-9), (change, topic)
 
 
 # ------------------------------------------------------------------------------------------ record

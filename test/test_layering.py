@@ -26,7 +26,8 @@ def imported_modules(path: Path) -> set[str]:
 def test_the_shared_package_imports_no_machine_package() -> None:
     assert {"excavator_kinematics", "scara_kinematics"} <= set(MACHINE_PACKAGES)
     offenders = {
-        str(path.relative_to(REPO)): sorted(m for m in imported_modules(path) if m.split(".")[0] in MACHINE_PACKAGES)
+        str(path.relative_to(REPO)): sorted(
+            m for m in imported_modules(path) if m.split(".")[0] in MACHINE_PACKAGES)
         for path in SHARED.rglob("*.py")
     }
     assert {k: v for k, v in offenders.items() if v} == {}

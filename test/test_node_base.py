@@ -92,15 +92,16 @@ def test_parameters_are_read_only_and_a_set_is_refused_with_a_reason(probe: Prob
     with NodeProcess("scara_ik_server") as process:
         describe = probe.node.create_client(DescribeParameters, "/scara_ik_server/describe_parameters")
         setter = probe.node.create_client(SetParameters, "/scara_ik_server/set_parameters")
-        probe.wait_until(lambda: describe.service_is_ready() and setter.service_is_ready(), TIMEOUT, "services")
+        probe.wait_until(lambda: describe.service_is_ready() and setter.service_is_ready(), TIMEOUT,
+                         "parameter services")
         descriptors = probe.call(describe, DescribeParameters.Request(names=["scara.l2", "base_frame"]),
                                  TIMEOUT).descriptors
         assert all(d.read_only for d in descriptors)
         assert descriptors[0].description == "upper arm, shoulder to elbow (m)"
         assert descriptors[1].description.startswith("frame of targets and results")
         value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=0.5)
-        result = probe.call(setter, SetParameters.Request(parameters=[ParameterMsg(name="scara.l2", value=value)]),
-                            TIMEOUT).results[0]
+        request = SetParameters.Request(parameters=[ParameterMsg(name="scara.l2", value=value)])
+        result = probe.call(setter, request, TIMEOUT).results[0]
         assert not result.successful and "read-only" in result.reason, result.reason
         assert get(probe, "scara_ik_server", ["scara.l2"])[0].double_value == SCARA["l2"]
         assert process.alive()

@@ -1,4 +1,4 @@
-"""manipulator_kinematics.packed: bytes written in place equal rclpy's own serialization of the same
+"""manipulator_kinematics.codec.packed: bytes written in place equal rclpy's own serialization of the same
 message, for every layout our nodes publish (independent reference: rclpy's serializer)."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header
 
-from manipulator_kinematics.packed import PackedMessage
+from manipulator_kinematics.codec.packed import PackedMessage
 
 
 def stamped(cls: type, values: list[float]) -> object:

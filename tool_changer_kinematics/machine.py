@@ -2,6 +2,8 @@
 
 from manipulator_kinematics.bag import analysis, synthetic
 from manipulator_kinematics.registry import Machine
+from manipulator_kinematics.urdf import serial_urdf
+from manipulator_kinematics.scene import serial_scene
 from tool_changer_kinematics.kinematics import CONFIG_FILE, SCHEMA, SECTION, ToolChanger
 
 MACHINE = Machine(
@@ -19,4 +21,6 @@ MACHINE = Machine(
     analyse=analysis.serial,
     synthesize=synthetic.serial_bag,
     forward_node="tool_changer_forward",
+    urdf=lambda model: serial_urdf("tool_changer", model),
+    scene=serial_scene,
 )

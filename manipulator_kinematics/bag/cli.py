@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable, Sequence
 
-from manipulator_kinematics.bag.io import BagError
+from manipulator_kinematics.bag.types import BagError
 
 #: Exit status of an expected failure (bad bag, bad arguments, existing output).
 FAILED = 1
@@ -16,7 +16,8 @@ def guarded(name: str, body: Callable[[Sequence[str]], int], argv: Sequence[str]
     try:
         return body(sys.argv[1:] if argv is None else list(argv))
     except BagError as error:
-        print(f"{name}: error: {error}", file=sys.stderr)
+        # One line even when the message quotes a multi-line text (a type definition's parse error).
+        print(f"{name}: error: {' '.join(str(error).split())}", file=sys.stderr)
         return FAILED
     except KeyboardInterrupt:
         return 130

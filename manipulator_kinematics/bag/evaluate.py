@@ -2,22 +2,27 @@
 
     evaluate BAG [-o DIR] [--params FILE ...] [--no-plots] [--recover]
 
-Finds the machines in the bag (an excavator or SCARA arm per namespace, by their topics and
-joint names), recomputes their kinematics from the recorded inputs with the numpy cores and
-reports the error of the published outputs, the tracking of commanded bucket twists, cylinder
-speed and stroke statistics, and per topic the message rate, gaps and latency (see
-:mod:`manipulator_kinematics.bag.analysis`). Writes ``report.json`` and PNG plots to DIR
-(default: ``<bag>_evaluation`` beside the bag); nothing is written when the bag cannot be read.
+Finds the registered machines (:mod:`manipulator_kinematics.registry`) in each namespace of the
+bag, by their joint names and topics (:func:`machines_in`), has each one's ``analyse`` hook
+recompute its kinematics from the recorded inputs with its numpy core and report the error of
+the published outputs (and what else the machine checks: the excavator's command tracking,
+cylinder speeds and strokes), and reports per topic the message rate, gaps and latency (see
+:mod:`manipulator_kinematics.bag.analysis`). Models come from ``--params`` files (each machine
+whose parameter section they hold, validated) or are the machines' shipped defaults. Writes
+``report.json`` and PNG plots to DIR (default: ``<bag>_evaluation`` beside the bag); nothing is
+written when the bag cannot be read.
 Needs no ROS installation beyond the message definitions that rosbags ships.
 """
 
 from __future__ import annotations
 
 import argparse
+import difflib
 import json
 import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -25,11 +30,19 @@ import numpy as np
 import yaml
 
 from manipulator_kinematics.bag import analysis
-from manipulator_kinematics.bag.analysis import Machines, Panel, Plot
+from manipulator_kinematics.bag.analysis import AnalysisContext, Panel, Plot
 from manipulator_kinematics.bag.cli import guarded
-from manipulator_kinematics.bag.io import BagError, BagReader, TopicArrays
-from manipulator_kinematics.bag.topics import package_topics
-from manipulator_kinematics.params import ConfigError, flatten, load_parameters, unflatten
+from manipulator_kinematics.bag.reader import BagReader, TopicArrays
+from manipulator_kinematics.bag.topics import (
+    JOINT_STATE,
+    merged,
+    node_sections,
+    node_settings,
+    package_topics,
+)
+from manipulator_kinematics.bag.types import BagError
+from manipulator_kinematics.params import flatten, load_parameters, unflatten
+from manipulator_kinematics.registry import Machine, by_section, machines
 
 NAME = "evaluate"
 # Points per curve in a plot: each bin keeps its min and max, so spikes stay visible.
@@ -48,8 +61,8 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
         type=Path,
         default=[],
         metavar="FILE",
-        help="ROS parameter files with the machines (excavator:, scara: sections); "
-        "default: the package's default machines",
+        help="ROS parameter files with machines (a registered machine's section under /**, "
+        "complete) and node settings (/**/<node> sections); default: the shipped machines and settings",
     )
     parser.add_argument("--no-plots", action="store_true", help="write no PNG files")
     parser.add_argument(
@@ -68,9 +81,24 @@ def split_topic(topic: str, names: Sequence[str]) -> tuple[str, str] | None:
     return None
 
 
-def load_machines(files: Sequence[Path]) -> Machines:
-    """Machines and node settings from ROS parameter files: ``/**`` sections for the machines,
-    node sections (``excavator_forward``, ``/**/excavator_forward``, ...) for node settings; a
+@dataclass
+class Setup:
+    """What evaluate recomputes with: models by machine name (the default model of a machine not
+    given is built when first needed) and node name -> settings (:class:`AnalysisContext`)."""
+
+    models: dict[str, Any] = field(default_factory=dict)
+    node_settings: Mapping[str, Mapping[str, Any]] = field(default_factory=node_settings)
+
+    def model(self, machine: Machine) -> Any:
+        if machine.name not in self.models:
+            self.models[machine.name] = machine.model()
+        return self.models[machine.name]
+
+
+def load_setup(files: Sequence[Path]) -> Setup:
+    """Models and node settings from ROS parameter files: under ``/**`` the section of each
+    registered machine (validated: the merged section must be complete), node sections
+    (``excavator_forward``, ``/**/excavator_forward``, ...) over the package's node settings; a
     later file's value wins key by key, as it does for a node given several files."""
     params: dict[str, Any] = {}
     nodes: dict[str, dict[str, Any]] = {}
@@ -79,17 +107,59 @@ def load_machines(files: Sequence[Path]) -> Machines:
             if not path.is_file():
                 raise BagError(f"--params {path}: no such file")
             params.update(flatten(load_parameters(path)))
-            for key in yaml.safe_load(path.read_text(encoding="utf-8")) or {}:
-                if key != "/**":
-                    node = nodes.setdefault(str(key).rsplit("/", 1)[-1], {})
-                    node.update(flatten(load_parameters(path, key)))
-        return Machines.from_parameters(unflatten(params), {name: unflatten(v) for name, v in nodes.items()})
-    except (ConfigError, yaml.YAMLError) as error:
+            for node, settings in node_sections(path).items():
+                nodes[node] = merged(nodes.get(node, {}), settings)
+        models = {}
+        for key, section in unflatten(params).items():
+            machine = by_section(key)
+            if machine is not None:
+                models[machine.name] = machine.model_from(section)
+            elif isinstance(section, dict):
+                known = [m.section for m in machines().values()]
+                close = difflib.get_close_matches(key, known, n=1)
+                hint = f" (did you mean {close[0]!r}?)" if close else ""
+                raise BagError(f"--params: {key!r} is not the section of a registered machine{hint}; "
+                               f"known: {', '.join(known)}")
+        defaults = node_settings()
+        settings = {name: merged(defaults.get(name, {}), nodes.get(name, {})) for name in defaults | nodes}
+        return Setup(models, settings)
+    except (ValueError, yaml.YAMLError) as error:  # ConfigError (a key named) or a model's refusal
         raise BagError(f"--params: {error}") from None
 
 
-def evaluate_bag(bag: BagReader, machines: Machines) -> tuple[dict[str, Any], list[Plot]]:
-    """The whole report (JSON-ready) and its plots."""
+def machines_in(data: Mapping[str, TopicArrays], setup: Setup) -> list[Machine]:
+    """The registered machines (with an ``analyse`` hook) whose nodes ran in one namespace
+    (``data``: relative topic name -> arrays): a machine is there when a topic that no other
+    machine declares has messages, or when its JointState topics name all its joints."""
+    registered = machines()
+    declared: dict[str, int] = {}
+    for machine in registered.values():
+        for topic in machine.topics:
+            declared[topic] = declared.get(topic, 0) + 1
+    found = []
+    for machine in registered.values():
+        own = [topic for topic in machine.topics if topic in data]
+        if machine.analyse is None or not own:
+            continue
+        if any(declared[topic] == 1 for topic in own):
+            found.append(machine)
+            continue
+        states = [data[topic] for topic in own if machine.topics[topic] == JOINT_STATE]
+        labels = {str(name) for arrays in states for name in np.unique(arrays["name"])}
+        names = machine.joint_names(setup.model(machine)) if states else ()
+        # The label check first: it spares building the model of every machine that is not there.
+        if states and set(names) <= labels:
+            seen = np.zeros(len(names), dtype=bool)
+            for arrays in states:
+                seen |= np.isfinite(arrays.by_name("position", names)).any(axis=0)
+            if seen.all():
+                found.append(machine)
+    return found
+
+
+def evaluate_bag(bag: BagReader, setup: Setup | None = None) -> tuple[dict[str, Any], list[Plot]]:
+    """The whole report (JSON-ready) and its plots; ``setup`` default: the shipped machines."""
+    setup = Setup() if setup is None else setup
     if bag.message_count == 0:
         raise BagError(f"{bag.path}: the bag holds no messages")
     ours = package_topics()
@@ -135,18 +205,11 @@ def evaluate_bag(bag: BagReader, machines: Machines) -> tuple[dict[str, Any], li
     for namespace, names in sorted(grouped.items()):
         data: dict[str, TopicArrays] = {name: arrays[topic] for name, topic in names.items()}
         prefix = "" if namespace == "/" else namespace.strip("/").replace("/", "_") + "_"
-        joints = data.get("joint_states")
-        if any(n in data for n in analysis.EXCAVATOR_TOPICS) or (
-            joints is not None and analysis.has_swing(joints)
-        ):
-            section, figures = analysis.excavator(data, machines, stamp0, prefix)
-            report["machines"].append({"kind": "excavator", "namespace": namespace, **section})
-            plots += figures
-        if any(n in data for n in analysis.SCARA_TOPICS) or (
-            joints is not None and analysis.has_scara_joints(joints, machines)
-        ):
-            section, figures = analysis.scara(data, machines, stamp0, prefix)
-            report["machines"].append({"kind": "scara", "namespace": namespace, **section})
+        for machine in machines_in(data, setup):
+            context = AnalysisContext(stamp0, f"{prefix}{machine.name}_", setup.node_settings)
+            own = {topic: data[topic] for topic in machine.topics if topic in data}
+            section, figures = machine.analyse(own, setup.model(machine), context)
+            report["machines"].append({"kind": machine.name, "namespace": namespace, **section})
             plots += figures
     return report, plots
 
@@ -214,10 +277,7 @@ def render(report: dict[str, Any]) -> str:
     for machine in report["machines"]:
         out += ["", f"{machine['kind']} in namespace {machine['namespace']}"]
         errors = []
-        for topic, entry in {
-            **machine.get("consistency", {}),
-            **{k: v for k, v in machine.items() if k in ("tool_pose", "tool_twist")},
-        }.items():
+        for topic, entry in machine.get("consistency", {}).items():
             for quantity, stats in entry.items():
                 if isinstance(stats, dict):
                     errors.append(
@@ -366,9 +426,12 @@ def write_plots(plots: Sequence[Plot], directory: Path) -> list[Path]:
 
 def run_evaluate(argv: Sequence[str]) -> int:
     args = parse_args(argv)
-    machines = load_machines(args.params)
+    setup = load_setup(args.params)
     bag = BagReader(args.bag, recover=args.recover)
-    report, plots = evaluate_bag(bag, machines)
+    # A bag's numbers can be anything (a damaged byte makes 1e300): what overflows is reported as
+    # inf, not as numpy warnings on stderr.
+    with np.errstate(all="ignore"):
+        report, plots = evaluate_bag(bag, setup)
     print(render(report))
     output = args.output or args.bag.parent / f"{args.bag.stem}_evaluation"
     try:

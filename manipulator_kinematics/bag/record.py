@@ -3,18 +3,19 @@
     record [-o BAG] [-s mcap|sqlite3] [--overwrite] [--topics T ...] [--type T:=pkg/msg/Type ...]
            [--discovery-timeout S] [--duration S] [--flush-interval S] [--ros-args ...]
 
-Default topics: every topic of the package's nodes (their config files), resolved in the
+Default topics: every topic of the registered machines' nodes (``Machine.topics``), resolved in the
 recorder's namespace (``--ros-args -r __ns:=/machine1``) and remappings. A topic's type is the
 one given with ``--type``, else the one its publishers show in the graph (waiting up to
 ``--discovery-timeout`` for them), else the package's own type for that topic. Messages are
-stored as received (raw CDR) at their DDS reception time. The bag is flushed every
-``--flush-interval`` s, so SIGKILL loses at most that much (see docs/bags.md).
+stored as received (raw CDR) at the time the recorder takes them. The bag is flushed every
+``--flush-interval`` s, so SIGKILL loses at most that much (see docs/bags.md). Spun by
+:func:`manipulator_kinematics.executor.spin` (``MK_EXECUTOR``); on SIGINT/SIGTERM it stores
+what is still queued and then ends.
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
 import importlib
 import math
 import signal
@@ -26,15 +27,16 @@ from datetime import datetime
 from pathlib import Path
 
 import rclpy
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
-from rclpy.subscription import Subscription
 
 from manipulator_kinematics.bag.cli import guarded, parse_assignments, split_ros_args
-from manipulator_kinematics.bag.io import STORAGES, BagError, BagWriter, TopicQos
 from manipulator_kinematics.bag.topics import package_topics
+from manipulator_kinematics.bag.types import BagError, TopicQos
+from manipulator_kinematics.bag.writer import STORAGES, BagWriter
+from manipulator_kinematics.executor import executor_name, spin
+from manipulator_kinematics.params import ConfigError
 
 NAME = "record"
 # Subscriber queue: 1 s of a 1 kHz topic, so a stall of the recorder's thread loses nothing.
@@ -94,44 +96,44 @@ def discover_types(
 
 
 class Receiver:
-    """Stores whatever arrives on the recorder's subscriptions, until stopped.
+    """Stores whatever arrives on the recorder's subscriptions (raw CDR), until stopped.
 
-    rclpy's executor spends about 0.5 ms of Python per message (one wake-up and callback each),
-    which at 1 kHz keeps a core busy and makes the recorder the first to fall behind on a loaded
-    machine. This loop waits in rcl on all subscriptions at once (the wait set the executor is
-    built on) and then takes every queued message of each ready one, so a recorder that fell
-    behind catches up in one pass. Record time is the DDS reception time of each message.
+    Record time is the time the message is handed to its callback: the DDS reception time is
+    only in the message info, which EventsExecutor cannot pass (see manipulator_kinematics.executor).
     """
 
-    def __init__(self, node: Node, writer: BagWriter, subscriptions: dict[str, Subscription]) -> None:
-        self.node, self.writer, self.subscriptions = node, writer, subscriptions
-        self.counts = dict.fromkeys(subscriptions, 0)
+    def __init__(self, node: Node, writer: BagWriter) -> None:
+        self.node, self.writer = node, writer
+        self.counts: dict[str, int] = {}
+        self._counted = -1
 
-    def run(self, duration: float | None, stop: threading.Event) -> None:
-        """Record for ``duration`` s (None: until ``stop`` is set)."""
+    def subscribe(self, topic: str, msg_class: type, qos: QoSProfile) -> None:
+        self.counts[topic] = 0
+        clock, write, counts = self.node.get_clock(), self.writer.write, self.counts
+
+        def store(raw: bytes) -> None:
+            write(topic, clock.now().nanoseconds, raw)
+            counts[topic] += 1
+
+        self.node.create_subscription(msg_class, topic, store, qos, raw=True)
+
+    def run(self, duration: float | None, stop: threading.Event, executor: str) -> None:
+        """Record for ``duration`` s (None: until ``stop`` is set), then take what is still queued."""
         end = math.inf if duration is None else time.monotonic() + duration
-        wait_set = _rclpy.WaitSet(len(self.subscriptions), 0, 0, 0, 0, 0, self.node.context.handle)
-        with contextlib.ExitStack() as handles:
-            for subscription in self.subscriptions.values():
-                handles.enter_context(subscription.handle)
-            while not stop.is_set() and (left := end - time.monotonic()) > 0:
-                wait_set.clear_entities()
-                for subscription in self.subscriptions.values():
-                    wait_set.add_subscription(subscription.handle)
-                # A signal handler only runs between waits: the timeout bounds how late a stop is seen.
-                wait_set.wait(int(min(left, STOP_LATENCY, self.writer.flush_interval) * 1e9))
-                ready = set(wait_set.get_ready_entities("subscription"))
-                for topic, subscription in self.subscriptions.items():
-                    if subscription.handle.pointer in ready:
-                        self._take_all(topic, subscription)
-                self.writer.flush_if_due()
+        self.node.create_timer(self.writer.flush_interval, self.writer.flush_if_due)
 
-    def _take_all(self, topic: str, subscription: Subscription) -> None:
-        handle, msgtype, clock = subscription.handle, subscription.msg_type, self.node.get_clock()
-        while (taken := handle.take_message(msgtype, True)) is not None:
-            raw, info = taken
-            self.writer.write(topic, info.get("received_timestamp") or clock.now().nanoseconds, raw)
-            self.counts[topic] += 1
+        def done() -> bool:
+            if not stop.is_set() and time.monotonic() < end:
+                return False
+            # Stopped: once a whole poll went by without a message, every one that arrived before
+            # the stop (all acknowledged ones of a publisher that waited for its acks) is stored.
+            total = sum(self.counts.values())
+            quiet, self._counted = total == self._counted, total
+            return quiet
+
+        # A signal handler only runs between polls: the poll bounds how late a stop is seen.
+        spin(self.node, executor, until=done, poll=min(STOP_LATENCY, self.writer.flush_interval))
+        self.writer.flush_if_due()
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
@@ -179,10 +181,15 @@ def record(argv: Sequence[str]) -> int:
     if (output.exists() or output.is_symlink()) and not args.overwrite:
         raise BagError(f"{output} exists; not overwriting it (use --overwrite)")
     given = parse_assignments(args.types, "--type")
+    try:
+        executor = executor_name()
+    except ConfigError as error:
+        raise BagError(str(error)) from None
 
-    # Our own handlers instead of rclpy's: its SIGINT handler also raises KeyboardInterrupt
-    # wherever the recorder is, which could cut a bag write in half. SIGTERM (what launch and
-    # test harnesses send) stops the recording like Ctrl-C.
+    # Our own handlers instead of rclpy's: those shut the context down at once, losing what is
+    # still queued, and their SIGINT also raises KeyboardInterrupt wherever the recorder is, which
+    # could cut a bag write in half. SIGTERM (what launch and test harnesses send) stops the
+    # recording like Ctrl-C.
     rclpy.init(args=[NAME, *ros_args], signal_handler_options=SignalHandlerOptions.NO)
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -210,20 +217,16 @@ def record(argv: Sequence[str]) -> int:
         classes = {topic: message_class(t) for topic, t in types.items()}
 
         writer = BagWriter(output, args.storage, overwrite=args.overwrite, flush_interval=args.flush_interval)
-        subscriptions = {}
+        receiver = Receiver(node, writer)
         for topic, msgtype in types.items():
             offered = offered_qos(node, topic)
             writer.add_topic(topic, msgtype, offered[0] if offered else None)
-            # Never called: the Receiver takes the messages itself.
-            subscriptions[topic] = node.create_subscription(
-                classes[topic], topic, lambda _: None, subscription_qos(offered), raw=True
-            )
-        receiver = Receiver(node, writer, subscriptions)
+            receiver.subscribe(topic, classes[topic], subscription_qos(offered))
         node.get_logger().info(
             f"recording {len(types)} topics to {output} ({args.storage}): "
             f"{', '.join(f'{t} [{m}]' for t, m in types.items())}"
         )
-        receiver.run(args.duration, stop)
+        receiver.run(args.duration, stop, executor)
         writer.close()
         total = sum(receiver.counts.values())
         print(f"{NAME}: {total} messages on {len(receiver.counts)} topics in {output}", file=sys.stderr)

@@ -17,6 +17,7 @@ import signal
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import rclpy
@@ -25,8 +26,9 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from manipulator_kinematics.bag.cli import guarded, parse_assignments, split_ros_args
-from manipulator_kinematics.bag.io import BagError, BagReader, TopicQos
+from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.bag.record import QUEUE_DEPTH, message_class
+from manipulator_kinematics.bag.types import BagError, TopicQos
 
 NAME = "replay"
 # Longest single sleep, so Ctrl-C and shutdown are noticed during long pauses in a bag.
@@ -99,13 +101,24 @@ def wait_for_subscribers(node: Node, publishers: dict, timeout: float) -> None:
         time.sleep(0.01)
 
 
-def replay(argv: Sequence[str]) -> int:
-    ours, ros_args = split_ros_args(argv)
-    args = parse_args(ours)
+@dataclass(frozen=True)
+class Playlist:
+    """What replay publishes: messages (topic, record time ns, CDR bytes) in record order, from
+    ``start`` on, each topic with its message class, recorded QoS and published name."""
+
+    messages: list[tuple[str, int, bytes]]
+    start: int
+    classes: dict[str, type]
+    qos: dict[str, TopicQos | None]
+    names: dict[str, str]
+
+
+def load(args: argparse.Namespace) -> Playlist:
+    """Everything replay reads before it starts ROS; BagError for a bag it cannot play as asked."""
     bag = BagReader(args.bag, recover=args.recover)
     if bag.recovered:
         print(f"{NAME}: warning: {bag.recovered}", file=sys.stderr)
-    topics = list(args.topics or bag.topics)
+    topics = bag.select(args.topics)
     remap = parse_assignments(args.remap, "--remap")
     strangers = sorted(set(remap) - set(bag.topics))
     if strangers:
@@ -120,26 +133,37 @@ def replay(argv: Sequence[str]) -> int:
             f"--start-offset {args.start_offset:g} s is past the end of the selected messages "
             f"({(messages[-1][1] - messages[0][1]) * 1e-9:.3f} s)"
         )
+    return Playlist(
+        messages,
+        start,
+        classes,
+        {topic: bag.topics[topic].qos for topic in topics},
+        {topic: remap.get(topic, topic) for topic in topics},
+    )
+
+
+def replay(argv: Sequence[str]) -> int:
+    ours, ros_args = split_ros_args(argv)
+    args = parse_args(ours)
+    playlist = load(args)
 
     rclpy.init(args=[NAME, *ros_args])
     signal.signal(signal.SIGTERM, lambda *_: rclpy.try_shutdown())
     node = Node("bag_replay")
     try:
         publishers = {
-            topic: node.create_publisher(
-                classes[topic], remap.get(topic, topic), publisher_qos(bag.topics[topic].qos)
-            )
-            for topic in topics
+            topic: node.create_publisher(cls, playlist.names[topic], publisher_qos(playlist.qos[topic]))
+            for topic, cls in playlist.classes.items()
         }
         if args.wait_for_subscribers > 0:
             wait_for_subscribers(node, publishers, args.wait_for_subscribers)
         played = 0
         while rclpy.ok():
             wall0 = time.monotonic()
-            for topic, log_time, raw in messages:
-                if log_time < start:
+            for topic, log_time, raw in playlist.messages:
+                if log_time < playlist.start:
                     continue
-                due = wall0 + (log_time - start) * 1e-9 / args.rate
+                due = wall0 + (log_time - playlist.start) * 1e-9 / args.rate
                 while rclpy.ok() and (wait := due - time.monotonic()) > 0:
                     time.sleep(min(wait, MAX_SLEEP))
                 if not rclpy.ok():

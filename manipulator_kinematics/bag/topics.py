@@ -1,78 +1,79 @@
-"""The package's topics: names from the nodes' config files, message types by topic key (no rclpy).
+"""The package's topics, from the machine registry, and its nodes' settings, from its config files
+(no rclpy).
 
-A node's section of a ``config/*.yaml`` file names each of its topics either as ``topics.<key>``
-(excavator nodes) or as ``<key>_topic`` (SCARA nodes); the key says what flows there, so it fixes
-the message type. ``record`` subscribes to all of them by default.
+Each registered machine declares the topics its nodes use (``Machine.topics``: relative name ->
+message type); ``record`` subscribes to all of them by default and ``evaluate`` reads them. The
+node settings (sections ``/**/<node>`` of ``config/*.yaml``) are what an analysis mirrors.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import yaml
 
-from manipulator_kinematics.params import CONFIG_DIR, config_path, flatten, load_parameters
+from manipulator_kinematics.params import CONFIG_DIR, ConfigError, config_path, flatten, unflatten
+from manipulator_kinematics.registry import machines
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 POSE = "geometry_msgs/msg/PoseStamped"
 TWIST = "geometry_msgs/msg/TwistStamped"
 ACCEL = "geometry_msgs/msg/AccelStamped"
 
-#: Message type of each topic key used in the nodes' config files.
-TYPES_BY_KEY: dict[str, str] = {
-    "cylinder_lengths": JOINT_STATE,
-    "joint_states": JOINT_STATE,
-    "open_chain_joint_states": JOINT_STATE,
-    "rate_commands": JOINT_STATE,
-    "rate_command_array": "std_msgs/msg/Float64MultiArray",
-    "bucket_pose": POSE,
-    "bucket_twist": TWIST,
-    "bucket_accel": ACCEL,
-    "target_bucket_twist": TWIST,
-    "pose": POSE,
-    "twist": TWIST,
-}
+
+def package_topics() -> dict[str, str]:
+    """{topic name as the nodes use it (relative): message type} over every registered machine.
+
+    Raises ValueError when two machines declare one topic name with different types.
+    """
+    topics: dict[str, str] = {}
+    owner: dict[str, str] = {}
+    for name, machine in machines().items():
+        for topic, msgtype in machine.topics.items():
+            if topics.setdefault(topic, msgtype) != msgtype:
+                raise ValueError(
+                    f"machines {owner[topic]} and {name} declare topic {topic!r} with different types "
+                    f"({topics[topic]}, {msgtype})"
+                )
+            owner.setdefault(topic, name)
+    return topics
+
+
+def node_sections(path: Path) -> dict[str, dict[str, Any]]:
+    """Node name -> its own ``ros__parameters`` (nested) of every node section of a parameters
+    file (``name``, ``/**/name`` or ``/ns/name``; ``/**`` holds machines, not nodes)."""
+    with open(path, encoding="utf-8") as stream:
+        document = yaml.safe_load(stream) or {}
+    if not isinstance(document, dict):
+        raise ConfigError(f"{path}: not a ROS parameters file (top level is not a mapping)")
+    out: dict[str, dict[str, Any]] = {}
+    for key, section in document.items():
+        if key != "/**" and isinstance(section, dict):
+            parameters = section.get("ros__parameters") or {}
+            if not isinstance(parameters, dict):
+                raise ConfigError(f"{path}: {key}: ros__parameters is not a mapping")
+            node = str(key).rsplit("/", 1)[-1]
+            out[node] = merged(out.get(node, {}), parameters)
+    return out
+
+
+def merged(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
+    """Nested parameters ``base`` with ``override``'s values, key by key (a later file wins)."""
+    return unflatten({**flatten(base), **flatten(override)})
 
 
 def config_files() -> list[Path]:
     """The package's config files, from the source tree or else the installed share directory."""
     files = sorted(CONFIG_DIR.glob("*.yaml"))
-    return files or sorted(config_path("excavator_nodes.yaml").parent.glob("*.yaml"))
+    folders = {config_path(m.config_file).parent for m in machines().values()} if not files else set()
+    return files or sorted(path for folder in folders for path in folder.glob("*.yaml"))
 
 
-def _sections() -> list[tuple[Path, str]]:
-    """(config file, node section key) of every node section (``name`` or ``/**/name``)."""
-    out = []
+def node_settings() -> dict[str, dict[str, Any]]:
+    """Node name -> the settings it reads from the package's config files (nested)."""
+    out: dict[str, dict[str, Any]] = {}
     for path in config_files():
-        with open(path, encoding="utf-8") as stream:
-            document = yaml.safe_load(stream) or {}
-        out += [(path, key) for key in document if key != "/**"]
+        for node, parameters in node_sections(path).items():
+            out[node] = merged(out.get(node, {}), parameters)
     return out
-
-
-def node_settings(node: str) -> dict:
-    """The settings a node of the package reads from its config file (nested dict)."""
-    for path, key in _sections():
-        if key.rsplit("/", 1)[-1] == node:
-            return load_parameters(path, key)
-    raise KeyError(f"no section for node {node!r} in {[p.name for p in config_files()]}")
-
-
-def package_topics() -> dict[str, str]:
-    """{topic name as the nodes use it (relative): message type} over every node's config.
-
-    Raises KeyError naming a topic key whose type is not in :data:`TYPES_BY_KEY`.
-    """
-    topics: dict[str, str] = {}
-    for path, node in _sections():
-        for name, value in flatten(load_parameters(path, node)).items():
-            if name.startswith("topics."):
-                key = name[len("topics.") :]
-            elif name.endswith("_topic"):
-                key = name[: -len("_topic")]
-            else:
-                continue
-            if key not in TYPES_BY_KEY:
-                raise KeyError(f"{path.name}: {node}: topic key {key!r} has no message type in TYPES_BY_KEY")
-            topics.setdefault(value, TYPES_BY_KEY[key])
-    return topics

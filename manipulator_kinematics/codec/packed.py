@@ -4,7 +4,7 @@ rclpy's ``Publisher.publish(msg)`` converts the Python message to C field by fie
 serializing it: on our machines 20 of the 30 us that a PoseStamped publish costs, more than the
 kinematics behind it. Our nodes publish, at the input rate, messages whose strings (frame ids,
 joint names) and sequence lengths never change, so their CDR bytes have a fixed layout: serialize
-one message, find where its numbers sit (:func:`manipulator_kinematics.bag.cdr.walk`), and from
+one message, find where its numbers sit (:func:`manipulator_kinematics.codec.cdr.walk`), and from
 then on write new numbers into those bytes with :mod:`struct`. ``Publisher.publish`` takes the
 bytes as a serialized message, which subscribers receive exactly as if the message had been
 published (the tests receive such messages through DDS).
@@ -20,7 +20,7 @@ from typing import Any
 
 from rclpy.serialization import serialize_message
 
-from manipulator_kinematics.bag import cdr
+from manipulator_kinematics.codec import cdr
 
 # IDL names of primitive types (as rclpy message classes report them) -> cdr.PRIMITIVES keys.
 _IDL = {"double": "float64", "float": "float32", "boolean": "bool"}

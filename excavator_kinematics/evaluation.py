@@ -1,0 +1,321 @@
+"""The excavator's bag analysis (its ``analyse`` hook for ``evaluate``): the recorded outputs of
+its nodes against the kinematics recomputed from the recorded inputs, the tracking of commanded
+bucket twists, and cylinder and swing speed and stroke statistics.
+
+The recomputation is what the forward node should have published for the recorded inputs:
+
+* the swing state is the ``joint_states`` message with the cylinder message's stamp, or else the
+  latest earlier one extrapolated with its rate (the node's first-order hold), within the forward
+  node's ``swing_max_age``;
+* accelerations are raw finite differences of successive rates (the node with
+  ``acceleration_time_constant`` 0, its default), restarted after a gap over
+  ``acceleration_max_gap``.
+
+The node settings come from the evaluation context (the package's config/excavator_nodes.yaml,
+overridden by ``evaluate --params`` files).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from excavator_kinematics.kinematics import (
+    CYLINDERS,
+    JOINTS,
+    STROKE_TOLERANCE,
+    Excavator,
+    bucket_angular_acceleration,
+    bucket_angular_velocity,
+    bucket_quaternion,
+)
+from manipulator_kinematics.bag.analysis import (
+    AnalysisContext,
+    Panel,
+    Plot,
+    consistency_plot,
+    error_stats,
+    finite_differences,
+    match_exact,
+    match_latest,
+    quaternion_angle,
+    since,
+    vectors,
+    wrap,
+)
+from manipulator_kinematics.bag.reader import TopicArrays
+
+SWING = JOINTS[0]
+# Share of the stroke at either end that counts as "near the end".
+NEAR_END = 0.01
+# A command at or above this share of the speed limit counts as saturated.
+SATURATED = 0.999
+
+
+@dataclass(frozen=True)
+class _Settings:
+    """The node settings the recomputation mirrors."""
+
+    swing_max_age: float
+    acceleration_max_gap: float
+    acceleration_time_constant: float
+    command_timeout: float
+
+    @classmethod
+    def of(cls, context: AnalysisContext) -> _Settings:
+        forward = context.node_settings["excavator_forward"]
+        ik = context.node_settings["excavator_velocity_ik"]
+        return cls(
+            float(forward["swing_max_age"]),
+            float(forward["acceleration_max_gap"]),
+            float(forward["acceleration_time_constant"]),
+            float(ik["command_timeout"]),
+        )
+
+
+@dataclass
+class _ExcavatorInputs:
+    """Accepted inputs in stamp order and the state recomputed for them."""
+
+    stamp: np.ndarray
+    D: np.ndarray
+    D_dot: np.ndarray
+    known_ddot: np.ndarray
+    theta1: np.ndarray
+    state: Any
+
+
+def _inputs(
+    cylinders: TopicArrays, joints: TopicArrays, exc: Excavator, m: _Settings
+) -> _ExcavatorInputs | None:
+    stamp = cylinders.stamp_ns()
+    lengths = cylinders.by_name("position", CYLINDERS)
+    rates = cylinders.by_name("velocity", CYLINDERS)
+    swing_angle = joints.by_name("position", [SWING])[:, 0]
+    swing_rows = np.isfinite(swing_angle)
+    if not swing_rows.any():
+        return None
+    s_j = joints.stamp_ns()[swing_rows]
+    angle, rate = swing_angle[swing_rows], joints.by_name("velocity", [SWING])[swing_rows, 0]
+    # Swing accelerations as the node's differentiator sees them: over joint_states in stamp order.
+    order = np.argsort(s_j, kind="stable")
+    swing_ddot = np.empty_like(rate)
+    swing_ddot[order] = finite_differences(s_j[order], rate[order, None], m.acceleration_max_gap)[:, 0]
+
+    j = match_exact(stamp, s_j)
+    j = np.where(j >= 0, j, match_latest(stamp, s_j))
+    gap = np.where(j >= 0, (stamp - s_j[j]) * 1e-9, np.inf)
+    theta1 = angle[j] + rate[j] * gap
+    D = np.column_stack([theta1, lengths])
+    D_dot = np.column_stack([rate[j], rates])
+    lim = exc.limits
+    accepted = (
+        (j >= 0)
+        & (np.abs(gap) <= m.swing_max_age)
+        & np.all(np.isfinite(D), axis=1)
+        & np.all(np.isfinite(D_dot), axis=1)
+        & np.all(lim.d_min - STROKE_TOLERANCE <= D, axis=1)
+        & np.all(lim.d_max + STROKE_TOLERANCE >= D, axis=1)
+    )
+    rows = np.flatnonzero(accepted)
+    rows = rows[np.argsort(stamp[rows], kind="stable")]
+    if not len(rows):
+        return None
+    D, D_dot, stamp, j = D[rows], D_dot[rows], stamp[rows], j[rows]
+    # Only accepted cylinder messages feed the node's differencing.
+    cylinder_ddot = finite_differences(stamp, D_dot[:, 1:], m.acceleration_max_gap)
+    D_ddot = np.column_stack([swing_ddot[j], cylinder_ddot])
+    known = np.all(np.isfinite(D_ddot), axis=1)
+    state = exc.state(D, D_dot, np.where(known[:, None], D_ddot, 0.0))
+    return _ExcavatorInputs(stamp, D, D_dot, known, D[:, 0], state)
+
+
+def _consistency(
+    data: dict[str, TopicArrays],
+    inputs: _ExcavatorInputs,
+    m: _Settings,
+    t0: int,
+    plots: list[Plot],
+    prefix: str,
+) -> dict[str, Any]:
+    s = inputs.state
+    out: dict[str, Any] = {}
+    curves: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+
+    def matched(topic: str) -> tuple[TopicArrays, np.ndarray, np.ndarray, dict[str, Any]] | None:
+        if topic not in data:
+            return None
+        arrays = data[topic]
+        k = match_exact(arrays.stamp_ns(), inputs.stamp)
+        rows = np.flatnonzero(k >= 0)
+        entry = {"matched": int(rows.size), "unmatched": int(len(k) - rows.size)}
+        out[topic] = entry
+        return arrays, rows, k[rows], entry
+
+    if found := matched("bucket_pose"):
+        arrays, rows, k, entry = found
+        position = np.linalg.norm(vectors(arrays, "pose.position")[rows] - s.Q[k, :3], axis=1)
+        quaternion = np.stack([arrays[f"pose.orientation.{a}"] for a in "xyzw"], axis=-1)[rows]
+        rotation = quaternion_angle(quaternion, bucket_quaternion(inputs.theta1[k], s.Q[k, 3]))
+        entry.update(position_m=error_stats(position), orientation_rad=error_stats(rotation))
+        curves["bucket_pose position (m)"] = (since(arrays.stamp_ns()[rows], t0), position)
+    if found := matched("bucket_twist"):
+        arrays, rows, k, entry = found
+        linear = np.linalg.norm(vectors(arrays, "twist.linear")[rows] - s.Q_dot[k, :3], axis=1)
+        omega = bucket_angular_velocity(inputs.theta1[k], inputs.D_dot[k, 0], s.Q_dot[k, 3])
+        angular = np.linalg.norm(vectors(arrays, "twist.angular")[rows] - omega, axis=1)
+        entry.update(linear_mps=error_stats(linear), angular_radps=error_stats(angular))
+        curves["bucket_twist linear (m/s)"] = (since(arrays.stamp_ns()[rows], t0), linear)
+    if (found := matched("bucket_accel")) and m.acceleration_time_constant > 0:
+        found[3]["not_compared"] = (
+            f"the node low-pass filters accelerations (acceleration_time_constant "
+            f"{m.acceleration_time_constant:g} s); the recomputation uses raw differences"
+        )
+    elif found:
+        arrays, rows, k, entry = found
+        known = inputs.known_ddot[k]
+        rows, k = rows[known], k[known]
+        entry["without_recomputed_acceleration"] = int(np.sum(~known))
+        linear = np.linalg.norm(vectors(arrays, "accel.linear")[rows] - s.Q_ddot[k, :3], axis=1)
+        alpha = bucket_angular_acceleration(
+            inputs.theta1[k], inputs.D_dot[k, 0], s.theta_ddot[k, 0], s.Q_dot[k, 3], s.Q_ddot[k, 3]
+        )
+        angular = np.linalg.norm(vectors(arrays, "accel.angular")[rows] - alpha, axis=1)
+        entry.update(linear_mps2=error_stats(linear), angular_radps2=error_stats(angular))
+        curves["bucket_accel linear (m/s²)"] = (since(arrays.stamp_ns()[rows], t0), linear)
+    if found := matched("open_chain_joint_states"):
+        arrays, rows, k, entry = found
+        angles = np.abs(wrap(arrays.by_name("position", JOINTS)[rows] - s.theta[k])).max(axis=1)
+        rates = np.abs(arrays.by_name("velocity", JOINTS)[rows] - s.theta_dot[k]).max(axis=1)
+        entry.update(angle_rad=error_stats(angles), rate_radps=error_stats(rates))
+        curves["open_chain_joint_states angle (rad)"] = (since(arrays.stamp_ns()[rows], t0), angles)
+    consistency_plot(plots, f"{prefix}consistency", curves)
+    return out
+
+
+def _tracking(
+    target: TopicArrays, achieved: TopicArrays, m: _Settings, t0: int, plots: list[Plot], prefix: str
+) -> dict[str, Any]:
+    s_t, s_b = target.stamp_ns(), achieved.stamp_ns()
+    k = match_latest(s_b, s_t)
+    active = (k >= 0) & ((s_b - s_t[k]) * 1e-9 <= m.command_timeout)
+    rows, k = np.flatnonzero(active), k[active]
+    commanded, reached = vectors(target, "twist.linear")[k], vectors(achieved, "twist.linear")[rows]
+    linear = np.linalg.norm(reached - commanded, axis=1)
+    angular = np.linalg.norm(
+        vectors(achieved, "twist.angular")[rows] - vectors(target, "twist.angular")[k], axis=1
+    )
+    t = since(s_b[rows], t0)
+    panels = [
+        Panel(f"v{axis} (m/s)", {"commanded": (t, commanded[:, i]), "achieved": (t, reached[:, i])})
+        for i, axis in enumerate("xyz")
+    ]
+    plots.append(Plot(f"{prefix}tracking", "Bucket twist: commanded vs achieved", panels))
+    return {
+        "matched": int(rows.size),
+        "without_active_command": int(np.sum(~active)),
+        "linear_mps": error_stats(linear),
+        "angular_radps": error_stats(angular),
+    }
+
+
+def _actuators(
+    data: dict[str, TopicArrays], exc: Excavator, t0: int, plots: list[Plot], prefix: str
+) -> dict[str, Any]:
+    lim = exc.limits
+    out: dict[str, Any] = {}
+    if "cylinder_lengths" in data:
+        cyl = data["cylinder_lengths"]
+        lengths, rates = cyl.by_name("position", CYLINDERS), cyl.by_name("velocity", CYLINDERS)
+        t = since(cyl.stamp_ns(), t0)
+        for i, name in enumerate(CYLINDERS):
+            low, high, limit = lim.stroke_min[i], lim.stroke_max[i], lim.max_cylinder_speed[i]
+            d, v = lengths[:, i], rates[:, i]
+            have = np.isfinite(d)
+            if not have.any():
+                continue
+            near = NEAR_END * (high - low)
+            speed = np.abs(v[np.isfinite(v)])
+            out[name] = {
+                "length_min_m": float(d[have].min()),
+                "length_max_m": float(d[have].max()),
+                "stroke_used": float((d[have].max() - d[have].min()) / (high - low)),
+                "near_end_fraction": float(np.mean((d[have] <= low + near) | (d[have] >= high - near))),
+                "beyond_end": int(
+                    np.sum((d[have] < low - STROKE_TOLERANCE) | (d[have] > high + STROKE_TOLERANCE))
+                ),
+                "speed_max_mps": float(speed.max()) if speed.size else None,
+                "speed_limit_mps": float(limit),
+                "over_speed": int(np.sum(speed > limit * (1 + 1e-9))),
+            }
+        plots.append(
+            Plot(
+                f"{prefix}cylinders",
+                "Cylinder lengths and speeds with their limits",
+                [
+                    panel
+                    for i, name in enumerate(CYLINDERS)
+                    for panel in (
+                        Panel(
+                            f"{name} (m)",
+                            {"length": (t, lengths[:, i])},
+                            [float(lim.stroke_min[i]), float(lim.stroke_max[i])],
+                        ),
+                        Panel(
+                            f"{name} (m/s)",
+                            {"speed": (t, rates[:, i])},
+                            [float(-lim.max_cylinder_speed[i]), float(lim.max_cylinder_speed[i])],
+                        ),
+                    )
+                ],
+            )
+        )
+    if "joint_states" in data:
+        js = data["joint_states"]
+        angle, rate = js.by_name("position", [SWING])[:, 0], js.by_name("velocity", [SWING])[:, 0]
+        if np.isfinite(angle).any():
+            speed = np.abs(rate[np.isfinite(rate)])
+            out[SWING] = {
+                "angle_min_rad": float(np.nanmin(angle)),
+                "angle_max_rad": float(np.nanmax(angle)),
+                "speed_max_radps": float(speed.max()) if speed.size else None,
+                "speed_limit_radps": float(lim.max_swing_speed),
+                "over_speed": int(np.sum(speed > lim.max_swing_speed * (1 + 1e-9))),
+            }
+    if "cylinder_rate_commands" in data:
+        commands = data["cylinder_rate_commands"].by_name("velocity", [*CYLINDERS, SWING])
+        limits = np.concatenate([lim.max_cylinder_speed, [lim.max_swing_speed]])
+        out["commands"] = {
+            name: {
+                "max": float(np.nanmax(np.abs(commands[:, i])))
+                if np.isfinite(commands[:, i]).any()
+                else None,
+                "limit": float(limits[i]),
+                "saturated_fraction": float(np.mean(np.abs(commands[:, i]) >= SATURATED * limits[i])),
+            }
+            for i, name in enumerate([*CYLINDERS, SWING])
+        }
+    return out
+
+
+def analyse(
+    data: dict[str, TopicArrays], exc: Excavator, context: AnalysisContext
+) -> tuple[dict[str, Any], list[Plot]]:
+    """The excavator's ``analyse`` hook: report of one excavator's topics (relative names ->
+    arrays) and its plots (module docstring)."""
+    m = _Settings.of(context)
+    t0, prefix = context.t0, context.prefix
+    report: dict[str, Any] = {}
+    plots: list[Plot] = []
+    if "cylinder_lengths" in data and "joint_states" in data:
+        inputs = _inputs(data["cylinder_lengths"], data["joint_states"], exc, m)
+        if inputs is not None:
+            report["accepted_inputs"] = len(inputs.stamp)
+            report["consistency"] = _consistency(data, inputs, m, t0, plots, prefix)
+    if "target_bucket_twist" in data and "bucket_twist" in data:
+        target, achieved = data["target_bucket_twist"], data["bucket_twist"]
+        report["tracking"] = _tracking(target, achieved, m, t0, plots, prefix)
+    report["actuators"] = _actuators(data, exc, t0, plots, prefix)
+    return report, plots

@@ -1,0 +1,409 @@
+"""rosbag2 bags (mcap or sqlite3) read: messages indexed on open, decoded topic by topic.
+
+mcap files are read front to back by the ``mcap`` library's StreamReader, so a file the recorder
+did not finish (no summary, no footer) reads up to its last complete record: that is an error
+unless ``recover=True``. sqlite3 files are read with the standard library. Messages are not
+deserialised one by one (rosbags takes about 35 us per message): the messages of a topic are
+decoded together by :mod:`manipulator_kinematics.codec.cdr`. Types come from the bag's own
+definitions, else from ROS 2 Jazzy.
+"""
+
+from __future__ import annotations
+
+import os
+import sqlite3
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from operator import attrgetter
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from mcap.exceptions import InvalidMagic, RecordLengthLimitExceeded
+from mcap.records import Channel, Chunk, Header, McapRecord, Message, Schema
+from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
+
+from manipulator_kinematics.bag.types import BagError, MessageTypes, TopicQos
+from manipulator_kinematics.bag.writer import STORAGES
+from manipulator_kinematics.codec import cdr
+
+_MCAP_MAGIC = b"\x89MCAP0\r\n"
+# ROS 2 times are int64 nanoseconds; MCAP stores uint64, so anything above is a damaged record.
+_MAX_TIME = np.iinfo(np.int64).max
+# Messages gathered before they are turned into arrays: bounds the Python objects alive at once.
+_BATCH = 1 << 16
+_LOG_TIME, _CHANNEL, _DATA = attrgetter("log_time"), attrgetter("channel_id"), attrgetter("data")
+
+
+@dataclass(frozen=True)
+class TopicInfo:
+    name: str
+    msgtype: str
+    count: int
+    qos: TopicQos | None
+
+
+@dataclass
+class TopicArrays:
+    """Every message of one topic, decoded: ``fields[path]`` has one row per message, in record order."""
+
+    topic: str
+    msgtype: str
+    log_time: np.ndarray
+    fields: dict[str, np.ndarray]
+
+    def __len__(self) -> int:
+        return len(self.log_time)
+
+    def __getitem__(self, path: str) -> np.ndarray:
+        try:
+            return self.fields[path]
+        except KeyError:
+            raise KeyError(f"{self.topic} ({self.msgtype}) has no field {path!r}") from None
+
+    def stamp_ns(self, header: str = "header") -> np.ndarray:
+        """Header stamps as int64 nanoseconds."""
+        return self[f"{header}.stamp.sec"].astype(np.int64) * 1_000_000_000 + self[f"{header}.stamp.nanosec"]
+
+    def by_name(self, path: str, names: Sequence[str], name_path: str = "name") -> np.ndarray:
+        """``(N, len(names))`` values of a JointState-like field in the order of ``names``;
+        NaN where a message lacks the name or the value."""
+        labels, values = self[name_path], self[path]
+        out = np.full((len(self), len(names)), np.nan)
+        rows = np.arange(len(self))
+        for j, name in enumerate(names):
+            match = labels == name
+            column = np.argmax(match, axis=1)
+            have = match.any(axis=1) & (column < values.shape[1])
+            out[have, j] = values[rows[have], column[have]]
+        return out
+
+
+@dataclass(frozen=True)
+class _Connection:
+    topic: str
+    msgtype: str
+    encoding: str
+    qos: TopicQos | None
+
+
+class _Index:
+    """Where each message is: its connection, record time and byte range in the joined ``buffers``."""
+
+    def __init__(self) -> None:
+        self.connections: dict[int, _Connection] = {}
+        self.definitions: dict[str, tuple[str, str]] = {}
+        self.parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self.buffers: list[bytes] = []
+        self.used = 0
+
+    def add(self, conn: Any, log_time: Any, blobs: Sequence[bytes]) -> None:
+        """Messages given as their connection ids, record times and CDR bytes."""
+        sizes = np.fromiter(map(len, blobs), np.int64, len(blobs))
+        self.buffers.append(b"".join(blobs))
+        starts = self.used + np.cumsum(sizes) - sizes
+        self.used += len(self.buffers[-1])
+        self.parts.append((np.asarray(conn, np.int64), np.asarray(log_time, np.int64), starts, sizes))
+
+    @property
+    def count(self) -> int:
+        return sum(len(part[0]) for part in self.parts)
+
+
+class _Corrupt(ValueError):
+    """Records that are not what the format says must be there."""
+
+
+class _McapRecords:
+    """The records of one MCAP file, added to an :class:`_Index` as StreamReader hands them out."""
+
+    def __init__(self, index: _Index) -> None:
+        self.index = index
+        self.schemas: dict[int, str] = {}
+        self.messages: list[Message] = []
+
+    def add(self, record: McapRecord, end: int) -> None:
+        """``record``, which ends at byte ``end``, and the records of a chunk."""
+        try:
+            inner = breakup_chunk(record, validate_crc=True) if isinstance(record, Chunk) else (record,)
+        except Exception as error:  # whatever the library's reads raise on bytes that make no sense
+            raise _Corrupt(f"the chunk ending at byte {end}: {_describe(error)}") from None
+        for r in inner:
+            if isinstance(r, Message):
+                self.messages.append(r)
+            elif isinstance(r, Schema):
+                self.schemas[r.id] = r.name
+                self.index.definitions.setdefault(r.name, (r.encoding, r.data.decode("utf-8", "replace")))
+            elif isinstance(r, Channel):
+                if r.schema_id and r.schema_id not in self.schemas:
+                    raise _Corrupt(f"channel {r.topic} refers to schema {r.schema_id}, not declared before")
+                self.index.connections.setdefault(
+                    r.id,
+                    _Connection(
+                        r.topic,
+                        self.schemas.get(r.schema_id, ""),
+                        r.message_encoding,
+                        TopicQos.parse(r.metadata.get("offered_qos_profiles")),
+                    ),
+                )
+            elif isinstance(r, Header) and r.profile != "ros2":
+                raise _Corrupt(f"MCAP profile {r.profile!r}: not a ROS 2 bag")
+        if len(self.messages) >= _BATCH:
+            self.flush()
+
+    def flush(self) -> None:
+        messages, self.messages = self.messages, []
+        log_time = np.fromiter(map(_LOG_TIME, messages), np.uint64, len(messages))
+        late = np.flatnonzero(log_time > _MAX_TIME)
+        if len(late):
+            raise _Corrupt(f"a message's record time {log_time[late[0]]} ns is beyond int64 nanoseconds")
+        self.index.add(list(map(_CHANNEL, messages)), log_time, list(map(_DATA, messages)))
+
+
+def _describe(error: Exception) -> str:
+    return str(error) or type(error).__name__
+
+
+def _scan_mcap(path: Path, index: _Index) -> tuple[int, str | None]:
+    """Index an MCAP file: (end of the last complete record, why the file ends early or None)."""
+    size = path.stat().st_size
+    records = _McapRecords(index)
+    end = len(_MCAP_MAGIC)
+    with path.open("rb") as stream:
+        # A record longer than the file is cut off or damaged; without this limit a damaged length
+        # has the reader allocate and read up to 4 GiB.
+        reader = StreamReader(stream, emit_chunks=True, validate_crcs=True, record_size_limit=size).records
+        while True:
+            try:
+                record = next(reader, None)
+            # The reader raises whatever its struct and string reads raise where the bytes run out
+            # or make no sense (EndOfFile, struct.error, UnicodeDecodeError, ...): the file was cut
+            # off if the failed record reached its end, else it is damaged.
+            except Exception as error:
+                cut = stream.tell() >= size or isinstance(error, RecordLengthLimitExceeded)
+                if not cut or isinstance(error, (InvalidMagic, CRCValidationError)):
+                    raise _Corrupt(f"the record at byte {end}: {_describe(error)}") from None
+                records.flush()
+                if end == size:
+                    return end, f"ends without its summary and footer at byte {size}"
+                return end, f"truncated inside the record at byte {end} (file of {size} bytes)"
+            if record is None:
+                records.flush()
+                return end, None
+            end = stream.tell()
+            records.add(record, end)
+
+
+def _load_sqlite(path: Path, index: _Index, recover: bool) -> str | None:
+    """Index an SQLite bag. A journal left by a killed writer holds an interrupted transaction:
+    with ``recover`` SQLite rolls it back (this writes the file), otherwise that is an error."""
+    journal = path.with_name(path.name + "-journal")
+    interrupted = journal.is_file() and journal.stat().st_size > 0
+    if interrupted and not recover:
+        raise BagError(
+            f"{path}: an interrupted transaction is left in {journal.name} (the recorder did not "
+            f"finish); --recover rolls it back and reads the committed messages"
+        )
+    try:
+        db = sqlite3.connect(f"file:{path}?mode={'rw' if recover else 'ro'}", uri=True)
+        try:
+            topics = db.execute(
+                "SELECT id, name, type, serialization_format, offered_qos_profiles FROM topics"
+            )
+            for tid, name, msgtype, encoding, qos in topics.fetchall():
+                index.connections[tid] = _Connection(name, msgtype, encoding, TopicQos.parse(qos))
+            has_definitions = db.execute(
+                "SELECT 1 FROM sqlite_master WHERE type='table' AND name='message_definitions'"
+            ).fetchone()
+            if has_definitions:
+                for msgtype, encoding, text in db.execute(
+                    "SELECT topic_type, encoding, encoded_message_definition FROM message_definitions"
+                ):
+                    index.definitions.setdefault(msgtype, (encoding, text))
+            rows = db.execute("SELECT topic_id, timestamp, data FROM messages ORDER BY id").fetchall()
+        finally:
+            db.close()
+    except sqlite3.Error as error:
+        raise BagError(f"{path}: not a readable rosbag2 SQLite file ({error})") from None
+    if rows:
+        # SQLite columns take any type: a damaged file can hold text or NULL where numbers and bytes belong.
+        try:
+            index.add(*zip(*rows))
+        except (TypeError, ValueError, OverflowError) as error:
+            raise BagError(f"{path}: corrupt: a row of its messages table: {error}") from None
+    return f"{path}: rolled back the transaction the recorder left unfinished" if interrupted else None
+
+
+class BagReader:
+    """A rosbag2 bag (directory with metadata.yaml, or a single .mcap / .db3 file), indexed on open.
+
+    ``recover=True`` reads an mcap file that lacks its summary and footer (a recorder that was
+    killed, or a truncated copy) up to its last complete record instead of refusing it;
+    ``recovered`` then says what was cut. For sqlite3 it lets SQLite roll back the transaction a
+    killed recorder left open (in the ``-journal`` file), which rewrites the database file.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], recover: bool = False) -> None:
+        self.path = Path(path)
+        self.recovered: str | None = None
+        index = _Index()
+        try:
+            files, self.storage = self._files()
+            for file in files:
+                if self.storage == "mcap":
+                    self._scan_mcap(file, index, recover)
+                else:
+                    self.recovered = _load_sqlite(file, index, recover) or self.recovered
+        except OSError as error:
+            raise BagError(f"{self.path}: cannot read it ({error})") from None
+        self._types = MessageTypes()
+        for msgtype, (encoding, text) in index.definitions.items():
+            self._types.add_definition(msgtype, encoding, text)
+        self._data = np.frombuffer(
+            index.buffers[0] if len(index.buffers) == 1 else b"".join(index.buffers), np.uint8
+        )
+        conn, log_time, start, size = (
+            np.concatenate([part[k] for part in index.parts]) if index.parts else np.empty(0, np.int64)
+            for k in range(4)
+        )
+        undeclared = set(np.unique(conn).tolist()) - set(index.connections)
+        if undeclared:
+            raise BagError(
+                f"{self.path}: corrupt: messages on channels {sorted(undeclared)} that are never declared"
+            )
+        self._topics: dict[str, TopicInfo] = {}
+        self._encodings: dict[str, str] = {}
+        self._messages: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        for topic in dict.fromkeys(c.topic for c in index.connections.values()):
+            ids = [cid for cid, c in index.connections.items() if c.topic == topic]
+            kinds = sorted({(index.connections[cid].msgtype, index.connections[cid].encoding) for cid in ids})
+            if len(kinds) > 1:
+                raise BagError(f"{self.path}: topic {topic} is recorded with several types {kinds}")
+            msgtype, self._encodings[topic] = kinds[0]
+            rows = np.flatnonzero(np.isin(conn, ids))
+            rows = rows[np.argsort(log_time[rows], kind="stable")]
+            self._messages[topic] = (log_time[rows], start[rows], size[rows])
+            qos = next((index.connections[cid].qos for cid in ids if index.connections[cid].qos), None)
+            self._topics[topic] = TopicInfo(topic, msgtype, len(rows), qos)
+
+    @property
+    def topics(self) -> dict[str, TopicInfo]:
+        return dict(self._topics)
+
+    @property
+    def message_count(self) -> int:
+        return sum(t.count for t in self._topics.values())
+
+    def arrays(self, topics: Iterable[str] | None = None) -> dict[str, TopicArrays]:
+        """Decoded messages of ``topics`` (default: all), each topic in record-time order."""
+        out = {}
+        for topic in self.select(topics):
+            info = self._topics[topic]
+            if self._encodings[topic] != "cdr":
+                raise BagError(f"topic {topic}: message encoding {self._encodings[topic]!r} is not CDR")
+            log_time, start, size = self._messages[topic]
+            schemas = self._types.schemas(info.msgtype, f"topic {topic}")
+            try:
+                fields = cdr.decode(self._data, start, size, info.msgtype, schemas)
+            except cdr.CdrError as error:
+                raise BagError(f"{self.path}: topic {topic}: {error}") from None
+            out[topic] = TopicArrays(topic, info.msgtype, log_time, fields)
+        return out
+
+    def log_times(self, topic: str) -> np.ndarray:
+        """Record times (ns) of ``topic``'s messages, in order, without decoding them."""
+        return self._messages[self.select([topic])[0]][0]
+
+    def messages(self, topics: Iterable[str] | None = None) -> Iterator[tuple[str, int, bytes]]:
+        """(topic, record time ns, CDR bytes) of ``topics`` (default: all) in record-time order."""
+        selected = self.select(topics)
+        if not selected:
+            return
+        parts = [self._messages[t] for t in selected]
+        which = np.concatenate([np.full(len(p[0]), i) for i, p in enumerate(parts)])
+        log_time, start, size = (np.concatenate([p[k] for p in parts]) for k in range(3))
+        order = np.argsort(log_time, kind="stable")
+        data = self._data
+        for i in order.tolist():
+            yield selected[which[i]], int(log_time[i]), data[start[i] : start[i] + size[i]].tobytes()
+
+    def select(self, topics: Iterable[str] | None) -> list[str]:
+        """``topics`` checked against the bag (all topics for None); BagError names missing ones."""
+        if topics is None:
+            return list(self._topics)
+        selected = list(dict.fromkeys(topics))
+        missing = [t for t in selected if t not in self._topics]
+        if missing:
+            raise BagError(
+                f"{self.path}: no topic {', '.join(missing)} in the bag (it has "
+                f"{', '.join(self._topics) or 'no topics'})"
+            )
+        return selected
+
+    def _files(self) -> tuple[list[Path], str]:
+        path = self.path
+        if not path.exists():
+            raise BagError(f"{path}: no such bag")
+        if path.is_file():
+            return [path], _storage_of(path)
+        meta = path / "metadata.yaml"
+        if meta.is_file():
+            try:
+                info = yaml.safe_load(meta.read_text(encoding="utf-8"))["rosbag2_bagfile_information"]
+                storage = str(info.get("storage_identifier") or "")
+                files = [path / name for name in info["relative_file_paths"]]
+            # Whatever the YAML holds: a damaged file parses to other types as easily as it fails.
+            except (yaml.YAMLError, KeyError, TypeError, AttributeError, UnicodeDecodeError) as error:
+                raise BagError(f"{meta}: not rosbag2 metadata ({type(error).__name__}: {error})") from None
+            if info.get("compression_mode"):
+                raise BagError(
+                    f"{path}: compressed bags ({info['compression_mode']} "
+                    f"{info.get('compression_format')}) are not supported"
+                )
+            if storage not in STORAGES:
+                raise BagError(f"{meta}: storage {storage!r} is not mcap or sqlite3")
+            missing = [f.name for f in files if not f.is_file()]
+            if missing:
+                raise BagError(
+                    f"{path}: data file(s) {', '.join(missing)} named in metadata.yaml are missing"
+                )
+            for file in files:
+                if _storage_of(file) != storage:
+                    raise BagError(f"{file}: is not an {storage} file as metadata.yaml says")
+            return files, storage
+        files = sorted(p for p in path.iterdir() if p.suffix in (".mcap", ".db3") and p.is_file())
+        if not files:
+            raise BagError(f"{path}: not a bag (no metadata.yaml, no .mcap or .db3 file)")
+        storages = {_storage_of(f) for f in files}
+        if len(storages) > 1:
+            raise BagError(f"{path}: holds both mcap and sqlite3 files and no metadata.yaml")
+        return files, storages.pop()
+
+    def _scan_mcap(self, path: Path, index: _Index, recover: bool) -> None:
+        before = index.count
+        try:
+            end, problem = _scan_mcap(path, index)
+        except _Corrupt as error:
+            raise BagError(f"{path}: corrupt: {error}") from None
+        if problem is None:
+            return
+        found = index.count - before
+        if not recover:
+            raise BagError(
+                f"{path}: {problem}: the recorder did not finish it or the file was cut; "
+                f"--recover reads the {found} messages before byte {end}"
+            )
+        self.recovered = f"{path}: {problem}; read the {found} messages before byte {end}"
+
+
+def _storage_of(path: Path) -> str:
+    with path.open("rb") as stream:
+        head = stream.read(16)
+    if head.startswith(_MCAP_MAGIC):
+        return "mcap"
+    if head.startswith(b"SQLite format 3\x00"):
+        return "sqlite3"
+    if not head:
+        raise BagError(f"{path}: the file is empty")
+    raise BagError(f"{path}: neither an MCAP nor an SQLite file")

@@ -1,0 +1,178 @@
+"""`evaluate` and `replay` on damaged bags: the golden bags corrupted in a few hundred seeded ways
+(bytes of the data file changed, the data file cut, metadata.yaml damaged, a record time beyond
+int64) end in exit status 1 with one line on stderr, or, where the damage leaves a readable bag
+(a changed number inside a message), in their normal result. Never a traceback, a numpy warning
+or a hang, and the damaged files are left as they were.
+
+Most cases run in-process (`evaluate` whole, without plots; `replay` up to where it would start
+ROS); a few run the console scripts.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+import hashlib
+import io
+import random
+import shutil
+import struct
+import subprocess
+import warnings
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+
+import pytest
+import yaml
+
+from manipulator_kinematics.bag import evaluate, replay
+from manipulator_kinematics.bag.cli import guarded
+from manipulator_kinematics.bag.reader import BagReader
+from manipulator_kinematics.node_util import console_script
+
+GOLDEN = sorted((Path(__file__).resolve().parent / "data").glob("*_golden"))
+CASES = 300
+SEED = 9_000
+
+
+def read_for_replay(argv: Sequence[str]) -> int:
+    replay.load(replay.parse_args(argv))
+    return 0
+
+
+def record_time_beyond_int64(bag: Path, rng: random.Random) -> str:
+    """Set the top bit of one message's record time (the fuzzer's OverflowError)."""
+    reader = BagReader(bag)
+    topic = rng.choice([t for t, info in reader.topics.items() if info.count > 2])
+    times = reader.log_times(topic)
+    stamp = int(times[rng.randrange(1, len(times) - 1)])  # not the first or last: the chunk header has those
+    data = data_file(bag)
+    raw = bytearray(data.read_bytes())
+    at = raw.find(struct.pack("<Q", stamp))  # the first is the message record's log_time
+    raw[at + 7] |= 0x80
+    data.write_bytes(bytes(raw))
+    return f"record time {stamp} of a {topic} message + 2^63 at byte {at}"
+
+
+def damage(bag: Path, rng: random.Random) -> tuple[str, bool]:
+    """Corrupt ``bag`` in place: (what was done, whether reading it must fail)."""
+    data, meta = data_file(bag), bag / "metadata.yaml"
+    kind = rng.choices(
+        ["flip", "cut", "meta flip", "meta cut", "meta junk", "log time"], [8, 4, 3, 3, 1, 1]
+    )[0]
+    if kind == "log time":
+        return record_time_beyond_int64(bag, rng), True
+    target = meta if kind.startswith("meta") else data
+    raw = bytearray(target.read_bytes())
+    if kind.endswith("flip"):
+        spots = sorted(rng.randrange(len(raw)) for _ in range(rng.choice([1, 1, 1, 2, 4])))
+        for at in spots:
+            raw[at] ^= rng.randrange(1, 256)
+        what = f"{target.name}: bytes {spots} changed"
+    elif kind.endswith("cut"):
+        raw = raw[: rng.randrange(len(raw))]
+        what = f"{target.name}: cut to {len(raw)} bytes"
+    else:
+        raw = bytearray(rng.randbytes(rng.randrange(1, 400)))
+        what = f"{target.name}: {len(raw)} random bytes"
+    target.write_bytes(bytes(raw))
+    # A cut data file has no footer; random metadata names no data file: both must be refused.
+    return what, kind in ("cut", "meta junk")
+
+
+def data_file(bag: Path) -> Path:
+    (data,) = bag.glob("*.mcap")
+    return data
+
+
+def contents(bag: Path) -> dict[str, str]:
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(bag.iterdir())}
+
+
+def run_in_process(main: Callable[[Sequence[str]], int], argv: Sequence[str]) -> tuple[object, str, list]:
+    """(exit status, stderr, warnings a console script would print) of ``main(argv)``."""
+    err = io.StringIO()
+    with (
+        warnings.catch_warnings(record=True) as caught,
+        contextlib.redirect_stdout(io.StringIO()),
+        contextlib.redirect_stderr(err),
+    ):
+        warnings.simplefilter("always")
+        status = main(argv)
+    shown = [w for w in caught if not issubclass(w.category, (DeprecationWarning, PendingDeprecationWarning))]
+    return status, err.getvalue(), [f"{w.category.__name__}: {w.message}" for w in shown]
+
+
+def check(name: str, what: str, must_fail: bool, status: object, stderr: str, shown: list) -> None:
+    lines = stderr.strip().splitlines()
+    assert "Traceback" not in stderr and not shown, f"{name} on {what}: {shown}\n{stderr}"
+    if status == 1:
+        assert len(lines) == 1 and lines[0].startswith(f"{name}: error: "), f"{name} on {what}:\n{stderr}"
+    else:
+        assert status == 0 and not must_fail, f"{name} on {what}: exit {status}\n{stderr}"
+        assert len(lines) <= 1, f"{name} on {what}:\n{stderr}"  # evaluate names its report
+
+
+@pytest.fixture(scope="module")
+def config_parsed_once() -> Iterator[None]:
+    """yaml.safe_load parses each text once: otherwise parsing the package's config files is most of
+    an in-process evaluate. Callers get copies, so nothing they change leaks into the next case."""
+    parse, parsed = yaml.safe_load, {}
+
+    def safe_load(stream: object) -> object:
+        text = stream if isinstance(stream, (str, bytes)) else stream.read()
+        if text not in parsed:
+            parsed[text] = parse(text)
+        return copy.deepcopy(parsed[text])
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(yaml, "safe_load", safe_load)
+        yield
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("case", range(CASES))
+@pytest.mark.usefixtures("config_parsed_once")
+def test_a_damaged_bag_fails_in_one_line_or_reads(case: int, tmp_path: Path) -> None:
+    golden = GOLDEN[case % len(GOLDEN)]
+    bag = tmp_path / golden.name
+    shutil.copytree(golden, bag)
+    what, must_fail = damage(bag, random.Random(SEED + case))
+    before = contents(bag)
+    for name, main, argv in (
+        ("evaluate", evaluate.main, [str(bag), "-o", str(tmp_path / "report"), "--no-plots"]),
+        ("replay", lambda argv: guarded("replay", read_for_replay, argv), [str(bag)]),
+    ):
+        check(name, what, must_fail, *run_in_process(main, argv))
+        assert contents(bag) == before, f"{name} changed the bag ({what})"
+
+
+def test_console_scripts_fail_in_one_line_on_damaged_bags(tmp_path: Path) -> None:
+    rng = random.Random(SEED)
+    bags = {}
+    for kind in ("cut", "log time", "metadata"):
+        bag = tmp_path / kind.replace(" ", "_") / GOLDEN[0].name
+        shutil.copytree(GOLDEN[0], bag)
+        if kind == "cut":
+            data = data_file(bag)
+            data.write_bytes(data.read_bytes()[: data.stat().st_size * 6 // 10])
+        elif kind == "log time":
+            record_time_beyond_int64(bag, rng)
+        else:
+            (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: {relative_file_paths: 7}\n")
+        bags[kind] = (bag, contents(bag))
+    runs = {
+        (kind, name): subprocess.Popen(
+            [console_script(name), str(bag), *(["-o", str(bag.parent / "report")] * (name == "evaluate"))],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for kind, (bag, _) in bags.items()
+        for name in ("evaluate", "replay")
+    }
+    for (kind, name), process in runs.items():
+        _, stderr = process.communicate(timeout=120)
+        check(name, kind, True, process.returncode, stderr, [])
+        assert contents(bags[kind][0]) == bags[kind][1]
+        assert not (bags[kind][0].parent / "report").exists()
