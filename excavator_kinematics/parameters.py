@@ -51,6 +51,9 @@ def _cylinder(**pins: Any) -> dict[str, Any]:
 #: The ``excavator:`` section of a parameters file; every key is required.
 SCHEMA = {
     "name": Text(empty=False),
+    # Height of the base frame's origin above the level ground the machine stands on: z = 0 of
+    # the working ranges (SAE J1193 / ISO 7135 ground reference plane) is z = -base_height.
+    "base_height": Number(min=-30.0, max=30.0, unit="m"),
     "boom": {"foot_pin": _POINT, "length": _LENGTH},
     "arm": {"length": _LENGTH},
     "bucket": {"length": _LENGTH},
