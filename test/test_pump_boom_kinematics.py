@@ -1,0 +1,335 @@
+"""Pump-truck boom (paper 001): FK against the D-H chain, Jacobian against finite differences,
+region IK round trips over the whole table, bands, envelope, the paper's example, pours."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from manipulator_kinematics.model import IKStatus, RequestError, pose_matrix
+from manipulator_kinematics.params import ConfigError, config_path, load_parameters
+from pump_boom_kinematics import build_regions
+from pump_boom_kinematics.kinematics import Failure, PumpBoom, RegionTableError
+from pump_boom_kinematics.pour import TYPICAL_POURS, plan_path, pour_line
+from pump_boom_kinematics.regions import RegionTable
+
+#: The largest joint change per 100 mm of tip motion along r or z that the table allows (the
+#: builder's max_step); along any direction a 100 mm step moves the tip at most 0.1 m in r and z
+#: together, so sqrt(2) times that bounds it (to first order).
+MAX_STEP = math.radians(10.0)
+
+
+@pytest.fixture(scope="module")
+def boom() -> PumpBoom:
+    return PumpBoom.default()
+
+
+@pytest.fixture(scope="module")
+def random_q(boom: PumpBoom) -> np.ndarray:
+    rng = np.random.default_rng(7)
+    return boom.limits.lower + (boom.limits.upper - boom.limits.lower) * rng.random((2000, 6))
+
+
+def _plane(boom: PumpBoom, spacing: float) -> np.ndarray:
+    """Pour points (M, 3) at y = 0 every ``spacing`` over the table's squares, moved 1 um toward
+    their square's centre (a point exactly on the table's outer edge is in or out by round-off)."""
+    plane = build_regions.table_samples(boom.table, spacing)
+    i, j = boom.table.square(plane[:, 0], plane[:, 1])
+    centre = np.stack(boom.grid.corner(i + 0.5, j + 0.5), axis=-1)
+    plane = plane + 1e-6 * np.sign(centre - plane)
+    return np.stack([plane[:, 0], np.zeros(len(plane)), plane[:, 1]], axis=-1)
+
+
+def test_plane_geometry_equals_dh_chain(boom: PumpBoom, random_q: np.ndarray) -> None:
+    frames = boom.frames(random_q)
+    assert frames.shape == (2000, 7, 4, 4)
+    np.testing.assert_allclose(frames[:, 1:, :3, 3], boom.points(random_q), atol=1e-12)
+    np.testing.assert_allclose(boom.fkine(random_q)[:, :3, 3], boom.tip(random_q), atol=1e-12)
+
+
+def test_straight_boom_and_paper_convention(boom: PumpBoom) -> None:
+    # theta2 = 90 deg, every section straight on (180 deg): a vertical boom 41.5 m above the pin.
+    up = np.array([0.3, math.pi / 2, math.pi, math.pi, math.pi, math.pi])
+    np.testing.assert_allclose(
+        boom.tip(up), [0.25 * math.cos(0.3), 0.25 * math.sin(0.3), 3.6 + 41.5], atol=1e-12
+    )
+    # Section 2 folded back onto section 1 (theta3 = 0): its end returns to the root pin's line.
+    folded = np.array([0.0, 0.0, 0.0, math.pi, math.pi, math.pi])
+    np.testing.assert_allclose(boom.points(folded)[2], [0.25 + 9.6 - 8.4, 0.0, 3.6], atol=1e-12)
+
+
+def test_tip_jacobian_against_finite_differences_and_chain(boom: PumpBoom, random_q: np.ndarray) -> None:
+    q = random_q[:200]
+    jacobian = boom.tip_jacobian(q)
+    h = 1e-6
+    numeric = np.stack([(boom.tip(q + h * e) - boom.tip(q - h * e)) / (2 * h) for e in np.eye(6)], axis=-1)
+    np.testing.assert_allclose(jacobian, numeric, atol=1e-7)
+    np.testing.assert_allclose(boom.jacob0(q)[:, :3], jacobian, atol=1e-11)
+
+
+def test_round_trip_on_the_whole_table(boom: PumpBoom) -> None:
+    points = _plane(boom, 0.1)
+    assert len(points) > 100_000
+    heading = np.linspace(-math.pi, math.pi, len(points), endpoint=False)
+    points = np.stack([points[:, 0] * np.cos(heading), points[:, 0] * np.sin(heading), points[:, 2]], axis=-1)
+    result = boom.region_ik(points)
+    assert result.ok.all(), result.reason(int(np.argmin(result.ok)))
+    assert np.abs(boom.tip(result.q) - points).max() < 1e-9
+    assert boom.limits.within(result.q).all()
+    assert (boom.envelope_margin(result.q) >= 0.0).all()  # positive envelope at every pour point
+
+
+def test_random_points_of_the_table(boom: PumpBoom) -> None:
+    rng = np.random.default_rng(3)
+    squares = boom.table.index[rng.integers(0, len(boom.table), 100_000)]
+    plane = np.stack(boom.table.grid.corner(squares[:, 0], squares[:, 1]), axis=-1) + 5.0 * rng.random(
+        (100_000, 2)
+    )
+    points = np.stack([plane[:, 0], np.zeros(len(plane)), plane[:, 1]], axis=-1)
+    result = boom.region_ik(points)
+    assert result.ok.all()
+    assert np.abs(boom.tip(result.q) - points).max() < 1e-9
+
+
+def test_triples_constant_inside_squares_and_blended_only_in_bands(boom: PumpBoom) -> None:
+    points = _plane(boom, 0.1)
+    result = boom.region_ik(points)
+    u, v = boom.grid.cell(points[:, 0], points[:, 2])
+    edge = (
+        np.minimum.reduce([u - np.floor(u), np.ceil(u) - u, v - np.floor(v), np.ceil(v) - v]) * boom.grid.size
+    )
+    core = edge > boom.grid.band / 2 + 1e-9
+    own = boom.table.own_triple(points[:, 0], points[:, 2])
+    np.testing.assert_array_equal(result.q[core, 1:4], own[core])
+    assert not result.blended[core].any()
+    assert result.blended[~core].mean() > 0.5  # most band points lie between two table squares
+
+
+@pytest.mark.parametrize("axis", [0, 1])
+def test_continuity_across_bands(boom: PumpBoom, axis: int) -> None:
+    # Lines along r (axis 0) or z (axis 1) through the table every 0.1 m, 100 mm apart.
+    step = np.zeros(2)
+    step[axis] = 0.1
+    start = _plane(boom, 0.1)
+    after = start + np.array([step[0], 0.0, step[1]])
+    a, b = boom.region_ik(start), boom.region_ik(after)
+    both = a.ok & b.ok
+    assert both.sum() > 100_000
+    jump = np.abs(b.q[both] - a.q[both]).max()
+    # The builder checks its lattice; these points are 1 um off it: 1 % slack.
+    assert jump <= MAX_STEP * 1.01, math.degrees(jump)
+    assert jump > math.radians(2.0)  # the bands do move the joints: the bound is not vacuous
+
+
+def test_any_direction_step(boom: PumpBoom) -> None:
+    rng = np.random.default_rng(11)
+    start = _plane(boom, 0.25)
+    angle = rng.uniform(0, 2 * math.pi, len(start))
+    after = start + 0.1 * np.stack([np.cos(angle), np.zeros(len(angle)), np.sin(angle)], axis=-1)
+    a, b = boom.region_ik(start), boom.region_ik(after)
+    both = a.ok & b.ok
+    assert np.abs(b.q[both] - a.q[both]).max() <= math.sqrt(2) * MAX_STEP * 1.05
+
+
+def test_single_point_path_equals_the_vectorised_ik(boom: PumpBoom) -> None:
+    """region_ik_point (plain floats) against region_ik over the table, its bands and around it:
+    the same joints to round-off and the same failure for every point."""
+    rng = np.random.default_rng(17)
+    inside = _plane(boom, 0.25)
+    around = inside + np.stack([rng.normal(scale=4.0, size=len(inside)), np.zeros(len(inside)),
+                                rng.normal(scale=4.0, size=len(inside))], axis=-1)
+    plane = np.concatenate([inside, around])
+    heading = rng.uniform(-math.pi, math.pi, len(plane))
+    points = np.stack([plane[:, 0] * np.cos(heading), plane[:, 0] * np.sin(heading), plane[:, 2]], axis=-1)
+    points[:50] = [[np.nan, 0.0, 1.0], [60.0, 0.0, 3.6], [0.1, 0.0, 10.0], [0.0, 0.0, 10.0], *points[4:50]]
+    slew = rng.uniform(-6.0, 6.0, len(points))
+    seed = np.zeros((len(points), 6))
+    seed[:, 0] = slew
+    expected = boom.region_ik(points, seed=seed)
+    q = np.full((len(points), 6), np.nan)
+    failure = np.empty(len(points), dtype=int)
+    for k, (point, s) in enumerate(zip(points.tolist(), slew.tolist(), strict=True)):
+        solution, failure[k] = boom.region_ik_point(*point, s)
+        if solution is not None:
+            q[k] = solution
+    np.testing.assert_array_equal(failure, expected.failure)
+    assert set(failure.tolist()) >= {Failure.NONE, Failure.NOT_FINITE, Failure.BEYOND_REACH,
+                                     Failure.BEHIND_ROOT, Failure.NOT_IN_TABLE}
+    assert expected.blended.sum() > 5000  # the bands are well sampled
+    np.testing.assert_allclose(q, expected.q, atol=1e-12)  # NaN where both fail
+    unseeded, _ = boom.region_ik_point(-20.0, 5.0, 17.5)
+    assert unseeded == pytest.approx(tuple(boom.region_ik([-20.0, 5.0, 17.5]).q), abs=1e-12)
+
+
+def test_paper_example_area(boom: PumpBoom) -> None:
+    q = boom.example_sweep(401)
+    tips = boom.plane_points(q)[..., -1, :].reshape(-1, 2)
+    envelope = boom.positive_envelope(q).reshape(-1)
+
+    def area(p: np.ndarray) -> float:
+        return len({tuple(c) for c in np.floor(p / 0.1).astype(int).tolist()}) * 0.01
+
+    assert 140.0 < area(tips) < 165.0
+    assert 0.87 < area(tips[envelope]) / area(tips) < 0.91  # the reference note's "about 89 %"
+    # The 2R of the IK recovers the example's theta5, theta6 from its tips with the example's triple.
+    corner = np.floor(tips.min(axis=0) / 5.0).astype(int) - 1
+    extent = np.ceil(tips.max(axis=0) / 5.0).astype(int) + 1
+    squares = np.stack(
+        np.meshgrid(np.arange(corner[0], extent[0]), np.arange(corner[1], extent[1]), indexing="ij"), axis=-1
+    ).reshape(-1, 2)
+    grid = type(boom.grid)((0.0, 0.0), 5.0, 1.0)
+    table = RegionTable(
+        grid=grid,
+        index=squares,
+        triples=np.tile(q[0, 0, 1:4], (len(squares), 1)),
+        margin=np.zeros(len(squares)),
+        built_for={},
+        search={},
+        coverage={},
+    )
+    flat = q.reshape(-1, 6)[envelope]
+    result = boom.region_ik(boom.tip(flat), table=table)
+    assert result.ok.all()
+    np.testing.assert_allclose(result.q, flat, atol=1e-9)
+
+
+def test_behind_the_slew_axis(boom: PumpBoom, random_q: np.ndarray) -> None:
+    behind = np.array([-20.0, 5.0, 17.5])
+    result = boom.region_ik(behind)
+    assert result.ok and math.isclose(result.q[0], math.atan2(5.0, -20.0))
+    np.testing.assert_allclose(boom.tip(result.q), behind, atol=1e-9)
+    # With a seed the slew turn nearest to it is taken (no swing round by 2 pi).
+    turned = boom.region_ik(behind, seed=np.array([-3.0, 1, 2, 2, 2, 2]))
+    assert math.isclose(turned.q[0], math.atan2(5.0, -20.0) - 2 * math.pi)
+    np.testing.assert_allclose(boom.tip(turned.q), behind, atol=1e-9)
+    # Joint states with the tip behind the slew axis: the IK answers with theta1 + pi, tip in front.
+    tips = boom.tip(random_q)
+    plane_r = boom.plane_points(random_q)[:, -1, 0]
+    solved = boom.region_ik(tips[plane_r < 0])
+    assert (plane_r < 0).mean() > 0.1 and solved.ok.any()
+    turn = np.abs((solved.q[solved.ok, 0] - random_q[plane_r < 0][solved.ok, 0]) % (2 * math.pi) - math.pi)
+    assert turn.max() < 1e-9
+
+
+def test_failures_with_reasons(boom: PumpBoom) -> None:
+    points = np.array(
+        [[40.5, 0.0, 12.0], [60.0, 0.0, 3.6], [0.1, 0.0, 10.0], [np.nan, 0.0, 1.0], [0.0, 0.0, 10.0]]
+    )
+    result = boom.region_ik(points)
+    assert list(result.failure) == [
+        Failure.NOT_IN_TABLE,
+        Failure.BEYOND_REACH,
+        Failure.BEHIND_ROOT,
+        Failure.NOT_FINITE,
+        Failure.BEHIND_ROOT,
+    ]
+    assert np.isnan(result.q).all()
+    assert "outside the region table" in result.reason(0) and "square (8, 2)" in result.reason(0)
+    assert "beyond the boom's reach" in result.reason(1)
+    assert "behind the boom root pin" in result.reason(2)
+
+
+def test_solve_ik_protocol(boom: PumpBoom) -> None:
+    targets = np.stack([pose_matrix(p) for p in ([20.0, 5.0, 17.5], [40.5, 0.0, 12.0])])
+    solutions = boom.solve_ik(targets, use_orientation=False, mode="region")
+    assert solutions.q.shape == (2, 1, 6) and list(solutions.selected) == [0, -1]
+    assert solutions.outcome[1] == IKStatus.UNREACHABLE
+    assert "outside the region table" in solutions.note(1)
+    np.testing.assert_allclose(boom.tip(solutions.solution[0]), [20.0, 5.0, 17.5], atol=1e-9)
+    single = boom.solve_ik(targets[0], use_orientation=False)
+    np.testing.assert_array_equal(single.solution, solutions.solution[0])
+    with pytest.raises(RequestError, match="position only"):
+        boom.solve_ik(targets[0])
+    with pytest.raises(RequestError, match="unknown IK mode"):
+        boom.solve_ik(targets[0], use_orientation=False, mode="phi")
+    with pytest.raises(RequestError, match="unknown branch"):
+        boom.solve_ik(targets[0], use_orientation=False, branch="elbow_a")
+
+
+@pytest.mark.parametrize("name", list(TYPICAL_POURS))
+def test_typical_pours(boom: PumpBoom, name: str) -> None:
+    _, start, end = TYPICAL_POURS[name]
+    plan = pour_line(boom, start, end)
+    assert plan.ok and not plan.truncated and plan.last_waypoint == 1
+    length = float(np.linalg.norm(np.subtract(end, start)))
+    assert len(plan.points) == math.ceil(length / 0.1 - 1e-9) + 1  # eqs. 5-6
+    np.testing.assert_allclose(boom.tip(plan.q), plan.points, atol=1e-9)
+    np.testing.assert_allclose(plan.t, plan.s / boom.tip_speed)
+    assert np.abs(np.diff(plan.q, axis=0)).max() <= math.sqrt(2) * MAX_STEP
+    assert plan.blended.any() and (~plan.blended).any()
+    own = boom.table.own_triple(np.hypot(plan.points[:, 0], plan.points[:, 1]), plan.points[:, 2])
+    np.testing.assert_array_equal(plan.q[~plan.blended, 1:4], own[~plan.blended])
+    slew = np.ptp(plan.q[:, 0])
+    if name == "horizontal_line":
+        assert slew < 1e-12 and np.ptp(plan.points[:, 2]) < 1e-12
+    else:
+        assert slew > 1.0 and np.all(np.diff(plan.q[:, 0]) > 0)
+
+
+def test_pour_end_outside_is_replaced_by_farthest_reachable_point(boom: PumpBoom) -> None:
+    plan = pour_line(boom, (20.0, 0.0, 17.5), (45.0, 0.0, 17.5))
+    assert plan.ok and plan.truncated and plan.last_waypoint == 0
+    assert "farthest reachable point" in plan.message
+    assert boom.region_ik(plan.end).ok
+    assert not boom.region_ik(plan.end + [2e-6, 0.0, 0.0]).ok
+    np.testing.assert_allclose(plan.points[-1], plan.end)
+    assert np.linalg.norm(np.diff(plan.points, axis=0), axis=1).max() <= 0.1 + 1e-12
+    nothing = plan_path(boom, [[60.0, 0.0, 3.6], [20.0, 0.0, 17.5]])
+    assert not nothing.ok and nothing.last_waypoint == -1 and len(nothing.q) == 0
+
+
+def test_table_file_matches_the_machine(boom: PumpBoom) -> None:
+    assert boom.table_problem() is None
+    coverage = boom.table.coverage
+    assert coverage["squares"] == len(boom.table) >= 42 and coverage["band_failures"] == 0
+    assert coverage["covered_area"] == 25.0 * len(boom.table) < coverage["envelope_area"]
+    section = load_parameters(config_path("pump_boom.yaml"))["pump_boom"]
+    section["lenghts"] = section.pop("lengths")
+    with pytest.raises(ConfigError, match=r"pump_boom\.lenghts.*did you mean 'lengths'"):
+        PumpBoom.from_parameters(section)
+
+
+def test_a_changed_geometry_runs_fk_but_no_region_ik_until_its_table_is_built(
+    boom: PumpBoom, random_q: np.ndarray, tmp_path
+) -> None:
+    section = load_parameters(config_path("pump_boom.yaml"))["pump_boom"]
+    section["lengths"] = [9.7, 8.4, 8.2, 8.6, 6.7]
+    changed = PumpBoom.from_parameters(section)
+    # FK and the Jacobian need no table: section 1 is 0.1 m longer, so every joint from P_1 on moves
+    # by 0.1 m along section 1.
+    phi1 = random_q[:, 1]
+    shift = 0.1 * np.stack([np.cos(phi1) * np.cos(random_q[:, 0]), np.cos(phi1) * np.sin(random_q[:, 0]),
+                            np.sin(phi1)], axis=-1)
+    np.testing.assert_allclose(changed.tip(random_q) - boom.tip(random_q), shift, atol=1e-12)
+    np.testing.assert_allclose(changed.jacob0(random_q)[:, :3], changed.tip_jacobian(random_q), atol=1e-11)
+    # Region IK, solve_ik and pours refuse with the reason and the fix.
+    problem = changed.table_problem()
+    assert "built_for.lengths" in problem and "pump_boom_regions --config" in problem, problem
+    with pytest.raises(RegionTableError, match=r"built_for\.lengths.*pump_boom_regions"):
+        changed.region_ik([20.0, 0.0, 17.5])
+    with pytest.raises(RegionTableError, match="pump_boom_regions"):
+        changed.solve_ik(pose_matrix([20.0, 0.0, 17.5]), use_orientation=False)
+    with pytest.raises(RegionTableError, match="pump_boom_regions"):
+        pour_line(changed, (20.0, 0.0, 17.5), (25.0, 0.0, 17.5))
+    section["regions"]["table_file"] = str(tmp_path / "missing.yaml")
+    assert "missing.yaml does not exist" in PumpBoom.from_parameters(section).table_problem()
+
+
+def test_builder_is_deterministic_and_its_table_serves_a_changed_machine(tmp_path) -> None:
+    section = load_parameters(config_path("pump_boom.yaml"))["pump_boom"]
+    section["lengths"] = [9.7, 8.4, 8.2, 8.6, 6.7]
+    section["regions"]["table_file"] = str(tmp_path / "t0.yaml")
+    boom = PumpBoom.from_parameters(section)
+    area = build_regions.reachable_area(boom, samples=20_000, cell=1.0)
+    tables = [build_regions.build_table(boom, step_deg=15.0, coverage=area) for _ in range(2)]
+    for k, table in enumerate(tables):
+        table.dump(tmp_path / f"t{k}.yaml")
+    assert (tmp_path / "t0.yaml").read_bytes() == (tmp_path / "t1.yaml").read_bytes()
+    assert boom.table_problem() is None
+    assert len(boom.table) > 5 and boom.table.coverage["band_failures"] == 0
+    np.testing.assert_array_equal(boom.table.triples, tables[0].triples)
+    points = _plane(boom, 0.5)
+    result = boom.region_ik(points)
+    assert result.ok.all() and np.abs(boom.tip(result.q) - points).max() < 1e-9
