@@ -14,8 +14,9 @@ Bad input is rejected with a logged reason; nothing is published for it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
-from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
@@ -29,35 +30,39 @@ from excavator_kinematics.kinematics import (
     bucket_angular_acceleration,
     bucket_angular_velocity,
 )
+from excavator_kinematics.node_settings import FORWARD, NODES_CONFIG
 from excavator_kinematics.state_input import RateDifferentiator, SwingHold
+from manipulator_kinematics.codec.packed import PackedMessage
 from manipulator_kinematics.joint_state import InputError, decode_joint_state
-from manipulator_kinematics.node_util import ThrottledLog, machine_parameters, make_node, node_parameters, run
-from manipulator_kinematics.packed import PackedMessage
+from manipulator_kinematics.node_util import ThrottledLog
+from manipulator_kinematics.nodes import MachineNode, run_node
+from manipulator_kinematics.registry import Machine
 
 NODE = "excavator_forward"
-NODES_CONFIG = "excavator_nodes.yaml"
-MACHINE_CONFIG = "excavator_cet200.yaml"
 SWING = JOINTS[0]
 # What changes in a stamped geometry message from one input to the next: everything but frame_id.
 STAMPED = ("header.stamp", "pose", "twist", "accel")
 
 
-class ForwardKinematics:
-    """The node's state and callbacks; ``node`` is what the executor spins."""
+class ForwardKinematics(MachineNode):
+    """The node's state and callbacks."""
 
-    def __init__(self) -> None:
-        self.node: Node = make_node(NODE)
-        settings = node_parameters(self.node, NODES_CONFIG, f"/**/{NODE}")
-        self.exc = Excavator.from_parameters(machine_parameters(self.node, "excavator", MACHINE_CONFIG))
+    SETTINGS = FORWARD
+    DEFAULTS_FILE = NODES_CONFIG
+
+    def __init__(self, node_name: str, machine: Machine, argv: Sequence[str]) -> None:
+        super().__init__(node_name, machine, argv)
+        settings = self.settings
+        self.exc: Excavator = self.model
         self.frame = settings["base_frame"]
         self.swing = SwingHold(settings["swing_max_age"])
         tau, gap = settings["acceleration_time_constant"], settings["acceleration_max_gap"]
         self.cylinder_acceleration = RateDifferentiator(tau, gap)
         self.swing_acceleration = RateDifferentiator(tau, gap)
-        self.log = ThrottledLog(self.node, settings["warning_period"])
+        self.log = ThrottledLog(self, settings["warning_period"])
 
         qos = QoSProfile(depth=settings["qos_depth"], reliability=ReliabilityPolicy.RELIABLE)
-        topic = {key[len("topics.") :]: value for key, value in settings.items() if key.startswith("topics.")}
+        topic = settings["topics"]
         # Outputs go out as bytes of a fixed layout: building them as rclpy messages would cost
         # more than the kinematics (see manipulator_kinematics.packed).
         header = Header(frame_id=self.frame)
@@ -68,14 +73,14 @@ class ForwardKinematics:
             JointState(name=list(JOINTS), position=[0.0] * 4, velocity=[0.0] * 4),
             ("header.stamp", "position", "velocity"),
         )
-        self.pose_pub = self.node.create_publisher(PoseStamped, topic["bucket_pose"], qos)
-        self.twist_pub = self.node.create_publisher(TwistStamped, topic["bucket_twist"], qos)
-        self.accel_pub = self.node.create_publisher(AccelStamped, topic["bucket_accel"], qos)
-        self.joints_pub = self.node.create_publisher(JointState, topic["open_chain_joint_states"], qos)
+        self.pose_pub = self.create_publisher(PoseStamped, topic["bucket_pose"], qos)
+        self.twist_pub = self.create_publisher(TwistStamped, topic["bucket_twist"], qos)
+        self.accel_pub = self.create_publisher(AccelStamped, topic["bucket_accel"], qos)
+        self.joints_pub = self.create_publisher(JointState, topic["open_chain_joint_states"], qos)
         # raw: the callbacks decode the bytes themselves (decode_joint_state), at a third of the cost.
-        self.node.create_subscription(JointState, topic["joint_states"], self.on_swing, qos, raw=True)
-        self.node.create_subscription(JointState, topic["cylinder_lengths"], self.on_cylinders, qos, raw=True)
-        self.node.get_logger().info(
+        self.create_subscription(JointState, topic["joint_states"], self.on_swing, qos, raw=True)
+        self.create_subscription(JointState, topic["cylinder_lengths"], self.on_cylinders, qos, raw=True)
+        self.get_logger().info(
             f"{self.exc.name}: {topic['cylinder_lengths']} + {topic['joint_states']} -> "
             f"{topic['bucket_pose']}, {topic['bucket_twist']}, {topic['bucket_accel']}, "
             f"{topic['open_chain_joint_states']} in frame {self.frame!r}"
@@ -122,8 +127,8 @@ class ForwardKinematics:
         self.joints_pub.publish(self.joints.pack((*sec_nanosec, *s.theta.tolist(), *s.theta_dot.tolist())))
 
 
-def main(args: list[str] | None = None) -> int:
-    return run(lambda: ForwardKinematics().node, args)
+def main(args: Sequence[str] | None = None) -> int:
+    return run_node(ForwardKinematics, "excavator", NODE, args)
 
 
 if __name__ == "__main__":

@@ -10,64 +10,60 @@ between timer calls, so timer jitter does not change the integrated motion.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
-from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from sensor_msgs.msg import JointState
 
 from excavator_kinematics import messages
 from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
+from excavator_kinematics.node_settings import NODES_CONFIG, SIM
 from excavator_kinematics.plant import Plant
 from excavator_kinematics.state_input import InputError
 from manipulator_kinematics.joint_state import joint_values
-from manipulator_kinematics.node_util import (
-    ThrottledLog,
-    machine_parameters,
-    make_node,
-    node_parameters,
-    param,
-    run,
-)
-from manipulator_kinematics.params import ConfigError
+from manipulator_kinematics.node_util import ThrottledLog
+from manipulator_kinematics.nodes import MachineNode, run_node
+from manipulator_kinematics.registry import Machine
 
 NODE = "excavator_sim"
 
 
-class Simulator:
-    """The node's state and callbacks; ``node`` is what the executor spins."""
+class Simulator(MachineNode):
+    """The node's state and callbacks."""
 
-    def __init__(self) -> None:
-        self.node: Node = make_node(NODE)
-        s = node_parameters(self.node, "excavator_nodes.yaml", f"/**/{NODE}")
-        self.exc = Excavator.from_parameters(
-            machine_parameters(self.node, "excavator", "excavator_cet200.yaml")
-        )
-        lengths = param(self.node, "initial_cylinder_lengths", self.exc.limits.reference[1:].tolist())
-        if not s["rate"] > 0.0:
-            raise ConfigError(f"{NODE}.rate must be positive, got {s['rate']}")
+    SETTINGS = SIM
+    DEFAULTS_FILE = NODES_CONFIG
+
+    def __init__(self, node_name: str, machine: Machine, argv: Sequence[str]) -> None:
+        super().__init__(node_name, machine, argv)
+        s = self.settings
+        self.exc: Excavator = self.model
+        given = s["initial_cylinder_lengths"]
+        lengths = self.exc.limits.reference[1:] if given is None else given
         self.plant = Plant(
             self.exc.limits, np.array([s["initial_swing_angle"], *lengths], dtype=float), s["time_constant"]
         )
         self.command_timeout_ns = int(s["command_timeout"] * 1e9)
         self.command = np.zeros(4)
         self.command_received_ns: int | None = None
-        self.log = ThrottledLog(self.node, s["warning_period"])
+        self.log = ThrottledLog(self, s["warning_period"])
 
         qos = QoSProfile(depth=s["qos_depth"], reliability=ReliabilityPolicy.RELIABLE)
-        self.cylinder_pub = self.node.create_publisher(JointState, s["topics.cylinder_lengths"], qos)
-        self.swing_pub = self.node.create_publisher(JointState, s["topics.joint_states"], qos)
+        self.cylinder_pub = self.create_publisher(JointState, s["topics"]["cylinder_lengths"], qos)
+        self.swing_pub = self.create_publisher(JointState, s["topics"]["joint_states"], qos)
         # Only the latest command matters; a queue of old ones would delay the loop.
         latest = QoSProfile(depth=s["input_queue_depth"], reliability=ReliabilityPolicy.RELIABLE)
-        self.node.create_subscription(JointState, s["topics.rate_commands"], self.on_command, latest)
+        self.create_subscription(JointState, s["topics"]["rate_commands"], self.on_command, latest)
         self.last_ns = self.now_ns()
-        self.node.create_timer(1.0 / s["rate"], self.on_timer)
-        self.node.get_logger().info(
+        self.create_timer(1.0 / s["rate"], self.on_timer)
+        self.get_logger().info(
             f"{self.exc.name} simulated at {s['rate']:g} Hz from D = {self.plant.d.round(6).tolist()}"
         )
 
     def now_ns(self) -> int:
-        return self.node.get_clock().now().nanoseconds
+        return self.get_clock().now().nanoseconds
 
     def on_command(self, msg: JointState) -> None:
         try:
@@ -93,8 +89,8 @@ class Simulator:
         self.cylinder_pub.publish(messages.joint_state(stamp, CYLINDERS, d[1:], d_dot[1:]))
 
 
-def main(args: list[str] | None = None) -> int:
-    return run(lambda: Simulator().node, args)
+def main(args: Sequence[str] | None = None) -> int:
+    return run_node(Simulator, "excavator", NODE, args)
 
 
 if __name__ == "__main__":

@@ -16,41 +16,46 @@ while moving, publishes zero rates once and holds (publishes nothing) until the 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import TwistStamped
-from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from excavator_kinematics import messages
 from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
+from excavator_kinematics.node_settings import NODES_CONFIG, VELOCITY_IK
 from excavator_kinematics.rate_command import rate_command
 from excavator_kinematics.state_input import InputError, SwingHold
 from excavator_kinematics.twist import split_twist
 from manipulator_kinematics.joint_state import joint_values
-from manipulator_kinematics.node_util import ThrottledLog, machine_parameters, make_node, node_parameters, run
+from manipulator_kinematics.node_util import ThrottledLog
+from manipulator_kinematics.nodes import MachineNode, run_node
+from manipulator_kinematics.registry import Machine
 
 NODE = "excavator_velocity_ik"
 
 
-class VelocityIk:
-    """The node's state and callbacks; ``node`` is what the executor spins."""
+class VelocityIk(MachineNode):
+    """The node's state and callbacks."""
 
-    def __init__(self) -> None:
-        self.node: Node = make_node(NODE)
-        s = node_parameters(self.node, "excavator_nodes.yaml", f"/**/{NODE}")
-        self.exc = Excavator.from_parameters(
-            machine_parameters(self.node, "excavator", "excavator_cet200.yaml")
-        )
+    SETTINGS = VELOCITY_IK
+    DEFAULTS_FILE = NODES_CONFIG
+
+    def __init__(self, node_name: str, machine: Machine, argv: Sequence[str]) -> None:
+        super().__init__(node_name, machine, argv)
+        s = self.settings
+        self.exc: Excavator = self.model
         self.frame = s["base_frame"]
         self.command_timeout_ns = int(s["command_timeout"] * 1e9)
         self.state_timeout_ns = int(s["state_timeout"] * 1e9)
         self.condition_threshold = float(s["condition_threshold"])
         self.stroke_horizon = float(s["stroke_horizon"])
         self.residual_tolerance = float(s["twist_residual_tolerance"])
-        self.log = ThrottledLog(self.node, s["warning_period"])
+        self.log = ThrottledLog(self, s["warning_period"])
         self.swing = SwingHold(s["swing_max_age"])
         self.cylinders: tuple[int, int, np.ndarray] | None = None  # (stamp ns, receipt ns, lengths)
         self.target: tuple[int, np.ndarray, np.ndarray] | None = None  # (receipt ns, linear, angular)
@@ -61,24 +66,24 @@ class VelocityIk:
         # A controller acts on the latest target and state: a short input queue drops what a busy
         # moment left behind instead of working through it late (a backlog is a delay in the loop).
         latest = QoSProfile(depth=s["input_queue_depth"], reliability=ReliabilityPolicy.RELIABLE)
-        self.command_pub = self.node.create_publisher(JointState, s["topics.rate_commands"], qos)
+        self.command_pub = self.create_publisher(JointState, s["topics"]["rate_commands"], qos)
         self.array_pub = (
-            self.node.create_publisher(Float64MultiArray, s["topics.rate_command_array"], qos)
+            self.create_publisher(Float64MultiArray, s["topics"]["rate_command_array"], qos)
             if s["publish_array"]
             else None
         )
-        self.node.create_subscription(TwistStamped, s["topics.target_bucket_twist"], self.on_target, latest)
-        self.node.create_subscription(JointState, s["topics.joint_states"], self.on_swing, latest)
-        self.node.create_subscription(JointState, s["topics.cylinder_lengths"], self.on_cylinders, latest)
-        self.node.create_timer(s["command_timeout"] / 5.0, self.on_timer)
-        self.node.get_logger().info(
-            f"{self.exc.name}: {s['topics.target_bucket_twist']} (frame {self.frame!r}) -> "
-            f"{s['topics.rate_commands']}"
-            + (f" + {s['topics.rate_command_array']}" if self.array_pub else "")
+        self.create_subscription(TwistStamped, s["topics"]["target_bucket_twist"], self.on_target, latest)
+        self.create_subscription(JointState, s["topics"]["joint_states"], self.on_swing, latest)
+        self.create_subscription(JointState, s["topics"]["cylinder_lengths"], self.on_cylinders, latest)
+        self.create_timer(s["command_timeout"] / 5.0, self.on_timer)
+        self.get_logger().info(
+            f"{self.exc.name}: {s['topics']['target_bucket_twist']} (frame {self.frame!r}) -> "
+            f"{s['topics']['rate_commands']}"
+            + (f" + {s['topics']['rate_command_array']}" if self.array_pub else "")
         )
 
     def now_ns(self) -> int:
-        return self.node.get_clock().now().nanoseconds
+        return self.get_clock().now().nanoseconds
 
     def on_swing(self, msg: JointState) -> None:
         try:
@@ -166,7 +171,7 @@ class VelocityIk:
         self.log(severity, reason)
         self.target = None
         if self.moving:
-            self.publish(self.node.get_clock().now().to_msg(), np.zeros(4))
+            self.publish(self.get_clock().now().to_msg(), np.zeros(4))
             self.moving = False
 
     def publish(self, stamp: Time, d_dot: np.ndarray) -> None:
@@ -175,8 +180,8 @@ class VelocityIk:
             self.array_pub.publish(Float64MultiArray(data=[float(v) for v in d_dot]))
 
 
-def main(args: list[str] | None = None) -> int:
-    return run(lambda: VelocityIk().node, args)
+def main(args: Sequence[str] | None = None) -> int:
+    return run_node(VelocityIk, "excavator", NODE, args)
 
 
 if __name__ == "__main__":

@@ -22,7 +22,7 @@ from builtin_interfaces.msg import Duration
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from manipulator_kinematics.joint_state import InputError, joint_values
-from manipulator_kinematics.nodes import forward_main, main
+from manipulator_kinematics.nodes import forward_main, run_node
 from manipulator_kinematics.nodes.ik_server import IKServerNode, Rejected
 from manipulator_kinematics.registry import Machine
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes
@@ -104,4 +104,4 @@ def forward(args: Sequence[str] | None = None) -> int:
 
 
 def ik_server(args: Sequence[str] | None = None) -> int:
-    return main(PumpBoomServer, "pump_boom", "pump_boom_ik_server", args)
+    return run_node(PumpBoomServer, "pump_boom", "pump_boom_ik_server", args)

@@ -16,7 +16,9 @@ from manipulator_kinematics.nodes.base import MachineNode
 from manipulator_kinematics.registry import machine
 
 
-def main(node_class: type[MachineNode], machine_name: str, node_name: str, args: Sequence[str] | None) -> int:
+def run_node(
+    node_class: type[MachineNode], machine_name: str, node_name: str, args: Sequence[str] | None
+) -> int:
     """Run ``node_class`` for the registered machine ``machine_name`` until SIGINT/SIGTERM."""
     argv = list(sys.argv if args is None else args)
     return run(lambda: node_class(node_name, machine(machine_name), argv), argv)
@@ -26,14 +28,14 @@ def forward_main(machine_name: str, node_name: str, args: Sequence[str] | None =
     """joint_states -> tool_pose + tool_twist (:mod:`manipulator_kinematics.nodes.forward`)."""
     from manipulator_kinematics.nodes.forward import ForwardNode
 
-    return main(ForwardNode, machine_name, node_name, args)
+    return run_node(ForwardNode, machine_name, node_name, args)
 
 
 def ik_server_main(machine_name: str, node_name: str, args: Sequence[str] | None = None) -> int:
     """solve_ik + solve_fk (:mod:`manipulator_kinematics.nodes.ik_server`)."""
     from manipulator_kinematics.nodes.ik_server import IKServerNode
 
-    return main(IKServerNode, machine_name, node_name, args)
+    return run_node(IKServerNode, machine_name, node_name, args)
 
 
-__all__ = ["MachineNode", "forward_main", "ik_server_main", "main"]
+__all__ = ["MachineNode", "forward_main", "ik_server_main", "run_node"]

@@ -80,6 +80,8 @@ def node_settings(
 def declare(node: Node, values: Mapping[str, Any], schema: Schema, prefix: str = "") -> None:
     """Declare every value (nested) read-only, described by its schema field's ``doc``."""
     for name, value in flatten(dict(values)).items():
+        if value is None:  # an optional setting left out: nothing to declare
+            continue
         full = f"{prefix}.{name}" if prefix else name
         given = node.get_parameter(full) if node.has_parameter(full) else None
         kind = given.type_ if given is not None else Parameter.Type.from_parameter_value(value)

@@ -1,0 +1,80 @@
+"""Settings schemas of the excavator nodes (manipulator_kinematics.config); their defaults live in
+``config/excavator_nodes.yaml`` (sections ``/**/<node>``), the one place a user reads them."""
+
+from __future__ import annotations
+
+from manipulator_kinematics.config import Flag, Number, Numbers, Text
+
+NODES_CONFIG = "excavator_nodes.yaml"
+
+
+def _topic(what: str) -> Text:
+    return Text(empty=False, doc=what)
+
+
+_SECONDS = {"unit": "s", "min": 0.0, "max": 3600.0}
+_WARNING_PERIOD = Number(**_SECONDS, doc="the same kind of rejection is logged at most this often")
+_QOS_DEPTH = Number(min=1, max=100_000, integer=True, doc="reliable keep-last depth of the publishers")
+_INPUT_DEPTH = Number(min=1, max=100_000, integer=True,
+                      doc="depth of the input subscriptions: act on the latest input, drop a backlog")
+_SWING_MAX_AGE = Number(**_SECONDS, doc="max |stamp(cylinder_lengths) - stamp(joint_states)|")
+
+FORWARD = {
+    "base_frame": Text(empty=False, doc="frame_id of bucket_pose, bucket_twist and bucket_accel"),
+    "swing_max_age": _SWING_MAX_AGE,
+    "acceleration_time_constant": Number(**_SECONDS, doc="low-pass on the accelerations; 0 = raw"),
+    "acceleration_max_gap": Number(**_SECONDS, doc="a longer gap between messages restarts the differencing"),
+    "warning_period": _WARNING_PERIOD,
+    "qos_depth": Number(min=1, max=100_000, integer=True,
+                        doc="reliable keep-last depth of every topic (100: 0.1 s of 1 kHz input)"),
+    "topics": {
+        "cylinder_lengths": _topic("input: sensor_msgs/JointState, boom/arm/bucket cylinder length and rate"),
+        "joint_states": _topic("input: sensor_msgs/JointState, swing_joint angle and rate"),
+        "bucket_pose": _topic("output: geometry_msgs/PoseStamped"),
+        "bucket_twist": _topic("output: geometry_msgs/TwistStamped"),
+        "bucket_accel": _topic("output: geometry_msgs/AccelStamped"),
+        "open_chain_joint_states": _topic("output: sensor_msgs/JointState of the open chain"),
+    },
+}
+
+VELOCITY_IK = {
+    "base_frame": Text(empty=False, doc="the only frame_id accepted on target_bucket_twist"),
+    "command_timeout": Number(**_SECONDS, doc="no accepted target for this long: zero rates once, then hold"),
+    "state_timeout": Number(**_SECONDS, doc="a cylinder/swing state older than this is refused"),
+    "swing_max_age": _SWING_MAX_AGE,
+    "condition_threshold": Number(min=1.0, max=1e12,
+                                  doc="cond(JC0) above which damped least squares starts"),
+    "stroke_horizon": Number(**_SECONDS, doc="slow down to reach a stroke end no sooner than this"),
+    "twist_residual_tolerance": Number(min=0.0, max=1e3, unit="rad/s",
+                                       doc="unachievable angular velocity before a (throttled) warning"),
+    "warning_period": _WARNING_PERIOD,
+    "publish_array": Flag(doc="also publish Float64MultiArray for a ros2_control forward command controller"),
+    "qos_depth": _QOS_DEPTH,
+    "input_queue_depth": _INPUT_DEPTH,
+    "topics": {
+        "target_bucket_twist": _topic("input: geometry_msgs/TwistStamped in base_frame"),
+        "cylinder_lengths": _topic("input: sensor_msgs/JointState, cylinder lengths"),
+        "joint_states": _topic("input: sensor_msgs/JointState, swing_joint"),
+        "rate_commands": _topic("output: sensor_msgs/JointState velocities of swing_joint and the cylinders"),
+        "rate_command_array": _topic("output: std_msgs/Float64MultiArray in that order (publish_array)"),
+    },
+}
+
+SIM = {
+    "rate": Number(min=0.0, max=10_000.0, unit="Hz", exclusive_min=True,
+                   doc="rate of cylinder_lengths and joint_states"),
+    "time_constant": Number(**_SECONDS, doc="first-order lag of the actuators; 0 = ideal"),
+    "command_timeout": Number(**_SECONDS, doc="no rate command for this long: the actuators stop"),
+    "warning_period": _WARNING_PERIOD,
+    "initial_swing_angle": Number(min=-7.0, max=7.0, unit="rad", doc="swing angle at start (rad)"),
+    "initial_cylinder_lengths": Numbers(3, Number(min=0.0, max=20.0, unit="m"), default=None,
+                                        doc="boom, arm, bucket cylinder lengths at start (m); "
+                                            "default: the machine's reference lengths"),
+    "qos_depth": _QOS_DEPTH,
+    "input_queue_depth": _INPUT_DEPTH,
+    "topics": {
+        "rate_commands": _topic("input: sensor_msgs/JointState velocities (rate commands)"),
+        "cylinder_lengths": _topic("output: sensor_msgs/JointState, cylinder lengths and rates"),
+        "joint_states": _topic("output: sensor_msgs/JointState, swing_joint"),
+    },
+}
