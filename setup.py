@@ -13,6 +13,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/urdf", glob("urdf/*.urdf")),
     ],
     install_requires=["setuptools"],
     zip_safe=True,
@@ -31,18 +32,34 @@ setup(
             "scara_ik_server = scara_kinematics.nodes:ik_server",
             "scara_forward = scara_kinematics.nodes:forward",
             # pump-truck boom (paper 001)
+            "pump_boom_forward = pump_boom_kinematics.nodes:forward",
+            "pump_boom_ik_server = pump_boom_kinematics.nodes:ik_server",
+            "pump_boom_regions = pump_boom_kinematics.build_regions:main",
+            "pump_boom_plots = pump_boom_kinematics.plots:main",
             # tool changer (paper 003)
+            "tool_changer_ik_server = tool_changer_kinematics.nodes:ik_server",
+            "tool_changer_forward = tool_changer_kinematics.nodes:forward",
+            "tool_changer_plots = tool_changer_kinematics.plots:main",
             # palletizer (paper 004)
-            # bag tools
+            "palletizer_ik_server = palletizer_kinematics.nodes:ik_server",
+            "palletizer_forward = palletizer_kinematics.nodes:forward",
+            "palletizer_plots = palletizer_kinematics.plots:main",
+            # bag tools and shared displays
             "record = manipulator_kinematics.bag.record:main",
             "replay = manipulator_kinematics.bag.replay:main",
             "evaluate = manipulator_kinematics.bag.evaluate:main",
+            "machine_markers = manipulator_kinematics.nodes.markers:main",
+            "mk_urdf = manipulator_kinematics.urdf:main",
+            "excavator_working_ranges = excavator_kinematics.working_ranges:main",
         ],
         # The machine registry (manipulator_kinematics.registry): one Machine per machine package.
         "manipulator_kinematics.machines": [
             "excavator = excavator_kinematics.machine:MACHINE",
             "scara = scara_kinematics.machine:MACHINE",
+            "pump_boom = pump_boom_kinematics.machine:MACHINE",
+            "tool_changer = tool_changer_kinematics.machine:MACHINE",
             # pump_boom, tool_changer, palletizer: added by their packages
+            "palletizer = palletizer_kinematics.machine:MACHINE",
         ],
     },
 )

@@ -10,8 +10,11 @@ on each ``bucket_pose`` it takes the reference of the digging cycle
 position, :func:`excavator_kinematics.bucket_path.follow`), plus the reference itself on
 ``reference_bucket_pose`` / ``reference_bucket_twist`` so the bag holds what was asked.
 Afterwards the bag is read back for the summary and the Fig. 11 / Fig. 12 style plots
-(:mod:`excavator_kinematics.cycle_report`). Exit status 1 if a process died, the cycle did not
-run, or the bucket left the reference path by more than ``--max-error`` metres.
+(:mod:`excavator_kinematics.cycle_report`), and an animated side view of the whole linkage
+(``excavator_digging.gif``). The recorder adds the topics Foxglove's 3-D panel needs
+(``record --visuals``: /robot_description, /tf, /tf_static, machine_markers). Exit status 1 if
+a process died, the cycle did not run, or the bucket left the reference path by more than
+``--max-error`` metres.
 """
 
 from __future__ import annotations
@@ -36,6 +39,8 @@ from excavator_kinematics import messages
 from excavator_kinematics.bucket_path import BucketPath, digging_cycle, follow, natural_coordinates, to_task
 from excavator_kinematics.kinematics import Excavator
 from excavator_kinematics.twist import bucket_angles, twist_from_q_dot
+from manipulator_kinematics import registry
+from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.node_util import console_script
 from manipulator_kinematics.params import config_path
 
@@ -60,6 +65,10 @@ OVERRIDES = {
     "/**/excavator_forward": {"ros__parameters": {"acceleration_time_constant": 0.03}},
     "/**/excavator_velocity_ik": {"ros__parameters": {"command_timeout": 0.1}},
 }
+# The recorder's stop includes adding the visual topics (record --visuals).
+RECORD_STOP_TIMEOUT = 120.0  # s
+ANIMATION = "excavator_digging.gif"
+ANIMATION_SPEED = 2.0  # x real time: a 40 s cycle in 20 s (200 frames at 10 fps)
 RECORDED = {
     "cylinder_lengths": "sensor_msgs/msg/JointState",
     "joint_states": "sensor_msgs/msg/JointState",
@@ -72,6 +81,25 @@ RECORDED = {
     "reference_bucket_pose": "geometry_msgs/msg/PoseStamped",
     "reference_bucket_twist": "geometry_msgs/msg/TwistStamped",
 }
+
+
+def animation(bag: Path, gif: Path, exc: Excavator, start_ns: int, duration: float) -> Path:
+    """Side view (boom plane) of the whole linkage through the recorded cycle, with the reference
+    path and the bucket-tip trace, as an animated GIF (:func:`manipulator_kinematics.animation.animate`)."""
+    from manipulator_kinematics.animation import View, animate, boom_plane
+    from manipulator_kinematics.bag.visual import gather_states
+
+    machine = registry.machine("excavator")
+    arrays = BagReader(bag).arrays(["/cylinder_lengths", "/joint_states", "/reference_bucket_pose"])
+    _, stamp, D = gather_states({t.strip("/"): a for t, a in arrays.items()}, machine.joint_names(exc))
+    cycle = (stamp >= start_ns) & (stamp <= start_ns + int((duration + 1.0) * 1e9))
+    reference = arrays["/reference_bucket_pose"]
+    points = np.stack([reference[f"pose.position.{c}"] for c in "xyz"], axis=-1)
+    return animate(
+        machine.scene(exc, D[cycle]), gif, [View(boom_plane(D[cycle, 0]), "r (m)", "z (m)")],
+        times=(stamp[cycle] - start_ns) * 1e-9, reference=points, ground=0.0, speed=ANIMATION_SPEED,
+        title=f"{exc.name}: digging cycle, side view of the boom plane ({ANIMATION_SPEED:g}x speed)",
+    )
 
 
 class Driver:
@@ -153,6 +181,8 @@ def start_processes(output: Path) -> list[tuple[str, subprocess.Popen]]:
         *RECORDED,
         "--type",
         *(f"{topic}:={msgtype}" for topic, msgtype in RECORDED.items()),
+        # When the recording ends: /robot_description, /tf, /tf_static, machine_markers (Foxglove).
+        "--visuals",
     ]
     processes = []
     for name, command in commands.items():
@@ -165,9 +195,10 @@ def stop_processes(processes: list[tuple[str, subprocess.Popen]]) -> None:
     for _, process in processes:
         if process.poll() is None:
             process.send_signal(signal.SIGINT)
-    for _, process in processes:
+    for name, process in processes:
         try:
-            process.wait(10.0)
+            # The recorder adds the visual topics after it stops (a few seconds for the cycle).
+            process.wait(RECORD_STOP_TIMEOUT if name == "record" else 10.0)
         except subprocess.TimeoutExpired:
             process.kill()
             process.wait()
@@ -249,6 +280,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     summary = report(args.output / "bag", args.output, exc, path, driver.start_ns)
     print(summary.text)
+    gif = animation(args.output / "bag", args.output / ANIMATION, exc, driver.start_ns, path.duration)
+    print(f"  animation: {gif} ({gif.stat().st_size / 1e6:.2f} MB); Foxglove: open {args.output / 'bag'} "
+          f"(docs/visualisation.md)")
     delay = 1e3 * np.percentile(driver.delays, [50, 99])
     print(
         f"  driver: got bucket_pose {delay[0]:.1f} ms (p50) / {delay[1]:.1f} ms (p99) after its stamp; "

@@ -8,8 +8,8 @@ tool_twist from joint_states; golden bag test/data/palletizer_forward_golden).
 
 from manipulator_kinematics.bag import analysis, synthetic
 from manipulator_kinematics.registry import Machine
-from manipulator_kinematics.urdf import serial_urdf
 from manipulator_kinematics.scene import serial_scene
+from manipulator_kinematics.urdf import serial_urdf
 from palletizer_kinematics.kinematics import CONFIG_FILE, SCHEMA, SECTION, Palletizer
 
 MACHINE = Machine(

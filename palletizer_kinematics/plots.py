@@ -10,6 +10,7 @@ Writes into OUT_DIR:
   (axis names, positions, velocities) as the YAML ``ros2 topic pub`` takes, when the message
   types are installed;
 * ``palletizer_statics_map.png``: T2 and T3 of both variants over the reachable vertical plane;
+* ``palletizer_door_path.gif``: the arm along the door path (shared scene, side and top view);
 
 and prints the paper's statics case (payload 110 kg, A2 = 30 deg, A3 = 15 deg) side by side.
 """
@@ -200,6 +201,17 @@ def write_trajectory_yaml(model: Palletizer, trajectory: DoorTrajectory, path: P
     return True
 
 
+def animate_door(model: Palletizer, trajectory: DoorTrajectory, path: Path) -> Path:
+    """The configured variant's axis angles along the door path, drawn from the shared scene."""
+    from manipulator_kinematics.animation import View, animate, view_xy, view_xz
+    from palletizer_kinematics.machine import MACHINE
+
+    return animate(MACHINE.scene(model, trajectory.axis[model.variant]), path,
+                   [View(view_xz, "x (m)", "z (m)", "side"), View(view_xy, "x (m)", "y (m)", "top")],
+                   times=trajectory.t, reference=trajectory.position, size=(7.0, 3.6), ground=0.0,
+                   title=f"Palletizer ({model.variant}): door path P0..P4")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="palletizer_plots", description=__doc__.split("\n")[0])
     parser.add_argument("out_dir", type=Path, help="directory to write into (created if missing)")
@@ -220,6 +232,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     write_csv(trajectory, out / "palletizer_door.csv")
     wrote_yaml = write_trajectory_yaml(model, trajectory, out / "palletizer_door_trajectory.yaml")
     plot_torque_map(model, out / "palletizer_statics_map.png")
+    animate_door(model, trajectory, out / "palletizer_door_path.gif")
     print(
         f"door trajectory: {len(trajectory.t)} samples over {trajectory.t[-1]:.3f} s "
         f"(step {args.step:g} m, peak speed {args.speed:g} m/s), variant {model.variant}"

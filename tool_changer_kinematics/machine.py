@@ -2,8 +2,8 @@
 
 from manipulator_kinematics.bag import analysis, synthetic
 from manipulator_kinematics.registry import Machine
-from manipulator_kinematics.urdf import serial_urdf
 from manipulator_kinematics.scene import serial_scene
+from manipulator_kinematics.urdf import serial_urdf
 from tool_changer_kinematics.kinematics import CONFIG_FILE, SCHEMA, SECTION, ToolChanger
 
 MACHINE = Machine(

@@ -3,7 +3,8 @@
 * ``tool_changer_workspace.png``: Monte-Carlo tool points (Fig. 5) with the extents printed;
 * ``tool_changer_section.png``: J1 = 90 deg, the y0-z0 plane (Fig. 6);
 * ``tool_changer_trajectory.png``: the quintic's positions, velocities, accelerations (Figs. 7-9);
-* ``tool_changer_solutions.png``: every closed-form IK candidate of one pose, valid ones coloured.
+* ``tool_changer_solutions.png``: every closed-form IK candidate of one pose, valid ones coloured;
+* ``tool_changer_trajectory.gif``: the arm moving along that trajectory (side and top view).
 """
 
 from __future__ import annotations
@@ -94,6 +95,18 @@ def plot_solutions(arm: ToolChanger, path: Path) -> None:
     plt.close(fig)
 
 
+def animate_trajectory(arm: ToolChanger, path: Path) -> Path:
+    """The arm along the paper's quintic (shared scene, side and top view), 3x real time."""
+    from manipulator_kinematics.animation import View, animate, view_xy, view_xz
+    from tool_changer_kinematics.machine import MACHINE
+
+    trajectory = paper_trajectory()
+    return animate(MACHINE.scene(arm, trajectory.q), path,
+                   [View(view_xz, "x (m)", "z (m)", "side"), View(view_xy, "x (m)", "y (m)", "top")],
+                   times=trajectory.t, speed=3.0, size=(7.0, 3.6),
+                   title="Tool changer: quintic joint trajectory (Figs. 7-9), 3x speed")
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("outdir", type=Path, help="directory for the PNG files (created)")
@@ -115,4 +128,5 @@ def main(argv: list[str] | None = None) -> None:
     plot_section(plane, args.outdir / "tool_changer_section.png")
     plot_trajectory(args.outdir / "tool_changer_trajectory.png")
     plot_solutions(arm, args.outdir / "tool_changer_solutions.png")
-    print(f"wrote 4 PNG files to {args.outdir}")
+    animate_trajectory(arm, args.outdir / "tool_changer_trajectory.gif")
+    print(f"wrote 4 PNG files and tool_changer_trajectory.gif to {args.outdir}")
