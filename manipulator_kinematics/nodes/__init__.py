@@ -13,14 +13,19 @@ from collections.abc import Sequence
 
 from manipulator_kinematics.node_util import run
 from manipulator_kinematics.nodes.base import MachineNode
+from manipulator_kinematics.nodes.help import help_text, wants_help
 from manipulator_kinematics.registry import machine
 
 
 def run_node(
     node_class: type[MachineNode], machine_name: str, node_name: str, args: Sequence[str] | None
 ) -> int:
-    """Run ``node_class`` for the registered machine ``machine_name`` until SIGINT/SIGTERM."""
+    """Run ``node_class`` for the registered machine ``machine_name`` until SIGINT/SIGTERM;
+    with ``-h``/``--help`` print what it does, its parameters, topics and services, and exit 0."""
     argv = list(sys.argv if args is None else args)
+    if wants_help(argv):
+        print(help_text(node_class, machine(machine_name), node_name, node_class.DEFAULTS_FILE))
+        return 0
     return run(lambda: node_class(node_name, machine(machine_name), argv), argv)
 
 

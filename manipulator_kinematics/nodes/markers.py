@@ -38,6 +38,7 @@ from manipulator_kinematics.config import Names, Number, Text
 from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes import run_node
 from manipulator_kinematics.nodes.base import MachineNode, params_files
+from manipulator_kinematics.nodes.help import help_text, wants_help
 from manipulator_kinematics.params import ConfigError, load_parameters
 from manipulator_kinematics.registry import Machine, by_section, machines
 from manipulator_kinematics.scene import Solids, solids
@@ -148,6 +149,9 @@ def machine_of(argv: Sequence[str]) -> Machine:
 
 def main(args: Sequence[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
+    if wants_help(argv):
+        print(help_text(MarkersNode, None, NODE_NAME, DEFAULTS_FILE))
+        return 0
     try:
         machine = machine_of(argv)
     except ConfigError as error:
