@@ -1,25 +1,28 @@
-"""End-to-end latency and drops of excavator_forward across processes, beside a bare echo node.
+"""End-to-end latency, drops and CPU of excavator_forward across processes, beside a bare echo
+node, on each executor a node can spin (manipulator_kinematics.executor.EXECUTORS).
 
-    python benchmarks/bench_excavator_latency.py [--duration 30] [--rates 100 1000] [--depth 100] [--rounds 3]
+    python benchmarks/bench_excavator_latency.py [--duration 30] [--rates 100 1000] [--depth 100]
+                                                 [--rounds 3] [--executors events single]
 
-For each input rate three nodes run in turn, each as its own process: the echo node (JointState in
--> TwistStamped out with the input's stamp, no math: the transport floor) spun by rclpy's
-SingleThreadedExecutor (``rclpy.spin``, what a plain rclpy node does), the same echo node spun by
-:func:`manipulator_kinematics.spin.spin` (what our nodes use), and excavator_forward. A publisher
-process sends ``cylinder_lengths`` at the rate (and ``joint_states`` at 100 Hz, a typical swing
-encoder) and this process receives ``bucket_twist``; latency = receive time - input stamp (one
-clock), drops = inputs without an output. The target compares excavator_forward with the echo on
-the same spin, so the ratio is the cost of the kinematics, not of the executor. The measuring
-process uses EventsExecutor so that it is not the bottleneck. Every queue is reliable keep-last of
-``--depth`` (default 100: 100 ms of 1 kHz input survives a stall). This machine's speed drifts
-over minutes, so all of it runs in ``--rounds`` rounds and each p99 is compared with the echo's
-of its own round; the result is the median ratio. Prints a table.
+For each input rate and executor two nodes run in turn, each as its own process started the way
+the console scripts run (``node_util.run``, executor chosen with ``MK_EXECUTOR``): the echo node
+(JointState in -> TwistStamped out with the input's stamp, no math: the transport floor) and
+excavator_forward. A publisher process sends ``cylinder_lengths`` at the rate (and
+``joint_states`` at 100 Hz, a typical swing encoder) and this process receives ``bucket_twist``;
+latency = receive time - input stamp (one clock), drops = inputs without an output, CPU = the
+node process's user + system time while the publisher sends, per input message. The target
+compares excavator_forward with the echo on the same executor, so the ratio is the cost of the
+kinematics, not of the executor. The measuring process uses EventsExecutor so that it is not the
+bottleneck. Every queue is reliable keep-last of ``--depth`` (default 100: 100 ms of 1 kHz input
+survives a stall). Each node is stopped with SIGINT after its row; its exit status is in the
+table. This machine's speed drifts over minutes, so all of it runs in ``--rounds`` rounds and
+each p99 is compared with the echo's of its own round and executor; the result is the median
+ratio. Prints a table.
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
 import os
 import signal
 import statistics
@@ -34,7 +37,6 @@ import rclpy
 import yaml
 from geometry_msgs.msg import TwistStamped
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -43,33 +45,30 @@ from sensor_msgs.msg import JointState
 from excavator_kinematics import messages
 from excavator_kinematics.demo import node_command
 from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator
-from manipulator_kinematics.spin import spin
+from manipulator_kinematics.executor import ENVIRONMENT, EXECUTORS
+from manipulator_kinematics.node_util import make_node, run
 
-# Echo node rows of the table, and the executor each one spins.
-ECHOES = {"echo, rclpy.spin": "rclpy", "echo, spin()": "spin"}
+ECHO = "echo"
 FORWARD = "excavator_forward"
 
 
-def echo(depth: int, executor: str) -> None:
+def echo(depth: int) -> int:
     """The transport floor: republish each JointState's stamp as a TwistStamped."""
-    rclpy.init()
-    node = Node("bench_echo")
-    qos = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
-    pub = node.create_publisher(TwistStamped, "bucket_twist", qos)
-    out = TwistStamped()
 
-    def on_message(msg: JointState) -> None:
-        out.header.stamp = msg.header.stamp
-        pub.publish(out)
+    def build() -> Node:
+        node = make_node("bench_echo")
+        qos = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
+        pub = node.create_publisher(TwistStamped, "bucket_twist", qos)
+        out = TwistStamped()
 
-    node.create_subscription(JointState, "cylinder_lengths", on_message, qos)
-    signal.signal(signal.SIGTERM, lambda *_: rclpy.try_shutdown())
-    with contextlib.suppress(KeyboardInterrupt, ExternalShutdownException):
-        if executor == "rclpy":
-            rclpy.spin(node)
-        else:
-            spin(node)
-    rclpy.try_shutdown()
+        def on_message(msg: JointState) -> None:
+            out.header.stamp = msg.header.stamp
+            pub.publish(out)
+
+        node.create_subscription(JointState, "cylinder_lengths", on_message, qos)
+        return node
+
+    return run(build, [sys.argv[0]])
 
 
 def publish(rate: float, duration: float, depth: int, sent_file: Path, swing_listened: bool) -> None:
@@ -116,9 +115,9 @@ def publish(rate: float, duration: float, depth: int, sent_file: Path, swing_lis
     rclpy.shutdown()
 
 
-def start_node(kind: str, depth: int, work: Path) -> subprocess.Popen:
-    if kind in ECHOES:
-        command = [sys.executable, __file__, "--echo", ECHOES[kind], "--depth", str(depth)]
+def start_node(kind: str, executor: str, depth: int, work: Path) -> subprocess.Popen:
+    if kind == ECHO:
+        command = [sys.executable, __file__, "--echo", "--depth", str(depth)]
     else:
         overrides = work / "bench_params.yaml"
         overrides.write_text(
@@ -126,10 +125,20 @@ def start_node(kind: str, depth: int, work: Path) -> subprocess.Popen:
         )
         command = node_command(FORWARD, overrides)
     log = (work / "node.log").open("w")
-    return subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
+    return subprocess.Popen(
+        command, stdout=log, stderr=subprocess.STDOUT, env={**os.environ, ENVIRONMENT: executor}
+    )
 
 
-def measure(node: Node, kind: str, rate: float, duration: float, depth: int, work: Path) -> dict[str, float]:
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a running process so far (Linux)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def measure(
+    node: Node, kind: str, executor_name: str, rate: float, duration: float, depth: int, work: Path
+) -> dict[str, float]:
     """Start the node under test and a publisher process; receive bucket_twist here."""
     qos = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
     received: dict[int, int] = {}
@@ -144,7 +153,7 @@ def measure(node: Node, kind: str, rate: float, duration: float, depth: int, wor
     # hundred microseconds per message here, EventsExecutor (spun in this, the main thread) far less.
     executor = EventsExecutor()
     executor.add_node(node)
-    under_test = start_node(kind, depth, work)
+    under_test = start_node(kind, executor_name, depth, work)
     sent_file = work / "bench_sent.npy"
     try:
         deadline = time.monotonic() + 20.0
@@ -152,6 +161,7 @@ def measure(node: Node, kind: str, rate: float, duration: float, depth: int, wor
             if time.monotonic() > deadline:
                 raise RuntimeError(f"{kind} did not show up")
             executor.spin_once(timeout_sec=0.05)
+        cpu_before = cpu_seconds(under_test.pid)
         publisher = subprocess.Popen(
             [
                 sys.executable,
@@ -167,6 +177,7 @@ def measure(node: Node, kind: str, rate: float, duration: float, depth: int, wor
         )
         while publisher.poll() is None:
             executor.spin_once(timeout_sec=0.05)
+        cpu = cpu_seconds(under_test.pid) - cpu_before
         if publisher.returncode != 0:
             raise RuntimeError(f"publisher failed ({publisher.returncode})")
         sent = np.load(sent_file)
@@ -175,7 +186,7 @@ def measure(node: Node, kind: str, rate: float, duration: float, depth: int, wor
             executor.spin_once(timeout_sec=0.01)
     finally:
         under_test.send_signal(signal.SIGINT)
-        under_test.wait(10)
+        exit_status = under_test.wait(10)
         executor.remove_node(node)
         node.destroy_subscription(sub)
     latencies = np.array([received[s] - s for s in sent.tolist() if s in received]) * 1e-6
@@ -185,6 +196,8 @@ def measure(node: Node, kind: str, rate: float, duration: float, depth: int, wor
         "p50": float(np.percentile(latencies, 50)),
         "p99": float(np.percentile(latencies, 99)),
         "max": float(latencies.max()),
+        "cpu_ms": cpu / (duration * rate + rate) * 1e3,  # the warm-up second's messages count too
+        "exit": exit_status,
         # A rejected input is a drop too; the node's log says why (throttled: one line per kind per 2 s).
         "complaints": [line for line in (work / "node.log").read_text().splitlines() if "[INFO]" not in line],
     }
@@ -196,13 +209,13 @@ def main() -> int:
     parser.add_argument("--rates", type=float, nargs="+", default=[100.0, 1000.0])
     parser.add_argument("--depth", type=int, default=100, help="reliable keep-last queue depth")
     parser.add_argument("--rounds", type=int, default=3, help="rounds of all nodes and rates")
-    parser.add_argument("--echo", choices=sorted(ECHOES.values()), help=argparse.SUPPRESS)
+    parser.add_argument("--executors", nargs="+", choices=sorted(EXECUTORS), default=list(EXECUTORS))
+    parser.add_argument("--echo", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--publish", nargs=3, metavar=("RATE", "DURATION", "FILE"), help=argparse.SUPPRESS)
     parser.add_argument("--swing-listened", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.echo:
-        echo(args.depth, args.echo)
-        return 0
+        return echo(args.depth)
     if args.publish:
         rate, duration, sent_file = args.publish
         publish(float(rate), float(duration), args.depth, Path(sent_file), args.swing_listened)
@@ -217,40 +230,46 @@ def main() -> int:
         # compared with the echo's of the same round and the rounds' median ratio is the result.
         for round_ in range(args.rounds):
             for rate in args.rates:
-                for kind in (*ECHOES, FORWARD):
-                    result = measure(node, kind, rate, args.duration, args.depth, work)
-                    rows.append((round_, kind, rate, result))
-                    print(f"round {round_ + 1}: {kind:<17} {rate:6.0f} Hz  done", file=sys.stderr, flush=True)
+                for name in args.executors:
+                    for kind in (ECHO, FORWARD):
+                        result = measure(node, kind, name, rate, args.duration, args.depth, work)
+                        rows.append((round_, kind, name, rate, result))
+                        done = f"round {round_ + 1}: {kind:<17} {name:<6} {rate:6.0f} Hz  done"
+                        print(done, file=sys.stderr, flush=True)
     finally:
         node.destroy_node()
         rclpy.shutdown()
     print(
         f"\nend-to-end latency, input stamp -> bucket_twist received, {args.duration:g} s per row, "
-        f"reliable depth {args.depth}, {args.rounds} round(s)"
+        f"reliable depth {args.depth}, {args.rounds} round(s); CPU of the node per input message"
     )
     print(
-        f"{'round':<6} {'node':<17} {'rate':>7} {'sent':>7} {'dropped':>8} {'p50 ms':>8} {'p99 ms':>8} "
-        f"{'max ms':>8}"
+        f"{'round':<6} {'node':<17} {'executor':<9} {'rate':>7} {'sent':>7} {'dropped':>8} {'p50 ms':>8} "
+        f"{'p99 ms':>8} {'max ms':>8} {'CPU ms':>7} {'exit':>5}"
     )
-    for round_, kind, rate, r in rows:
+    for round_, kind, name, rate, r in rows:
         print(
-            f"{round_ + 1:<6} {kind:<17} {rate:5.0f}Hz {r['sent']:7d} {r['dropped']:8d} {r['p50']:8.3f} "
-            f"{r['p99']:8.3f} {r['max']:8.2f}"
+            f"{round_ + 1:<6} {kind:<17} {name:<9} {rate:5.0f}Hz {r['sent']:7d} {r['dropped']:8d} "
+            f"{r['p50']:8.3f} {r['p99']:8.3f} {r['max']:8.2f} {r['cpu_ms']:7.3f} {r['exit']:5d}"
         )
         for line in r["complaints"][:3]:
             print(f"       {kind} said: {line}")
-    p99 = {(round_, kind, rate): r["p99"] for round_, kind, rate, r in rows}
+    results = {(round_, kind, name, rate): r for round_, kind, name, rate, r in rows}
     print()
     for rate in args.rates:
-        drops = sum(r["dropped"] for _, kind, q, r in rows if kind == FORWARD and q == rate)
-        for kind in ECHOES:
-            ratios = [p99[i, FORWARD, rate] / p99[i, kind, rate] for i in range(args.rounds)]
+        for name in args.executors:
+            forward = [results[i, FORWARD, name, rate] for i in range(args.rounds)]
+            echoes = [results[i, ECHO, name, rate] for i in range(args.rounds)]
+            ratios = [f["p99"] / e["p99"] for f, e in zip(forward, echoes)]
+            drops = [f["dropped"] for f in forward]
             print(
-                f"{rate:5.0f} Hz: forward p99 / {kind} p99 = {statistics.median(ratios):.2f} median of "
-                f"[{', '.join(f'{x:.2f}' for x in ratios)}]"
+                f"{rate:5.0f} Hz {name:<6}: forward p99 / echo p99 = {statistics.median(ratios):.2f} "
+                f"median of [{', '.join(f'{x:.2f}' for x in ratios)}]; forward drops "
+                f"{statistics.median(drops):g} median of {drops}; CPU ms/msg forward "
+                f"{statistics.median(f['cpu_ms'] for f in forward):.3f}, "
+                f"echo {statistics.median(e['cpu_ms'] for e in echoes):.3f}"
             )
-        print(f"{rate:5.0f} Hz: forward drops {drops} in {args.rounds} x {args.duration:g} s")
-    print("targets: forward p99 <= 1.5 x echo, spin() p99; 0 drops at 1 kHz")
+    print("targets: forward p99 <= 1.5 x echo p99 on the same executor; 0 drops at 1 kHz (median of rounds)")
     return 0
 
 

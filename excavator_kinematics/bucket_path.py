@@ -92,6 +92,27 @@ def follow(
     return np.asarray(reference_rate, dtype=float) + gain * error
 
 
+def path_deviation(
+    points: np.ndarray, t: np.ndarray, path: np.ndarray, t_path: np.ndarray, window: float = 1.0
+) -> np.ndarray:
+    """Distance of each of ``points`` (N, 3) at times ``t`` from the polyline ``path`` (M, 3) at
+    times ``t_path``, searched within +-``window`` s: how far the bucket left the path, whatever
+    its timing along it."""
+    out = np.empty(len(points))
+    for k, (p, tk) in enumerate(zip(points, t)):
+        lo, hi = np.searchsorted(t_path, [tk - window, tk + window])
+        a, b = path[max(lo - 1, 0) : hi], path[max(lo - 1, 0) + 1 : hi + 1]
+        n = min(len(a), len(b))
+        a, b = a[:n], b[:n]
+        if n == 0:
+            out[k] = np.linalg.norm(path[min(lo, len(path) - 1)] - p)
+            continue
+        ab = b - a
+        u = np.clip(np.sum((p - a) * ab, axis=1) / np.maximum(np.sum(ab * ab, axis=1), 1e-300), 0.0, 1.0)
+        out[k] = np.min(np.linalg.norm(a + u[:, None] * ab - p, axis=1))
+    return out
+
+
 def digging_cycle(start: np.ndarray) -> BucketPath:
     """One digging cycle of the CET200 from ``start`` (C of the machine's current state).
 
@@ -121,3 +142,32 @@ def digging_cycle(start: np.ndarray) -> BucketPath:
             Segment("return", back, 4.5),
         ],
     )
+
+
+class CycleClock:
+    """Time along a path from measurement stamps, held while the loop is broken.
+
+    The time advances by the stamp difference between consecutive measurements that were acted
+    on, but by at most ``max_step`` s: after a gap longer than the command timeouts the machine
+    stood still, so a reference that ran on through the gap would leave the bucket behind
+    (and cutting corners to catch up). The held time is counted in :attr:`held`.
+    """
+
+    def __init__(self, max_step: float) -> None:
+        self.max_step = float(max_step)
+        self.start_ns: int | None = None
+        self.last_ns: int | None = None
+        self.t = 0.0  # s along the path
+        self.held = 0.0  # s of stamp time that did not advance the path
+
+    def tick(self, stamp_ns: int) -> float:
+        """Advance to a measurement stamped ``stamp_ns`` (ns) and return the time along the path;
+        the first call is time 0. A stamp older than the previous one does not move the clock."""
+        if self.start_ns is None:
+            self.start_ns = self.last_ns = stamp_ns
+            return self.t
+        step = max(stamp_ns - self.last_ns, 0) * 1e-9
+        self.t += min(step, self.max_step)
+        self.held += max(step - self.max_step, 0.0)
+        self.last_ns = max(stamp_ns, self.last_ns)
+        return self.t

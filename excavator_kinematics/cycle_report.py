@@ -18,7 +18,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from excavator_kinematics.bucket_path import BucketPath
+from excavator_kinematics.bucket_path import BucketPath, path_deviation
 from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator
 from excavator_kinematics.twist import boom_plane_normal, bucket_angles
 from manipulator_kinematics.bag.reader import BagReader, TopicArrays
@@ -36,27 +36,6 @@ class Summary:
 
 def _vector(arrays: TopicArrays, prefix: str) -> np.ndarray:
     return np.stack([arrays[f"{prefix}.{axis}"] for axis in "xyz"], axis=-1)
-
-
-def path_deviation(
-    points: np.ndarray, t: np.ndarray, path: np.ndarray, t_path: np.ndarray, window: float = 1.0
-) -> np.ndarray:
-    """Distance of each of ``points`` (N, 3) at times ``t`` from the polyline ``path`` (M, 3) at
-    times ``t_path``, searched within +-``window`` s: how far the bucket left the path, whatever
-    its timing along it."""
-    out = np.empty(len(points))
-    for k, (p, tk) in enumerate(zip(points, t)):
-        lo, hi = np.searchsorted(t_path, [tk - window, tk + window])
-        a, b = path[max(lo - 1, 0) : hi], path[max(lo - 1, 0) + 1 : hi + 1]
-        n = min(len(a), len(b))
-        a, b = a[:n], b[:n]
-        if n == 0:
-            out[k] = np.linalg.norm(path[min(lo, len(path) - 1)] - p)
-            continue
-        ab = b - a
-        u = np.clip(np.sum((p - a) * ab, axis=1) / np.maximum(np.sum(ab * ab, axis=1), 1e-300), 0.0, 1.0)
-        out[k] = np.min(np.linalg.norm(a + u[:, None] * ab - p, axis=1))
-    return out
 
 
 def _matched(a: TopicArrays, b: TopicArrays) -> tuple[np.ndarray, np.ndarray]:
@@ -111,8 +90,12 @@ def _shade(axes: np.ndarray, path: BucketPath, label_row: np.ndarray) -> None:
             )
 
 
-def report(bag: Path, output: Path, exc: Excavator, path: BucketPath, start_ns: int) -> Summary:
-    """Read ``bag``, write fig11_bucket.png and fig12_cylinders.png to ``output``, return the summary."""
+def report(
+    bag: Path, output: Path, exc: Excavator, path: BucketPath, start_ns: int, end_ns: int | None = None
+) -> Summary:
+    """Read ``bag``, write fig11_bucket.png and fig12_cylinders.png to ``output``, return the summary.
+    The path deviation counts the bucket poses stamped from ``start_ns`` to ``end_ns`` (the cycle;
+    default: to the end of the bag), not the hold before it or the stop after it."""
     a = BagReader(bag).arrays()
     pose, ref_pose = a["/bucket_pose"], a["/reference_bucket_pose"]
     twist, ref_twist = a["/bucket_twist"], a["/reference_bucket_twist"]
@@ -127,8 +110,12 @@ def report(bag: Path, output: Path, exc: Excavator, path: BucketPath, start_ns: 
     position_error = np.linalg.norm(
         _vector(pose, "pose.position")[ip] - _vector(ref_pose, "pose.position")[ir], axis=1
     )
+    in_cycle = (pose.stamp_ns() >= start_ns) & (end_ns is None or pose.stamp_ns() <= end_ns)
     deviation = path_deviation(
-        _vector(pose, "pose.position"), seconds(pose), _vector(ref_pose, "pose.position"), seconds(ref_pose)
+        _vector(pose, "pose.position")[in_cycle],
+        seconds(pose)[in_cycle],
+        _vector(ref_pose, "pose.position"),
+        seconds(ref_pose),
     )
     quaternion = [f"pose.orientation.{c}" for c in "xyzw"]
     _, alpha = bucket_angles(np.stack([pose[c] for c in quaternion], axis=-1)[ip])

@@ -3,12 +3,23 @@
     excavator_demo [--output out/demo] [--max-error 0.05] [--timeout 90]
 
 Starts ``excavator_sim``, ``excavator_forward``, ``excavator_velocity_ik`` and the bag recorder
-(``record``) as processes with the package's config, then runs a driver node in this process:
-on each ``bucket_pose`` it takes the reference of the digging cycle
-(:func:`excavator_kinematics.bucket_path.digging_cycle`) at the pose's stamp and publishes
-``target_bucket_twist`` = reference rate + gain x (reference - measured) (closed loop on the bucket
-position, :func:`excavator_kinematics.bucket_path.follow`), plus the reference itself on
-``reference_bucket_pose`` / ``reference_bucket_twist`` so the bag holds what was asked.
+(``record``) as processes with the package's config, then runs a driver node in this process.
+
+Start-up handshake (each step with a timeout and an error naming what is missing): every node's
+publishers and subscriptions are in the graph and the driver's own are matched with theirs
+(velocity IK, forward node, simulator, recorder on every recorded topic); then a first command
+round trip: the driver holds the bucket at the path's start with the reference raised by
+``PROBE``, and waits until ``excavator_velocity_ik`` answers with a non-zero
+``cylinder_rate_commands`` and the simulator moves on it; then the bucket settles back to the
+start and only then does the cycle clock start.
+
+The cycle: on each ``bucket_pose`` the driver takes the reference of the digging cycle
+(:func:`excavator_kinematics.bucket_path.digging_cycle`) at the cycle time of the pose's stamp
+(:class:`excavator_kinematics.bucket_path.CycleClock`: held over gaps longer than the command
+timeouts) and publishes ``target_bucket_twist`` = reference rate + gain x (reference - measured)
+(closed loop on the bucket position, :func:`excavator_kinematics.bucket_path.follow`), plus the
+reference itself on ``reference_bucket_pose`` / ``reference_bucket_twist`` so the bag holds what
+was asked. Every 5 s of cycle it prints a progress line (time, phase, distance from the path).
 Afterwards the bag is read back for the summary and the Fig. 11 / Fig. 12 style plots
 (:mod:`excavator_kinematics.cycle_report`), and an animated side view of the whole linkage
 (``excavator_digging.gif``). The recorder adds the topics Foxglove's 3-D panel needs
@@ -34,9 +45,18 @@ import yaml
 from geometry_msgs.msg import PoseStamped, TwistStamped
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
 
 from excavator_kinematics import messages
-from excavator_kinematics.bucket_path import BucketPath, digging_cycle, follow, natural_coordinates, to_task
+from excavator_kinematics.bucket_path import (
+    BucketPath,
+    CycleClock,
+    digging_cycle,
+    follow,
+    natural_coordinates,
+    path_deviation,
+    to_task,
+)
 from excavator_kinematics.kinematics import Excavator
 from excavator_kinematics.twist import bucket_angles, twist_from_q_dot
 from manipulator_kinematics import registry
@@ -65,6 +85,21 @@ OVERRIDES = {
     "/**/excavator_forward": {"ros__parameters": {"acceleration_time_constant": 0.03}},
     "/**/excavator_velocity_ik": {"ros__parameters": {"command_timeout": 0.1}},
 }
+# Start-up: how long to wait for every process's endpoints (imports and discovery on a loaded
+# machine take seconds), then for the first command round trip and the hold to settle.
+CONNECT_TIMEOUT = 60.0  # s
+ROUND_TRIP_TIMEOUT = 20.0  # s
+# The round trip's probe: the hold reference is raised this much until the simulator moves on the
+# IK's command (a zero command would not show that the simulator listens); then back to the start.
+PROBE = 0.005  # m
+MOVING = 1e-4  # m/s: a cylinder rate in cylinder_lengths that shows the simulator moving
+SETTLED = 1e-3  # m: the cycle starts once the bucket is back within this of the path's start
+# The cycle clock advances with the pose stamps but at most this much from one acted-on pose to
+# the next: after a longer gap the IK's and the simulator's command timeouts (0.1 s) stopped the
+# machine, so the reference waits for it instead of running away.
+MAX_CLOCK_STEP = 0.1  # s
+PROGRESS_PERIOD = 5.0  # s of cycle between progress lines
+RECORDER = "bag_recorder"
 # The recorder's stop includes adding the visual topics (record --visuals).
 RECORD_STOP_TIMEOUT = 120.0  # s
 ANIMATION = "excavator_digging.gif"
@@ -83,16 +118,17 @@ RECORDED = {
 }
 
 
-def animation(bag: Path, gif: Path, exc: Excavator, start_ns: int, duration: float) -> Path:
-    """Side view (boom plane) of the whole linkage through the recorded cycle, with the reference
-    path and the bucket-tip trace, as an animated GIF (:func:`manipulator_kinematics.animation.animate`)."""
+def animation(bag: Path, gif: Path, exc: Excavator, start_ns: int, end_ns: int) -> Path:
+    """Side view (boom plane) of the whole linkage through the recorded cycle (stamps ``start_ns``
+    to ``end_ns``), with the reference path and the bucket-tip trace, as an animated GIF
+    (:func:`manipulator_kinematics.animation.animate`)."""
     from manipulator_kinematics.animation import View, animate, boom_plane
     from manipulator_kinematics.bag.visual import gather_states
 
     machine = registry.machine("excavator")
     arrays = BagReader(bag).arrays(["/cylinder_lengths", "/joint_states", "/reference_bucket_pose"])
     _, stamp, D = gather_states({t.strip("/"): a for t, a in arrays.items()}, machine.joint_names(exc))
-    cycle = (stamp >= start_ns) & (stamp <= start_ns + int((duration + 1.0) * 1e9))
+    cycle = (stamp >= start_ns) & (stamp <= end_ns)
     reference = arrays["/reference_bucket_pose"]
     points = np.stack([reference[f"pose.position.{c}"] for c in "xyz"], axis=-1)
     return animate(
@@ -102,35 +138,59 @@ def animation(bag: Path, gif: Path, exc: Excavator, start_ns: int, duration: flo
     )
 
 
+def missing_endpoints(
+    expected: Sequence[tuple[str, str, str]], present: Callable[[str, str], set[str]]
+) -> list[str]:
+    """What of ``expected`` ((node, "publishes" | "subscribes to", topic)) the graph lacks, as
+    phrases; ``present(kind, topic)`` gives the node names with that kind of endpoint on ``topic``."""
+    return [f"{name} {kind} /{topic}" for name, kind, topic in expected if name not in present(kind, topic)]
+
+
 class Driver:
-    """Publishes the target bucket twist that tracks ``path`` from the first pose it sees."""
+    """Publishes the target bucket twist that tracks ``path``: a hold at the path's start (raised
+    by :attr:`probe` m during the start-up round trip) until :meth:`start`, then the cycle."""
 
     def __init__(self, node: Node, path: BucketPath) -> None:
         self.node, self.path = node, path
-        self.start_ns: int | None = None
-        self.last_ns: int | None = None
-        self.delays: list[float] = []  # s from a pose's stamp to the driver receiving it
-        self.skipped = 0  # poses too old to act on
+        self.probe = PROBE
+        self.running = False
+        self.clock = CycleClock(MAX_CLOCK_STEP)
+        self.delays: list[float] = []  # s from a pose's stamp to the driver receiving it (cycle only)
+        self.skipped = 0  # poses too old to act on (cycle only)
+        self.hold_error = np.inf  # m, tip from the path's start (before the cycle)
+        # Cycle samples for the progress lines: time along the path, tip, reference tip.
+        self.times: list[float] = []
+        self.tips: list[np.ndarray] = []
+        self.references: list[np.ndarray] = []
+        self.reported = 0  # samples already judged by progress()
+        self.max_deviation = 0.0  # m
+        self.next_progress = PROGRESS_PERIOD
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self.target = node.create_publisher(TwistStamped, "target_bucket_twist", qos)
         self.reference_pose = node.create_publisher(PoseStamped, "reference_bucket_pose", qos)
         self.reference_twist = node.create_publisher(TwistStamped, "reference_bucket_twist", qos)
         # Depth 1: a controller wants the latest pose, never a backlog.
-        node.create_subscription(PoseStamped, "bucket_pose", self.on_pose, 1)
+        self.poses = node.create_subscription(PoseStamped, "bucket_pose", self.on_pose, 1)
 
     def elapsed(self) -> float:
-        return 0.0 if self.start_ns is None else (self.last_ns - self.start_ns) * 1e-9
+        return self.clock.t
+
+    def start(self) -> None:
+        """Start the cycle at the next pose (time 0 of the path)."""
+        self.probe = 0.0
+        self.running = True
 
     def on_pose(self, msg: PoseStamped) -> None:
         # The reference is taken at the measurement's stamp, so delivery delays are not errors.
-        self.last_ns = messages.stamp_ns(msg.header.stamp)
-        self.delays.append((self.node.get_clock().now().nanoseconds - self.last_ns) * 1e-9)
-        if self.start_ns is None:
-            self.start_ns = self.last_ns
-        if self.delays[-1] > MAX_POSE_AGE:
-            self.skipped += 1
+        stamp = messages.stamp_ns(msg.header.stamp)
+        age = (self.node.get_clock().now().nanoseconds - stamp) * 1e-9
+        if self.running:
+            self.delays.append(age)
+        if age > MAX_POSE_AGE:
+            self.skipped += self.running
             return
-        c_reference, c_rate = self.path.natural(self.elapsed(), LEAD)
+        t = self.clock.tick(stamp) if self.running else 0.0
+        c_reference, c_rate = self.path.natural(t, LEAD)
         o = msg.pose.orientation
         theta1, alpha = bucket_angles([o.x, o.y, o.z, o.w])
         p = msg.pose.position
@@ -139,12 +199,19 @@ class Driver:
         # Track in C = [r, theta1, z, alpha]; turn the rate into a Cartesian twist at the state the
         # IK will see (TRANSPORT later): a twist made for the measured swing angle and resolved
         # after the machine swung on pushes the bucket off the arc (by r theta1_dot^2 x delay).
-        c_dot = follow(c_reference, c_rate, measured, GAIN, angles=(1, 3))
+        raised = c_reference + np.array([0.0, 0.0, self.probe, 0.0])
+        c_dot = follow(raised, c_rate, measured, GAIN, angles=(1, 3))
         predicted = measured + TRANSPORT * c_dot
         q_predicted, q_dot = to_task(predicted, c_dot)
         twist = twist_from_q_dot(predicted[1], q_predicted[:3], q_dot)
         self.target.publish(messages.bucket_twist(msg.header.stamp, FRAME, *twist))
-        reference, rate = self.path.at(self.elapsed())  # what is asked, without the lead
+        reference, rate = self.path.at(t)  # what is asked, without the lead
+        if not self.running:
+            self.hold_error = float(np.linalg.norm(tip - reference[:3]))
+            return
+        self.times.append(t)
+        self.tips.append(tip)
+        self.references.append(reference[:3])
         reference_theta1 = float(c_reference[1])
         self.reference_pose.publish(
             messages.bucket_pose(msg.header.stamp, FRAME, reference_theta1, reference)
@@ -155,6 +222,24 @@ class Driver:
                 FRAME,
                 *twist_from_q_dot(reference_theta1, reference[:3], rate),
             )
+        )
+
+    def progress(self) -> str | None:
+        """A line every PROGRESS_PERIOD s of the cycle: phase, time, the bucket's distance from the
+        reference path (as the summary measures it), poses not acted on, clock held."""
+        if not self.times or self.times[-1] < self.next_progress:
+            return None
+        self.next_progress += PROGRESS_PERIOD
+        times, tips, references = (np.asarray(v) for v in (self.times, self.tips, self.references))
+        new = slice(self.reported, len(times))
+        self.reported = len(times)
+        deviation = path_deviation(tips[new], times[new], references, times)
+        self.max_deviation = max(self.max_deviation, float(deviation.max()))
+        t = times[-1]
+        return (
+            f"  {t:5.1f} / {self.path.duration:.1f} s  {self.path.segments[self.path.phase(t)].name:<9} "
+            f"off path {1e3 * deviation[-1]:5.1f} mm (max {1e3 * self.max_deviation:5.1f} mm)  "
+            f"poses not acted on {self.skipped}, clock held {self.clock.held:.2f} s"
         )
 
 
@@ -204,8 +289,29 @@ def stop_processes(processes: list[tuple[str, subprocess.Popen]]) -> None:
             process.wait()
 
 
+def expected_graph() -> list[tuple[str, str, str]]:
+    """Every endpoint the cycle needs, as (node, "publishes" | "subscribes to", topic)."""
+    pub, sub = "publishes", "subscribes to"
+    return [
+        ("excavator_sim", sub, "cylinder_rate_commands"),
+        ("excavator_sim", pub, "cylinder_lengths"),
+        ("excavator_sim", pub, "joint_states"),
+        ("excavator_forward", sub, "cylinder_lengths"),
+        ("excavator_forward", sub, "joint_states"),
+        *(("excavator_forward", pub, t) for t in ("bucket_pose", "bucket_twist", "bucket_accel")),
+        ("excavator_forward", pub, "open_chain_joint_states"),
+        ("excavator_velocity_ik", sub, "target_bucket_twist"),
+        ("excavator_velocity_ik", sub, "cylinder_lengths"),
+        ("excavator_velocity_ik", sub, "joint_states"),
+        ("excavator_velocity_ik", pub, "cylinder_rate_commands"),
+        *((RECORDER, sub, t) for t in RECORDED),
+    ]
+
+
 def run_cycle(output: Path, path: BucketPath, timeout: float) -> tuple[str | None, Driver | None]:
-    """Start everything and drive ``path`` once; (None or what went wrong, the driver)."""
+    """Start everything, wait until the chain answers, drive ``path`` once; (None or what went
+    wrong, the driver)."""
+    started = time.monotonic()
     processes = start_processes(output)
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -213,34 +319,109 @@ def run_cycle(output: Path, path: BucketPath, timeout: float) -> tuple[str | Non
     executor = rclpy.executors.SingleThreadedExecutor(context=context)
     executor.add_node(node)
     driver = None
+
+    def say(line: str) -> None:
+        print(f"excavator_demo: {line} ({time.monotonic() - started:.1f} s)", flush=True)
+
+    def spin_until(
+        done: Callable[[], bool],
+        limit: float,
+        what: Callable[[], str],
+        tick: Callable[[], None] | None = None,
+    ) -> str | None:
+        deadline = time.monotonic() + limit
+        while not done():
+            dead = [f"{name} (exit {p.returncode})" for name, p in processes if p.poll() is not None]
+            if dead:
+                return f"{', '.join(dead)} ended early (see {output}/<name>.log)"
+            if time.monotonic() > deadline:
+                return f"timed out after {limit:g} s waiting for {what()} (see {output}/<name>.log)"
+            executor.spin_once(timeout_sec=0.01)
+            if tick is not None:
+                tick()
+        return None
+
     try:
+        driver = Driver(node, path)
+        seen = {"command": False, "motion": False}
 
-        def spin_until(done: Callable[[], bool], limit: float, what: str) -> str | None:
-            deadline = time.monotonic() + limit
-            while not done():
-                dead = [name for name, p in processes if p.poll() is not None]
-                if dead:
-                    return f"{', '.join(dead)} ended early (see {output}/<name>.log)"
-                if time.monotonic() > deadline:
-                    return f"timed out after {limit:g} s waiting for {what}"
-                executor.spin_once(timeout_sec=0.01)
-            return None
+        def answered(msg: JointState) -> None:
+            seen["command"] |= any(v != 0.0 for v in msg.velocity)
 
-        def recorder_ready() -> bool:
-            return all(
-                any(info.node_name == "bag_recorder" for info in node.get_subscriptions_info_by_topic(t))
-                for t in RECORDED
-            )
+        def moved(msg: JointState) -> None:
+            # Only once the IK answered: the simulator moving on the probe's command.
+            seen["motion"] |= seen["command"] and any(abs(v) > MOVING for v in msg.velocity)
 
-        # Every recorded topic must have the recorder's subscription before the cycle starts.
-        failure = spin_until(recorder_ready, 30.0, "the recorder")
+        # The start-up round trip watches the chain's outputs; these go again before the cycle.
+        commands = node.create_subscription(JointState, "cylinder_rate_commands", answered, 1)
+        states = node.create_subscription(JointState, "cylinder_lengths", moved, 1)
+        expected = expected_graph()
+        # Our own endpoints matched with theirs (the DDS match, not only the graph entry):
+        # (who, topic, matched count, how many).
+        matches = [
+            ("the IK and the recorder", "target_bucket_twist", driver.target.get_subscription_count, 2),
+            ("the recorder", "reference_bucket_pose", driver.reference_pose.get_subscription_count, 1),
+            ("the recorder", "reference_bucket_twist", driver.reference_twist.get_subscription_count, 1),
+            ("excavator_forward", "bucket_pose", driver.poses.get_publisher_count, 1),
+            ("excavator_velocity_ik", "cylinder_rate_commands", commands.get_publisher_count, 1),
+            ("excavator_sim", "cylinder_lengths", states.get_publisher_count, 1),
+        ]
+
+        def graph_missing() -> list[str]:
+            def present(kind: str, topic: str) -> set[str]:
+                infos = (
+                    node.get_publishers_info_by_topic(topic)
+                    if kind == "publishes"
+                    else node.get_subscriptions_info_by_topic(topic)
+                )
+                return {info.node_name for info in infos}
+
+            return missing_endpoints(expected, present) + [
+                f"{who} matching the driver on /{topic}"
+                for who, topic, count, least in matches
+                if count() < least
+            ]
+
+        failure = spin_until(lambda: not graph_missing(), CONNECT_TIMEOUT, lambda: "; ".join(graph_missing()))
         if failure is None:
-            driver = Driver(node, path)
-            failure = spin_until(lambda: driver.start_ns is not None, 30.0, "bucket_pose")
-        if failure is None:
-            print(f"excavator_demo: driving a {path.duration:.1f} s digging cycle", flush=True)
+            say(f"connected: {len(processes)} processes, {len(expected) + len(matches)} endpoints matched")
+            # The round trip: a hold target raised by PROBE -> velocity IK (on the simulator's state)
+            # -> cylinder_rate_commands -> the simulator moves -> excavator_forward -> bucket_pose.
             failure = spin_until(
-                lambda: driver.elapsed() > path.duration + 1.0, timeout, "the cycle to finish"
+                lambda: seen["command"] and seen["motion"],
+                ROUND_TRIP_TIMEOUT,
+                lambda: (
+                    "the simulator to move on the velocity IK's command (excavator_sim, cylinder_lengths)"
+                    if seen["command"]
+                    else "a cylinder_rate_commands answer from excavator_velocity_ik to target_bucket_twist"
+                    if driver.hold_error < np.inf
+                    else "the first bucket_pose from excavator_forward"
+                ),
+            )
+        if failure is None:
+            driver.probe = 0.0
+            node.destroy_subscription(commands)
+            node.destroy_subscription(states)
+            failure = spin_until(
+                lambda: driver.hold_error < SETTLED,
+                ROUND_TRIP_TIMEOUT,
+                lambda: f"the bucket to settle at the path's start (off by {1e3 * driver.hold_error:.1f} mm)",
+            )
+        if failure is None:
+            say("first command round trip: target -> velocity IK -> simulator -> forward -> driver")
+            print(f"excavator_demo: driving a {path.duration:.1f} s digging cycle", flush=True)
+            driver.start()
+
+            def show() -> None:
+                line = driver.progress()
+                if line is not None:
+                    print(line, flush=True)
+
+            failure = spin_until(
+                lambda: driver.elapsed() > path.duration + 1.0,
+                timeout,
+                lambda: f"the cycle to finish (at {driver.elapsed():.1f} of {path.duration:.1f} s)",
+                show,
             )
         return failure, driver
     finally:
@@ -278,15 +459,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     if failure is not None:
         print(f"excavator_demo: FAILED: {failure}", file=sys.stderr)
         return 1
-    summary = report(args.output / "bag", args.output, exc, path, driver.start_ns)
+    start_ns, end_ns = driver.clock.start_ns, driver.clock.last_ns
+    summary = report(args.output / "bag", args.output, exc, path, start_ns, end_ns)
     print(summary.text)
-    gif = animation(args.output / "bag", args.output / ANIMATION, exc, driver.start_ns, path.duration)
+    gif = animation(args.output / "bag", args.output / ANIMATION, exc, start_ns, end_ns)
     print(f"  animation: {gif} ({gif.stat().st_size / 1e6:.2f} MB); Foxglove: open {args.output / 'bag'} "
           f"(docs/visualisation.md)")
     delay = 1e3 * np.percentile(driver.delays, [50, 99])
     print(
         f"  driver: got bucket_pose {delay[0]:.1f} ms (p50) / {delay[1]:.1f} ms (p99) after its stamp; "
-        f"{driver.skipped} of {len(driver.delays)} older than {MAX_POSE_AGE:g} s not acted on"
+        f"{driver.skipped} of {len(driver.delays)} older than {MAX_POSE_AGE:g} s not acted on; "
+        f"cycle clock held {driver.clock.held:.2f} s over gaps longer than {MAX_CLOCK_STEP:g} s"
     )
     if summary.max_path_deviation > args.max_error:
         print(

@@ -9,13 +9,18 @@ at most ``swing_max_age`` apart) and accelerations as finite differences of succ
   only once accelerations are known: from the second message on);
 * ``open_chain_joint_states`` (JointState theta1..theta4 with rates) for robot_state_publisher.
 
-Bad input is rejected with a logged reason; nothing is published for it.
+Bad input is rejected with a logged reason; nothing is published for it. That includes finite
+values no machine can have: rates beyond 1000 x the speed limits and accelerations beyond that in
+10 ms (:class:`excavator_kinematics.state_input.Plausible`; an implausible acceleration costs only
+that message's ``bucket_accel``). Every output is checked to be finite before it goes out.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
+import numpy as np
 from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -23,6 +28,7 @@ from std_msgs.msg import Header
 
 from excavator_kinematics import messages
 from excavator_kinematics.kinematics import (
+    ACTUATORS,
     CYLINDERS,
     JOINTS,
     Excavator,
@@ -31,7 +37,7 @@ from excavator_kinematics.kinematics import (
     bucket_angular_velocity,
 )
 from excavator_kinematics.node_settings import FORWARD, NODES_CONFIG
-from excavator_kinematics.state_input import RateDifferentiator, SwingHold
+from excavator_kinematics.state_input import Plausible, RateDifferentiator, SwingHold
 from manipulator_kinematics.codec.packed import PackedMessage
 from manipulator_kinematics.joint_state import InputError, decode_joint_state
 from manipulator_kinematics.node_util import ThrottledLog
@@ -59,6 +65,7 @@ class ForwardKinematics(MachineNode):
         tau, gap = settings["acceleration_time_constant"], settings["acceleration_max_gap"]
         self.cylinder_acceleration = RateDifferentiator(tau, gap)
         self.swing_acceleration = RateDifferentiator(tau, gap)
+        self.plausible = Plausible(ACTUATORS, self.exc.limits.max_rates.tolist())
         self.log = ThrottledLog(self, settings["warning_period"])
 
         qos = QoSProfile(depth=settings["qos_depth"], reliability=ReliabilityPolicy.RELIABLE)
@@ -90,19 +97,21 @@ class ForwardKinematics(MachineNode):
         try:
             msg = decode_joint_state(raw)
             angle, rate = messages.positions_and_rates(msg, (SWING,))
+            self.plausible.rates((SWING,), rate.tolist())
         except InputError as error:
             self.log("error", f"rejected joint_states: {error}")
             return
         stamp = msg.stamp_ns
-        acceleration = self.swing_acceleration.update(stamp, rate)
+        acceleration = self.acceleration(self.swing_acceleration, (SWING,), stamp, rate)
         self.swing.update(
-            stamp, float(angle[0]), float(rate[0]), None if acceleration is None else float(acceleration[0])
+            stamp, float(angle[0]), float(rate[0]), None if acceleration is None else acceleration[0]
         )
 
     def on_cylinders(self, raw: bytes) -> None:
         try:
             msg = decode_joint_state(raw)
             lengths, rates = messages.positions_and_rates(msg, CYLINDERS)
+            self.plausible.rates(CYLINDERS, rates.tolist())
             stamp_ns = msg.stamp_ns
             theta1, theta1_dot, theta1_ddot = self.swing.at(stamp_ns)
             D = self.exc.validate([theta1, *lengths])
@@ -110,21 +119,48 @@ class ForwardKinematics(MachineNode):
             self.log("error", f"rejected cylinder_lengths: {error}")
             return
         # Only accepted messages feed the differencing, so a rejected one cannot spike it.
-        cylinder_ddot = self.cylinder_acceleration.update(stamp_ns, rates)
+        cylinder_ddot = self.acceleration(self.cylinder_acceleration, CYLINDERS, stamp_ns, rates)
         known = cylinder_ddot is not None and theta1_ddot is not None
         s = self.exc.state(D, [theta1_dot, *rates], [theta1_ddot, *cylinder_ddot] if known else None)
 
         # Python floats from here on: unpacking numpy arrays element by element costs more.
         Q, Q_dot = s.Q.tolist(), s.Q_dot.tolist()
-        sec_nanosec = (msg.sec, msg.nanosec)
-        self.pose_pub.publish(self.pose.pack((*sec_nanosec, *messages.bucket_pose_values(theta1, Q))))
-        angular = bucket_angular_velocity(theta1, theta1_dot, Q_dot[3]).tolist()
-        self.twist_pub.publish(self.twist.pack((*sec_nanosec, *Q_dot[:3], *angular)))
+        pose = messages.bucket_pose_values(theta1, Q)
+        twist = [*Q_dot[:3], *bucket_angular_velocity(theta1, theta1_dot, Q_dot[3]).tolist()]
+        joints = [*s.theta.tolist(), *s.theta_dot.tolist()]
+        accel = []
         if known:
             Q_ddot = s.Q_ddot.tolist()
             angular_acc = bucket_angular_acceleration(theta1, theta1_dot, theta1_ddot, Q_dot[3], Q_ddot[3])
-            self.accel_pub.publish(self.accel.pack((*sec_nanosec, *Q_ddot[:3], *angular_acc.tolist())))
-        self.joints_pub.publish(self.joints.pack((*sec_nanosec, *s.theta.tolist(), *s.theta_dot.tolist())))
+            accel = [*Q_ddot[:3], *angular_acc.tolist()]
+        # The input checks keep the arithmetic far from overflow; this is the promise itself.
+        if not all(map(math.isfinite, (*pose, *twist, *joints, *accel))):
+            self.log("error", f"dropped the outputs of cylinder_lengths D = {D.tolist()}, "
+                     f"D_dot = {[theta1_dot, *rates.tolist()]}: not finite")
+            return
+        sec_nanosec = (msg.sec, msg.nanosec)
+        self.pose_pub.publish(self.pose.pack((*sec_nanosec, *pose)))
+        self.twist_pub.publish(self.twist.pack((*sec_nanosec, *twist)))
+        if known:
+            self.accel_pub.publish(self.accel.pack((*sec_nanosec, *accel)))
+        self.joints_pub.publish(self.joints.pack((*sec_nanosec, *joints)))
+
+    def acceleration(
+        self, differentiator: RateDifferentiator, names: Sequence[str], stamp_ns: int, rates: np.ndarray
+    ) -> list[float] | None:
+        """The finite-difference accelerations of ``names``, or None while unknown or implausible
+        (a jump between two plausible rates a nanosecond apart; logged, differencing restarted)."""
+        acceleration = differentiator.update(stamp_ns, rates)
+        if acceleration is None:
+            return None
+        values = acceleration.tolist()
+        try:
+            self.plausible.accelerations(names, values)
+        except InputError as error:
+            differentiator.restart()
+            self.log("warning", f"no acceleration for this message: {error}")
+            return None
+        return values
 
 
 def main(args: Sequence[str] | None = None) -> int:

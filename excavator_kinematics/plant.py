@@ -35,7 +35,15 @@ class Plant:
         self.d_dot = np.zeros(4)
 
     def step(self, command: np.ndarray, dt: float) -> None:
-        """Advance by ``dt`` seconds holding the rate ``command`` (4,)."""
+        """Advance by ``dt`` seconds holding the rate ``command`` (4,).
+
+        Speeds and stroke ends hold exactly (no ulp beyond): the lag moves the rate towards a
+        target clipped to the speed limits without overshoot, and D is clipped to its ends.
+        ValueError for a command or step that is not finite (the state would be lost to NaN).
+        """
+        command = np.asarray(command, dtype=float)
+        if command.shape != (4,) or not np.all(np.isfinite(command)) or not np.isfinite(dt):
+            raise ValueError(f"plant step needs 4 finite rates and a finite dt, got {command!r}, {dt!r}")
         if dt <= 0.0:
             return
         target = np.clip(command, -self.limits.max_rates, self.limits.max_rates)
@@ -50,4 +58,5 @@ class Plant:
         d = self.d + travel
         stopped = (d <= self.limits.d_min) & (d_dot <= 0.0) | (d >= self.limits.d_max) & (d_dot >= 0.0)
         self.d = np.clip(d, self.limits.d_min, self.limits.d_max)
-        self.d_dot = np.where(stopped, 0.0, d_dot)
+        # In reals the lag cannot overshoot its target; the clip makes that so in floats too.
+        self.d_dot = np.where(stopped, 0.0, np.clip(d_dot, -self.limits.max_rates, self.limits.max_rates))

@@ -16,7 +16,8 @@ Numpy only, no ROS; the velocity IK node wires it. The order of the safety steps
    actuator, because a stroke end stops that actuator only.
 3. Speed limits: the whole vector is scaled by one factor so that every actuator is within its
    maximum speed and the bucket keeps its direction (scaling after the clamp, so an actuator that
-   the clamp already stopped does not slow the others down).
+   the clamp already stopped does not slow the others down). The limits hold exactly, not to
+   an ulp: |D_dot_i| <= max_rates_i in floating point.
 """
 
 from __future__ import annotations
@@ -73,10 +74,17 @@ def clamp_to_stroke(
 
 
 def scale_to_speed(d_dot: np.ndarray, max_speed: np.ndarray) -> tuple[np.ndarray, float]:
-    """Uniformly scaled rates within ``max_speed`` (direction kept) and the factor used."""
+    """Uniformly scaled rates within ``max_speed`` (direction kept) and the factor used.
+
+    The limit holds exactly: ``d_dot * (1 / ratio)`` rounds up to an ulp above ``max_speed`` for
+    the fastest actuator (1 in 25 random commands), so the product is clipped to the limits
+    afterwards; that moves a rate by at most an ulp, the direction is kept to round-off.
+    """
     ratio = float(np.max(np.abs(d_dot) / max_speed))
-    scale = 1.0 / ratio if ratio > 1.0 else 1.0
-    return d_dot * scale, scale
+    if not ratio > 1.0:
+        return d_dot, 1.0
+    scale = 1.0 / ratio
+    return np.clip(d_dot * scale, -max_speed, max_speed), scale
 
 
 def rate_command(

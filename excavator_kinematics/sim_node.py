@@ -4,7 +4,10 @@ Integrates the rate commands of ``cylinder_rate_commands`` (JointState velocitie
 boom_cylinder, arm_cylinder, bucket_cylinder) with :class:`excavator_kinematics.plant.Plant`
 (speed limits, stroke ends, optional first-order lag) and publishes, at ``rate`` Hz and with one
 stamp, ``cylinder_lengths`` (position m, velocity m/s) and ``joint_states`` (swing_joint angle
-and rate). A command older than ``command_timeout`` s counts as zero. Steps use the measured time
+and rate). A command older than ``command_timeout`` s counts as zero. A command that is not
+finite or beyond 1000 x a speed limit (:class:`excavator_kinematics.state_input.Plausible`) is
+refused with a reason and leaves the previous one in force; a plausible one is saturated at the
+speed limits by the plant. What is published is checked to be finite. Steps use the measured time
 between timer calls, so timer jitter does not change the integrated motion.
 """
 
@@ -21,7 +24,7 @@ from excavator_kinematics import messages
 from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
 from excavator_kinematics.node_settings import NODES_CONFIG, SIM
 from excavator_kinematics.plant import Plant
-from excavator_kinematics.state_input import InputError
+from excavator_kinematics.state_input import InputError, Plausible
 from manipulator_kinematics.joint_state import joint_values
 from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes import MachineNode, run_node
@@ -49,6 +52,7 @@ class Simulator(MachineNode):
         self.command = np.zeros(4)
         self.command_received_ns: int | None = None
         self.log = ThrottledLog(self, s["warning_period"])
+        self.plausible = Plausible(ACTUATORS, self.exc.limits.max_rates.tolist())
 
         qos = QoSProfile(depth=s["qos_depth"], reliability=ReliabilityPolicy.RELIABLE)
         self.cylinder_pub = self.create_publisher(JointState, s["topics"]["cylinder_lengths"], qos)
@@ -68,6 +72,7 @@ class Simulator(MachineNode):
     def on_command(self, msg: JointState) -> None:
         try:
             _, rates = joint_values(msg, ACTUATORS, require_velocity=True)
+            self.plausible.rates(ACTUATORS, rates.tolist())
         except InputError as error:
             self.log("error", f"rejected rate command: {error}")
             return
@@ -83,6 +88,9 @@ class Simulator(MachineNode):
         self.last_ns = now
         stamp = Time(nanoseconds=now).to_msg()
         d, d_dot = self.plant.d, self.plant.d_dot
+        if not (np.all(np.isfinite(d)) and np.all(np.isfinite(d_dot))):  # the plant's promise, kept here
+            self.log("error", f"simulated D = {d.tolist()}, D_dot = {d_dot.tolist()} not finite: not sent")
+            return
         # Swing first: a node combining the two (excavator_forward) then usually holds the swing
         # state of this very step when the cylinder message arrives.
         self.swing_pub.publish(messages.joint_state(stamp, JOINTS[:1], d[:1], d_dot[:1]))

@@ -11,16 +11,56 @@
   that message.
 
 Stamps are integer nanoseconds, so differences are exact.
+
+Plausibility (:class:`Plausible`): a rate beyond ``PLAUSIBILITY_FACTOR`` (1000, the package's one
+factor, :mod:`manipulator_kinematics.joint_state`) times the actuator's speed
+limit, or an acceleration beyond that rate reached from standstill in ``FASTEST_RAMP`` seconds, is
+not a measurement of this machine but a corrupt input. Refusing it where it enters also keeps
+every product downstream (twists, finite differences, the squared rates of eq. 11) many orders of
+magnitude from overflow: two finite rates of 1.7e308 of opposite sign would otherwise difference
+to -inf.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
-from manipulator_kinematics.joint_state import InputError
+from manipulator_kinematics.joint_state import PLAUSIBILITY_FACTOR, InputError
 from manipulator_kinematics.params import ConfigError
+
+#: Quickest plausible ramp (s) from standstill to PLAUSIBILITY_FACTOR x the speed limit.
+FASTEST_RAMP = 0.01
+
+
+class Plausible:
+    """Bounds of plausible rates and accelerations per actuator name, from its speed limit."""
+
+    def __init__(self, names: Sequence[str], max_rates: Sequence[float]) -> None:
+        self.rate = {name: PLAUSIBILITY_FACTOR * float(m) for name, m in zip(names, max_rates, strict=True)}
+        self.acceleration = {name: bound / FASTEST_RAMP for name, bound in self.rate.items()}
+
+    def rates(self, names: Sequence[str], values: Sequence[float]) -> None:
+        """InputError naming the first rate beyond its bound."""
+        _check(names, values, self.rate, "rate", "speed limit")
+
+    def accelerations(self, names: Sequence[str], values: Sequence[float]) -> None:
+        """InputError naming the first acceleration beyond its bound."""
+        _check(names, values, self.acceleration, "acceleration", f"speed limit / {FASTEST_RAMP:g} s")
+
+
+def _check(names: Sequence[str], values: Sequence[float], bounds: dict[str, float], what: str,
+           limit: str) -> None:
+    # Plain Python: this runs on every message of a 1 kHz stream.
+    for name, value in zip(names, values, strict=True):
+        bound = bounds[name]
+        if not abs(value) <= bound:
+            raise InputError(
+                f"{name} {what} {value:.6g} is beyond {PLAUSIBILITY_FACTOR:g} x its {limit} "
+                f"(|{what}| <= {bound:.6g}): implausible"
+            )
 
 
 class SwingHold:
@@ -59,6 +99,10 @@ class RateDifferentiator:
         self._stamp_ns: int | None = None
         self._rates: np.ndarray | None = None
         self._filtered: np.ndarray | None = None
+
+    def restart(self) -> None:
+        """Forget the filtered value: the next acceleration is a raw difference again."""
+        self._filtered = None
 
     def update(self, stamp_ns: int, rates: np.ndarray) -> np.ndarray | None:
         """Acceleration at ``stamp_ns``, or None while the differencing (re)starts."""

@@ -12,6 +12,11 @@ swing_joint, boom_cylinder, arm_cylinder, bucket_cylinder; velocity only) and, i
 
 Stopping: no accepted target for ``command_timeout`` s, or a target/state that cannot be used
 while moving, publishes zero rates once and holds (publishes nothing) until the next good target.
+
+Inputs are checked where they enter, finite values included: a swing rate beyond 1000 x its speed
+limit (:class:`excavator_kinematics.state_input.Plausible`) and a target twist beyond 1000 x the
+fastest bucket motion the actuators give at the reference state are refused with a reason. Every
+command is finite and within the speed limits exactly (checked again before it is published).
 """
 
 from __future__ import annotations
@@ -29,7 +34,7 @@ from excavator_kinematics import messages
 from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
 from excavator_kinematics.node_settings import NODES_CONFIG, VELOCITY_IK
 from excavator_kinematics.rate_command import rate_command
-from excavator_kinematics.state_input import InputError, SwingHold
+from excavator_kinematics.state_input import PLAUSIBILITY_FACTOR, InputError, Plausible, SwingHold
 from excavator_kinematics.twist import split_twist
 from manipulator_kinematics.joint_state import joint_values
 from manipulator_kinematics.node_util import ThrottledLog
@@ -57,6 +62,14 @@ class VelocityIk(MachineNode):
         self.residual_tolerance = float(s["twist_residual_tolerance"])
         self.log = ThrottledLog(self, s["warning_period"])
         self.swing = SwingHold(s["swing_max_age"])
+        limits = self.exc.limits
+        self.max_rates = limits.max_rates
+        self.plausible = Plausible(ACTUATORS, self.max_rates.tolist())
+        # Bucket rates [x_dot, y_dot, z_dot, alpha_dot] of every actuator at its limit, each adding up
+        # (eq. 8 at the reference state): the plausible target speeds are PLAUSIBILITY_FACTOR times that.
+        fastest = np.abs(self.exc.jc0(limits.reference)) @ self.max_rates
+        self.max_linear = PLAUSIBILITY_FACTOR * float(np.linalg.norm(fastest[:3]))
+        self.max_angular = PLAUSIBILITY_FACTOR * float(limits.max_swing_speed + fastest[3])
         self.cylinders: tuple[int, int, np.ndarray] | None = None  # (stamp ns, receipt ns, lengths)
         self.target: tuple[int, np.ndarray, np.ndarray] | None = None  # (receipt ns, linear, angular)
         self.moving = False  # a non-zero command may be in force
@@ -88,6 +101,7 @@ class VelocityIk(MachineNode):
     def on_swing(self, msg: JointState) -> None:
         try:
             angle, rate = messages.positions_and_rates(msg, (JOINTS[0],))
+            self.plausible.rates((JOINTS[0],), rate.tolist())
         except InputError as error:
             self.log("error", f"rejected joint_states: {error}")
             return
@@ -111,6 +125,13 @@ class VelocityIk(MachineNode):
             if msg.header.frame_id != self.frame:
                 raise InputError(f"frame_id {msg.header.frame_id!r} is not the base frame {self.frame!r}")
             linear, angular = messages.twist_arrays(msg)
+            speed, turn = float(np.linalg.norm(linear)), float(np.linalg.norm(angular))
+            if not (speed <= self.max_linear and turn <= self.max_angular):
+                raise InputError(
+                    f"twist of {speed:.6g} m/s, {turn:.6g} rad/s is beyond {PLAUSIBILITY_FACTOR:g} x the "
+                    f"fastest bucket motion ({self.max_linear:.6g} m/s, {self.max_angular:.6g} rad/s): "
+                    "implausible"
+                )
         except InputError as error:
             self.stop(f"rejected target_bucket_twist: {error}")
             return
@@ -175,6 +196,10 @@ class VelocityIk(MachineNode):
             self.moving = False
 
     def publish(self, stamp: Time, d_dot: np.ndarray) -> None:
+        # rate_command guarantees both; a command is what moves the machine, so it is checked here.
+        if not (np.all(np.isfinite(d_dot)) and np.all(np.abs(d_dot) <= self.max_rates)):
+            self.log("error", f"command {d_dot.tolist()} not finite or beyond the speed limits: zero sent")
+            d_dot = np.zeros(4)
         self.command_pub.publish(messages.joint_state(stamp, ACTUATORS, velocities=d_dot))
         if self.array_pub is not None:
             self.array_pub.publish(Float64MultiArray(data=[float(v) for v in d_dot]))

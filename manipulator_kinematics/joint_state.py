@@ -22,6 +22,26 @@ class InputError(ValueError):
     """An input message that cannot be used; the text says why (for a logged rejection)."""
 
 
+#: An input this many times beyond what the machine can do (its speed limit; its joint range
+#: beyond the limits; its reach) is refused as implausible where it enters a node: no machine
+#: measures it, and refusing it keeps the arithmetic downstream far from overflow.
+PLAUSIBILITY_FACTOR = 1000.0
+
+
+def check_plausible_positions(q: np.ndarray, names: Sequence[str], lower: np.ndarray,
+                              upper: np.ndarray) -> None:
+    """InputError naming the first joint further outside [lower, upper] than PLAUSIBILITY_FACTOR
+    times its range (at least one unit: a joint fixed by its limits still has a scale)."""
+    margin = PLAUSIBILITY_FACTOR * np.maximum(upper - lower, 1.0)
+    bad = ~((q >= lower - margin) & (q <= upper + margin))
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        raise InputError(
+            f"{names[i]} = {q[i]:.6g} is beyond {PLAUSIBILITY_FACTOR:g} x its range outside "
+            f"[{lower[i]:.6g}, {upper[i]:.6g}]: implausible"
+        )
+
+
 def joint_values(
     msg: Any, names: Sequence[str], *, require_position: bool = False, require_velocity: bool = False
 ) -> tuple[np.ndarray | None, np.ndarray | None]:
@@ -31,9 +51,11 @@ def joint_values(
     Raises InputError naming what is missing, of the wrong length or not finite.
     """
     index = {name: i for i, name in enumerate(msg.name)}
+    if len(index) != len(msg.name):
+        raise InputError(f"joint names repeat in the message: {_shown(msg.name)}")
     missing = [name for name in names if name not in index]
     if missing:
-        raise InputError(f"joint names {missing} missing from the message (has {list(msg.name)})")
+        raise InputError(f"joint names {missing} missing from the message (has {_shown(msg.name)})")
     rows = [index[name] for name in names]
     out = []
     for label, field, required in (
@@ -52,6 +74,16 @@ def joint_values(
             raise InputError(f"non-finite {label} {values} for {list(names)}")
         out.append(np.array(values))
     return out[0], out[1]
+
+
+# Names of a message shown in a reason: a message may carry thousands.
+_SHOWN_NAMES = 8
+
+
+def _shown(names: Sequence[str]) -> str:
+    """``names`` for a log line: the first few (each cut to 40 characters) and how many in all."""
+    shown = [name[:40] for name in names[:_SHOWN_NAMES]]
+    return str(shown) if len(names) <= _SHOWN_NAMES else f"{str(shown)[:-1]}, ... ({len(names)} names)]"
 
 
 class RawJointState(NamedTuple):

@@ -2,24 +2,41 @@
 
 Nodes are created with ``automatically_declare_parameters_from_overrides`` so a machine
 description given by ``--ros-args --params-file config/<machine>.yaml`` arrives whole, whatever
-its keys; :func:`machine_parameters` turns it back into the nested dict the numpy cores take.
+its keys (:mod:`manipulator_kinematics.nodes.base` validates it). Parameters are read at
+start-up: :func:`run` refuses a run-time change with that reason (:func:`refuse_runtime_changes`)
+unless the node applies changes itself and opts out.
 """
 
 from __future__ import annotations
 
-import re
 import shutil
+import signal
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 import rclpy
-from rclpy.executors import ExternalShutdownException
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions, get_current_signal_handlers_options
 
-from manipulator_kinematics import spin
-from manipulator_kinematics.params import ConfigError, config_path, flatten, load_parameters, unflatten
+from manipulator_kinematics import executor
+from manipulator_kinematics.params import ConfigError, check_ros_arguments
+from manipulator_kinematics.throttle import ThrottledLog
+
+__all__ = [
+    "ThrottledLog",
+    "console_script",
+    "make_node",
+    "param",
+    "refuse_runtime_changes",
+    "run",
+]
+
+
+STARTUP_ONLY = "parameters are read at start-up"
 
 
 def console_script(name: str) -> str:
@@ -38,53 +55,64 @@ def make_node(name: str) -> Node:
     return Node(name, automatically_declare_parameters_from_overrides=True)
 
 
-def param(node: Node, name: str, default: Any) -> Any:
-    """Value of parameter ``name``, declaring it with ``default`` when no override exists."""
-    if node.has_parameter(name):
-        return node.get_parameter(name).value
-    return node.declare_parameter(name, default).value
+def param(node: Node, name: str, default: Any, description: str = "") -> Any:
+    """Value of parameter ``name``, declaring it with ``default`` when no override exists; either
+    way it gets a read-only descriptor, so ``ros2 param describe`` shows it as a start-up setting."""
+    given = node.get_parameter(name) if node.has_parameter(name) else None
+    kind = given.type_ if given is not None else Parameter.Type.from_parameter_value(default)
+    descriptor = ParameterDescriptor(
+        description=description, type=kind.value, read_only=True, additional_constraints=STARTUP_ONLY
+    )
+    if given is not None:
+        node.set_descriptor(name, descriptor)
+        return given.value
+    return node.declare_parameter(name, default, descriptor).value
 
 
-def machine_parameters(node: Node, prefix: str, default_file: str) -> dict[str, Any]:
-    """Nested machine description under ``prefix`` (e.g. ``excavator``).
+def run(
+    node_factory: Callable[[], Node],
+    args: Sequence[str] | None = None,
+    *,
+    refuse_parameter_changes: bool = True,
+) -> int:
+    """Entry point body of every console script: init, build, spin until SIGINT/SIGTERM, exit 0.
 
-    Parameters given to the node win; keys it was not given come from the package's default
-    config file, so ``-p excavator.boom.length:=6.0`` changes one value of the default machine.
+    The node is spun by :func:`manipulator_kinematics.executor.spin` (executor from
+    ``MK_EXECUTOR``, default ``events``), which also keeps every callback's exceptions inside it.
+    A node that applies ``ros2 param set`` itself passes ``refuse_parameter_changes=False``;
+    every other gets :func:`refuse_runtime_changes`. A machine description or setting that fails
+    validation ends the process with its message and exit code 2 (nothing to serve).
     """
-    defaults = load_parameters(config_path(default_file), node.get_name()).get(prefix, {})
-    given = unflatten({name: p.value for name, p in node.get_parameters_by_prefix(prefix).items()})
-    return _merge(defaults, given)
-
-
-def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
-    out = dict(base)
-    for key, value in over.items():
-        both_sections = isinstance(value, dict) and isinstance(out.get(key), dict)
-        out[key] = _merge(out[key], value) if both_sections else value
-    return out
-
-
-def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None) -> int:
-    """Entry point body of every console script: init, build, spin until SIGINT/SIGTERM.
-
-    A machine description that fails validation ends the process with its message and exit
-    code 2 (nothing to serve); everything after start-up is handled inside the node.
-    """
-    # rclpy's own handlers (SignalHandlerOptions.ALL) turn SIGINT and SIGTERM into a shutdown of
-    # the context, which ends the spin below.
-    rclpy.init(args=list(args) if args is not None else sys.argv)
+    # rclpy's handlers (installed by init) turn SIGINT and SIGTERM into a shutdown of the
+    # context, which ends the spin. For SIGINT they also call the Python handler found at init,
+    # which by default raises KeyboardInterrupt wherever the main thread is: in a callback or
+    # half-way through destroy_node. This one is that handler, and stays quiet once rclpy's are in.
+    signal.signal(signal.SIGINT, _interrupt_until_rclpy_handles_it)
+    argv = list(args) if args is not None else sys.argv
+    try:
+        check_ros_arguments(argv)
+        rclpy.init(args=argv)
+    except ConfigError as error:
+        print(f"invalid arguments: {error}", file=sys.stderr)
+        return 2
+    except Exception as error:  # rcl refused what the check above let through
+        print(f"invalid ROS arguments: {str(error).splitlines()[0]}", file=sys.stderr)
+        return 2
     node = None
     try:
+        name = executor.executor_name()
         node = node_factory()
-        spin.spin(node)
+        if refuse_parameter_changes:
+            refuse_runtime_changes(node)
+        executor.spin(node, name)
     except ConfigError as error:
         print(f"configuration error: {error}", file=sys.stderr)
         return 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+    except KeyboardInterrupt:
+        pass  # SIGINT before rclpy.init
     except Exception:
-        # A signal can shut the context down while the executor builds its wait set or takes a
-        # message; rclpy then raises RCLError or RuntimeError instead of ExternalShutdownException.
+        # A signal shuts the context down from rclpy's own thread, also while the node is being
+        # built: rclpy then raises RCLError or RuntimeError from wherever the main thread was.
         if rclpy.ok():
             raise
     finally:
@@ -94,41 +122,21 @@ def run(node_factory: Callable[[], Node], args: Sequence[str] | None = None) -> 
     return 0
 
 
-def node_parameters(node: Node, default_file: str, section: str) -> dict[str, Any]:
-    """Settings of a node: every key of ``section`` in the package's ``default_file``, declared on
-    the node with the file's value as default, so values given to the node win and the file stays
-    the one place where defaults live. Keys are dotted (``topics.bucket_pose``)."""
-    defaults = flatten(load_parameters(config_path(default_file), section))
-    return {name: param(node, name, value) for name, value in defaults.items()}
+def refuse_runtime_changes(node: Node) -> None:
+    """Refuse every ``ros2 param set`` on ``node`` with the reason: its parameters are read at
+    start-up. Parameters declared later (not yet known to the node) are let through."""
+
+    def on_set(parameters: list[Parameter]) -> SetParametersResult:
+        known = [p.name for p in parameters if node.has_parameter(p.name)]
+        if known:
+            return SetParametersResult(
+                successful=False, reason=f"{STARTUP_ONLY}: restart the node to change {', '.join(known)}"
+            )
+        return SetParametersResult(successful=True)
+
+    node.add_on_set_parameters_callback(on_set)
 
 
-class ThrottledLog:
-    """Logs each kind of message at most once per ``period`` seconds of the node's clock.
-
-    Messages that differ only in their numbers are of one kind. rclpy's own throttle is per call
-    site, so different reasons for rejecting an input, logged from one place, would hide each other.
-    """
-
-    _NUMBER = re.compile(r"[-+]?\d[\d.eE+-]*")
-
-    def __init__(self, node: Node, period: float) -> None:
-        self._node = node
-        self._period_ns = int(period * 1e9)
-        self._last: dict[str, int] = {}
-
-    def __call__(self, severity: str, text: str) -> None:
-        """``severity`` is a logger method name: "info", "warning" or "error"."""
-        kind = self._NUMBER.sub("#", text)
-        now = self._node.get_clock().now().nanoseconds
-        last = self._last.get(kind)
-        if last is not None and now - last < self._period_ns:
-            return
-        self._last[kind] = now
-        # One call site per severity: rclpy refuses a call site that changes its severity.
-        logger = self._node.get_logger()
-        if severity == "error":
-            logger.error(text)
-        elif severity == "warning":
-            logger.warning(text)
-        else:
-            logger.info(text)
+def _interrupt_until_rclpy_handles_it(signum: int, frame: object) -> None:
+    if get_current_signal_handlers_options() == SignalHandlerOptions.NO:
+        raise KeyboardInterrupt

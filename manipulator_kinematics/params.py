@@ -6,6 +6,7 @@ dotted parameter names in ROS (``excavator.boom.length``). Cores take the nested
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +63,69 @@ def load_parameters(path: str | Path, node_name: str = "/**") -> dict[str, Any]:
                 raise ConfigError(f"{path}: {key}: ros__parameters is not a mapping")
             _deep_update(merged, parameters)
     return merged
+
+
+def check_ros_arguments(argv: Sequence[str]) -> None:
+    """Refuse, with one line naming the argument, what rcl would refuse with a traceback: a
+    ``--params-file`` that is missing, is not YAML, is not shaped ``{node: {ros__parameters: {...}}}``
+    or holds a value no ROS parameter can take (null, an empty mapping, a mixed or nested list);
+    a ``-p``/``-r`` rule without ``:=``. Only arguments inside ``--ros-args`` sections count."""
+    in_ros_args, expect = False, None
+    for arg in argv:
+        if expect is not None:
+            if expect == "--params-file":
+                _check_params_file(Path(arg))
+            elif ":=" not in arg or arg.startswith(":="):
+                raise ConfigError(f"{expect} {arg!r}: expected NAME:=VALUE")
+            expect = None
+        elif arg == "--ros-args":
+            in_ros_args = True
+        elif arg == "--":
+            in_ros_args = False
+        elif in_ros_args and arg in ("--params-file", "-p", "--param", "-r", "--remap"):
+            expect = arg
+    if expect is not None:
+        raise ConfigError(f"{expect}: a value must follow it")
+
+
+def _check_params_file(path: Path) -> None:
+    try:
+        with open(path, encoding="utf-8") as stream:
+            document = yaml.safe_load(stream)
+    except OSError as error:
+        raise ConfigError(f"--params-file {path}: {error.strerror}") from None
+    except yaml.YAMLError as error:
+        where = getattr(error, "problem_mark", None)
+        line = f" (line {where.line + 1})" if where is not None else ""
+        raise ConfigError(f"--params-file {path}: not valid YAML{line}") from None
+    if not isinstance(document, dict) or not document:
+        raise ConfigError(f"--params-file {path}: expected sections {{node: {{ros__parameters: {{...}}}}}}")
+    for node, section in document.items():
+        if not isinstance(section, dict) or not isinstance(section.get("ros__parameters"), dict):
+            raise ConfigError(f"--params-file {path}: {node}: expected a mapping 'ros__parameters:'")
+        for name, value in _leaves(section["ros__parameters"]):
+            if not _parameter_value(value):
+                raise ConfigError(f"--params-file {path}: {node}: {name} = {value!r} is not a ROS parameter "
+                                  "value (a number, string, bool, or a list of one of those)")
+
+
+def _leaves(nested: dict[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
+    """(dotted name, value) of every leaf; an empty mapping is a leaf (rcl cannot declare it)."""
+    out = []
+    for key, value in nested.items():
+        name = f"{prefix}.{key}" if prefix else str(key)
+        out += _leaves(value, name) if isinstance(value, dict) and value else [(name, value)]
+    return out
+
+
+def _parameter_value(value: Any) -> bool:
+    if isinstance(value, (bool, int, float, str)):
+        return True
+    if isinstance(value, list) and value:
+        kinds = {bool if isinstance(v, bool) else (float if isinstance(v, (int, float)) else type(v))
+                 for v in value}
+        return len(kinds) == 1 and kinds <= {bool, float, str}
+    return False
 
 
 def unflatten(flat: dict[str, Any]) -> dict[str, Any]:

@@ -7,8 +7,8 @@ Jacobian is 6 x n with the linear rows first, in the world frame (the frame the 
 given in), like Robotics Toolbox for Python's ``fkine``/``jacob0``.
 
 Every function takes joint values of shape (..., n): one configuration (n,) or any batch
-(N, n), (N, M, n); outputs carry the same leading shape. The only Python loop is over the n
-joints (matrix products along the chain), never over configurations.
+(N, n), (N, M, n); outputs carry the same leading shape. There is no Python loop over
+configurations: a batch runs the chain's straight-line code (:class:`SerialChain`) on arrays.
 
 Row semantics (the Robotics Toolbox's ``RevoluteDH``/``PrismaticDH`` and ``...MDH``):
 
@@ -28,8 +28,13 @@ default). The palletizer's passive flange joint theta4 = -(theta2 + theta3) is t
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import functools
+import math
+import struct
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from itertools import chain
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -96,7 +101,18 @@ def trotz(angle: float) -> np.ndarray:
 
 
 class SerialChain:
-    """Forward kinematics and geometric Jacobian of a D-H chain, vectorised over configurations."""
+    """Forward kinematics and geometric Jacobian of a D-H chain, vectorised over configurations.
+
+    No 4x4 products at run time: when a chain is built, its walk (Rz(theta) Tz(d) turns the x and
+    y axes and moves the origin along z, Tx(a) Rx(alpha) moves it along x and turns y and z, then
+    the tool and the Jacobian's cross products) is traced once on symbolic parts (:class:`_Tracer`)
+    into straight-line Python with the constants folded: terms multiplied by an exact 0 vanish
+    (alpha and constant angles that are multiples of 90 deg are snapped), so a 90 deg twist is a
+    swap of axes. That one function runs on Python floats for one configuration (numpy's per-call
+    overhead would dominate 6x6 work) and on (N,) arrays for a batch, with cos and sin taken once
+    for the whole (n_rows, N) array: the same arithmetic in both, so without coupling (whose
+    matrix product may sum in another order) one configuration and a batch agree to the bit.
+    """
 
     def __init__(
         self,
@@ -125,6 +141,7 @@ class SerialChain:
         self._theta = np.array([r.theta for r in rows], dtype=float)
         self._offset = np.array([r.offset for r in rows], dtype=float)
         self._prismatic = np.array([r.prismatic for r in rows], dtype=bool)
+        self._programs: dict[int, tuple[Callable, list[tuple[int, ...]]]] = {}  # traced on first use
 
     @property
     def n(self) -> int:
@@ -178,10 +195,9 @@ class SerialChain:
         With ``all_frames`` the link frames instead, shape (..., n_rows + 1, 4, 4): index 0 is the base
         frame, index i the frame of link i (base A_1 ... A_i; the tool transform not applied).
         """
-        frames = self._frames(q)
         if all_frames:
-            return frames
-        return frames[..., -1, :, :] @ self.tool
+            return self._run(q, _FRAMES)[0]
+        return self._run(q, _POSE)[0]
 
     def jacob0(self, q: ArrayLike) -> np.ndarray:
         """Geometric Jacobian in the world frame, shape (..., 6, n): rows vx, vy, vz, wx, wy, wz.
@@ -191,31 +207,146 @@ class SerialChain:
         in standard D-H, frame i in modified D-H (after Rz(theta_i) Tz(d_i), which leave z_i in
         place); coupled joints multiply it by C.
         """
-        frames = self._frames(q)
-        tool = frames[..., -1, :, :] @ self.tool
-        axis_frames = frames[..., 1:, :, :] if self.modified else frames[..., :-1, :, :]
-        z = axis_frames[..., :3, 2]
-        origin = axis_frames[..., :3, 3]
-        moment = np.cross(z, tool[..., None, :3, 3] - origin)
-        prismatic = self._prismatic[:, None]
-        linear = np.where(prismatic, z, moment)
-        angular = np.where(prismatic, 0.0, z)
-        rows = np.concatenate([np.swapaxes(linear, -1, -2), np.swapaxes(angular, -1, -2)], axis=-2)
-        return rows if self._identity else rows @ self.coupling
+        return self._coupled(self._run(q, _JACOBIAN)[0])
 
-    def _frames(self, q: ArrayLike) -> np.ndarray:
-        links = self.link_transforms(q)
-        frames = np.empty(links.shape[:-3] + (self.n_rows + 1, 4, 4))
-        frames[..., 0, :, :] = self.base
-        for i in range(self.n_rows):
-            frames[..., i + 1, :, :] = frames[..., i, :, :] @ links[..., i, :, :]
-        return frames
+    def fkine_jacob0(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """``(fkine(q), jacob0(q))`` from one walk along the chain: tool pose (..., 4, 4) and
+        Jacobian (..., 6, n), for callers that need both (velocity FK, an IK iteration)."""
+        pose, jacobian = self._run(q, _POSE | _JACOBIAN)
+        return pose, self._coupled(jacobian)
+
+    def _run(self, q: ArrayLike, what: int) -> list[np.ndarray]:
+        """The traced program ``what`` on q (..., n); its outputs as arrays of shape (..., *dims)."""
+        q = self._joint_array(q)
+        traced = self._programs.get(what)
+        if traced is None:
+            traced = self._programs[what] = self._trace(what)
+        program, dims = traced
+        if q.ndim == 1:
+            v = (q if self._identity else self.coupling @ q) + self._offset
+            return evaluate_parts(program, (np.cos(v), np.sin(v), v), dims)
+        flat = q.reshape(-1, self.n).T
+        # (n_rows, N) in C order: each row's values one contiguous array for the program.
+        v = np.add(flat if self._identity else self.coupling @ flat, self._offset[:, None], order="C")
+        out = evaluate_parts(program, (np.cos(v), np.sin(v), v), dims)
+        return [result.reshape(q.shape[:-1] + shape) for result, shape in zip(out, dims, strict=True)]
+
+    def _trace(self, what: int) -> tuple[Callable, list[tuple[int, ...]]]:
+        """Straight-line function (cos, sin, v) -> lists of parts of the outputs ``what`` (for
+        :func:`evaluate_parts`), and their shapes; cos, sin, v are indexed by row: theta_i = v_i of
+        a revolute, d_i = v_i of a prismatic row (offsets included)."""
+        tracer = _Tracer()
+        const = tracer.constant
+        frame = [[const(x) for x in self.base[:3, j]] for j in range(4)]
+        frames = [frame]
+        for i, row in enumerate(self.rows):
+            if row.prismatic:
+                cos, sin = const(_snap(math.cos(row.theta))), const(_snap(math.sin(row.theta)))
+                d = tracer.variable(f"v[{i}]")
+            else:
+                cos, sin, d = tracer.variable(f"cos[{i}]"), tracer.variable(f"sin[{i}]"), const(row.d)
+            shift = const(row.a), const(_snap(math.cos(row.alpha))), const(_snap(math.sin(row.alpha)))
+            if self.modified:
+                frame = _turn(_shift(frame, *shift), cos, sin, d)
+            else:
+                frame = _shift(_turn(frame, cos, sin, d), *shift)
+            frames.append(frame)
+        tool = _times(frames[-1], [[const(x) for x in self.tool[:3, j]] for j in range(4)])
+        outputs, dims = [], []
+        if what & _POSE:
+            outputs.append(_entries(tool))
+            dims.append((4, 4))
+        if what & _FRAMES:
+            outputs.append([x for f in frames for x in _entries(f)])
+            dims.append((len(frames), 4, 4))
+        if what & _JACOBIAN:
+            columns = []
+            axes = frames[1:] if self.modified else frames[:-1]
+            for row, (_, _, z, o) in zip(self.rows, axes, strict=True):
+                if row.prismatic:
+                    columns.append(z + [const(0.0)] * 3)
+                else:
+                    columns.append(_cross(z, [t - x for t, x in zip(tool[3], o, strict=True)]) + z)
+            outputs.append([column[k] for k in range(6) for column in columns])
+            dims.append((6, len(self.rows)))
+        return tracer.compile(outputs, f"serial_chain_{what}"), dims
+
+    def _coupled(self, jacobian: np.ndarray) -> np.ndarray:
+        return jacobian if self._identity else jacobian @ self.coupling
 
     def _joint_array(self, q: ArrayLike) -> np.ndarray:
         q = np.asarray(q, dtype=float)
         if q.ndim == 0 or q.shape[-1] != self.n:
             raise ValueError(f"joint values must have shape (..., {self.n}), got {q.shape}")
         return q
+
+
+def evaluate_parts(function: Callable[..., Sequence[Sequence]], args: Sequence[np.ndarray],
+                   dims: Sequence[tuple[int, ...]]) -> list[np.ndarray]:
+    """Run a function written on scalar parts for one case or a batch; its outputs as arrays.
+
+    ``function(*args)`` indexes each argument by row and returns one list of parts per output
+    (the row-major entries of an array of shape ``dims[j]``), with +, -, * and the like only, so
+    that a part can be a float or an (N,) array alike. ``args``: arrays (k,) for one case, given
+    to the function as lists of floats (numpy's per-call overhead would dominate small work), or
+    (k, N) for a batch, given in chunks of columns so that the temporaries stay in the cache. The
+    arithmetic is the same, so one case and a batch give bit-identical results. Returns arrays of
+    shape ``dims[j]`` for one case, else (N, *dims[j]).
+    """
+    if args[0].ndim == 1:
+        parts = function(*[arg.tolist() for arg in args])
+        # One buffer for every output: the cheapest way from tens of floats to arrays.
+        buffer = bytearray(_packer(sum(map(len, parts))).pack(*chain.from_iterable(parts)))
+        out, start = [], 0
+        for shape in dims:
+            out.append(np.ndarray(shape, buffer=buffer, offset=start))
+            start += 8 * math.prod(shape)
+        return out
+    count = args[0].shape[1]
+    out = [np.empty((count, math.prod(shape))) for shape in dims]
+    stages = [np.empty((math.prod(shape), _CHUNK)) for shape in dims]
+    for start in range(0, count, _CHUNK):
+        stop = min(start + _CHUNK, count)
+        parts = function(*(arg[:, start:stop] for arg in args))
+        # Each part into a contiguous row of a stage, copied into the output transposed: cheaper
+        # than strided column writes.
+        for values, stage, result in zip(parts, stages, out, strict=True):
+            for k, value in enumerate(values):
+                stage[k, :stop - start] = value
+            result[start:stop] = stage[:, :stop - start].T
+    return [result.reshape((count, *shape)) for result, shape in zip(out, dims, strict=True)]
+
+
+def parts_where(condition: Any, a: Any, b: Any) -> Any:
+    """np.where for a batch's parts, a conditional expression for floats (see evaluate_parts)."""
+    if isinstance(condition, np.ndarray):
+        return np.where(condition, a, b)
+    return a if condition else b
+
+
+def parts_any(condition: Any) -> bool:
+    """True if the condition holds anywhere (for work a rare case alone needs)."""
+    return bool(condition.any()) if isinstance(condition, np.ndarray) else bool(condition)
+
+
+def parts_all(condition: Any) -> bool:
+    """True if the condition holds everywhere."""
+    return bool(condition.all()) if isinstance(condition, np.ndarray) else bool(condition)
+
+
+def parts_sqrt(x: Any) -> Any:
+    """Square root of a part (math.sqrt and np.sqrt are both correctly rounded: same bits)."""
+    return np.sqrt(x) if isinstance(x, np.ndarray) else math.sqrt(x)
+
+
+def parts_clip(x: Any, low: float = -1.0, high: float = 1.0) -> Any:
+    """A part clipped to [low, high] (NaN stays NaN)."""
+    return np.clip(x, low, high) if isinstance(x, np.ndarray) else min(max(x, low), high)
+
+
+@functools.cache
+def _packer(count: int) -> struct.Struct:
+    return struct.Struct(f"{count}d")
 
 
 @dataclass(frozen=True)
@@ -270,3 +401,147 @@ def _homogeneous(matrix: ArrayLike | None, what: str) -> np.ndarray:
     if not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-9) or np.linalg.det(rotation) < 0:
         raise ValueError(f"{what} transform's rotation part is not a rotation matrix")
     return matrix
+
+
+#: Cases per chunk of a batch in evaluate_parts (the temporaries then fit in the cache).
+_CHUNK = 4096
+# What a traced program returns (bit flags).
+_POSE, _FRAMES, _JACOBIAN = 1, 2, 4
+
+
+class _Part:
+    """One scalar of the traced walk: a constant (``name`` None) or ``sign`` times a variable."""
+
+    __slots__ = ("name", "sign", "tracer", "value")
+
+    def __init__(self, tracer: _Tracer, name: int | None, sign: float = 1.0, value: float = 0.0) -> None:
+        self.tracer, self.name, self.sign, self.value = tracer, name, sign, value
+
+    def __neg__(self) -> _Part:
+        if self.name is None:
+            return self.tracer.constant(-self.value)
+        return _Part(self.tracer, self.name, -self.sign)
+
+    def __add__(self, other: _Part) -> _Part:
+        emit = self.tracer.emit
+        if other.name is None:
+            if self.name is None:
+                return self.tracer.constant(self.value + other.value)
+            self, other = other, self
+        if self.name is None:  # constant + sign * variable
+            if self.value == 0.0:
+                return other
+            if other.sign > 0:
+                return emit("{} + " + repr(self.value), other.name)
+            return emit("{} - " + repr(self.value), other.name, sign=-1.0)
+        if self.sign == other.sign:
+            return emit("{} + {}", self.name, other.name, sign=self.sign)
+        first, second = (self, other) if self.sign > 0 else (other, self)
+        return emit("{} - {}", first.name, second.name)
+
+    def __sub__(self, other: _Part) -> _Part:
+        return self + -other
+
+    def __mul__(self, other: _Part) -> _Part:
+        if other.name is None:
+            self, other = other, self
+        if self.name is None:  # constant * (sign * variable or constant)
+            if self.value == 0.0:
+                return self
+            if other.name is None:
+                return self.tracer.constant(self.value * other.value)
+            sign = other.sign * math.copysign(1.0, self.value)
+            if abs(self.value) == 1.0:
+                return _Part(self.tracer, other.name, sign)
+            return self.tracer.emit(repr(abs(self.value)) + " * {}", other.name, sign=sign)
+        return self.tracer.emit("{} * {}", self.name, other.name, sign=self.sign * other.sign)
+
+
+class _Tracer:
+    """Records +, -, * on :class:`_Part` as straight-line code, folding constants, then compiles
+    what the outputs need of it into a Python function of (cos, sin, v)."""
+
+    def __init__(self) -> None:
+        self.lines: list[tuple[str, tuple[int, ...]]] = []  # line i: (template, operand lines)
+
+    def constant(self, value: float) -> _Part:
+        return _Part(self, None, value=float(value))
+
+    def variable(self, expression: str) -> _Part:
+        return self.emit(expression)
+
+    def emit(self, template: str, *operands: int, sign: float = 1.0) -> _Part:
+        self.lines.append((template, operands))
+        return _Part(self, len(self.lines) - 1, sign)
+
+    def compile(self, outputs: list[list[_Part]], name: str) -> Callable:
+        """The function; its lines are the ones the outputs need, and a local is reused once its
+        value is dead, so a batch holds few (N,) temporaries at a time."""
+        needed = {part.name for parts in outputs for part in parts} - {None}
+        for line in range(len(self.lines) - 1, -1, -1):
+            if line in needed:
+                needed.update(self.lines[line][1])
+        kept = sorted(needed)
+        last_use = {operand: line for line in kept for operand in self.lines[line][1]}
+        last_use.update((part.name, math.inf) for parts in outputs for part in parts)
+        local: dict[int, str] = {}
+        free: list[str] = []
+        body = [f"def {name}(cos, sin, v):"]
+        for line in kept:
+            template, operands = self.lines[line]
+            arguments = [local[operand] for operand in operands]
+            free += [local[operand] for operand in set(operands) if last_use[operand] == line]
+            local[line] = free.pop() if free else f"t{len(set(local.values()))}"
+            body.append(f"    {local[line]} = {template.format(*arguments)}")
+
+        def text(part: _Part) -> str:
+            if part.name is None:
+                return repr(part.value)
+            return local[part.name] if part.sign > 0 else f"-{local[part.name]}"
+
+        lists = ("[" + ", ".join(map(text, parts)) + "]" for parts in outputs)
+        body.append(f"    return ({', '.join(lists)},)")
+        source = "\n".join(body)
+        namespace: dict[str, Any] = {}
+        exec(compile(source, f"<{name}>", "exec"), namespace)  # generated above from the D-H table alone
+        function = namespace[name]
+        function.source = source  # to read what a chain runs: chain._programs[...][0].source
+        return function
+
+
+def _turn(frame: list[list[_Part]], cos: _Part, sin: _Part, d: _Part) -> list[list[_Part]]:
+    """frame Rz(theta) Tz(d), frame as [x, y, z, p] (columns of three parts)."""
+    x, y, z, p = frame
+    return [[cos * a + sin * b for a, b in zip(x, y)], [cos * b - sin * a for a, b in zip(x, y)], z,
+            [pi + d * zi for pi, zi in zip(p, z)]]
+
+
+def _shift(frame: list[list[_Part]], a: _Part, ca: _Part, sa: _Part) -> list[list[_Part]]:
+    """frame Tx(a) Rx(alpha)."""
+    x, y, z, p = frame
+    return [x, [ca * b + sa * c for b, c in zip(y, z)], [ca * c - sa * b for b, c in zip(y, z)],
+            [pi + a * xi for pi, xi in zip(p, x)]]
+
+
+def _times(frame: list[list[_Part]], other: list[list[_Part]]) -> list[list[_Part]]:
+    """frame @ other, both as [x, y, z, p]."""
+    x, y, z, p = frame
+    columns = [[u[k] * col[0] + v[k] * col[1] + w[k] * col[2] for k in range(3)]
+               for col, (u, v, w) in zip(other, [(x, y, z)] * 4)]
+    columns[3] = [c + pk for c, pk in zip(columns[3], p)]
+    return columns
+
+
+def _cross(u: list[_Part], v: list[_Part]) -> list[_Part]:
+    return [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+
+
+def _entries(frame: list[list[_Part]]) -> list[_Part]:
+    """The 16 entries, row-major, of the 4x4 transform [x, y, z, p]."""
+    zero, one = frame[0][0].tracer.constant(0.0), frame[0][0].tracer.constant(1.0)
+    return [frame[j][k] for k in range(3) for j in range(4)] + [zero, zero, zero, one]
+
+
+def _snap(value: float) -> float:
+    """cos/sin of a constant angle, exactly 0 or +-1 at multiples of 90 deg (so those terms vanish)."""
+    return float(round(value)) if abs(value - round(value)) < 1e-12 else value

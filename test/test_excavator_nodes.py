@@ -490,7 +490,7 @@ class TestVelocityIkNode:
         ("what", "reason"),
         [
             ("nan", "non-finite twist"),
-            ("huge", "the rates overflow"),
+            ("huge", "implausible"),
             ("frame", "is not the base frame"),
             ("state", "cylinder_lengths is"),
         ],
@@ -505,7 +505,8 @@ class TestVelocityIkNode:
         if what == "nan":
             ik.send(np.array([np.nan, 0.0, 0.0]), np.zeros(3))
         elif what == "huge":
-            ik.send(np.full(3, 1.7e308), np.array([0.0, -1.7e308, 0.0]))  # finite, overflows in eq. 9
+            # Finite, would overflow in eq. 9: refused where it enters (beyond 1000 x the fastest motion).
+            ik.send(np.full(3, 1.7e308), np.array([0.0, -1.7e308, 0.0]))
         elif what == "frame":
             ik.send(good, np.zeros(3), frame="map")
         else:

@@ -95,3 +95,21 @@ def test_low_pass_of_the_differences() -> None:
     np.testing.assert_allclose(first, [1.0])
     out = diff.update(20_000_000, np.array([0.01]))  # raw 0: decays by exp(-dt / tau)
     np.testing.assert_allclose(out, [np.exp(-dt / tau)])
+
+
+def test_speeds_and_stroke_ends_hold_exactly_for_random_commands() -> None:
+    """10,000 random steps (commands up to 10 x the speeds, steps up to 1 s, with and without lag):
+    D stays inside its ends and D_dot inside its speeds exactly; a non-finite command is refused."""
+    rng = np.random.default_rng(5)
+    outside = 0
+    for tau in (0.0, 0.05):
+        plant = Plant(LIMITS, REF, time_constant=tau)
+        for _ in range(5_000):
+            plant.step(rng.uniform(-10.0, 10.0, 4) * LIMITS.max_rates, float(rng.uniform(0.0, 1.0)))
+            outside += int(np.any(plant.d < LIMITS.d_min) or np.any(plant.d > LIMITS.d_max))
+            outside += int(np.any(np.abs(plant.d_dot) > LIMITS.max_rates))
+    assert outside == 0
+    for bad in (np.array([np.nan, 0.0, 0.0, 0.0]), np.array([0.0, np.inf, 0.0, 0.0])):
+        with pytest.raises(ValueError, match="finite"):
+            plant.step(bad, 0.01)
+    assert np.all(np.isfinite(plant.d))

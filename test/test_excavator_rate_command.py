@@ -185,3 +185,24 @@ def test_a_target_that_overflows_is_refused() -> None:
     D = LIMITS.reference
     with pytest.raises(ValueError, match="overflow"):
         rate_command(EXC.jc0(D), D, np.full(4, 1.7e308), LIMITS, 50.0, 0.1)
+
+
+def test_speed_limits_hold_exactly_not_to_an_ulp() -> None:
+    """20,000 random states and targets (most far beyond the speeds): no command exceeds a limit,
+    not even by an ulp (before the fix 1 in 25 did, ratio 1.0000000000000002), and the direction
+    is kept to round-off."""
+    rng = np.random.default_rng(11)
+    states = random_states(20_000)
+    over, scaled = 0, 0
+    for D, q_dot in zip(states, rng.normal(scale=2.0, size=(20_000, 4)), strict=True):
+        cmd = rate_command(EXC.jc0(D), D, q_dot, LIMITS, 50.0, 0.1)
+        over += int(np.any(np.abs(cmd.d_dot) > LIMITS.max_rates))
+        if cmd.speed_scale < 1.0 and not cmd.clamped.any():
+            scaled += 1
+            unscaled = rate_command(EXC.jc0(D), D, q_dot * cmd.speed_scale, LIMITS, 50.0, 0.1).d_dot
+            np.testing.assert_allclose(cmd.d_dot, unscaled, rtol=1e-13, atol=1e-16)
+    assert over == 0 and scaled > 10_000
+    # The rounding case itself: 1 / ratio times the fastest rate is an ulp above the limit.
+    d_dot = np.array([0.0, 0.15 * 3.0000000000000004, 0.0, 0.0])
+    out, _ = scale_to_speed(d_dot, np.array([1.0, 0.15, 1.0, 1.0]))
+    assert out[1] <= 0.15

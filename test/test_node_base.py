@@ -88,6 +88,29 @@ def test_unknown_and_invalid_settings_are_refused() -> None:
     assert "base_frame: must not be empty" in start_fails("-p", "base_frame:=''")
 
 
+@pytest.mark.parametrize(("text", "message"), [
+    ("/**:\n  ros__parameters:\n", "expected a mapping 'ros__parameters:'"),
+    ("a: [\n", "not valid YAML (line 2)"),
+    ("/**:\n  ros__parameters:\n    scara: {}\n", "scara = {} is not a ROS parameter value"),
+    ("/**:\n  ros__parameters:\n    scara: {l1: [1, x]}\n", "scara.l1 = [1, 'x'] is not"),
+    ("[1, 2]\n", "expected sections"),
+])
+def test_a_params_file_rcl_cannot_take_is_one_line(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    assert message in start_fails("--params-file", str(path))
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (("--params-file", "no_such_file.yaml"), "no_such_file.yaml: No such file or directory"),
+    (("-p", "l1"), "-p 'l1': expected NAME:=VALUE"),
+    (("--params-file",), "--params-file: a value must follow it"),
+    (("--no-such-ros-argument",), "invalid ROS arguments"),
+])
+def test_rcl_argument_errors_are_one_line(args: tuple[str, ...], message: str) -> None:
+    assert message in start_fails(*args)
+
+
 def test_parameters_are_read_only_and_a_set_is_refused_with_a_reason(probe: Probe) -> None:
     with NodeProcess("scara_ik_server") as process:
         describe = probe.node.create_client(DescribeParameters, "/scara_ik_server/describe_parameters")

@@ -11,6 +11,9 @@ from manipulator_kinematics.serial_chain import (
     DHRow,
     JointLimits,
     SerialChain,
+    evaluate_parts,
+    parts_sqrt,
+    parts_where,
     prismatic,
     revolute,
     transl,
@@ -163,3 +166,60 @@ def test_joint_limits_report_the_side_of_a_violation() -> None:
     assert limits.within([0.2, 0.9, -0.9])
     with pytest.raises(ValueError):
         JointLimits(("a",), np.array([1.0]), np.array([0.0]))
+
+
+def product_of_links(chain: SerialChain, q: np.ndarray) -> np.ndarray:
+    """base A_1 ... A_n tool from link_transforms: plain 4x4 products, independent of the traced walk."""
+    links = chain.link_transforms(q)
+    pose = np.broadcast_to(chain.base, links.shape[:-3] + (4, 4))
+    for i in range(chain.n_rows):
+        pose = pose @ links[..., i, :, :]
+    return pose @ chain.tool
+
+
+@pytest.mark.parametrize("modified", [False, True])
+def test_fkine_jacob0_equals_link_products_and_central_differences(modified: bool) -> None:
+    rng = np.random.default_rng(11 + modified)
+    for _ in range(20):
+        chain = random_chain(rng, modified)
+        q = rng.uniform(-PI, PI, (7, chain.n))
+        pose, jacobian = chain.fkine_jacob0(q)
+        assert pose.shape == (7, 4, 4) and jacobian.shape == (7, 6, chain.n)
+        np.testing.assert_allclose(pose, product_of_links(chain, q), atol=1e-13)
+        for k in (0, 6):
+            np.testing.assert_allclose(jacobian[k], numeric_jacobian(chain, q[k]), atol=1e-8)
+            one_pose, one_jacobian = chain.fkine_jacob0(q[k])
+            np.testing.assert_array_equal(one_pose, pose[k])  # floats and arrays: the same arithmetic
+            np.testing.assert_array_equal(one_jacobian, jacobian[k])
+
+
+def test_fkine_jacob0_of_a_coupled_chain_differentiates_the_independent_joints() -> None:
+    # The palletizer's pattern: a passive row v4 = -(q2 + q3) keeps the flange level.
+    coupling = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, -1, -1, 0], [0, 0, 0, 1]]
+    rows = [revolute(d=0.4, alpha=PI / 2), revolute(a=0.7), revolute(a=0.6), revolute(a=0.1, alpha=-PI / 2),
+            revolute(d=0.2)]
+    chain = SerialChain(rows, tool=transl(0.0, 0.0, 0.15), coupling=coupling)
+    q = np.array([0.3, 0.9, -0.4, 1.1])
+    pose, jacobian = chain.fkine_jacob0(q)
+    assert jacobian.shape == (6, 4)
+    np.testing.assert_allclose(jacobian, numeric_jacobian(chain, q), atol=1e-8)
+    np.testing.assert_allclose(pose, product_of_links(chain, q), atol=1e-14)
+    np.testing.assert_allclose(pose[2, :3], [0.0, 0.0, 1.0], atol=1e-14)  # level flange: z stays vertical
+
+
+def test_evaluate_parts_gives_one_case_and_batches_alike() -> None:
+    def polar(args: list, scale: list) -> tuple[list, list]:
+        r, angle_cos, angle_sin = args
+        return [r * angle_cos, r * angle_sin], [parts_sqrt(r) * scale[0], parts_where(r > 1.0, 1.0, 0.0)]
+
+    rng = np.random.default_rng(12)
+    r, angle = rng.uniform(0.0, 2.0, 5000), rng.uniform(-PI, PI, 5000)
+    args = np.stack([r, np.cos(angle), np.sin(angle)])
+    xy, extra = evaluate_parts(polar, (args, np.array([3.0] * 5000)[None]), [(2,), (2,)])
+    assert xy.shape == (5000, 2) and extra.shape == (5000, 2)
+    np.testing.assert_allclose(xy, np.stack([r * np.cos(angle), r * np.sin(angle)], axis=-1), rtol=1e-15)
+    np.testing.assert_array_equal(extra, np.stack([3 * np.sqrt(r), r > 1.0], axis=-1))
+    for k in (0, 4096, 4999):  # the second chunk starts at 4096
+        one_xy, one_extra = evaluate_parts(polar, (args[:, k], np.array([3.0])), [(2,), (2,)])
+        np.testing.assert_array_equal(one_xy, xy[k])
+        np.testing.assert_array_equal(one_extra, extra[k])

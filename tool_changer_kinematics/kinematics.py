@@ -22,11 +22,18 @@ theta_i = q_i + offset_i, R = [n o a] and p the flange pose (base and tool trans
    x5 = cos theta5 x4 + sin theta5 z1, y5 = -z4.
 4. The J3 origin o3 = w - a4 x4 - d5 z4 (z4 = x4 x z1), relative to the J2 origin o1, is the tip
    of the planar 2R arm of Fig. 3 (a2, a3): law of cosines, elbow ``up`` (theta3 <= 0) or
-   ``down`` (the shared :func:`two_link_ik`); theta4 = phi - theta2 - theta3 (eq. 7).
+   ``down``, theta2 = atan2(o3) - atan2(a3 sin theta3, a2 + a3 cos theta3); theta4 = phi -
+   theta2 - theta3 (eq. 7).
 
 That gives 2 x 2 x 2 = 8 candidates, in the order of :data:`BRANCHES` (index = 4 shoulder +
 2 elbow + wrist). Each angle is returned as the representative modulo 2 pi inside its joint's
 limits when there is one (J5's limits [0, 270] deg span more than a half turn).
+
+Speed (benchmarks/bench_tool_changer_ik.py): the steps run on scalar parts, Python floats for one
+target and (M,) arrays for chunks of a batch (the shared :func:`evaluate_parts`, one code path),
+with every angle kept as a (sine, cosine)-like pair (sums and differences of angles are products
+of pairs) until one arctan2 over all 48 at the end. numpy on (8, 6) arrays would cost more in
+per-call overhead than the arithmetic itself.
 
 Degenerate targets, handled by a stated rule and never NaN for a solution that exists:
 
@@ -51,7 +58,8 @@ stop alone makes the solution unique does not hold for this model (docs/tool_cha
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from contextlib import nullcontext
 from typing import Any
 
 import numpy as np
@@ -68,10 +76,15 @@ from manipulator_kinematics.model import (
     select,
 )
 from manipulator_kinematics.params import config_path, load_parameters
-from manipulator_kinematics.planar import two_link_ik
 from manipulator_kinematics.serial_chain import (
     JointLimits,
     SerialChain,
+    evaluate_parts,
+    parts_all,
+    parts_any,
+    parts_clip,
+    parts_sqrt,
+    parts_where,
     revolute,
     transl,
     trotx,
@@ -92,6 +105,10 @@ LIMIT_TOL = 1e-10
 WRIST_RULE = 1e-8
 #: Wrist centre distance (m) from the J1 axis below which theta1 is taken from the seed.
 AXIS_RULE = 1e-9
+#: Targets per chunk of a batch in solve_ik.
+IK_CHUNK = 2048
+#: Distance (m) by which the J3 origin may lie outside the J2-J3 annulus and count as on it (round-off).
+TWO_LINK_TOL = 1e-12
 #: Largest |R^T R - I| entry of a target rotation that is still a rotation.
 ROTATION_TOL = 1e-6
 
@@ -139,7 +156,19 @@ class ToolChanger:
         self.axis_singularity = float(axis_singularity)
         rows = [revolute(a=a[i], alpha=ALPHA[i], d=d[i], offset=offset[i]) for i in range(6)]
         self.chain = SerialChain(rows, tool=tool)
-        self._tool_inv = np.linalg.inv(self.chain.tool)
+        identity = np.array_equal(self.chain.tool, np.eye(4))
+        self._tool_inv = None if identity else np.linalg.inv(self.chain.tool)
+        self._lengths = tuple(float(x) for x in (*a[:4], d[0], d[4], d[5]))  # a1..a4, d1, d5, d6
+        self._reach = (abs(a[1] - a[2]) - TWO_LINK_TOL, a[1] + a[2] + TWO_LINK_TOL)
+        # The representative of an angle inside [lower, upper], else the nearest to them, lies in
+        # (top - 2 pi, top]: top = (lower + upper) / 2 + pi (the angle farthest from the limits) or,
+        # for limits a full turn wide or more, lower + 2 pi. theta - offset spans [-pi - offset,
+        # pi - offset]; whole turns added to offset put its top into that window (within LIMIT_TOL),
+        # so one more turn up where an angle is at or below the window's bottom is all that is left.
+        top = np.minimum(0.5 * (limits.lower + limits.upper) + math.pi, limits.lower + 2 * math.pi)
+        turns = np.floor((top + 2 * LIMIT_TOL - math.pi + offset) / (2 * math.pi))
+        self._wrap_offset = offset - 2 * math.pi * turns
+        self._wrap_bottom = top - 2 * math.pi
 
     # ---- construction -------------------------------------------------------------------------
     @classmethod
@@ -237,93 +266,159 @@ class ToolChanger:
         if target.shape[-2:] != (4, 4):
             raise ValueError(f"targets must have shape (..., 4, 4), got {target.shape}")
         shape = target.shape[:-2]
-        seed_q = None if seed is None else np.broadcast_to(np.asarray(seed, dtype=float), shape + (6,))
+        seed_q = None if seed is None else np.asarray(seed, dtype=float)
+        if seed_q is not None and seed_q.shape != shape + (6,):
+            seed_q = np.broadcast_to(seed_q, shape + (6,))
         if not use_orientation and seed_q is not None:
             target[..., :3, :3] = self.fkine(seed_q)[..., :3, :3]
-        flat_seed = None if seed_q is None else seed_q.reshape(-1, 6)
-        q, diag = self._candidates(target.reshape(-1, 4, 4), flat_seed)
-        q = q.reshape(shape + (8, 6))
-        status = limit_status(q, self._limits, LIMIT_TOL)
-        singular = (diag["s5"] < self.wrist_singularity) | (diag["rho"] < self.axis_singularity)[:, None]
-        status = np.where((status == _SUCCESS) & singular.reshape(shape + (8,)), _SINGULAR, status)
-        invalid = diag["invalid"].reshape(shape)
-        status = np.where(invalid[..., None], _INVALID, status).astype(np.int8)
-        q = np.where(invalid[..., None, None], np.nan, q)
         index = None if branch is None else BRANCHES.index(branch)
-        selected, tie = select(q, status, seed=seed_q, branch=index)
-        diag = {key: value.reshape(shape + value.shape[1:]) for key, value in diag.items()}
+        if not shape:
+            q, status, selected, tie, diag = self._solve(target, seed_q, index)
+        else:
+            # In chunks of targets, so that every (chunk, 8, 6) array of the pipeline stays in the
+            # cache (the work is a few dozen memory-bound passes over the candidates).
+            target = target.reshape(-1, 4, 4)
+            flat_seed = None if seed_q is None else seed_q.reshape(-1, 6)
+            pieces = [self._solve(target[start:start + IK_CHUNK], None if flat_seed is None
+                                  else flat_seed[start:start + IK_CHUNK], index)
+                      for start in range(0, len(target), IK_CHUNK) or [0]]
+            q, status, selected, tie = (np.concatenate(arrays).reshape(shape + arrays[0].shape[1:])
+                                        for arrays in zip(*(piece[:4] for piece in pieces), strict=True))
+            diag = {key: np.concatenate([piece[4][key] for piece in pieces]).reshape(shape + value.shape[1:])
+                    for key, value in pieces[0][4].items()}
 
         def explain(solutions: IKSolutions, at: tuple[int, ...]) -> str:
             return self._explain(solutions, at, diag, seeded=seed is not None, requested=branch)
 
         return IKSolutions(q=q, status=status, branches=BRANCHES, selected=selected, tie=tie, explain=explain)
 
-    def _candidates(self, target: np.ndarray,
-                    seed: np.ndarray | None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """All 8 candidates (N, 8, 6) of flange-frame targets (N, 4, 4) and per-target diagnostics."""
-        n_targets = target.shape[0]
-        R = target[:, :3, :3]
-        finite = np.all(np.isfinite(target), axis=(-2, -1))
-        with np.errstate(invalid="ignore"):
-            orthonormal = np.abs(np.swapaxes(R, -1, -2) @ R - np.eye(3)).max(axis=(-2, -1)) < ROTATION_TOL
-            proper = np.linalg.det(np.where(finite[:, None, None], R, np.eye(3))) > 0.0
-        invalid = ~(finite & orthonormal & proper)
-        T = np.where(invalid[:, None, None], np.eye(4), target) @ self._tool_inv
-        nx, ny, nz = T[:, 0, 0], T[:, 1, 0], T[:, 2, 0]
-        ax, ay, az = T[:, 0, 2], T[:, 1, 2], T[:, 2, 2]
-        a1, a2, a3, a4 = self.a[:4]
-        d1, d5, d6 = self.d[0], self.d[4], self.d[5]
-        wx, wy, wz = T[:, 0, 3] - d6 * ax, T[:, 1, 3] - d6 * ay, T[:, 2, 3] - d6 * az
-        rho = np.hypot(wx, wy)
-        seed_q = np.zeros((n_targets, 6)) if seed is None else seed
-        th1 = np.where(rho < AXIS_RULE, seed_q[:, 0] + self.offset[0], np.arctan2(wy, wx))
-        th1 = np.stack([th1, th1 + math.pi], axis=-1)  # (N, shoulder)
-        c1, s1 = np.cos(th1), np.sin(th1)
-        col = (slice(None), None)
-        # a, n and w in frame 1 (x1 = (c1, s1, 0), y1 = base z, z1 = (s1, -c1, 0)), w relative to o1.
-        ax1, az1 = ax[col] * c1 + ay[col] * s1, ax[col] * s1 - ay[col] * c1
-        nx1, nz1 = nx[col] * c1 + ny[col] * s1, nx[col] * s1 - ny[col] * c1
-        ay1, ny1 = np.broadcast_to(az[col], c1.shape), np.broadcast_to(nz[col], c1.shape)
-        wx1, wy1 = wx[col] * c1 + wy[col] * s1 - a1, np.broadcast_to(wz[col] - d1, c1.shape)
-        s5_abs = np.hypot(ax1, ay1)
-        degenerate = s5_abs < WRIST_RULE
-        sign = np.array([1.0, -1.0])  # wrist noflip / flip
-        s5 = s5_abs[..., None] * sign  # (N, shoulder, wrist)
-        c5 = az1[..., None]
-        th5 = np.arctan2(s5, c5)
-        phi = np.arctan2(-ay1[..., None] * sign, -ax1[..., None] * sign)
-        # Wrist singularity: keep the seed's theta6; cos theta5 = +1 fixes phi + theta6, -1 phi - theta6.
-        th6_seed = (seed_q[:, 5] + self.offset[5])[:, None]
-        psi = np.arctan2(ny1, nx1)
-        phi_rule = np.where(az1 >= 0.0, psi - th6_seed, psi + math.pi + th6_seed)
-        phi = np.where(degenerate[..., None], phi_rule[..., None], phi)
-        cphi, sphi = np.cos(phi), np.sin(phi)
-        th6 = np.arctan2(-(sphi * nx1[..., None] - cphi * ny1[..., None]),
-                         c5 * (cphi * nx1[..., None] + sphi * ny1[..., None]) + s5 * nz1[..., None])
-        o3x = wx1[..., None] - a4 * cphi - d5 * sphi
-        o3y = wy1[..., None] - a4 * sphi + d5 * cphi
-        arm = two_link_ik(o3x, o3y, a2, a3)
-        th2, th3 = arm.theta1[..., ::-1], arm.theta2[..., ::-1]  # elbow up (theta3 <= 0) first
-        th4 = phi[..., None] - th2 - th3
-        shape = th2.shape  # (N, shoulder, wrist, elbow)
-        theta = np.stack([np.broadcast_to(th1[:, :, None, None], shape), th2, th3, th4,
-                          np.broadcast_to(th5[..., None], shape),
-                          np.broadcast_to(th6[..., None], shape)], axis=-1)
-        theta[:, :, 1][degenerate] = np.nan  # at the singularity the flip branch is the same configuration
-        theta = np.swapaxes(theta, 2, 3).reshape(n_targets, 8, 6)  # (shoulder, elbow, wrist) order
-        theta[np.isnan(theta).any(axis=-1)] = np.nan  # a branch without a solution is empty, all joints
-        q = self._into_limits(theta - self.offset)
-        s5_c = np.broadcast_to(s5_abs[:, :, None, None], shape).swapaxes(2, 3).reshape(n_targets, 8)
-        reach = np.swapaxes(np.broadcast_to(arm.distance[..., None], shape), 2, 3).reshape(n_targets, 8)
-        return q, {"s5": np.where(np.isnan(q[..., 0]), np.inf, s5_c), "rho": rho, "invalid": invalid,
-                   "reach": reach}
+    def _solve(self, target: np.ndarray, seed: np.ndarray | None, branch: int | None) -> tuple:
+        """Candidates, statuses, selection and diagnostics of one target (4, 4) or a chunk (M, 4, 4)."""
+        shape = target.shape[:-2]
+        flange = target if self._tool_inv is None else target @ self._tool_inv
+        rule = self.offset[::5] if seed is None else seed[..., ::5] + self.offset[::5]  # theta1, theta6
+        if shape:  # rows of (k, M) arrays for evaluate_parts
+            pose = np.ascontiguousarray(flange.reshape(-1, 16).T)
+            rule = np.ascontiguousarray(np.broadcast_to(rule, shape + (2,)).T)
+        else:
+            pose = flange.reshape(16)
+        # Junk from targets that are not poses is masked below; floats never warn (nor cost errstate).
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore") if shape else nullcontext():
+            y, x, extra = evaluate_parts(self._closed_form, (pose, np.cos(rule), np.sin(rule)),
+                                         ((8, 6), (8, 6), (18,)))
+        q = self._into_limits(np.arctan2(y, x))
+        invalid, rho, s5 = extra[..., 0] == 0.0, extra[..., 1], extra[..., 2:10]
+        status = limit_status(q, self._limits, LIMIT_TOL)
+        singular = (s5 < self.wrist_singularity) | (rho < self.axis_singularity)[..., None]
+        status[(status == _SUCCESS) & singular] = _SINGULAR
+        if parts_any(invalid):
+            status[invalid] = _INVALID
+            q[invalid] = np.nan
+        selected, tie = select(q, status, seed=seed, branch=branch)
+        diag = {"invalid": invalid, "rho": rho, "s5": s5, "reach": extra[..., 10:]}
+        return q, status, selected, tie, diag
 
-    def _into_limits(self, q: np.ndarray) -> np.ndarray:
-        """Each angle's representative modulo 2 pi inside its limits, else the one nearest to them."""
-        lower, upper = self._limits.lower, self._limits.upper
-        up = lower + np.mod(q - lower + LIMIT_TOL, 2 * math.pi) - LIMIT_TOL  # in [lower, lower + 2 pi)
-        down = up - 2 * math.pi
-        return np.where(up - upper <= lower - down, up, down)
+    def _closed_form(self, pose: Sequence, rule_cos: Sequence, rule_sin: Sequence) -> tuple[list, list, list]:
+        """The module docstring's steps 1-4 on scalar parts (floats for one target, (M,) arrays for
+        a chunk: :func:`evaluate_parts`), every angle as a pair (y, x) for one arctan2 afterwards, so
+        that no inverse trigonometry (whose math and numpy versions differ in the last bit) runs here.
+
+        ``pose`` the 16 entries of the flange pose, row-major; ``rule_cos``, ``rule_sin`` cos/sin of
+        the seed's theta1 and theta6 (the degenerate rules). Returns y (48) and x (48), candidate by
+        candidate in :data:`BRANCHES` order, NaN in every joint of a branch without a solution, and
+        [valid, rho, |sin theta5| of the 8 candidates (NaN if none), J3 origin distance from J2 of
+        the 8]. Never raises: a target that is not a rigid transform gives junk and valid = 0.
+        """
+        nx, ox, ax, px, ny, oy, ay, py, nz, oz, az, pz, b0, b1, b2, b3 = pose
+        a1, a2, a3, a4, d1, d5, d6 = self._lengths
+        valid = ((abs(nx * nx + ny * ny + nz * nz - 1.0) < ROTATION_TOL)
+                 & (abs(ox * ox + oy * oy + oz * oz - 1.0) < ROTATION_TOL)
+                 & (abs(ax * ax + ay * ay + az * az - 1.0) < ROTATION_TOL)
+                 & (abs(nx * ox + ny * oy + nz * oz) < ROTATION_TOL)
+                 & (abs(nx * ax + ny * ay + nz * az) < ROTATION_TOL)
+                 & (abs(ox * ax + oy * ay + oz * az) < ROTATION_TOL)
+                 & (nx * (oy * az - oz * ay) + ny * (oz * ax - ox * az) + nz * (ox * ay - oy * ax) > 0.0)
+                 & (abs(px) + abs(py) + abs(pz) + abs(b0) + abs(b1) + abs(b2) + abs(b3) < math.inf))
+        # 1. Wrist centre and theta1 (front shoulder); on the J1 axis the seed's theta1.
+        wx, wy, wz = px - d6 * ax, py - d6 * ay, pz - d6 * az
+        rho = parts_sqrt(wx * wx + wy * wy)
+        on_axis = rho < AXIS_RULE
+        safe = rho + (rho == 0.0)  # divisors: 0 becomes 1 (floats would raise; the rules take over there)
+        c1, s1 = wx / safe, wy / safe
+        if parts_any(on_axis):
+            c1, s1 = parts_where(on_axis, rule_cos[0], c1), parts_where(on_axis, rule_sin[0], s1)
+        # a, n and the wrist centre in frame 1 of the front shoulder (x1 = (c1, s1, 0), y1 = base z,
+        # z1 = (s1, -c1, 0)); the back shoulder (theta1 + pi) flips x1 and z1.
+        ax1, az1 = ax * c1 + ay * s1, ax * s1 - ay * c1
+        nx1, nz1 = nx * c1 + ny * s1, nx * s1 - ny * c1
+        w1, wy1 = wx * c1 + wy * s1, wz - d1
+        # 2. |sin theta5| and the direction of x4 in the arm plane: phi = theta2 + theta3 + theta4.
+        s5 = parts_sqrt(ax1 * ax1 + az * az)
+        degenerate = s5 < WRIST_RULE
+        safe5 = s5 + (s5 == 0.0)
+        rule = parts_any(degenerate)
+        if rule:  # wrist singularity: phi from psi = atan2(n.y1, n.x1) and the seed's theta6
+            norm = parts_sqrt(nx1 * nx1 + nz * nz)
+            norm = norm + (norm == 0.0)
+            cpsi, spsi = nx1 / norm, nz / norm
+            c6, s6 = rule_cos[1], rule_sin[1]
+        y, x, sin5, reach = [], [], [], []
+        for shoulder in (1.0, -1.0):
+            ax1k, az1k, nx1k, nz1k = shoulder * ax1, shoulder * az1, shoulder * nx1, shoulder * nz1
+            wx1 = shoulder * w1 - a1
+            if rule:  # cos theta5 = +1 fixes phi + theta6 = psi, -1 fixes phi - theta6 = psi + pi
+                up = az1k >= 0.0
+                cpsi_k = shoulder * cpsi
+                cphi_rule = parts_where(up, cpsi_k * c6 + spsi * s6, spsi * s6 - cpsi_k * c6)
+                sphi_rule = parts_where(up, spsi * c6 - cpsi_k * s6, -spsi * c6 - cpsi_k * s6)
+            branches = {}
+            for wrist in (1.0, -1.0):  # noflip, flip
+                sin5_k = wrist * s5
+                cphi, sphi = -wrist * ax1k / safe5, -wrist * az / safe5
+                if rule:  # the flip branch is the noflip configuration there: left empty
+                    cphi = parts_where(degenerate, cphi_rule, cphi)
+                    sphi = parts_where(degenerate, sphi_rule, sphi)
+                    if wrist < 0.0:
+                        sin5_k = parts_where(degenerate, math.nan, sin5_k)
+                # 3. theta6 from n in frame 5.
+                y6 = cphi * nz - sphi * nx1k
+                x6 = az1k * (cphi * nx1k + sphi * nz) + sin5_k * nz1k
+                # 4. The J3 origin relative to J2: the tip of the planar 2R arm (a2, a3), elbow angle
+                # theta3 by the law of cosines, theta2 = atan2(o3) - atan2(a3 s3, a2 + a3 c3).
+                o3x = wx1 - a4 * cphi - d5 * sphi
+                o3y = wy1 - a4 * sphi + d5 * cphi
+                r = parts_sqrt(o3x * o3x + o3y * o3y)
+                c3 = parts_clip((r * r - a2 * a2 - a3 * a3) / (2.0 * a2 * a3))
+                s3_abs = parts_sqrt(1.0 - c3 * c3)
+                reachable = (r >= self._reach[0]) & (r <= self._reach[1])
+                alive = 1.0 + 0.0 * sin5_k  # NaN where this branch has no solution: every joint NaN
+                if not parts_all(reachable):
+                    alive = parts_where(reachable, alive, math.nan)
+                k1 = a2 + a3 * c3
+                for elbow in (-1.0, 1.0):  # up (theta3 <= 0), down
+                    s3 = elbow * s3_abs
+                    k2 = a3 * s3
+                    y2, x2 = o3y * k1 - o3x * k2, o3x * k1 + o3y * k2
+                    y23, x23 = y2 * c3 + x2 * s3, x2 * c3 - y2 * s3
+                    branches[elbow, wrist] = (
+                        [alive * shoulder * s1, alive * y2, alive * s3, alive * (sphi * x23 - cphi * y23),
+                         alive * sin5_k, alive * y6],  # theta4 = phi - theta2 - theta3
+                        [shoulder * c1, x2, c3, cphi * x23 + sphi * y23, az1k, x6], alive * s5, r)
+            for elbow in (-1.0, 1.0):  # BRANCHES order: shoulder, elbow, wrist
+                for wrist in (1.0, -1.0):
+                    yk, xk, s5k, rk = branches[elbow, wrist]
+                    y += yk
+                    x += xk
+                    sin5.append(s5k)
+                    reach.append(rk)
+        return y, x, [valid, rho, *sin5, *reach]
+
+    def _into_limits(self, theta: np.ndarray) -> np.ndarray:
+        """q = theta - offset for theta in [-pi, pi] (arctan2), as each angle's representative modulo
+        2 pi inside its joint's limits, else the one nearest to them (__init__: one window per joint)."""
+        q = theta - self._wrap_offset
+        q += 2 * math.pi * (q <= self._wrap_bottom)  # (np.add's where= is slower on large arrays)
+        return q
 
     def _explain(self, solutions: IKSolutions, at: tuple[int, ...], diag: dict[str, np.ndarray], *,
                  seeded: bool, requested: str | None) -> str:

@@ -1,7 +1,8 @@
 """record: topics into a rosbag2 bag (mcap by default), from raw subscriptions, flushed as it goes.
 
     record [-o BAG] [-s mcap|sqlite3] [--overwrite] [--topics T ...] [--type T:=pkg/msg/Type ...]
-           [--discovery-timeout S] [--duration S] [--flush-interval S] [--ros-args ...]
+           [--discovery-timeout S] [--duration S] [--flush-interval S] [--visuals [PARAMS ...]]
+           [--ros-args ...]
 
 Default topics: every topic of the registered machines' nodes (``Machine.topics``), resolved in the
 recorder's namespace (``--ros-args -r __ns:=/machine1``) and remappings. A topic's type is the
@@ -43,6 +44,7 @@ NAME = "record"
 QUEUE_DEPTH = 1000
 DISCOVERY_POLL = 0.05
 STOP_LATENCY = 0.1
+DRAIN_LIMIT = 1.0
 
 
 def message_class(msgtype: str) -> type:
@@ -106,6 +108,7 @@ class Receiver:
         self.node, self.writer = node, writer
         self.counts: dict[str, int] = {}
         self._counted = -1
+        self._stopped_at: float | None = None
 
     def subscribe(self, topic: str, msg_class: type, qos: QoSProfile) -> None:
         self.counts[topic] = 0
@@ -118,22 +121,25 @@ class Receiver:
         self.node.create_subscription(msg_class, topic, store, qos, raw=True)
 
     def run(self, duration: float | None, stop: threading.Event, executor: str) -> None:
-        """Record for ``duration`` s (None: until ``stop`` is set), then take what is still queued."""
+        """Record for ``duration`` s (None: until ``stop`` is set), then take what is still queued
+        (at most ``DRAIN_LIMIT`` s more)."""
         end = math.inf if duration is None else time.monotonic() + duration
         self.node.create_timer(self.writer.flush_interval, self.writer.flush_if_due)
 
         def done() -> bool:
-            if not stop.is_set() and time.monotonic() < end:
+            now = time.monotonic()
+            if not stop.is_set() and now < end:
                 return False
-            # Stopped: once a whole poll went by without a message, every one that arrived before
-            # the stop (all acknowledged ones of a publisher that waited for its acks) is stored.
+            # Once a whole poll went by without a message, every one that arrived before the stop
+            # (all acknowledged ones of a publisher that waited for its acks) is stored; a
+            # publisher that keeps sending does not keep the recorder alive.
+            self._stopped_at = self._stopped_at or now
             total = sum(self.counts.values())
             quiet, self._counted = total == self._counted, total
-            return quiet
+            return quiet or now - self._stopped_at >= DRAIN_LIMIT
 
         # A signal handler only runs between polls: the poll bounds how late a stop is seen.
         spin(self.node, executor, until=done, poll=min(STOP_LATENCY, self.writer.flush_interval))
-        self.writer.flush_if_due()
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
@@ -165,6 +171,15 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
         help="how long to wait for publishers of topics whose type is not known (s)",
     )
     parser.add_argument("--duration", type=float, metavar="S", help="stop after this many seconds")
+    parser.add_argument(
+        "--visuals",
+        nargs="*",
+        type=Path,
+        metavar="PARAMS",
+        help="when the recording ends, add /robot_description, /tf, /tf_static and machine_markers for "
+        "Foxglove (manipulator_kinematics.bag.visual); optional params files with the machines "
+        "(default: the shipped ones)",
+    )
     parser.add_argument(
         "--flush-interval", type=float, default=0.5, metavar="S", help="most data a SIGKILL can lose (s)"
     )
@@ -230,12 +245,28 @@ def record(argv: Sequence[str]) -> int:
         writer.close()
         total = sum(receiver.counts.values())
         print(f"{NAME}: {total} messages on {len(receiver.counts)} topics in {output}", file=sys.stderr)
+        if args.visuals is not None:
+            add_visuals_to_recording(output, args.visuals)
         return 0
     finally:
         if writer is not None:
             writer.close()
         node.destroy_node()
         rclpy.try_shutdown()
+
+
+def add_visuals_to_recording(output: Path, params: Sequence[Path]) -> None:
+    """``--visuals``: the recorded bag rewritten with its visual topics (the recording stays as it
+    is when that fails)."""
+    from manipulator_kinematics.bag.visual import add_visuals  # URDF and scene code: only when asked
+
+    try:
+        added = add_visuals(output, output, params=params)
+    except BagError as error:
+        raise BagError(f"{output} is recorded, but no visual topics were added: {error}") from None
+    for item in added:
+        print(f"{NAME}: added {', '.join(item.topics)} for {item.machine} ({item.states} states) in "
+              f"{item.namespace}", file=sys.stderr)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -20,11 +20,10 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, ClassVar
 
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 
 from manipulator_kinematics.config import Schema, validate
+from manipulator_kinematics.node_util import param
 from manipulator_kinematics.params import ConfigError, config_path, flatten, load_parameters, unflatten
 from manipulator_kinematics.registry import Machine
 
@@ -80,18 +79,8 @@ def node_settings(
 def declare(node: Node, values: Mapping[str, Any], schema: Schema, prefix: str = "") -> None:
     """Declare every value (nested) read-only, described by its schema field's ``doc``."""
     for name, value in flatten(dict(values)).items():
-        if value is None:  # an optional setting left out: nothing to declare
-            continue
-        full = f"{prefix}.{name}" if prefix else name
-        given = node.get_parameter(full) if node.has_parameter(full) else None
-        kind = given.type_ if given is not None else Parameter.Type.from_parameter_value(value)
-        descriptor = ParameterDescriptor(
-            description=_doc(schema, name.split(".")), read_only=True, type=kind.value,
-            additional_constraints="read at start-up; restart the node to change it")
-        if given is not None:
-            node.set_descriptor(full, descriptor)
-        else:
-            node.declare_parameter(full, value, descriptor)
+        if value is not None:  # an optional setting left out: nothing to declare
+            param(node, f"{prefix}.{name}" if prefix else name, value, _doc(schema, name.split(".")))
 
 
 class MachineNode(Node):

@@ -5,9 +5,11 @@ publishes the tool's geometry_msgs/PoseStamped (``model.fkine``) and, when the m
 velocities, its TwistStamped (``model.jacob0`` times the joint rates: linear velocity of the tool
 point and angular velocity, in ``base_frame``), both stamped with the input's stamp.
 
-A message that lacks a joint, mismatches its arrays, holds a non-finite value, or gives a
-non-finite pose or twist is dropped with a throttled log line; nothing non-finite is published.
-A state outside the joint limits is still published (it is a measurement) with a warning.
+A message that lacks a joint, mismatches its arrays, holds a non-finite value or a position
+further outside the limits than 1000 x the joint's range (implausible:
+:func:`manipulator_kinematics.joint_state.check_plausible_positions`), or gives a non-finite pose
+or twist is dropped with a throttled log line; nothing non-finite is published. A state outside
+the joint limits otherwise is still published (it is a measurement) with a warning.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 from manipulator_kinematics.config import Number, Text
-from manipulator_kinematics.joint_state import InputError, joint_values
+from manipulator_kinematics.joint_state import InputError, check_plausible_positions, joint_values
 from manipulator_kinematics.model import describe_limits
 from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes.base import MachineNode
@@ -64,6 +66,7 @@ class ForwardNode(MachineNode):
     def on_joint_state(self, msg: JointState) -> None:
         try:
             q, qd = joint_values(msg, self.joint_names, require_position=True)
+            check_plausible_positions(q, self.joint_names, self.limits.lower, self.limits.upper)
         except InputError as error:
             self.log("warning", f"dropped joint_states: {error}")
             return

@@ -12,7 +12,10 @@ Services (relative names, so they can be namespaced or remapped), manipulator_ki
 
 Every bad request (NaN, unreachable, outside the joint limits, singular, unknown mode or branch,
 foreign frame) is answered with success = false, an error code (MoveIt's values where they
-exist) and a reason; nothing a client sends can stop the server.
+exist) and a reason; nothing a client sends can stop the server. Finite but absurd values are
+refused where they enter: a target farther from the base than 1000 x the machine's reach
+(INVALID_GOAL_CONSTRAINTS), a seed further outside the limits than 1000 x a joint's range
+(INVALID_ROBOT_STATE). A solution that is not finite is never sent (FAILURE with the reason).
 """
 
 from __future__ import annotations
@@ -23,7 +26,12 @@ from typing import Any
 import numpy as np
 
 from manipulator_kinematics.config import Text
-from manipulator_kinematics.joint_state import InputError, joint_values
+from manipulator_kinematics.joint_state import (
+    PLAUSIBILITY_FACTOR,
+    InputError,
+    check_plausible_positions,
+    joint_values,
+)
 from manipulator_kinematics.model import IKStatus, RequestError, describe_limits, pose_matrix
 from manipulator_kinematics.nodes.base import MachineNode
 from manipulator_kinematics.nodes.messages import joint_state, pose_array, pose_stamped, twist_stamped
@@ -63,6 +71,7 @@ class IKServerNode(MachineNode):
         self.frame = self.settings["base_frame"]
         self.joint_names = machine.joint_names(self.model)
         self.limits = machine.limits(self.model)
+        self.max_distance = PLAUSIBILITY_FACTOR * max(self._reach(), 1.0)
         self.create_service(SolveIK, "solve_ik", self.solve_ik)
         self.create_service(SolveFK, "solve_fk", self.solve_fk)
         self.get_logger().info(
@@ -80,8 +89,14 @@ class IKServerNode(MachineNode):
         if not np.all(np.isfinite(position)):
             raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
                            f"target position is not finite: ({', '.join(map(str, position))})")
-        if request.use_orientation and (not np.all(np.isfinite(quaternion))
-                                        or np.linalg.norm(quaternion) < 1e-9):
+        distance = float(np.max(np.abs(position)))
+        if distance > self.max_distance:
+            raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
+                           f"target position {position.tolist()} is beyond {PLAUSIBILITY_FACTOR:g} x the "
+                           f"machine's reach (|coordinate| <= {self.max_distance:.6g} m): implausible")
+        # The norm of a finite quaternion can still overflow (1e308): that is not a rotation either.
+        norm = float(np.linalg.norm(quaternion))
+        if request.use_orientation and not (np.isfinite(norm) and norm >= 1e-9):
             raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
                            f"target orientation is not a rotation: {quaternion.tolist()}")
         mode = request.mode or None
@@ -93,6 +108,8 @@ class IKServerNode(MachineNode):
             if len(request.seed.name) or len(request.seed.position):
                 try:
                     seed, _ = joint_values(request.seed, names, require_position=True)
+                    if tuple(names) == tuple(self.limits.names):  # limits are known in these joints
+                        check_plausible_positions(seed, names, self.limits.lower, self.limits.upper)
                 except InputError as error:
                     raise Rejected(KinematicsErrorCodes.INVALID_ROBOT_STATE, f"seed: {error}") from None
             target = pose_matrix(position, quaternion if request.use_orientation else None)
@@ -103,10 +120,18 @@ class IKServerNode(MachineNode):
             raise Rejected(code, str(error)) from None
         response.message = result.note()
         if not bool(result.ok):
-            raise Rejected(CODES[IKStatus(int(result.outcome))], response.message)
+            # A valid candidate can exist without a selection (the requested branch is not valid):
+            # the code is then the best failure, never SUCCESS with success = false.
+            failed = result.status[result.status != IKStatus.SUCCESS]
+            raise Rejected(CODES[IKStatus(int(failed.min())) if failed.size else IKStatus.INVALID],
+                           response.message)
+        ordered = result.ordered()
+        if not (np.all(np.isfinite(result.solution)) and np.all(np.isfinite(result.q[ordered]))):
+            raise Rejected(KinematicsErrorCodes.FAILURE,
+                           f"the solver gave a non-finite solution for {position.tolist()}: not sent")
         stamp = self.get_clock().now().to_msg()
         response.solution = joint_state(stamp, names, result.solution)
-        response.solutions = [joint_state(stamp, names, result.q[i]) for i in result.ordered()]
+        response.solutions = [joint_state(stamp, names, result.q[i]) for i in ordered]
         response.success = True
         response.error_code.val = KinematicsErrorCodes.SUCCESS
 
@@ -138,6 +163,12 @@ class IKServerNode(MachineNode):
         response.message = note(q) if note is not None else ""
 
     # ---- common -------------------------------------------------------------------------------
+    def _reach(self) -> float:
+        """Largest distance of the tool from the base over a seeded sample of the joint box (m)."""
+        lower, upper = self.limits.lower, self.limits.upper
+        q = np.random.default_rng(0).uniform(lower, upper, (4096, len(lower)))
+        return float(np.max(np.linalg.norm(self.model.fkine(q)[..., :3, 3], axis=-1)))
+
     def _check_frame(self, frame_id: str) -> None:
         if frame_id not in ("", self.frame):
             raise Rejected(KinematicsErrorCodes.FRAME_TRANSFORM_FAILURE,

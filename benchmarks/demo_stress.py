@@ -1,0 +1,117 @@
+"""The demo under load: ``excavator_demo`` N times with a CPU hog pinned on one core.
+
+    python benchmarks/demo_stress.py [--runs 20] [--output out/demo_stress] [--hog-core 0 | --no-hog]
+
+Each run gets its own output directory (``<output>/run_NN``, with the demo's console output in
+``demo.out``) and its own ROS_DOMAIN_ID, reserved with the same lock files as the test suite
+(test/conftest.py) so a test run on the machine at the same time is never heard. The hog is a busy
+Python loop pinned to one core with ``os.sched_setaffinity``, started before the first run and
+killed after the last. Prints a line per run and a table: exit code, the bucket's distance from
+the reference path (RMS / max, as the demo's summary), the driver's pose delay p99, poses not acted
+on, cycle clock held, wall time, load average at the start; then the pass count. Exit status 0
+only if every run passed. Not part of the test suite (about 70 s a run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import fcntl
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+from manipulator_kinematics.node_util import console_script
+
+LOCK_DIR = Path(tempfile.gettempdir()) / "manipulator_kinematics_ros_domains"  # as test/conftest.py
+PATTERNS = {
+    "rms": r"distance from the reference path: RMS ([\d.]+) mm",
+    "max": r"distance from the reference path: RMS [\d.]+ mm, max ([\d.]+) mm",
+    "p99": r"/ ([\d.]+) ms \(p99\)",
+    "skipped": r"; (\d+) of \d+ older than",
+    "held": r"cycle clock held ([\d.]+) s",
+}
+
+
+@contextmanager
+def reserved_domain():
+    """A ROS_DOMAIN_ID in 1..101 nobody else on this machine holds, for the block's duration."""
+    LOCK_DIR.mkdir(exist_ok=True)
+    for domain in range(1, 102):
+        with open(LOCK_DIR / f"{domain}.lock", "w") as handle:
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                continue
+            yield domain
+            return
+    raise RuntimeError("no free ROS_DOMAIN_ID in 1..101")
+
+
+def start_hog(core: int) -> subprocess.Popen:
+    code = f"import os\nos.sched_setaffinity(0, {{{core}}})\nwhile True:\n    pass\n"
+    return subprocess.Popen([sys.executable, "-c", code])
+
+
+def run_once(output: Path) -> dict[str, object]:
+    output.mkdir(parents=True, exist_ok=True)
+    load = os.getloadavg()[0]
+    with reserved_domain() as domain:
+        env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+        began = time.monotonic()
+        with open(output / "demo.out", "w", encoding="utf-8") as log:
+            code = subprocess.call(
+                [console_script("excavator_demo"), "--output", str(output)],
+                stdout=log, stderr=subprocess.STDOUT, env=env,
+            )
+        wall = time.monotonic() - began
+    text = (output / "demo.out").read_text(encoding="utf-8")
+    row: dict[str, object] = {"code": code, "wall": wall, "load": load, "domain": domain}
+    for key, pattern in PATTERNS.items():
+        found = re.search(pattern, text)
+        row[key] = found.group(1) if found else "-"
+    failed = [line for line in text.splitlines() if "FAILED" in line]
+    row["why"] = failed[0].split("FAILED: ", 1)[1][:70] if failed else ""
+    return row
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--runs", type=int, default=20, help="number of demo runs (default 20)")
+    parser.add_argument(
+        "--output", type=Path, default=Path("out/demo_stress"), help="directory of the runs (out/demo_stress)"
+    )
+    parser.add_argument("--hog-core", type=int, default=0, help="core the busy loop is pinned to (default 0)")
+    parser.add_argument("--no-hog", action="store_true", help="no busy loop (the unloaded reference)")
+    args = parser.parse_args()
+    hog = None if args.no_hog else start_hog(args.hog_core)
+    load = "no load" if hog is None else f"a busy loop pinned to core {args.hog_core}"
+    print(f"demo_stress: {args.runs} runs of excavator_demo, {os.cpu_count()} cores, {load}", flush=True)
+    header = (
+        f"{'run':>3}  {'exit':>4}  {'RMS mm':>6}  {'max mm':>6}  {'p99 ms':>6}  {'skip':>4}  {'held s':>6}  "
+        f"{'wall s':>6}  {'load1':>5}  why"
+    )
+    lines = []
+    try:
+        for k in range(1, args.runs + 1):
+            r = run_once(args.output / f"run_{k:02d}")
+            lines.append(
+                f"{k:>3}  {r['code']:>4}  {r['rms']:>6}  {r['max']:>6}  {r['p99']:>6}  {r['skipped']:>4}  "
+                f"{r['held']:>6}  {r['wall']:>6.1f}  {r['load']:>5.2f}  {r['why']}"
+            )
+            print(lines[-1], flush=True)
+    finally:
+        if hog is not None:
+            hog.kill()
+            hog.wait()
+    passed = sum(line.split()[1] == "0" for line in lines)
+    print("\n".join(["", header, *lines, "", f"demo_stress: {passed} of {len(lines)} runs passed ({load})"]))
+    return 0 if passed == len(lines) == args.runs else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,559 @@
+"""Fuzz every node and service with malformed and extreme input (seeded, bounded, real processes).
+
+Each test sends a few thousand bad messages or requests in bursts (random bytes, truncated and
+corrupted serializations, counts of 0xFFFFFFFF, NaN/inf/1e308, wrong and repeated names, stamps going
+backwards, alternating huge rates) and after each burst one valid input whose output it waits for:
+the node took the whole burst (the burst fits its input queue, depth raised for the test) and still
+serves. It checks that the node is alive, that no output field is non-finite, that commands and
+simulated states keep their limits exactly, that the valid input gives the library's numbers, and
+that the callback backstop (``guarded``: "failed on") never fired, i.e. the checks at the entry
+caught everything. Counts are printed (``-s``) for the record.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
+from ros_harness import NodeProcess, Probe
+from sensor_msgs.msg import JointState
+
+from excavator_kinematics import messages
+from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator, bucket_angular_velocity
+from excavator_kinematics.plant import Plant
+from excavator_kinematics.rate_command import rate_command
+from excavator_kinematics.twist import split_twist
+from manipulator_kinematics.model import RequestError, matrix_quaternion
+from manipulator_kinematics.params import config_path
+from manipulator_kinematics.registry import machine
+from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
+from manipulator_kinematics_interfaces.srv import SolveFK, SolveIK
+
+EXC = Excavator.default()
+LIMITS = EXC.limits
+QOS = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
+TIMEOUT = 30.0
+BURST = 150  # messages per burst; the nodes' input queues are raised above this for the test
+EXTREMES = (math.nan, math.inf, -math.inf, 1.7e308, -1.7e308, 1e308, 1e160, -1e160, 5e-324, 1e19, -0.0)
+SERIAL = ("scara", "tool_changer", "palletizer", "pump_boom")
+EXCAVATOR_PARAMS = (str(config_path("excavator_cet200.yaml")), str(config_path("excavator_nodes.yaml")))
+
+
+def floats(msg: object) -> list[float]:
+    """Every float of a ROS message, nested fields and sequences included."""
+    if isinstance(msg, float):
+        return [msg]
+    if isinstance(msg, list | tuple) or type(msg).__name__ == "ndarray" or hasattr(msg, "tolist"):
+        return [v for item in list(msg) for v in floats(item)]
+    if hasattr(msg, "get_fields_and_field_types"):
+        return [v for name in msg.get_fields_and_field_types() for v in floats(getattr(msg, name))]
+    return []
+
+
+def all_finite(msg: object) -> bool:
+    return all(map(math.isfinite, floats(msg)))
+
+
+class Outputs:
+    """Every message of some topics, and how many were non-finite."""
+
+    def __init__(self, probe: Probe, topics: dict[str, type]) -> None:
+        self.messages: dict[str, list] = {topic: [] for topic in topics}
+        for topic, msg_type in topics.items():
+            probe.node.create_subscription(msg_type, topic, self.messages[topic].append, QOS)
+
+    def count(self) -> int:
+        return sum(map(len, self.messages.values()))
+
+    def non_finite(self) -> int:
+        return sum(not all_finite(m) for ms in self.messages.values() for m in ms)
+
+
+def start(exe: str, namespace: str, tmp: Path, params: tuple[str, ...] = (),
+          **settings: object) -> NodeProcess:
+    """``exe`` in ``namespace`` with the package's params files and ``settings`` for the node."""
+    args = [a for p in params for a in ("--params-file", p)]
+    if settings:
+        path = tmp / f"{exe}.yaml"
+        path.write_text(yaml.safe_dump({f"{namespace}/{exe}": {"ros__parameters": settings}}))
+        args += ["--params-file", str(path)]
+    return NodeProcess(exe, *args, "-r", f"__ns:={namespace}")
+
+
+def stop_clean(process: NodeProcess) -> str:
+    log = process.stop()
+    assert "Traceback" not in log and "failed on" not in log, log[-3000:]
+    return log
+
+
+def report(what: str, **counts: int) -> None:
+    print(f"\nfuzz {what}: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+
+
+@pytest.fixture(scope="module")
+def probe() -> Iterator[Probe]:
+    p = Probe("fuzz_probe")
+    yield p
+    p.close()
+
+
+@pytest.fixture(scope="module")
+def tmp() -> Iterator[Path]:
+    with tempfile.TemporaryDirectory(prefix="fuzz_nodes-") as directory:
+        yield Path(directory)
+
+
+# ------------------------------------------------------------------------------ malformed input
+def joint_state(names, position=(), velocity=(), sec: int = 0, nanosec: int = 0,
+                frame: str = "") -> JointState:
+    msg = JointState(name=list(names), position=[float(v) for v in position],
+                     velocity=[float(v) for v in velocity])
+    msg.header.stamp, msg.header.frame_id = Time(sec=sec, nanosec=nanosec), frame
+    return msg
+
+
+def extreme(rng: np.random.Generator, n: int, scale: np.ndarray | float) -> list[float]:
+    """n values: mostly plausible (up to 100 x ``scale``), some extreme."""
+    values = rng.uniform(-100.0, 100.0, n) * scale
+    for i in range(n):
+        if rng.random() < 0.5:
+            values[i] = EXTREMES[rng.integers(len(EXTREMES))]
+    return [float(v) for v in values]
+
+
+def bad_joint_states(rng: np.random.Generator, names: tuple[str, ...], lower: np.ndarray, upper: np.ndarray,
+                     rate_scale: np.ndarray | float, k: int) -> JointState:
+    """One malformed or extreme JointState of ``names`` (kind by ``k``)."""
+    n = len(names)
+    position = rng.uniform(lower, upper)
+    velocity = rng.uniform(-1.0, 1.0, n) * rate_scale
+    sec = int(rng.integers(-2**31, 2**31)) if rng.random() < 0.2 else 1000 - k  # stamps going backwards
+    kind = k % 9
+    if kind == 0:
+        position = extreme(rng, n, upper - lower)
+    elif kind == 1:
+        velocity = extreme(rng, n, rate_scale)
+    elif kind == 2:  # alternating huge rates
+        velocity = np.full(n, 1.7e308 if k % 2 else -1.7e308)
+    elif kind == 3:
+        velocity = np.full(n, 1e160 * (-1) ** k)
+    elif kind == 4:  # wrong, missing or repeated names
+        choices = [("wrong",) * n, names[:-1], (*names[:-1], names[0]), (), ("x" * 300,) * n]
+        names = choices[rng.integers(len(choices))]
+    elif kind == 5:  # arrays that do not match the names
+        position = position[: rng.integers(0, n)]
+    elif kind == 6:
+        velocity = velocity[: rng.integers(0, n)]
+    elif kind == 7:  # many names
+        extra = [f"j{i}" for i in range(int(rng.integers(10, 60)))]
+        return joint_state([*extra, *names], [0.0] * len(extra) + list(position),
+                           [0.0] * len(extra) + list(velocity), sec)
+    else:  # plausible but fast: up to 100 x the speed limits, a stamp 1 ns after the previous one
+        velocity = rng.uniform(-100.0, 100.0, n) * rate_scale
+        return joint_state(names, position, velocity, 2000, int(k))
+    return joint_state(names, position, velocity, sec, int(rng.integers(0, 2**32)))
+
+
+def bad_bytes(rng: np.random.Generator, valid: bytes, k: int) -> bytes:
+    """Random bytes, a truncated or corrupted serialization, or one with a huge count."""
+    kind = k % 4
+    if kind == 0:
+        return rng.integers(0, 256, int(rng.integers(0, 300)), dtype=np.uint8).tobytes()
+    if kind == 1:
+        return valid[: int(rng.integers(0, len(valid)))]
+    data = bytearray(valid)
+    if kind == 2:
+        for _ in range(int(rng.integers(1, 6))):
+            data[int(rng.integers(0, len(data)))] = int(rng.integers(0, 256))
+    else:  # a length or count field (4-aligned) set to 0xFFFFFFFF
+        pos = 4 + 4 * int(rng.integers(2, (len(data) - 4) // 4))
+        data[pos:pos + 4] = struct.pack("<I", 0xFFFFFFFF)
+    return bytes(data)
+
+
+# ------------------------------------------------------------------------------ excavator_forward
+def test_excavator_forward_survives_any_input(probe: Probe, tmp: Path) -> None:
+    ns = "/fz_fwd"
+    process = start("excavator_forward", ns, tmp, EXCAVATOR_PARAMS, qos_depth=5000)
+    node = probe.node
+    cylinders = node.create_publisher(JointState, f"{ns}/cylinder_lengths", QOS)
+    swing = node.create_publisher(JointState, f"{ns}/joint_states", QOS)
+    topics = {f"{ns}/bucket_pose": PoseStamped, f"{ns}/bucket_twist": TwistStamped,
+              f"{ns}/bucket_accel": AccelStamped, f"{ns}/open_chain_joint_states": JointState}
+    out = Outputs(probe, topics)
+    pose_topic = f"{ns}/bucket_pose"
+    rng = np.random.default_rng(9001)
+    lower, upper, rates = LIMITS.d_min, LIMITS.d_max, LIMITS.max_rates
+    sent = 0
+    try:
+        probe.wait_until(lambda: cylinders.get_subscription_count() > 0 and swing.get_subscription_count() > 0
+                         and all(node.count_publishers(t) > 0 for t in topics), TIMEOUT, "excavator_forward")
+
+        def marker(sec: int, D: np.ndarray, D_dot: np.ndarray) -> PoseStamped:
+            """A valid swing + cylinder pair stamped ``sec``, re-sent until its pose is out (the two
+            topics are not ordered with respect to each other)."""
+            pair = (joint_state(JOINTS[:1], D[:1], D_dot[:1], sec),
+                    joint_state(CYLINDERS, D[1:], D_dot[1:], sec))
+
+            def seen() -> list:
+                return [m for m in out.messages[pose_topic] if m.header.stamp.sec == sec]
+
+            for _ in range(20):
+                swing.publish(serialize_message(pair[0]))
+                cylinders.publish(serialize_message(pair[1]))
+                try:
+                    probe.wait_until(lambda: bool(seen()), 1.0, f"pose of marker {sec}")
+                    return seen()[0]
+                except TimeoutError:
+                    continue
+            raise TimeoutError(f"no pose for marker {sec}")
+
+        for burst in range(20):
+            for k in range(BURST):
+                i = burst * BURST + k
+                names = (JOINTS[0],) if i % 2 else CYLINDERS
+                columns = slice(0, 1) if i % 2 else slice(1, 4)
+                msg = bad_joint_states(rng, names, lower[columns], upper[columns], rates[columns], i)
+                data = serialize_message(msg)
+                if rng.random() < 0.4:
+                    data = bad_bytes(rng, data, i)
+                (swing if i % 2 else cylinders).publish(data)
+                sent += 1
+            marker(100_000 + burst, LIMITS.reference, np.zeros(4))
+            assert process.alive(), process.log()[-3000:]
+        # The library's numbers afterwards.
+        D = LIMITS.reference + np.array([0.1, 0.05, -0.04, 0.03])
+        D_dot = np.array([0.05, 0.02, -0.03, 0.04])
+        pose = marker(200_000, D, D_dot)
+        s = EXC.state(D, D_dot)
+        p, o = pose.pose.position, pose.pose.orientation
+        np.testing.assert_allclose([p.x, p.y, p.z, o.x, o.y, o.z, o.w],
+                                   messages.bucket_pose_values(D[0], s.Q.tolist()), atol=1e-12)
+        twist = next(m for m in out.messages[f"{ns}/bucket_twist"] if m.header.stamp.sec == 200_000).twist
+        expected = [*s.Q_dot[:3], *bucket_angular_velocity(float(D[0]), float(D_dot[0]), float(s.Q_dot[3]))]
+        np.testing.assert_allclose([twist.linear.x, twist.linear.y, twist.linear.z,
+                                    twist.angular.x, twist.angular.y, twist.angular.z], expected, atol=1e-12)
+        assert process.alive()
+    finally:
+        log = process.stop()
+    report("excavator_forward", sent=sent, outputs_checked=out.count(), non_finite=out.non_finite(), alive=1)
+    assert out.non_finite() == 0
+    assert "Traceback" not in log and "failed on" not in log, log[-3000:]
+    assert "implausible" in log and "rejected cylinder_lengths" in log
+
+
+# ------------------------------------------------------------------------------ excavator_velocity_ik
+def test_excavator_velocity_ik_survives_any_input(probe: Probe, tmp: Path) -> None:
+    ns = "/fz_vik"
+    process = start("excavator_velocity_ik", ns, tmp, EXCAVATOR_PARAMS, input_queue_depth=5000,
+                    command_timeout=30.0, state_timeout=30.0)
+    node = probe.node
+    cylinders = node.create_publisher(JointState, f"{ns}/cylinder_lengths", QOS)
+    swing = node.create_publisher(JointState, f"{ns}/joint_states", QOS)
+    target = node.create_publisher(TwistStamped, f"{ns}/target_bucket_twist", QOS)
+    topic = f"{ns}/cylinder_rate_commands"
+    out = Outputs(probe, {topic: JointState})
+    rng = np.random.default_rng(9002)
+    lower, upper, rates = LIMITS.d_min, LIMITS.d_max, LIMITS.max_rates
+    D = LIMITS.reference + np.array([0.2, 0.1, -0.1, 0.05])
+    sent = 0
+    try:
+        probe.wait_until(lambda: all(p.get_subscription_count() > 0 for p in (cylinders, swing, target))
+                         and node.count_publishers(topic) > 0, TIMEOUT, "excavator_velocity_ik")
+
+        def marker(sec: int, linear: np.ndarray, angular: np.ndarray) -> JointState:
+            """State D and a target stamped ``sec``, re-sent until the command for it is out."""
+            twist = messages.bucket_twist(Time(sec=sec), "base_link", linear, angular)
+
+            def seen() -> list:
+                return [m for m in out.messages[topic] if m.header.stamp.sec == sec and any(m.velocity)]
+
+            for _ in range(20):
+                swing.publish(joint_state(JOINTS[:1], D[:1], [0.0], 1))
+                cylinders.publish(joint_state(CYLINDERS, D[1:], [0.0] * 3, 1))
+                target.publish(twist)
+                try:
+                    probe.wait_until(lambda: bool(seen()), 1.0, f"command of marker {sec}")
+                    return seen()[0]
+                except TimeoutError:
+                    continue
+            raise TimeoutError(f"no command for marker {sec}")
+
+        for burst in range(16):
+            for k in range(BURST):
+                i = burst * BURST + k
+                if i % 3 == 0:
+                    twist = extreme(rng, 6, 1.0)
+                    msg = messages.bucket_twist(Time(sec=i), "base_link" if rng.random() < 0.8 else "map",
+                                                np.array(twist[:3]), np.array(twist[3:]))
+                    target.publish(msg)
+                elif i % 3 == 1:
+                    cylinders.publish(bad_joint_states(rng, CYLINDERS, lower[1:], upper[1:], rates[1:], i))
+                else:
+                    swing.publish(bad_joint_states(rng, JOINTS[:1], lower[:1], upper[:1], rates[:1], i))
+                sent += 1
+            marker(100_000 + burst, rng.uniform(-0.3, 0.3, 3), np.zeros(3))
+            assert process.alive(), process.log()[-3000:]
+        # The library's numbers afterwards (a fast target: the speed scaling is in it).
+        linear = np.array([0.8, -0.4, 0.5])
+        command = marker(200_000, linear, np.zeros(3))
+        split = split_twist(D[0], EXC.pose(D)[:3], linear, np.zeros(3))
+        expected = rate_command(EXC.jc0(D), D, split.q_dot, LIMITS, 50.0, 0.1).d_dot
+        np.testing.assert_allclose(command.velocity, expected, rtol=1e-12, atol=1e-15)
+        assert process.alive()
+    finally:
+        log = process.stop()
+    commands = np.array([m.velocity for m in out.messages[topic] if len(m.velocity) == 4])
+    over = int(np.sum(np.abs(commands) > rates)) if len(commands) else 0
+    report("excavator_velocity_ik", sent=sent, outputs_checked=out.count(), non_finite=out.non_finite(),
+           above_speed_limit=over, alive=1)
+    assert out.non_finite() == 0 and over == 0 and len(commands) == out.count()
+    assert "Traceback" not in log and "failed on" not in log, log[-3000:]
+    assert "implausible" in log
+
+
+# ------------------------------------------------------------------------------ excavator_sim
+def test_excavator_sim_survives_any_input(probe: Probe, tmp: Path) -> None:
+    ns = "/fz_sim"
+    process = start("excavator_sim", ns, tmp, EXCAVATOR_PARAMS, input_queue_depth=5000, rate=200.0)
+    node = probe.node
+    commands = node.create_publisher(JointState, f"{ns}/cylinder_rate_commands", QOS)
+    topics = {f"{ns}/cylinder_lengths": JointState, f"{ns}/joint_states": JointState}
+    out = Outputs(probe, topics)
+    rng = np.random.default_rng(9003)
+    rates = LIMITS.max_rates
+    sent = 0
+    try:
+        probe.wait_until(lambda: commands.get_subscription_count() > 0
+                         and all(node.count_publishers(t) > 0 for t in topics), TIMEOUT, "excavator_sim")
+
+        def state() -> tuple[np.ndarray, np.ndarray]:
+            swing_msg = out.messages[f"{ns}/joint_states"][-1]
+            cylinder_msg = out.messages[f"{ns}/cylinder_lengths"][-1]
+            return (np.array([*swing_msg.position, *cylinder_msg.position]),
+                    np.array([*swing_msg.velocity, *cylinder_msg.velocity]))
+
+        def marker(command: np.ndarray) -> None:
+            """Send a valid command until the simulator moves at it (where no stroke end stops it)."""
+            def moving() -> bool:
+                if not (out.messages[f"{ns}/joint_states"] and out.messages[f"{ns}/cylinder_lengths"]):
+                    return False
+                d, d_dot = state()
+                free = (d > LIMITS.d_min) & (d < LIMITS.d_max)
+                return bool(np.array_equal(d_dot[free], command[free]))
+
+            for _ in range(20):
+                commands.publish(joint_state(ACTUATORS, velocity=command))
+                try:
+                    probe.wait_until(moving, 1.0, f"simulator moving at {command}")
+                    return
+                except TimeoutError:
+                    continue
+            raise TimeoutError(f"the simulator never moved at {command}")
+
+        for burst in range(20):
+            for k in range(BURST):
+                i = burst * BURST + k
+                msg = bad_joint_states(rng, ACTUATORS, LIMITS.d_min, LIMITS.d_max, rates, i)
+                msg.position = [] if rng.random() < 0.7 else msg.position
+                commands.publish(msg)
+                sent += 1
+            marker(np.full(4, 0.001 * (-1) ** burst) * (1 + burst / 100))
+            assert process.alive(), process.log()[-3000:]
+        # The library's numbers afterwards: the plant's response to a command beyond the limits.
+        command = np.array([0.3, -0.2, 0.2, 0.25])
+        plant = Plant(LIMITS, LIMITS.reference)
+        plant.step(command, 0.01)
+        marker(plant.d_dot)
+        assert process.alive()
+    finally:
+        log = process.stop()
+    states = out.messages[f"{ns}/cylinder_lengths"]
+    d = np.array([m.position for m in states])
+    d_dot = np.array([m.velocity for m in states])
+    outside = int(np.sum((d < LIMITS.stroke_min) | (d > LIMITS.stroke_max))
+                  + np.sum(np.abs(d_dot) > rates[1:]))
+    report("excavator_sim", sent=sent, outputs_checked=out.count(), non_finite=out.non_finite(),
+           outside_limits=outside, alive=1)
+    assert out.non_finite() == 0 and outside == 0
+    assert "Traceback" not in log and "failed on" not in log, log[-3000:]
+    assert "implausible" in log
+
+
+# ------------------------------------------------------------------------------ serial machines
+def random_request(rng: np.random.Generator, model, limits, k: int) -> SolveIK.Request:
+    """A SolveIK request: valid (FK of a random state, some outside the limits) or malformed."""
+    q = rng.uniform(limits.lower - 0.2, limits.upper + 0.2)
+    pose = model.fkine(q)
+    position, quaternion = pose[:3, 3].copy(), matrix_quaternion(pose[:3, :3])
+    request = SolveIK.Request(use_orientation=bool(rng.random() < 0.5))
+    kind = k % 8
+    if kind == 1:
+        position = np.array(extreme(rng, 3, 1.0))
+    elif kind == 2:
+        quaternions = [np.zeros(4), np.full(4, np.nan), np.full(4, 1e308), np.full(4, 1e-300),
+                       np.array([np.inf, 0, 0, 1])]
+        quaternion = quaternions[rng.integers(len(quaternions))]
+        request.use_orientation = True
+    elif kind == 3:
+        request.mode = str(rng.choice(["nope", "x" * 1000, *model.ik_modes]))
+        request.branch = str(rng.choice(["", "up", *model.ik_branches]))
+    elif kind == 4:
+        seed = extreme(rng, len(limits.names), limits.upper - limits.lower)
+        names = list(limits.names) if rng.random() < 0.7 else list(limits.names)[:-1]
+        request.seed = JointState(name=names, position=seed)
+    elif kind == 5:
+        request.target.header.frame_id = str(rng.choice(["map", "odom", "\x00", "base_link"]))
+    elif kind == 6:
+        position = position * 1e6
+    p, o = request.target.pose.position, request.target.pose.orientation
+    p.x, p.y, p.z = (float(v) for v in position)
+    o.x, o.y, o.z, o.w = (float(v) for v in quaternion)
+    return request
+
+
+def random_fk(rng: np.random.Generator, limits, k: int) -> SolveFK.Request:
+    names = limits.names
+    q = rng.uniform(limits.lower, limits.upper)
+    qd = rng.normal(size=len(names))
+    if k % 3 == 1:
+        q = np.array(extreme(rng, len(names), 1.0))
+    elif k % 3 == 2:
+        qd = np.array(extreme(rng, len(names), 1.0))
+    request = SolveFK.Request(joint_state=joint_state(names, q, qd))
+    if k % 7 == 0:
+        request.frame_id = "map"
+    return request
+
+
+def calls(probe: Probe, client, requests: list, window: int = 8) -> list:
+    """Responses to ``requests``, at most ``window`` in flight (a service queue keeps 10)."""
+    responses: list = [None] * len(requests)
+    pending: dict[int, object] = {}
+    nxt = 0
+    while nxt < len(requests) or pending:
+        while nxt < len(requests) and len(pending) < window:
+            pending[nxt] = client.call_async(requests[nxt])
+            nxt += 1
+        probe.wait_until(lambda: any(f.done() for f in pending.values()), TIMEOUT, "a service response")
+        for i in [i for i, f in pending.items() if f.done()]:
+            responses[i] = pending.pop(i).result()
+    return responses
+
+
+def check_ik_answers(requests: list, responses: list, limits) -> int:
+    """Problems among the answers: a success with a non-finite or short solution, a failure
+    without a code or reason."""
+    problems = 0
+    for response in responses:
+        if response.success:
+            ok = (response.error_code.val == Codes.SUCCESS and all_finite(response.solution)
+                  and len(response.solution.position) == len(response.solution.name) > 0
+                  and all(all_finite(s) for s in response.solutions))
+        else:
+            ok = response.error_code.val != Codes.SUCCESS and bool(response.message)
+        if not ok and problems < 3:
+            print(f"\nIK problem: success {response.success}, code {response.error_code.val}, "
+                  f"message {response.message[:200]!r}, solution {list(response.solution.position)}")
+        problems += not ok
+    return problems
+
+
+@pytest.mark.parametrize("name", SERIAL)
+def test_serial_nodes_survive_any_input(probe: Probe, tmp: Path, name: str) -> None:
+    record = machine(name)
+    model = record.model()
+    limits = record.limits(model)
+    ns = f"/fz_{name}"
+    params = (str(config_path(record.config_file)),)
+    forward = start(f"{name}_forward", ns, tmp, params, qos_depth=5000)
+    server = start(f"{name}_ik_server", ns, tmp, params)
+    node = probe.node
+    states = node.create_publisher(JointState, f"{ns}/joint_states", QOS)
+    topics = {f"{ns}/tool_pose": PoseStamped, f"{ns}/tool_twist": TwistStamped}
+    out = Outputs(probe, topics)
+    ik = node.create_client(SolveIK, f"{ns}/solve_ik")
+    fk = node.create_client(SolveFK, f"{ns}/solve_fk")
+    rng = np.random.default_rng(9100 + SERIAL.index(name))
+    sent = 0
+    try:
+        probe.wait_until(lambda: (states.get_subscription_count() > 0
+                                  and all(node.count_publishers(t) > 0 for t in topics)
+                                  and ik.service_is_ready() and fk.service_is_ready())
+                         or not (forward.alive() and server.alive()), TIMEOUT, f"{name} nodes")
+        assert forward.alive() and server.alive(), forward.log() + server.log()
+        q_good = 0.5 * (limits.lower + limits.upper)
+        # Both services answer once before the bursts (a first response can be lost to discovery).
+        probe.call(ik, SolveIK.Request(), TIMEOUT)
+        probe.call(fk, SolveFK.Request(joint_state=joint_state(limits.names, q_good)), TIMEOUT)
+
+        def marker(sec: int) -> None:
+            msg = joint_state(limits.names, q_good, np.zeros(len(q_good)), sec)
+            states.publish(msg)
+            probe.wait_until(lambda: any(m.header.stamp.sec == sec for m in out.messages[f"{ns}/tool_pose"]),
+                             TIMEOUT, f"pose of marker {sec}")
+
+        for burst in range(10):
+            for k in range(BURST):
+                i = burst * BURST + k
+                msg = bad_joint_states(rng, limits.names, limits.lower, limits.upper, 1.0, i)
+                if rng.random() < 0.3:
+                    states.publish(bad_bytes(rng, serialize_message(msg), i))
+                else:
+                    states.publish(msg)
+                sent += 1
+            marker(100_000 + burst)
+        ik_requests = [random_request(rng, model, limits, k) for k in range(1600)]
+        fk_requests = [random_fk(rng, limits, k) for k in range(400)]
+        ik_responses = calls(probe, ik, ik_requests)
+        fk_responses = calls(probe, fk, fk_requests)
+        ik_problems = check_ik_answers(ik_requests, ik_responses, limits)
+        fk_problems = sum(
+            not ((r.success and r.error_code.val == Codes.SUCCESS
+                  and all_finite(r.pose) and all_finite(r.twist))
+                 or (not r.success and r.error_code.val != Codes.SUCCESS and r.message))
+            for r in fk_responses)
+        # The library's numbers afterwards.
+        pose = model.fkine(q_good)
+        orientation = True
+        try:
+            expected = model.solve_ik(pose, use_orientation=True)
+        except RequestError:  # a position-only machine (the pump boom)
+            orientation = False
+            expected = model.solve_ik(pose, use_orientation=False)
+        request = SolveIK.Request(use_orientation=orientation)
+        p, o = request.target.pose.position, request.target.pose.orientation
+        p.x, p.y, p.z = (float(v) for v in pose[:3, 3])
+        o.x, o.y, o.z, o.w = (float(v) for v in matrix_quaternion(pose[:3, :3]))
+        answer = probe.call(ik, request, TIMEOUT)
+        if bool(expected.ok):
+            assert answer.success, answer.message
+            np.testing.assert_allclose(answer.solution.position, expected.solution, atol=1e-12)
+        else:
+            assert not answer.success
+        fk_answer = probe.call(fk, SolveFK.Request(joint_state=joint_state(limits.names, q_good)), TIMEOUT)
+        got = fk_answer.pose.pose.position
+        np.testing.assert_allclose([got.x, got.y, got.z], pose[:3, 3], atol=1e-12)
+        marker(200_000)
+        got = next(m for m in out.messages[f"{ns}/tool_pose"] if m.header.stamp.sec == 200_000).pose.position
+        np.testing.assert_allclose([got.x, got.y, got.z], pose[:3, 3], atol=1e-12)
+        alive = forward.alive() + server.alive()
+    finally:
+        forward_log, server_log = forward.stop(), server.stop()
+    successes = sum(r.success for r in ik_responses)
+    report(f"{name}", topic_sent=sent, outputs_checked=out.count(), non_finite=out.non_finite(),
+           ik_requests=len(ik_requests), ik_successes=successes, ik_problems=ik_problems,
+           fk_requests=len(fk_requests), fk_problems=fk_problems, alive=alive)
+    assert alive == 2 and out.non_finite() == 0 and ik_problems == 0 and fk_problems == 0
+    for log in (forward_log, server_log):
+        assert "Traceback" not in log and "failed on" not in log and "unexpectedly" not in log, log[-3000:]

@@ -1,0 +1,302 @@
+"""Nodes as processes, spun by the package's entry point (node_util.run): they serve, survive a
+failing callback, refuse run-time parameter changes with a reason, and end with exit 0 on SIGINT
+and SIGTERM while inputs are still arriving; so does the recorder (isolated domain; every wait on
+a condition)."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+from geometry_msgs.msg import PoseStamped, TwistStamped
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from ros_harness import NodeProcess, Probe
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Int64
+from std_srvs.srv import Trigger
+
+from excavator_kinematics import messages
+from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
+from manipulator_kinematics.executor import EXECUTORS
+from manipulator_kinematics.params import config_path
+from manipulator_kinematics_interfaces.srv import SolveFK
+
+TIMEOUT = 20.0
+QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+# Outputs (or answers) a node must have produced before it is signalled.
+SERVED = 20
+
+# A node with one entity of each kind, run by the package's entry point; its failures are on purpose.
+ENTRY_POINT_NODE = """
+import sys
+from std_msgs.msg import Int64
+from std_srvs.srv import Trigger
+from manipulator_kinematics.node_util import make_node, param, run
+
+def build():
+    node = make_node("entry_point")
+    param(node, "answer", 42)
+    echo = node.create_publisher(Int64, "echo", 10)
+    ticks = node.create_publisher(Int64, "ticks", 10)
+    count = [0]
+
+    def on_number(msg):
+        if msg.data < 0:
+            raise RuntimeError(f"negative number {msg.data}")
+        echo.publish(msg)
+
+    def on_tick():
+        count[0] += 1
+        ticks.publish(Int64(data=count[0]))
+        if count[0] == 3:
+            raise ValueError("the third tick")
+
+    def on_trigger(request, response):
+        if count[0] < 0:
+            return response
+        raise RuntimeError("no trigger today")
+
+    node.create_subscription(Int64, "numbers", on_number, 10)
+    node.create_timer(0.02, on_tick)
+    node.create_service(Trigger, "trigger", on_trigger)
+    return node
+
+sys.exit(run(build, sys.argv))
+"""
+
+
+@pytest.fixture(scope="module")
+def probe() -> Iterator[Probe]:
+    probe = Probe("node_shutdown_probe")
+    yield probe
+    probe.close()
+
+
+def wait_for_log(probe: Probe, process: subprocess.Popen, log: Path, text: str) -> None:
+    probe.wait_until(lambda: text in log.read_text() or process.poll() is not None, TIMEOUT,
+                     f"log line {text!r}")
+    assert text in log.read_text(), log.read_text()
+
+
+@pytest.mark.parametrize("executor", sorted(EXECUTORS))
+def test_the_entry_point_serves_survives_failing_callbacks_refuses_parameter_changes_and_stops_on_sigint(
+    probe: Probe, executor: str, tmp_path: Path
+) -> None:
+    namespace = f"/entry_{executor}"
+    log = tmp_path / "node.log"
+    with log.open("w") as out:
+        process = subprocess.Popen(
+            [sys.executable, "-c", ENTRY_POINT_NODE, "--ros-args", "-r", f"__ns:={namespace}"],
+            stdout=out, stderr=subprocess.STDOUT, env={**os.environ, "MK_EXECUTOR": executor},
+        )
+    try:
+        node = probe.node
+        numbers = node.create_publisher(Int64, f"{namespace}/numbers", QOS)
+        echoed: list[int] = []
+        ticks: list[int] = []
+        node.create_subscription(Int64, f"{namespace}/echo", lambda m: echoed.append(m.data), QOS)
+        node.create_subscription(Int64, f"{namespace}/ticks", lambda m: ticks.append(m.data), QOS)
+        trigger = node.create_client(Trigger, f"{namespace}/trigger")
+        parameters = node.create_client(SetParameters, f"{namespace}/entry_point/set_parameters")
+        def up() -> bool:
+            return process.poll() is not None or (
+                numbers.get_subscription_count() == 1 and node.count_publishers(f"{namespace}/echo") == 1
+                and trigger.service_is_ready() and parameters.service_is_ready())
+
+        probe.wait_until(up, TIMEOUT, "the entry point node")
+        assert process.poll() is None, log.read_text()
+
+        probe.wait_until(lambda: len(ticks) >= 6, TIMEOUT, "ticks after the failed third")
+        wait_for_log(probe, process, log, "timer of 0.02 s failed on its tick: ValueError: the third tick")
+        numbers.publish(Int64(data=-1))
+        numbers.publish(Int64(data=7))
+        probe.wait_until(lambda: echoed == [7], TIMEOUT, "the echo of 7 after a failed callback")
+        wait_for_log(probe, process, log, f"subscription to {namespace}/numbers failed on "
+                     "std_msgs.msg.Int64(data=-1): RuntimeError: negative number -1 (at ")
+        response = probe.call(trigger, Trigger.Request(), TIMEOUT)
+        assert not response.success
+        assert response.message.startswith("internal error: RuntimeError: no trigger today (at ")
+
+        def set_parameter(name: str, value: ParameterValue) -> str:
+            request = SetParameters.Request(parameters=[ParameterMsg(name=name, value=value)])
+            [result] = probe.call(parameters, request, TIMEOUT).results
+            assert not result.successful
+            return result.reason
+
+        one = ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=1)
+        true = ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=True)
+        assert set_parameter("answer", one) == "Trying to set a read-only parameter: answer."
+        assert set_parameter("use_sim_time", true) == (
+            "parameters are read at start-up: restart the node to change use_sim_time")
+
+        process.send_signal(signal.SIGINT)
+        assert process.wait(TIMEOUT) == 0, log.read_text()
+        assert "Traceback" not in log.read_text(), log.read_text()
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait(TIMEOUT)
+
+
+@dataclass
+class Kind:
+    """How to start one kind of node and keep inputs flowing to it."""
+
+    exe: str
+    args: tuple[str, ...]
+    # (probe, namespace) -> (send one round of inputs, number of outputs or answers so far)
+    traffic: Callable[[Probe, str], tuple[Callable[[], None], Callable[[], int]]]
+
+
+def counter(probe: Probe, msg_type: type, topic: str) -> Callable[[], int]:
+    received: list[object] = []
+    probe.node.create_subscription(msg_type, topic, received.append, QOS)
+    return lambda: len(received)
+
+
+def excavator_state(probe: Probe, namespace: str) -> Callable[[], None]:
+    """Publishers of the excavator's cylinder and swing state; the returned function sends one."""
+    cylinders = probe.node.create_publisher(JointState, f"{namespace}/cylinder_lengths", QOS)
+    swing = probe.node.create_publisher(JointState, f"{namespace}/joint_states", QOS)
+    D = Excavator.default().limits.reference
+
+    def send() -> None:
+        stamp = probe.node.get_clock().now().to_msg()
+        swing.publish(messages.joint_state(stamp, JOINTS[:1], D[:1], [0.0]))
+        cylinders.publish(messages.joint_state(stamp, CYLINDERS, D[1:], [0.01, -0.01, 0.01]))
+
+    return send
+
+
+def forward_traffic(probe: Probe, namespace: str) -> tuple[Callable[[], None], Callable[[], int]]:
+    return excavator_state(probe, namespace), counter(probe, PoseStamped, f"{namespace}/bucket_pose")
+
+
+def velocity_ik_traffic(probe: Probe, namespace: str) -> tuple[Callable[[], None], Callable[[], int]]:
+    state = excavator_state(probe, namespace)
+    target = probe.node.create_publisher(TwistStamped, f"{namespace}/target_bucket_twist", QOS)
+
+    def send() -> None:
+        state()
+        twist = TwistStamped()
+        twist.header.stamp = probe.node.get_clock().now().to_msg()
+        twist.header.frame_id = "base_link"
+        twist.twist.linear.x = 0.05
+        target.publish(twist)
+
+    return send, counter(probe, JointState, f"{namespace}/cylinder_rate_commands")
+
+
+def sim_traffic(probe: Probe, namespace: str) -> tuple[Callable[[], None], Callable[[], int]]:
+    commands = probe.node.create_publisher(JointState, f"{namespace}/cylinder_rate_commands", QOS)
+
+    def send() -> None:
+        stamp = probe.node.get_clock().now().to_msg()
+        commands.publish(messages.joint_state(stamp, ACTUATORS, velocities=[0.01, 0.01, -0.01, 0.01]))
+
+    return send, counter(probe, JointState, f"{namespace}/cylinder_lengths")
+
+
+def scara_forward_traffic(probe: Probe, namespace: str) -> tuple[Callable[[], None], Callable[[], int]]:
+    states = probe.node.create_publisher(JointState, f"{namespace}/joint_states", QOS)
+
+    def send() -> None:
+        msg = JointState(name=["rail_joint", "shoulder_joint", "elbow_joint"], position=[0.1, 0.5, 1.0],
+                         velocity=[0.0, 0.1, -0.1])
+        msg.header.stamp = probe.node.get_clock().now().to_msg()
+        states.publish(msg)
+
+    return send, counter(probe, PoseStamped, f"{namespace}/tool_pose")
+
+
+def scara_ik_server_traffic(probe: Probe, namespace: str) -> tuple[Callable[[], None], Callable[[], int]]:
+    client = probe.node.create_client(SolveFK, f"{namespace}/solve_fk")
+    answered: list[object] = []
+    request = SolveFK.Request(joint_state=JointState(name=["rail_joint", "shoulder_joint", "elbow_joint"],
+                                                     position=[0.1, 0.5, 1.0]))
+
+    def send() -> None:
+        # Requests sent before the server's response reader matched are lost (rmw_fastrtps):
+        # only answers count, and requests keep coming.
+        if client.service_is_ready():
+            client.call_async(request).add_done_callback(answered.append)
+
+    return send, lambda: len(answered)
+
+
+EXCAVATOR = ("--params-file", str(config_path("excavator_cet200.yaml")),
+             "--params-file", str(config_path("excavator_nodes.yaml")))
+SCARA = ("--params-file", str(config_path("scara.yaml")))
+KINDS = [
+    Kind("excavator_forward", EXCAVATOR, forward_traffic),
+    Kind("excavator_velocity_ik", EXCAVATOR, velocity_ik_traffic),
+    Kind("excavator_sim", EXCAVATOR, sim_traffic),
+    Kind("scara_ik_server", SCARA, scara_ik_server_traffic),
+    Kind("scara_forward", SCARA, scara_forward_traffic),
+]
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("kind", KINDS, ids=[kind.exe for kind in KINDS])
+def test_a_node_ends_with_exit_0_on_a_signal_while_inputs_arrive(
+    probe: Probe, kind: Kind, signum: int
+) -> None:
+    namespace = f"/shutdown_{kind.exe}_{signum}"
+    send, served = kind.traffic(probe, namespace)
+    process = NodeProcess(kind.exe, *kind.args, "-r", f"__ns:={namespace}")
+    try:
+        def serving() -> bool:
+            send()
+            return served() >= SERVED or not process.alive()
+
+        probe.wait_until(serving, TIMEOUT, f"{SERVED} outputs of {kind.exe}")
+        assert process.alive(), process.log()
+        process.process.send_signal(signum)
+
+        def ended() -> bool:
+            send()  # inputs keep arriving while the node shuts down
+            return not process.alive()
+
+        probe.wait_until(ended, TIMEOUT, f"the end of {kind.exe}")
+        assert process.process.returncode == 0, process.log()
+        assert "Traceback" not in process.log(), process.log()
+    finally:
+        process.stop()
+
+
+
+def test_record_stops_on_sigint_while_a_publisher_keeps_sending(probe: Probe, tmp_path: Path) -> None:
+    """record stores what is queued when it is stopped, but a publisher that keeps sending does not
+    keep it alive."""
+    topic = "/shutdown_record/numbers"
+    publisher = probe.node.create_publisher(Int64, topic, QOS)
+    process = NodeProcess("record", args=("-o", str(tmp_path / "bag"), "--topics", topic,
+                                          "--type", f"{topic}:=std_msgs/msg/Int64"))
+    try:
+        sent = iter(range(1_000_000))
+
+        def recording() -> bool:
+            publisher.publish(Int64(data=next(sent)))
+            return "recording 1 topics" in process.log() or not process.alive()
+
+        probe.wait_until(recording, TIMEOUT, "the recorder")
+        probe.wait_until(lambda: publisher.get_subscription_count() == 1, TIMEOUT, "the recorder's reader")
+        process.process.send_signal(signal.SIGINT)
+
+        def ended() -> bool:
+            publisher.publish(Int64(data=next(sent)))
+            return not process.alive()
+
+        probe.wait_until(ended, TIMEOUT, "the end of the recorder")
+        assert process.process.returncode == 0, process.log()
+        assert " messages on 1 topics in " in process.log()
+    finally:
+        process.stop()
