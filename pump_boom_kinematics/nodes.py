@@ -83,6 +83,8 @@ class PumpBoomServer(IKServerNode):
             plan = plan_path(self.model, waypoints, request.step or None, request.tip_speed or None, seed)
         except RegionTableError as error:
             raise Rejected(KinematicsErrorCodes.FAILURE, str(error)) from None
+        except ValueError as error:  # a request the planner refuses (e.g. too many points)
+            raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS, str(error)) from None
         response.message = plan.message
         response.last_reachable_waypoint = plan.last_waypoint
         trajectory = JointTrajectory()

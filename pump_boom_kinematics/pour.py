@@ -67,6 +67,11 @@ class PathPlan:
     blended: np.ndarray  # (M,) True where a transition band set theta2..theta4
 
 
+#: Most points one plan may have (10^6: 100 km at the default 0.1 m step), so that a request with
+#: a tiny step or far waypoints cannot make the planner allocate without bound.
+MAX_POINTS = 1_000_000
+
+
 def plan_path(
     boom: PumpBoom,
     waypoints: ArrayLike,
@@ -89,6 +94,11 @@ def plan_path(
         raise ValueError("waypoints must be finite")
     if not (np.isfinite(step) and step > 0.0 and np.isfinite(speed) and speed > 0.0):
         raise ValueError(f"step and tip speed must be > 0, got {step} m and {speed} m/s")
+    with np.errstate(over="ignore"):
+        count = float(np.sum(np.ceil(np.linalg.norm(np.diff(waypoints, axis=0), axis=1) / step)))
+    if not count <= MAX_POINTS:
+        raise ValueError(f"the path would have {count:.3g} points at step {step:g} m; at most {MAX_POINTS} "
+                         "(a longer step, or fewer or closer waypoints)")
     first = boom.region_ik(waypoints[0], seed)
     if not first.ok:
         return _plan(
