@@ -11,6 +11,8 @@ Writes into OUT_DIR:
   types are installed;
 * ``palletizer_statics_map.png``: T2 and T3 of both variants over the reachable vertical plane;
 * ``palletizer_door_path.gif``: the arm along the door path (shared scene, side and top view);
+* ``palletizer_door_bag/``: the door trajectory as a rosbag2 bag (joint_states, tool_pose,
+  tool_twist) for ``mk_evaluate``, Foxglove or a replay into ``palletizer_forward``;
 
 and prints the paper's statics case (payload 110 kg, A2 = 30 deg, A3 = 15 deg) side by side.
 """
@@ -30,6 +32,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from manipulator_kinematics.bag.synthetic import START_NS, serial_topics, write_bag
 from palletizer_kinematics.door import DOOR_POINTS, DoorTrajectory, door_trajectory
 from palletizer_kinematics.kinematics import VARIANTS, Palletizer, axis_from_dh, dh_from_axis
 from palletizer_kinematics.statics import holding_torques
@@ -212,6 +215,15 @@ def animate_door(model: Palletizer, trajectory: DoorTrajectory, path: Path) -> P
                    title=f"Palletizer ({model.variant}): door path P0..P4")
 
 
+def write_door_bag(model: Palletizer, trajectory: DoorTrajectory, path: Path) -> int:
+    """The door trajectory as a rosbag2 bag (mcap): ``joint_states`` (axis angles and rates of
+    the model's variant) with the ``tool_pose``/``tool_twist`` the forward node publishes for
+    them; ``mk_evaluate`` checks it like a recorded run. Returns the message count."""
+    stamp = START_NS + np.round(trajectory.t * 1e9).astype(np.int64)
+    topics = serial_topics(model, stamp, trajectory.axis[model.variant], trajectory.axis_rates)
+    return write_bag(path, topics, overwrite=True)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="palletizer_plots", description=__doc__.split("\n")[0])
     parser.add_argument("out_dir", type=Path, help="directory to write into (created if missing)")
@@ -233,6 +245,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     wrote_yaml = write_trajectory_yaml(model, trajectory, out / "palletizer_door_trajectory.yaml")
     plot_torque_map(model, out / "palletizer_statics_map.png")
     animate_door(model, trajectory, out / "palletizer_door_path.gif")
+    write_door_bag(model, trajectory, out / "palletizer_door_bag")
     print(
         f"door trajectory: {len(trajectory.t)} samples over {trajectory.t[-1]:.3f} s "
         f"(step {args.step:g} m, peak speed {args.speed:g} m/s), variant {model.variant}"

@@ -9,6 +9,8 @@ import math
 import numpy as np
 import pytest
 
+from manipulator_kinematics.bag.evaluate import evaluate_bag, load_setup
+from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.serial_chain import SerialChain, transl
 from palletizer_kinematics.door import DOOR_POINTS, door_trajectory, leg_times
 from palletizer_kinematics.kinematics import VARIANTS, Palletizer, axis_from_dh, dh_from_axis
@@ -186,6 +188,11 @@ def test_palletizer_plots_writes_everything(tmp_path, capsys) -> None:
         rows = list(csv.DictReader(stream))
     assert float(rows[0]["double_A2_rad"]) == 0.0 and float(rows[-1]["x_m"]) == pytest.approx(1.722)
     assert "same pose: double / single T2" in capsys.readouterr().out
+    # The door bag reads back as a recorded run whose outputs are the kinematics of its inputs.
+    report, _ = evaluate_bag(BagReader(tmp_path / "palletizer_door_bag"), load_setup([]))
+    [machine] = report["machines"]
+    assert machine["kind"] == "palletizer" and machine["joint_states"] == len(rows)
+    assert machine["consistency"]["tool_pose"]["position_m"]["max"] < 1e-12
 
 
 def test_joint_trajectory_message(model: Palletizer) -> None:

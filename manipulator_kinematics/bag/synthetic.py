@@ -109,11 +109,17 @@ def serial_motion(model: SerialModel, t: np.ndarray) -> tuple[np.ndarray, np.nda
 
 
 def serial_bag(model: SerialModel, samples: int, rate_hz: float) -> dict[str, Topic]:
-    """The ``synthesize`` hook of a serial machine: ``joint_states`` along :func:`serial_motion`
-    and what the generic forward node publishes for them, ``tool_pose`` (``fkine``, quaternion
-    with w >= 0) and ``tool_twist`` (``jacob0 @ qd``)."""
+    """The ``synthesize`` hook of a serial machine: :func:`serial_topics` along
+    :func:`serial_motion`."""
     t, stamp = timeline(samples, rate_hz)
-    q, qd = serial_motion(model, t)
+    return serial_topics(model, stamp, *serial_motion(model, t))
+
+
+def serial_topics(model: SerialModel, stamp: np.ndarray, q: np.ndarray, qd: np.ndarray) -> dict[str, Topic]:
+    """A serial machine's ``joint_states`` (q, qd (N, n) at header stamps (N,) ns) and what the
+    generic forward node publishes for them: ``tool_pose`` (``fkine``) and ``tool_twist``
+    (``jacob0 @ qd``), recorded :data:`OUTPUT_DELAY` later. Any joint trajectory (a planned
+    path, a measured run) becomes a bag that ``mk_evaluate`` and the replay tests read."""
     pose = model.fkine(q)
     twist = np.einsum("nij,nj->ni", model.jacob0(q), qd)
     out = stamp + OUTPUT_DELAY
