@@ -65,6 +65,34 @@ def test_fk_equals_the_dh_chain(scara: Scara) -> None:
     np.testing.assert_allclose(np.arctan2(T[:, 1, 0], T[:, 0, 0]), x[:, 2], atol=1e-12)
 
 
+def test_protocol_fk_frames_and_jacobian_are_the_shared_chains(scara: Scara) -> None:
+    """The SerialModel protocol's closed forms (fkine, jacob0) equal the D-H chain's generic ones."""
+    q = np.random.default_rng(4).uniform([-1, -math.pi, -math.pi], [1, math.pi, math.pi], (2000, 3))
+    np.testing.assert_allclose(scara.fkine(q), scara.chain.fkine(q), atol=1e-14)
+    np.testing.assert_allclose(scara.jacob0(q), scara.chain.jacob0(q), atol=1e-14)
+    frames = scara.frames(q)
+    assert frames.shape == (2000, 5, 4, 4)
+    np.testing.assert_allclose(frames[:, -1], scara.fkine(q), atol=0)
+    np.testing.assert_allclose(frames[:, :4], scara.chain.fkine(q, all_frames=True), atol=0)
+
+
+def test_protocol_solve_ik_returns_the_generating_state_among_its_solutions(scara: Scara) -> None:
+    rng = np.random.default_rng(5)
+    q = rng.uniform(scara.limits.lower, scara.limits.upper, (3000, 3))
+    q = q[~scara.singular(q)]
+    solutions = scara.solve_ik(scara.fkine(q))
+    assert solutions.q.shape == (len(q), 2, 3) and solutions.branches == ("elbow_a", "elbow_b")
+    error = np.abs(solutions.q - q[:, None, :]).max(axis=-1)
+    found = np.min(np.where(solutions.valid, error, np.inf), axis=-1)
+    assert np.all(found < 1e-9)
+    np.testing.assert_allclose(scara.fkine(solutions.solution), scara.fkine(q), atol=1e-12)
+    seeded = scara.solve_ik(scara.fkine(q), seed=q)
+    np.testing.assert_allclose(seeded.solution, q, atol=1e-9)  # the seed picks the generating branch
+    off_plane = scara.fkine(q[0]) @ np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0.1], [0, 0, 0, 1.0]])
+    refused = scara.solve_ik(off_plane)
+    assert not refused.ok and "z = 0.1 m" in refused.note()
+
+
 def test_jacobian_against_chain_and_finite_differences(scara: Scara) -> None:
     rng = np.random.default_rng(3)
     q = rng.uniform([-1, -math.pi, -math.pi], [1, math.pi, math.pi], (500, 3))
