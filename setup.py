@@ -45,9 +45,9 @@ setup(
             "palletizer_forward = palletizer_kinematics.nodes:forward",
             "palletizer_plots = palletizer_kinematics.plots:main",
             # bag tools and shared displays
-            "record = manipulator_kinematics.bag.record:main",
-            "replay = manipulator_kinematics.bag.replay:main",
-            "evaluate = manipulator_kinematics.bag.evaluate:main",
+            "mk_record = manipulator_kinematics.bag.record:main",
+            "mk_replay = manipulator_kinematics.bag.replay:main",
+            "mk_evaluate = manipulator_kinematics.bag.evaluate:main",
             "machine_markers = manipulator_kinematics.nodes.markers:main",
             "mk_urdf = manipulator_kinematics.urdf:main",
             "excavator_working_ranges = excavator_kinematics.working_ranges:main",

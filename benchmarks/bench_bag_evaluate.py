@@ -1,10 +1,10 @@
-"""Benchmark: `evaluate` on a 1 hour, 100 Hz excavator bag (about 1.5 million messages).
+"""Benchmark: `mk_evaluate` on a 1 hour, 100 Hz excavator bag (about 1.5 million messages).
 
     python benchmarks/bench_bag_evaluate.py [--hours 1.0] [--storage mcap|sqlite3] [--keep DIR]
 
 The bag is synthesised with the bag writer from core-library numbers (excavator_kinematics
 .synthetic): cylinder_lengths, joint_states, bucket_pose and bucket_twist at 100 Hz and
-target_bucket_twist at 20 Hz. Then the `evaluate` console script runs on it as a separate process
+target_bucket_twist at 20 Hz. Then the `mk_evaluate` command runs on it as a separate process
 (wall time, imports included), and its phases are timed in-process. Prints a table. The goal is
 under 60 s for the whole command.
 """
@@ -66,7 +66,7 @@ def main() -> int:
         if result.returncode:
             print(result.stdout, result.stderr, file=sys.stderr)
             return 1
-        rows.append(("evaluate command, total", total))
+        rows.append(("mk_evaluate command, total", total))
 
         start = time.perf_counter()
         bag = BagReader(bag_path)

@@ -1,9 +1,9 @@
-"""Benchmark: message loss of the `record` console script at 1 kHz for 60 s.
+"""Benchmark: message loss of the `mk_record` command at 1 kHz for 60 s.
 
     python benchmarks/bench_bag_record.py [--rate 1000] [--seconds 60] [--topics 1] [--depth 100]
                                           [--storage mcap sqlite3]
 
-For each storage, starts `record` as its own process, publishes sensor_msgs/JointState at
+For each storage, starts `mk_record` as its own process, publishes sensor_msgs/JointState at
 ``--rate`` Hz on each of ``--topics`` topics from this process (reliable, history ``--depth``,
 default 100 as the package's nodes have it; a sequence number in position[0]), stops the
 recorder with SIGINT, reads the
@@ -43,10 +43,10 @@ MATCH_TIMEOUT = 30.0
 def run_once(storage: str, rate: float, seconds: float, topics: int, depth: int, directory: Path) -> dict:
     bag = directory / f"bench_record_{storage}"
     names = [f"/bench_record_{i}" for i in range(topics)]
-    # The publishers exist before the recorder, which finds their type in the graph: its readers
-    # then match them as they are created. (A reader created first is matched by the writer
-    # before it matches the writer, and what is sent in between is lost: a DDS start-up race,
-    # not a recording loss.)
+    # The publishers exist before the recorder, which subscribes to a topic once it sees a
+    # publisher of it in the graph: its readers then match them as they are created. (A reader
+    # created first is matched by the writer before it matches the writer, and what is sent in
+    # between is lost: a DDS start-up race, not a recording loss.)
     context = rclpy.Context()
     rclpy.init(context=context)
     node = Node("bench_record_publisher", context=context)
@@ -62,8 +62,6 @@ def run_once(storage: str, rate: float, seconds: float, topics: int, depth: int,
         storage,
         "--topics",
         *names,
-        "--discovery-timeout",
-        str(MATCH_TIMEOUT),
     ]
     recorder = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     deadline = time.monotonic() + MATCH_TIMEOUT

@@ -10,48 +10,99 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Self
+from typing import Any, Self
 
 import rclpy
+import yaml
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
 from manipulator_kinematics.node_util import console_script
 
 REPO = Path(__file__).resolve().parent.parent
+#: Set by conftest.py to a directory of this test run, removed (and checked empty) at its end.
+SCRATCH_ENV = "MK_TEST_SCRATCH"
+
+
+def scratch_dir() -> Path:
+    """Where the harness keeps a process's log and params file while it runs: the test run's own
+    directory (conftest.py), else the system's temporary directory."""
+    return Path(os.environ.get(SCRATCH_ENV) or tempfile.gettempdir())
+
+
+# Every NodeProcess not stopped yet, held so that stop_all() can still stop it.
+_RUNNING: set[NodeProcess] = set()
+
+
+def stop_all() -> list[str]:
+    """Stop every process a test left running (and delete its files); their commands."""
+    left = sorted(_RUNNING, key=lambda p: p.process.pid)
+    for process in left:
+        process.stop()
+    return [" ".join(map(str, process.process.args)) for process in left]
 
 
 class NodeProcess:
-    """A node started as its console script; ``stop()`` ends it with SIGINT and returns its log."""
+    """A node started as its console script; ``stop()`` ends it with SIGINT, deletes its files and
+    returns its log.
 
-    def __init__(self, exe: str, *ros_args: str, args: tuple[str, ...] = ()) -> None:
-        self._log = tempfile.NamedTemporaryFile("w+", prefix=f"{exe}-", suffix=".log", delete=False)  # noqa: SIM115
+    ``params``: a ROS parameters document (``{"/ns/node": {"ros__parameters": {...}}}``) written
+    to a file given after ``ros_args``' own ``--params-file``s (a later file wins).
+    """
+
+    def __init__(
+        self, exe: str, *ros_args: str, args: tuple[str, ...] = (), params: dict[str, Any] | None = None
+    ) -> None:
+        self._files: list[Path] = []
+        self._text: str | None = None
+        self._log = tempfile.NamedTemporaryFile(  # noqa: SIM115 - closed and deleted by stop()
+            "w+", prefix=f"{exe}-", suffix=".log", dir=scratch_dir(), delete=False
+        )
+        self._files.append(Path(self._log.name))
+        if params is not None:
+            with tempfile.NamedTemporaryFile(
+                "w", prefix=f"{exe}-", suffix=".yaml", dir=scratch_dir(), delete=False
+            ) as file:
+                self._files.append(Path(file.name))
+                yaml.safe_dump(params, file)
+            ros_args = (*ros_args, "--params-file", file.name)
         command = [console_script(exe), *args]
         if ros_args:
             command += ["--ros-args", *ros_args]
         self.process = subprocess.Popen(
             command, stdout=self._log, stderr=subprocess.STDOUT, env=os.environ.copy()
         )
+        _RUNNING.add(self)
 
     def alive(self) -> bool:
         return self.process.poll() is None
 
     def log(self) -> str:
+        if self._text is not None:
+            return self._text
         self._log.flush()
         return Path(self._log.name).read_text(encoding="utf-8", errors="replace")
 
     def stop(self, timeout: float = 10.0) -> str:
-        if self.alive():
-            self.process.send_signal(signal.SIGINT)
-            try:
-                self.process.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait(timeout)
-        text = self.log()
-        self._log.close()
-        os.unlink(self._log.name)
-        return text
+        """End the process (SIGINT, then SIGKILL after ``timeout``) and delete its files; the log.
+        Stopping again returns the same log."""
+        if self._text is not None:
+            return self._text
+        try:
+            if self.alive():
+                self.process.send_signal(signal.SIGINT)
+                try:
+                    self.process.wait(timeout)
+                except subprocess.TimeoutExpired:
+                    self.process.kill()
+                    self.process.wait(timeout)
+            self._text = self.log()
+        finally:
+            self._log.close()
+            for path in self._files:
+                path.unlink(missing_ok=True)
+            _RUNNING.discard(self)
+        return self._text
 
     def __enter__(self) -> Self:
         return self

@@ -1,10 +1,10 @@
-"""`evaluate` and `replay` on damaged bags: the golden bags corrupted in a few hundred seeded ways
+"""`mk_evaluate` and `mk_replay` on damaged bags: the golden bags corrupted in a few hundred seeded ways
 (bytes of the data file changed, the data file cut, metadata.yaml damaged, a record time beyond
 int64) end in exit status 1 with one line on stderr, or, where the damage leaves a readable bag
 (a changed number inside a message), in their normal result. Never a traceback, a numpy warning
 or a hang, and the damaged files are left as they were.
 
-Most cases run in-process (`evaluate` whole, without plots; `replay` up to where it would start
+Most cases run in-process (`mk_evaluate` whole, without plots; `mk_replay` up to where it would start
 ROS); a few run the console scripts.
 """
 
@@ -140,8 +140,8 @@ def test_a_damaged_bag_fails_in_one_line_or_reads(case: int, tmp_path: Path) -> 
     what, must_fail = damage(bag, random.Random(SEED + case))
     before = contents(bag)
     for name, main, argv in (
-        ("evaluate", evaluate.main, [str(bag), "-o", str(tmp_path / "report"), "--no-plots"]),
-        ("replay", lambda argv: guarded("replay", read_for_replay, argv), [str(bag)]),
+        ("mk_evaluate", evaluate.main, [str(bag), "-o", str(tmp_path / "report"), "--no-plots"]),
+        ("mk_replay", lambda argv: guarded("mk_replay", read_for_replay, argv), [str(bag)]),
     ):
         check(name, what, must_fail, *run_in_process(main, argv))
         assert contents(bag) == before, f"{name} changed the bag ({what})"
@@ -163,13 +163,13 @@ def test_console_scripts_fail_in_one_line_on_damaged_bags(tmp_path: Path) -> Non
         bags[kind] = (bag, contents(bag))
     runs = {
         (kind, name): subprocess.Popen(
-            [console_script(name), str(bag), *(["-o", str(bag.parent / "report")] * (name == "evaluate"))],
+            [console_script(name), str(bag), *(["-o", str(bag.parent / "report")] * (name == "mk_evaluate"))],
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
         )
         for kind, (bag, _) in bags.items()
-        for name in ("evaluate", "replay")
+        for name in ("mk_evaluate", "mk_replay")
     }
     for (kind, name), process in runs.items():
         _, stderr = process.communicate(timeout=120)

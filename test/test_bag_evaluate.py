@@ -1,4 +1,4 @@
-"""`evaluate` without ROS: reported numbers against errors planted in otherwise exact bags, every
+"""`mk_evaluate` without ROS: reported numbers against errors planted in otherwise exact bags, every
 registered machine found in its own synthetic bag (and no other), and readable failures
 (non-zero exit, one line, nothing overwritten) for bags and parameter files it cannot use."""
 
@@ -245,7 +245,7 @@ def test_planted_serial_errors_are_reported_exactly(tmp_path: Path) -> None:
 
 
 def evaluate_cli(*args: str) -> subprocess.CompletedProcess:
-    script = Path(sys.executable).parent / "evaluate"
+    script = Path(sys.executable).parent / "mk_evaluate"
     command = (
         [str(script)] if script.exists() else [sys.executable, "-m", "manipulator_kinematics.bag.evaluate"]
     )
@@ -298,7 +298,8 @@ def test_bad_bags_fail_in_one_line_and_overwrite_nothing(tmp_path: Path) -> None
     for what, (bag, words) in bad_bags(tmp_path).items():
         result = evaluate_cli(str(bag), "-o", str(out))
         assert result.returncode == 1, what
-        assert result.stderr.startswith("evaluate: error: ") and words in result.stderr, (what, result.stderr)
+        assert result.stderr.startswith("mk_evaluate: error: "), (what, result.stderr)
+        assert words in result.stderr, (what, result.stderr)
         assert "Traceback" not in result.stderr and result.stderr.count("\n") == 1, what
         assert (out / "report.json").read_text() == "earlier report" and len(list(out.iterdir())) == 1, what
 

@@ -1,7 +1,8 @@
-"""record and replay as real processes over DDS: golden bags replayed into the real forward nodes
+"""mk_record and mk_replay as real processes over DDS: golden bags replayed into the real forward nodes
 of every registered machine (a machine with a forward node and no golden bag fails),
-recorded bags read by an independent reader, a recorder killed with SIGKILL, replay timing and
-topic handling. Every wait is on a condition with a timeout."""
+recorded bags read by an independent reader, a recorder killed with SIGKILL, topics that appear
+while recording, replay timing and topic handling (relative and absolute names). Every wait is on
+a condition with a timeout."""
 
 from __future__ import annotations
 
@@ -19,7 +20,9 @@ from mcap_ros2.decoder import DecoderFactory
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_harness import NodeProcess, Probe
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Int64
 
+from manipulator_kinematics.bag import replay
 from manipulator_kinematics.bag.reader import BagReader, TopicArrays
 from manipulator_kinematics.bag.synthetic import (
     GOLDEN_RATE_HZ,
@@ -102,7 +105,9 @@ def replay_into(
             "the node's publishers",
         )
         assert process.alive(), process.log()
-        player = NodeProcess("replay", args=(str(bag), "--topics", *inputs, "--wait-for-subscribers", "30"))
+        player = NodeProcess(
+            "mk_replay", args=(str(bag), "--topics", *inputs, "--wait-for-subscribers", "30")
+        )
         try:
             probe.wait_until(
                 lambda: (
@@ -244,7 +249,7 @@ def record_some(probe: Probe, bag: Path, topic: str, count: int, *extra: str) ->
     matches the writer, and DDS drops what is sent in between.
     """
     publisher = probe.node.create_publisher(JointState, topic, QOS)
-    recorder = NodeProcess("record", args=("-o", str(bag), "--topics", topic, *extra))
+    recorder = NodeProcess("mk_record", args=("-o", str(bag), "--topics", topic, *extra))
     probe.wait_until(
         lambda: publisher.get_subscription_count() > 0 or not recorder.alive(), TIMEOUT, "the recorder"
     )
@@ -295,42 +300,110 @@ def test_a_recorder_killed_with_sigkill_leaves_its_flushed_messages(
     np.testing.assert_array_equal(arrays["velocity"][:, 0], -np.arange(300.0))
 
 
+def started(recorder: NodeProcess) -> bool:
+    """Whether the recorder has opened its bag (its first line)."""
+    return " each of " in recorder.log() or not recorder.alive()
+
+
+def test_record_writes_at_once_and_adds_a_late_topic_with_its_first_message(
+    probe: Probe, tmp_path: Path
+) -> None:
+    """Topics relative (resolved in the recorder's namespace), absolute and typed with a relative
+    name; none has a publisher when the recorder starts. The bag is open before any appears; each
+    is subscribed to when its publisher appears, with one line, and the publisher's first message
+    (sent once the recorder's reader matched it) is in the bag."""
+    bag = tmp_path / "bag"
+    args = (
+        "-o", str(bag), "--topics", "late_rel", "/late_abs", "/late/typed",
+        "--type", "typed:=std_msgs/msg/Int64",
+    )
+    with NodeProcess("mk_record", "-r", "__ns:=/late", args=args) as recorder:
+        probe.wait_until(lambda: started(recorder), TIMEOUT, "the recorder's first line")
+        assert recorder.alive(), recorder.log()
+        assert (bag / "metadata.yaml").is_file() and flushed_count(bag) == 0
+        assert "recording /late" not in recorder.log()
+        publishers = {
+            "/late/late_rel": probe.node.create_publisher(JointState, "/late/late_rel", QOS),
+            "/late_abs": probe.node.create_publisher(PoseStamped, "/late_abs", QOS),
+            "/late/typed": probe.node.create_publisher(Int64, "/late/typed", QOS),
+        }
+        probe.wait_until(
+            lambda: all(p.get_subscription_count() for p in publishers.values()) or not recorder.alive(),
+            TIMEOUT,
+            "the recorder's subscriptions",
+        )
+        publishers["/late/late_rel"].publish(joint_state(0))
+        pose = PoseStamped()
+        pose.header.stamp.sec = 7
+        publishers["/late_abs"].publish(pose)
+        publishers["/late/typed"].publish(Int64(data=42))
+        probe.wait_until(lambda: flushed_count(bag) == 3 or not recorder.alive(), TIMEOUT, "3 messages")
+    log = recorder.log()
+    qos = "(reliable, volatile, depth 1000; 1 publishers)"
+    for line in (
+        f"mk_record: recording /late/late_rel [sensor_msgs/msg/JointState] {qos}",
+        f"mk_record: recording /late_abs [geometry_msgs/msg/PoseStamped] {qos}",
+        f"mk_record: recording /late/typed [std_msgs/msg/Int64] {qos}",
+        "mk_record: 3 messages on 3 topics in ",
+    ):
+        assert line in log, log
+    arrays = BagReader(bag).arrays()
+    assert arrays["/late/late_rel"]["header.stamp.sec"].tolist() == [0]
+    assert arrays["/late_abs"]["header.stamp.sec"].tolist() == [7]
+    assert arrays["/late/typed"]["data"].tolist() == [42]
+
+
 def test_record_discovers_types_resolves_namespaces_and_refuses_to_overwrite(
     probe: Probe, tmp_path: Path
 ) -> None:
     publisher = probe.node.create_publisher(PoseStamped, "/discovered", QOS)
-    with NodeProcess("record", args=("-o", str(tmp_path / "a"), "--topics", "/discovered")) as recorder:
+    with NodeProcess("mk_record", args=("-o", str(tmp_path / "a"), "--topics", "/discovered")) as recorder:
         probe.wait_until(
             lambda: publisher.get_subscription_count() > 0 or not recorder.alive(), TIMEOUT, "recorder"
         )
     assert BagReader(tmp_path / "a").topics["/discovered"].msgtype == "geometry_msgs/msg/PoseStamped"
 
-    # Default topics: every topic of the package's nodes, in the recorder's namespace.
-    expected = {f"/machine7/{t}" for t in package_topics()}
-    with NodeProcess("record", "-r", "__ns:=/machine7", args=("-o", str(tmp_path / "b"))) as recorder:
+    # Default topics: every topic of the package's nodes, in the recorder's namespace; those that
+    # get a publisher are recorded, the others are named at the end.
+    expected = [f"/machine7/{t}" for t in package_topics()]
+    published = {"/machine7/joint_states": JointState, "/machine7/tool_pose": PoseStamped}
+    assert set(published) <= set(expected)
+    publishers = [probe.node.create_publisher(kind, topic, QOS) for topic, kind in published.items()]
+    with NodeProcess("mk_record", "-r", "__ns:=/machine7", args=("-o", str(tmp_path / "b"))) as recorder:
         probe.wait_until(
-            lambda: all(probe.node.count_subscribers(t) > 0 for t in expected) or not recorder.alive(),
+            lambda: all(p.get_subscription_count() for p in publishers) or not recorder.alive(),
             TIMEOUT,
             "recorder",
         )
-    assert set(BagReader(tmp_path / "b").topics) == expected
+    assert set(BagReader(tmp_path / "b").topics) == set(published)
+    log = recorder.log()
+    first = next(line for line in log.splitlines() if " each of " in line)
+    assert first.endswith(f"publisher of it appears: {', '.join(expected)}"), first
+    absent = ", ".join(t for t in expected if t not in published)
+    assert f"mk_record: no publisher of {absent} appeared: not in the bag" in log, log
 
     before = sorted((p.name, p.stat().st_size) for p in (tmp_path / "a").iterdir())
     for args, words in (
         ([str(tmp_path / "a")], "exists; not overwriting"),
-        (
-            [str(tmp_path / "c"), "--topics", "/nobody", "--discovery-timeout", "0.5"],
-            "no publisher of /nobody within 0.5 s",
-        ),
+        ([str(tmp_path / "c"), "--topics", "bad name"], "'bad name' is not a topic name"),
+        ([str(tmp_path / "c"), "--topics", "/x", "--type", "y:=std_msgs/msg/Int64"], "/y is not a recorded"),
     ):
         result = subprocess.run(
-            [console_script("record"), "-o", *args], capture_output=True, text=True, timeout=TIMEOUT
+            [console_script("mk_record"), "-o", *args], capture_output=True, text=True, timeout=TIMEOUT
         )
-        assert result.returncode == 1 and words in result.stderr and "Traceback" not in result.stderr, (
-            result.stderr
-        )
+        assert result.returncode == 1, result.stderr
+        assert result.stderr.strip().splitlines()[-1].startswith("mk_record: error: "), result.stderr
+        assert words in result.stderr and "Traceback" not in result.stderr, result.stderr
     assert sorted((p.name, p.stat().st_size) for p in (tmp_path / "a").iterdir()) == before
-    assert not (tmp_path / "c").exists()
+
+    # A topic nobody publishes: an empty bag and a line saying so, at once and at the end.
+    result = subprocess.run(
+        [console_script("mk_record"), "-o", str(tmp_path / "d"), "--topics", "nobody", "--duration", "0.5"],
+        capture_output=True, text=True, timeout=TIMEOUT,
+    )
+    assert result.returncode == 0, result.stderr
+    assert "no publisher of /nobody appeared: not in the bag" in result.stderr, result.stderr
+    assert BagReader(tmp_path / "d").topics == {}
 
 
 # ------------------------------------------------------------------------------------------ replay
@@ -354,13 +427,14 @@ def test_replay_keeps_timing_with_rate_offset_selection_and_remapping(probe: Pro
             JointState, topic, lambda m, log=log: log.append((time.monotonic(), m.position[0])), QOS
         )
     player = NodeProcess(
-        "replay",
+        "mk_replay",
         args=(
             str(tmp_path / "bag"),
+            # Bag topics with or without the leading slash; a relative target in the root namespace.
             "--topics",
-            "/rp_a",
+            "rp_a",
             "--remap",
-            "/rp_a:=/rp_out",
+            "/rp_a:=rp_out",
             "--rate",
             "2",
             "--start-offset",
@@ -391,7 +465,7 @@ def test_replay_loops_until_stopped(probe: Probe, tmp_path: Path) -> None:
     numbers: list[float] = []
     probe.node.create_subscription(JointState, "/loop", lambda m: numbers.append(m.position[0]), QOS)
     with NodeProcess(
-        "replay", args=(str(tmp_path / "bag"), "--loop", "--wait-for-subscribers", "30")
+        "mk_replay", args=(str(tmp_path / "bag"), "--loop", "--wait-for-subscribers", "30")
     ) as player:
         probe.wait_until(lambda: len(numbers) >= 12 or not player.alive(), TIMEOUT, "three passes")
     assert numbers[:12] == [0, 1, 2, 3, 4] * 2 + [0, 1]
@@ -403,14 +477,34 @@ def test_replay_refuses_what_it_cannot_play(tmp_path: Path) -> None:
         writer.add_topic("/x", "sensor_msgs/msg/JointState")
     cases = (
         ([str(tmp_path / "bag"), "--topics", "/nope"], "no topic /nope in the bag"),
+        ([str(tmp_path / "bag"), "--topics", "nope"], "no topic /nope in the bag"),
+        ([str(tmp_path / "bag"), "--remap", "nope:=/x"], "--remap of /nope: not in the bag"),
         ([str(tmp_path / "bag"), "--start-offset", "9"], "past the end"),
         ([str(tmp_path / "empty")], "no messages to play"),
         ([str(tmp_path / "missing")], "no such bag"),
     )
     for args, words in cases:
         result = subprocess.run(
-            [console_script("replay"), *args], capture_output=True, text=True, timeout=TIMEOUT
+            [console_script("mk_replay"), *args], capture_output=True, text=True, timeout=TIMEOUT
         )
         assert result.returncode == 1 and words in result.stderr and "Traceback" not in result.stderr, (
             result.stderr
         )
+
+
+def test_replay_takes_bag_topics_with_or_without_the_leading_slash(tmp_path: Path) -> None:
+    """The README's command: bags store absolute names; ``joint_states`` means ``/joint_states``,
+    and a remap target keeps its form (a relative one is resolved in the replayer's namespace)."""
+    numbered_bag(tmp_path / "run1", ["/cylinder_lengths", "/joint_states", "/bucket_pose"], 5, 10_000_000)
+    for args in (
+        ["--topics", "cylinder_lengths", "joint_states", "--remap", "joint_states:=/m1/joint_states"],
+        ["--topics", "/cylinder_lengths", "/joint_states", "--remap", "/joint_states:=/m1/joint_states"],
+        ["--topics", "cylinder_lengths", "/joint_states", "--remap", "/joint_states:=/m1/joint_states"],
+    ):
+        playlist = replay.load(replay.parse_args([str(tmp_path / "run1"), "--rate", "2", *args]))
+        assert playlist.names == {
+            "/cylinder_lengths": "/cylinder_lengths", "/joint_states": "/m1/joint_states"
+        }
+        assert {topic for topic, _, _ in playlist.messages} == {"/cylinder_lengths", "/joint_states"}
+    playlist = replay.load(replay.parse_args([str(tmp_path / "run1"), "--remap", "bucket_pose:=pose"]))
+    assert playlist.names["/bucket_pose"] == "pose" and len(playlist.messages) == 15

@@ -162,10 +162,10 @@ def test_a_bag_without_machine_states_is_refused(tmp_path: Path) -> None:
 
 
 def test_record_visuals_flag(tmp_path: Path) -> None:
-    """``record --visuals`` across processes: SCARA joint states recorded, then /tf added."""
+    """``mk_record --visuals`` across processes: SCARA joint states recorded, then /tf added."""
     model = machine("scara").model()
     output = tmp_path / "recorded"
-    command = [console_script("record"), "-o", str(output), "--topics", "joint_states",
+    command = [console_script("mk_record"), "-o", str(output), "--topics", "joint_states",
                "--type", "joint_states:=sensor_msgs/msg/JointState", "--visuals"]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     probe = Probe("record_visuals_probe")

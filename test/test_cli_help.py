@@ -38,7 +38,7 @@ def test_every_executable_answers_help(entry, flag: str, monkeypatch: pytest.Mon
 
 def test_the_console_scripts_answer_help_too() -> None:
     assert len(ENTRY_POINTS) >= 20
-    for exe in ("excavator_forward", "tool_changer_ik_server", "machine_markers", "record"):
+    for exe in ("excavator_forward", "tool_changer_ik_server", "machine_markers", "mk_record"):
         result = subprocess.run([console_script(exe), "--help"], capture_output=True, text=True, timeout=120)
         assert result.returncode == 0 and result.stdout.startswith(f"usage: {exe}"), (exe, result.stderr)
 

@@ -8,13 +8,11 @@ damped least squares in normal-equations form) and from geometry (distance to a 
 
 from __future__ import annotations
 
-import tempfile
 import time
 from collections.abc import Callable, Iterator
 
 import numpy as np
 import pytest
-import yaml
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -51,12 +49,8 @@ def start(exe: str, namespace: str, **overrides: object) -> NodeProcess:
     """Console script ``exe`` (node of the same name) in ``namespace`` with the package's config,
     plus ``overrides`` in one more params file for this node (a later file wins; ``-p`` would
     not beat a node section, and ``-p node:name:=v`` does not reach a namespaced node)."""
-    args = [*PARAMS, "-r", f"__ns:={namespace}"]
-    if overrides:
-        with tempfile.NamedTemporaryFile("w", suffix=".yaml", prefix=f"{exe}-", delete=False) as f:
-            yaml.safe_dump({f"{namespace}/{exe}": {"ros__parameters": overrides}}, f)
-        args += ["--params-file", f.name]
-    return NodeProcess(exe, *args)
+    params = {f"{namespace}/{exe}": {"ros__parameters": overrides}} if overrides else None
+    return NodeProcess(exe, *PARAMS, "-r", f"__ns:={namespace}", params=params)
 
 
 class Collector:

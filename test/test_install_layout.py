@@ -124,6 +124,17 @@ def test_every_console_script_is_an_executable_in_lib(colcon_install: Path) -> N
         assert interpreter.is_file() and os.access(interpreter, os.X_OK), f"{exe}: bad {shebang}"
 
 
+def test_bag_tools_are_installed_under_names_that_cannot_clash(colcon_install: Path) -> None:
+    """The bag tools land on a user's PATH (venv/bin, install/<pkg>/bin) and in lib/<pkg>/ as
+    mk_record, mk_replay, mk_evaluate (like mk_urdf), never under bare generic names."""
+    lib = colcon_install / PKG / "lib" / PKG
+    scripts = console_scripts()
+    for name, module in (("mk_record", "record"), ("mk_replay", "replay"), ("mk_evaluate", "evaluate")):
+        assert scripts.get(name) == f"{PKG}.bag.{module}:main", name
+        assert (lib / name).is_file(), f"{lib / name} missing"
+        assert module not in scripts and not (lib / module).exists(), module
+
+
 def test_ament_index_marker_package_xml_and_config(colcon_install: Path) -> None:
     prefix = colcon_install / PKG
     marker = prefix / "share" / "ament_index" / "resource_index" / "packages" / PKG

@@ -111,6 +111,12 @@ def test_rcl_argument_errors_are_one_line(args: tuple[str, ...], message: str) -
     assert message in start_fails(*args)
 
 
+def test_a_renamed_node_keeps_its_settings_defaults(probe: Probe) -> None:
+    with NodeProcess("scara_forward", "-r", "__node:=renamed_forward") as process:
+        values = get(probe, "renamed_forward", ["base_frame", "topics.tool_pose"])
+        assert [v.string_value for v in values] == ["base_link", "tool_pose"], process.log()
+
+
 def test_parameters_are_read_only_and_a_set_is_refused_with_a_reason(probe: Probe) -> None:
     with NodeProcess("scara_ik_server") as process:
         describe = probe.node.create_client(DescribeParameters, "/scara_ik_server/describe_parameters")

@@ -274,18 +274,18 @@ def test_a_node_ends_with_exit_0_on_a_signal_while_inputs_arrive(
 
 
 def test_record_stops_on_sigint_while_a_publisher_keeps_sending(probe: Probe, tmp_path: Path) -> None:
-    """record stores what is queued when it is stopped, but a publisher that keeps sending does not
+    """mk_record stores what is queued when it is stopped, but a publisher that keeps sending does not
     keep it alive."""
     topic = "/shutdown_record/numbers"
     publisher = probe.node.create_publisher(Int64, topic, QOS)
-    process = NodeProcess("record", args=("-o", str(tmp_path / "bag"), "--topics", topic,
-                                          "--type", f"{topic}:=std_msgs/msg/Int64"))
+    process = NodeProcess("mk_record", args=("-o", str(tmp_path / "bag"), "--topics", topic,
+                                             "--type", f"{topic}:=std_msgs/msg/Int64"))
     try:
         sent = iter(range(1_000_000))
 
         def recording() -> bool:
             publisher.publish(Int64(data=next(sent)))
-            return "recording 1 topics" in process.log() or not process.alive()
+            return f"recording {topic} " in process.log() or not process.alive()
 
         probe.wait_until(recording, TIMEOUT, "the recorder")
         probe.wait_until(lambda: publisher.get_subscription_count() == 1, TIMEOUT, "the recorder's reader")

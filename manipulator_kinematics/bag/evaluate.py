@@ -1,6 +1,6 @@
-"""evaluate: check a bag of the package's topics against the kinematics; table, JSON and plots.
+"""mk_evaluate: check a bag of the package's topics against the kinematics; table, JSON and plots.
 
-    evaluate BAG [-o DIR] [--params FILE ...] [--no-plots] [--recover]
+    mk_evaluate BAG [-o DIR] [--params FILE ...] [--no-plots] [--recover]
 
 Finds the registered machines (:mod:`manipulator_kinematics.registry`) in each namespace of the
 bag, by their joint names and topics (:func:`machines_in`), has each one's ``analyse`` hook
@@ -44,7 +44,7 @@ from manipulator_kinematics.bag.types import BagError
 from manipulator_kinematics.params import flatten, load_parameters, unflatten
 from manipulator_kinematics.registry import Machine, by_section, machines
 
-NAME = "evaluate"
+NAME = "mk_evaluate"
 # Points per curve in a plot: each bin keeps its min and max, so spikes stay visible.
 PLOT_BINS = 2000
 

@@ -1,17 +1,18 @@
-"""record: topics into a rosbag2 bag (mcap by default), from raw subscriptions, flushed as it goes.
+"""mk_record: topics into a rosbag2 bag (mcap by default), from raw subscriptions, flushed as it goes.
 
-    record [-o BAG] [-s mcap|sqlite3] [--overwrite] [--topics T ...] [--type T:=pkg/msg/Type ...]
-           [--discovery-timeout S] [--duration S] [--flush-interval S] [--visuals [PARAMS ...]]
-           [--ros-args ...]
+    mk_record [-o BAG] [-s mcap|sqlite3] [--overwrite] [--topics T ...] [--type T:=pkg/msg/Type ...]
+              [--duration S] [--flush-interval S] [--visuals [PARAMS ...]] [--ros-args ...]
 
-Default topics: every topic of the registered machines' nodes (``Machine.topics``), resolved in the
-recorder's namespace (``--ros-args -r __ns:=/machine1``) and remappings. A topic's type is the
-one given with ``--type``, else the one its publishers show in the graph (waiting up to
-``--discovery-timeout`` for them), else the package's own type for that topic. Messages are
-stored as received (raw CDR) at the time the recorder takes them. The bag is flushed every
-``--flush-interval`` s, so SIGKILL loses at most that much (see docs/bags.md). Spun by
-:func:`manipulator_kinematics.executor.spin` (``MK_EXECUTOR``); on SIGINT/SIGTERM it stores
-what is still queued and then ends.
+Default topics: every topic of the registered machines' nodes (``Machine.topics``). Topic names,
+relative or absolute, are resolved in the recorder's namespace (``--ros-args -r __ns:=/machine1``)
+and remappings. The bag is open from the start; the graph is looked at every
+``DISCOVERY_PERIOD`` s and a topic is subscribed to as soon as a publisher of it appears, with one
+line saying its name, type and QoS. Its type is the one given with ``--type``, else the one its
+publishers show, else the package's own type for that topic. Messages are stored as received (raw
+CDR) at the time the recorder takes them. The bag is flushed every ``--flush-interval`` s, so
+SIGKILL loses at most that much (see docs/bags.md). Spun by
+:func:`manipulator_kinematics.executor.spin` (``MK_EXECUTOR``); on SIGINT/SIGTERM it stores what
+is still queued and then ends.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from datetime import datetime
 from pathlib import Path
 
@@ -36,13 +37,16 @@ from manipulator_kinematics.bag.cli import guarded, parse_assignments, split_ros
 from manipulator_kinematics.bag.topics import package_topics
 from manipulator_kinematics.bag.types import BagError, TopicQos
 from manipulator_kinematics.bag.writer import STORAGES, BagWriter
-from manipulator_kinematics.executor import executor_name, spin
+from manipulator_kinematics.executor import ERROR_LOG_PERIOD, executor_name, spin
+from manipulator_kinematics.executor import guarded as guarded_callback
 from manipulator_kinematics.params import ConfigError
+from manipulator_kinematics.throttle import ThrottledLog
 
-NAME = "record"
+NAME = "mk_record"
 # Subscriber queue: 1 s of a 1 kHz topic, so a stall of the recorder's thread loses nothing.
 QUEUE_DEPTH = 1000
-DISCOVERY_POLL = 0.05
+# How often the graph is looked at for publishers of topics not yet recorded (s).
+DISCOVERY_PERIOD = 0.2
 STOP_LATENCY = 0.1
 DRAIN_LIMIT = 1.0
 
@@ -82,35 +86,81 @@ def offered_qos(node: Node, topic: str) -> list[TopicQos]:
     ]
 
 
-def discover_types(
-    node: Node, topics: Sequence[str], timeout: float, stop: threading.Event
-) -> dict[str, str]:
-    """Types of ``topics`` as their publishers show them, waiting up to ``timeout`` s for them."""
-    deadline = time.monotonic() + timeout
-    found: dict[str, str] = {}
-    while True:
-        graph = dict(node.get_topic_names_and_types())
-        for topic in topics:
-            if topic in graph and node.count_publishers(topic) and len(graph[topic]) == 1:
-                found[topic] = graph[topic][0]
-        if len(found) == len(topics) or time.monotonic() >= deadline or stop.wait(DISCOVERY_POLL):
-            return found
+def describe_qos(qos: QoSProfile) -> str:
+    reliability = "reliable" if qos.reliability == ReliabilityPolicy.RELIABLE else "best effort"
+    durability = "transient local" if qos.durability == DurabilityPolicy.TRANSIENT_LOCAL else "volatile"
+    return f"{reliability}, {durability}, depth {qos.depth}"
 
 
-class Receiver:
-    """Stores whatever arrives on the recorder's subscriptions (raw CDR), until stopped.
+def resolve(node: Node, name: str) -> str:
+    """``name`` (relative, absolute or ``~/``) as the absolute topic name it means for ``node``;
+    BagError for a name that is not a topic name."""
+    try:
+        return node.resolve_topic_name(name)
+    except RuntimeError as error:  # rclpy's RCLError: "failed to resolve name: <why>, at <file>"
+        why = str(error).removeprefix("failed to resolve name: ").split(", at ")[0]
+        raise BagError(f"{name!r} is not a topic name: {why}") from None
 
-    Record time is the time the message is handed to its callback: the DDS reception time is
-    only in the message info, which EventsExecutor cannot pass (see manipulator_kinematics.executor).
+
+def say(text: str) -> None:
+    print(f"{NAME}: {text}", file=sys.stderr, flush=True)
+
+
+class Recorder:
+    """Subscribes to each wanted topic once a publisher of it is in the graph and stores whatever
+    arrives (raw CDR), until stopped.
+
+    Subscribing only to a topic that already has a publisher in the graph also means the reader
+    matches that publisher when it is created, before the publisher can see the reader: a
+    publisher that waits for a subscriber before sending loses nothing (the start-up note in
+    docs/bags.md). Record time is the time the message is handed to its callback: the DDS
+    reception time is only in the message info, which EventsExecutor cannot pass (see
+    manipulator_kinematics.executor).
     """
 
-    def __init__(self, node: Node, writer: BagWriter) -> None:
+    def __init__(
+        self, node: Node, writer: BagWriter, wanted: Mapping[str, str | None], fallback: Mapping[str, str]
+    ) -> None:
+        """``wanted``: resolved topic -> the type given for it or None; ``fallback``: the package's
+        type of a topic, used when its publishers disagree."""
         self.node, self.writer = node, writer
+        self.wanted, self.fallback = dict(wanted), dict(fallback)
         self.counts: dict[str, int] = {}
+        self.refused: set[str] = set()
+        self._log = ThrottledLog(node, ERROR_LOG_PERIOD)
         self._counted = -1
         self._stopped_at: float | None = None
 
-    def subscribe(self, topic: str, msg_class: type, qos: QoSProfile) -> None:
+    def pending(self) -> list[str]:
+        return [t for t in self.wanted if t not in self.counts and t not in self.refused]
+
+    def discover(self) -> None:
+        """Subscribe to every pending topic that has a publisher now (the discovery timer)."""
+        pending = self.pending()
+        if not pending:
+            return
+        graph = dict(self.node.get_topic_names_and_types())
+        for topic in pending:
+            if topic not in graph or not self.node.count_publishers(topic):
+                continue
+            shown = graph[topic]
+            msgtype = self.wanted[topic] or (shown[0] if len(shown) == 1 else None)
+            if msgtype is None and self.fallback.get(topic) in shown:
+                msgtype = self.fallback[topic]
+            if msgtype is None:
+                self.refused.add(topic)
+                say(f"not recording {topic}: it has the types {', '.join(shown)}; give one with "
+                    f"--type {topic}:=pkg/msg/Type")
+                continue
+            try:
+                self.subscribe(topic, msgtype, offered_qos(self.node, topic))
+            except BagError as error:
+                self.refused.add(topic)
+                say(f"not recording {topic}: {' '.join(str(error).split())}")
+
+    def subscribe(self, topic: str, msgtype: str, offered: Sequence[TopicQos]) -> None:
+        msg_class = message_class(msgtype)
+        self.writer.add_topic(topic, msgtype, offered[0] if offered else None)
         self.counts[topic] = 0
         clock, write, counts = self.node.get_clock(), self.writer.write, self.counts
 
@@ -118,13 +168,19 @@ class Receiver:
             write(topic, clock.now().nanoseconds, raw)
             counts[topic] += 1
 
-        self.node.create_subscription(msg_class, topic, store, qos, raw=True)
+        qos = subscription_qos(offered)
+        # Created while spinning: executor.spin's guard does not reach it, so it is guarded here.
+        callback = guarded_callback(store, self._log, f"subscription to {topic}")
+        self.node.create_subscription(msg_class, topic, callback, qos, raw=True)
+        say(f"recording {topic} [{msgtype}] ({describe_qos(qos)}; {len(offered)} publishers)")
 
     def run(self, duration: float | None, stop: threading.Event, executor: str) -> None:
         """Record for ``duration`` s (None: until ``stop`` is set), then take what is still queued
         (at most ``DRAIN_LIMIT`` s more)."""
         end = math.inf if duration is None else time.monotonic() + duration
         self.node.create_timer(self.writer.flush_interval, self.writer.flush_if_due)
+        self.discover()
+        self.node.create_timer(DISCOVERY_PERIOD, self.discover)
 
         def done() -> bool:
             now = time.monotonic()
@@ -161,14 +217,7 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
         default=[],
         metavar="TOPIC:=TYPE",
         dest="types",
-        help="type of a topic, e.g. /scan:=sensor_msgs/msg/LaserScan (skips discovery)",
-    )
-    parser.add_argument(
-        "--discovery-timeout",
-        type=float,
-        default=5.0,
-        metavar="S",
-        help="how long to wait for publishers of topics whose type is not known (s)",
+        help="type of a topic, e.g. /scan:=sensor_msgs/msg/LaserScan (default: what its publishers show)",
     )
     parser.add_argument("--duration", type=float, metavar="S", help="stop after this many seconds")
     parser.add_argument(
@@ -213,38 +262,27 @@ def record(argv: Sequence[str]) -> int:
     writer: BagWriter | None = None
     try:
         own = package_topics()
-        names = args.topics or list(own)
-        resolved = {node.resolve_topic_name(name): name for name in names}
-        types = {topic: given.get(topic) or given.get(name) for topic, name in resolved.items()}
-        types = {topic: t for topic, t in types.items() if t}
-        unknown = [topic for topic in resolved if topic not in types]
-        discovered = discover_types(node, unknown, args.discovery_timeout, stop) if unknown else {}
-        if stop.is_set():
-            raise KeyboardInterrupt
-        for topic in unknown:
-            types[topic] = discovered.get(topic) or own.get(resolved[topic]) or ""
-        missing = sorted(topic for topic, t in types.items() if not t)
-        if missing:
-            raise BagError(
-                f"no publisher of {', '.join(missing)} within {args.discovery_timeout:g} s; "
-                f"give the type with --type TOPIC:=pkg/msg/Type"
-            )
-        classes = {topic: message_class(t) for topic, t in types.items()}
-
+        # Relative and absolute names alike: "joint_states", "/joint_states" and, in namespace /m1,
+        # "/m1/joint_states" are one topic.
+        wanted = {resolve(node, name): None for name in args.topics or own}
+        for name, msgtype in given.items():
+            topic = resolve(node, name)
+            if topic not in wanted:
+                raise BagError(f"--type {name}:={msgtype}: {topic} is not a recorded topic")
+            message_class(msgtype)  # an unknown type is an error now, not when its topic appears
+            wanted[topic] = msgtype
+        fallback = {resolve(node, name): msgtype for name, msgtype in own.items()}
         writer = BagWriter(output, args.storage, overwrite=args.overwrite, flush_interval=args.flush_interval)
-        receiver = Receiver(node, writer)
-        for topic, msgtype in types.items():
-            offered = offered_qos(node, topic)
-            writer.add_topic(topic, msgtype, offered[0] if offered else None)
-            receiver.subscribe(topic, classes[topic], subscription_qos(offered))
-        node.get_logger().info(
-            f"recording {len(types)} topics to {output} ({args.storage}): "
-            f"{', '.join(f'{t} [{m}]' for t, m in types.items())}"
-        )
-        receiver.run(args.duration, stop, executor)
+        recorder = Recorder(node, writer, wanted, fallback)
+        say(f"writing {output} ({args.storage}); each of {len(wanted)} topics is recorded from when a "
+            f"publisher of it appears: {', '.join(wanted)}")
+        recorder.run(args.duration, stop, executor)
         writer.close()
-        total = sum(receiver.counts.values())
-        print(f"{NAME}: {total} messages on {len(receiver.counts)} topics in {output}", file=sys.stderr)
+        absent = recorder.pending()
+        if absent:
+            say(f"no publisher of {', '.join(absent)} appeared: not in the bag")
+        total = sum(recorder.counts.values())
+        say(f"{total} messages on {len(recorder.counts)} topics in {output}")
         if args.visuals is not None:
             add_visuals_to_recording(output, args.visuals)
         return 0
@@ -265,8 +303,7 @@ def add_visuals_to_recording(output: Path, params: Sequence[Path]) -> None:
     except BagError as error:
         raise BagError(f"{output} is recorded, but no visual topics were added: {error}") from None
     for item in added:
-        print(f"{NAME}: added {', '.join(item.topics)} for {item.machine} ({item.states} states) in "
-              f"{item.namespace}", file=sys.stderr)
+        say(f"added {', '.join(item.topics)} for {item.machine} ({item.states} states) in {item.namespace}")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1,10 +1,12 @@
-"""replay: publish a bag's messages again with their recorded timing.
+"""mk_replay: publish a bag's messages again with their recorded timing.
 
-    replay BAG [--rate R] [--loop] [--topics T ...] [--remap FROM:=TO ...] [--start-offset S]
+    mk_replay BAG [--rate R] [--loop] [--topics T ...] [--remap FROM:=TO ...] [--start-offset S]
            [--wait-for-subscribers S] [--recover] [--ros-args ...]
 
 Messages go out as recorded (raw CDR, header stamps untouched) on their recorded topic names,
 or the names given with ``--remap`` (a relative target is resolved in the replayer's namespace).
+Bag topics in ``--topics`` and on the left of ``--remap`` are named with or without the leading
+slash (``joint_states`` is the bag's ``/joint_states``).
 Message k is published ``(t_k - t_start) / rate`` seconds after the start, t being the record
 time and t_start the first message's plus ``--start-offset``. Publishers use the recorded QoS
 (reliability, durability) with a deep queue.
@@ -30,7 +32,7 @@ from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.bag.record import QUEUE_DEPTH, message_class
 from manipulator_kinematics.bag.types import BagError, TopicQos
 
-NAME = "replay"
+NAME = "mk_replay"
 # Longest single sleep, so Ctrl-C and shutdown are noticed during long pauses in a bag.
 MAX_SLEEP = 0.1
 ACK_TIMEOUT = 5.0
@@ -42,9 +44,18 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     parser.add_argument("bag", type=Path)
     parser.add_argument("--rate", type=float, default=1.0, help="time factor: 2 plays twice as fast")
     parser.add_argument("--loop", action="store_true", help="start over at the end, until stopped")
-    parser.add_argument("--topics", nargs="+", metavar="TOPIC", help="topics to play (default: all)")
     parser.add_argument(
-        "--remap", nargs="+", default=[], metavar="FROM:=TO", help="publish bag topic FROM on topic TO"
+        "--topics",
+        nargs="+",
+        metavar="TOPIC",
+        help="bag topics to play, with or without the leading slash (default: all)",
+    )
+    parser.add_argument(
+        "--remap",
+        nargs="+",
+        default=[],
+        metavar="FROM:=TO",
+        help="publish bag topic FROM on topic TO (a relative TO is in the replayer's namespace)",
     )
     parser.add_argument(
         "--start-offset", type=float, default=0.0, metavar="S", help="skip the first S seconds of the bag"
@@ -67,6 +78,11 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     if args.start_offset < 0:
         parser.error(f"--start-offset must not be negative, got {args.start_offset}")
     return args
+
+
+def bag_topic(name: str) -> str:
+    """The bag's (absolute) name of a topic given as ``name`` or ``/name``."""
+    return name if name.startswith("/") else f"/{name}"
 
 
 def publisher_qos(qos: TopicQos | None) -> QoSProfile:
@@ -118,8 +134,8 @@ def load(args: argparse.Namespace) -> Playlist:
     bag = BagReader(args.bag, recover=args.recover)
     if bag.recovered:
         print(f"{NAME}: warning: {bag.recovered}", file=sys.stderr)
-    topics = bag.select(args.topics)
-    remap = parse_assignments(args.remap, "--remap")
+    topics = bag.select(None if args.topics is None else [bag_topic(t) for t in args.topics])
+    remap = {bag_topic(source): target for source, target in parse_assignments(args.remap, "--remap").items()}
     strangers = sorted(set(remap) - set(bag.topics))
     if strangers:
         raise BagError(f"--remap of {', '.join(strangers)}: not in the bag (it has {', '.join(bag.topics)})")

@@ -59,12 +59,13 @@ def machine_section(node: Node, machine: Machine, argv: Sequence[str]) -> dict[s
 
 
 def node_settings(
-    node: Node, schema: Schema, defaults_file: str, ignore: Sequence[str] = ()
+    node: Node, schema: Schema, defaults_file: str, section: str, ignore: Sequence[str] = ()
 ) -> dict[str, Any]:
-    """The node's settings: the package's ``defaults_file`` section for this node, overridden by
-    the parameters given to the node, validated against ``schema``. ``ignore`` lists parameter
-    prefixes that are not settings (the machine section)."""
-    defaults = load_parameters(config_path(defaults_file), f"/**/{node.get_name()}")
+    """The node's settings: the package's ``defaults_file`` section ``/**/<section>`` (the node's
+    own name, whatever ``-r __node:=`` renamed it to), overridden by the parameters given to the
+    node, validated against ``schema``. ``ignore`` lists parameter prefixes that are not settings
+    (the machine section)."""
+    defaults = load_parameters(config_path(defaults_file), f"/**/{section}")
     for prefix in ignore:
         defaults.pop(prefix, None)
     given = {
@@ -100,7 +101,7 @@ class MachineNode(Node):
         declare(self, section, machine.schema, machine.section)
         self.model = machine.factory(section)
         self.settings = node_settings(self, self.SETTINGS, self.DEFAULTS_FILE or machine.config_file,
-                                      ignore=(machine.section,))
+                                      node_name, ignore=(machine.section,))
 
 
 def _values(node: Node, prefix: str) -> dict[str, Any]:
