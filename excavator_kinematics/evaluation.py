@@ -9,7 +9,10 @@ The recomputation is what the forward node should have published for the recorde
   node's ``swing_max_age``;
 * accelerations are raw finite differences of successive rates (the node with
   ``acceleration_time_constant`` 0, its default), restarted after a gap over
-  ``acceleration_max_gap``.
+  ``acceleration_max_gap``;
+* ``urdf_joint_states`` (every URDF joint and its rate) and, when the node's ``grade`` is
+  enabled, ``grade_height`` (the tip's height above the design plane) from the same state
+  (:mod:`excavator_kinematics.display`).
 
 The node settings come from the evaluation context (the package's config/excavator_nodes.yaml,
 overridden by ``evaluate --params`` files).
@@ -22,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from excavator_kinematics.display import DesignPlane, urdf_joint_states
 from excavator_kinematics.kinematics import (
     CYLINDERS,
     JOINTS,
@@ -31,6 +35,7 @@ from excavator_kinematics.kinematics import (
     bucket_angular_velocity,
     bucket_quaternion,
 )
+from excavator_kinematics.urdf_joints import URDF_JOINTS
 from manipulator_kinematics.bag.analysis import (
     AnalysisContext,
     Panel,
@@ -62,16 +67,19 @@ class _Settings:
     acceleration_max_gap: float
     acceleration_time_constant: float
     command_timeout: float
+    grade: DesignPlane | None
 
     @classmethod
     def of(cls, context: AnalysisContext) -> _Settings:
         forward = context.node_settings["excavator_forward"]
         ik = context.node_settings["excavator_velocity_ik"]
+        grade = forward.get("grade", {})
         return cls(
             float(forward["swing_max_age"]),
             float(forward["acceleration_max_gap"]),
             float(forward["acceleration_time_constant"]),
             float(ik["command_timeout"]),
+            DesignPlane.from_settings(grade) if grade.get("enabled") else None,
         )
 
 
@@ -134,6 +142,7 @@ def _inputs(
 
 def _consistency(
     data: dict[str, TopicArrays],
+    exc: Excavator,
     inputs: _ExcavatorInputs,
     m: _Settings,
     t0: int,
@@ -191,6 +200,18 @@ def _consistency(
         rates = np.abs(arrays.by_name("velocity", JOINTS)[rows] - s.theta_dot[k]).max(axis=1)
         entry.update(angle_rad=error_stats(angles), rate_radps=error_stats(rates))
         curves["open_chain_joint_states angle (rad)"] = (since(arrays.stamp_ns()[rows], t0), angles)
+    if found := matched("urdf_joint_states"):
+        arrays, rows, k, entry = found
+        positions, rates = urdf_joint_states(exc, inputs.D[k], inputs.D_dot[k])
+        angles = np.abs(wrap(arrays.by_name("position", URDF_JOINTS)[rows] - positions)).max(axis=1)
+        speeds = np.abs(arrays.by_name("velocity", URDF_JOINTS)[rows] - rates).max(axis=1)
+        entry.update(position=error_stats(angles), rate=error_stats(speeds))
+        curves["urdf_joint_states position (rad, m)"] = (since(arrays.stamp_ns()[rows], t0), angles)
+    if (found := matched("grade_height")) and m.grade is not None:
+        arrays, rows, k, entry = found
+        height = np.abs(arrays["point.z"][rows] - m.grade.height(s.Q[k, :3]))
+        entry.update(height_m=error_stats(height))
+        curves["grade_height (m)"] = (since(arrays.stamp_ns()[rows], t0), height)
     consistency_plot(plots, f"{prefix}consistency", curves)
     return out
 
@@ -313,7 +334,7 @@ def analyse(
         inputs = _inputs(data["cylinder_lengths"], data["joint_states"], exc, m)
         if inputs is not None:
             report["accepted_inputs"] = len(inputs.stamp)
-            report["consistency"] = _consistency(data, inputs, m, t0, plots, prefix)
+            report["consistency"] = _consistency(data, exc, inputs, m, t0, plots, prefix)
     if "target_bucket_twist" in data and "bucket_twist" in data:
         target, achieved = data["target_bucket_twist"], data["bucket_twist"]
         report["tracking"] = _tracking(target, achieved, m, t0, plots, prefix)

@@ -7,7 +7,12 @@ at most ``swing_max_age`` apart) and accelerations as finite differences of succ
 
 * ``bucket_pose`` (PoseStamped), ``bucket_twist`` (TwistStamped), ``bucket_accel`` (AccelStamped,
   only once accelerations are known: from the second message on);
-* ``open_chain_joint_states`` (JointState theta1..theta4 with rates) for robot_state_publisher.
+* ``open_chain_joint_states`` (JointState theta1..theta4 with rates);
+* ``urdf_joint_states`` (JointState of every joint of ``urdf/excavator.urdf``, the passive ones of
+  the cut loops included, with rates; :func:`excavator_kinematics.display.urdf_joint_states`) for
+  robot_state_publisher, at most ``urdf_joint_states_rate`` per second of input stamps;
+* ``grade_height`` (PointStamped, if ``grade.enabled``): the bucket tip in the design surface's
+  frame, z = its height above the design plane (:class:`excavator_kinematics.display.DesignPlane`).
 
 Bad input is rejected with a logged reason; nothing is published for it. That includes finite
 values no machine can have: rates beyond 1000 x the speed limits and accelerations beyond that in
@@ -21,12 +26,13 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
+from geometry_msgs.msg import AccelStamped, PointStamped, PoseStamped, TwistStamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
 from excavator_kinematics import messages
+from excavator_kinematics.display import DesignPlane, urdf_joint_states
 from excavator_kinematics.kinematics import (
     ACTUATORS,
     CYLINDERS,
@@ -38,6 +44,7 @@ from excavator_kinematics.kinematics import (
 )
 from excavator_kinematics.node_settings import FORWARD, NODES_CONFIG
 from excavator_kinematics.state_input import Plausible, RateDifferentiator, SwingHold
+from excavator_kinematics.urdf_joints import URDF_JOINTS
 from manipulator_kinematics.codec.packed import PackedMessage
 from manipulator_kinematics.joint_state import InputError, decode_joint_state
 from manipulator_kinematics.node_util import ThrottledLog
@@ -47,7 +54,8 @@ from manipulator_kinematics.registry import Machine
 NODE = "excavator_forward"
 SWING = JOINTS[0]
 # What changes in a stamped geometry message from one input to the next: everything but frame_id.
-STAMPED = ("header.stamp", "pose", "twist", "accel")
+STAMPED = ("header.stamp", "pose", "twist", "accel", "point")
+JOINT_FIELDS = ("header.stamp", "position", "velocity")
 
 
 class ForwardKinematics(MachineNode):
@@ -77,20 +85,35 @@ class ForwardKinematics(MachineNode):
         self.twist = PackedMessage(TwistStamped(header=header), STAMPED)
         self.accel = PackedMessage(AccelStamped(header=header), STAMPED)
         self.joints = PackedMessage(
-            JointState(name=list(JOINTS), position=[0.0] * 4, velocity=[0.0] * 4),
-            ("header.stamp", "position", "velocity"),
+            JointState(name=list(JOINTS), position=[0.0] * 4, velocity=[0.0] * 4), JOINT_FIELDS
         )
+        n = len(URDF_JOINTS)
+        self.urdf_joints = PackedMessage(
+            JointState(name=list(URDF_JOINTS), position=[0.0] * n, velocity=[0.0] * n), JOINT_FIELDS
+        )
+        rate = settings["urdf_joint_states_rate"]
+        # By input stamps, so a replayed bag gives the same messages; 0 Hz: every input.
+        self.urdf_period_ns = int(1e9 / rate) if rate > 0 else 0
+        self.urdf_last_ns: int | None = None
+        grade = settings["grade"]
+        self.plane = DesignPlane.from_settings(grade) if grade["enabled"] else None
+        self.grade = PackedMessage(PointStamped(header=Header(frame_id=grade["frame"])), STAMPED)
         self.pose_pub = self.create_publisher(PoseStamped, topic["bucket_pose"], qos)
         self.twist_pub = self.create_publisher(TwistStamped, topic["bucket_twist"], qos)
         self.accel_pub = self.create_publisher(AccelStamped, topic["bucket_accel"], qos)
         self.joints_pub = self.create_publisher(JointState, topic["open_chain_joint_states"], qos)
+        self.urdf_pub = self.create_publisher(JointState, topic["urdf_joint_states"], qos)
+        self.grade_pub = (self.create_publisher(PointStamped, topic["grade_height"], qos)
+                          if self.plane is not None else None)
         # raw: the callbacks decode the bytes themselves (decode_joint_state), at a third of the cost.
         self.create_subscription(JointState, topic["joint_states"], self.on_swing, qos, raw=True)
         self.create_subscription(JointState, topic["cylinder_lengths"], self.on_cylinders, qos, raw=True)
         self.get_logger().info(
             f"{self.exc.name}: {topic['cylinder_lengths']} + {topic['joint_states']} -> "
             f"{topic['bucket_pose']}, {topic['bucket_twist']}, {topic['bucket_accel']}, "
-            f"{topic['open_chain_joint_states']} in frame {self.frame!r}"
+            f"{topic['open_chain_joint_states']}, {topic['urdf_joint_states']}"
+            + (f", {topic['grade_height']}" if self.plane is not None else "")
+            + f" in frame {self.frame!r}"
         )
 
     def on_swing(self, raw: bytes) -> None:
@@ -133,8 +156,10 @@ class ForwardKinematics(MachineNode):
             Q_ddot = s.Q_ddot.tolist()
             angular_acc = bucket_angular_acceleration(theta1, theta1_dot, theta1_ddot, Q_dot[3], Q_ddot[3])
             accel = [*Q_ddot[:3], *angular_acc.tolist()]
+        grade = self.plane.local(Q[:3]).tolist() if self.plane is not None else []
+        urdf = self.urdf_values(stamp_ns, D, [theta1_dot, *rates.tolist()])
         # The input checks keep the arithmetic far from overflow; this is the promise itself.
-        if not all(map(math.isfinite, (*pose, *twist, *joints, *accel))):
+        if not all(map(math.isfinite, (*pose, *twist, *joints, *accel, *grade, *urdf))):
             self.log("error", f"dropped the outputs of cylinder_lengths D = {D.tolist()}, "
                      f"D_dot = {[theta1_dot, *rates.tolist()]}: not finite")
             return
@@ -144,6 +169,19 @@ class ForwardKinematics(MachineNode):
         if known:
             self.accel_pub.publish(self.accel.pack((*sec_nanosec, *accel)))
         self.joints_pub.publish(self.joints.pack((*sec_nanosec, *joints)))
+        if urdf:
+            self.urdf_last_ns = stamp_ns
+            self.urdf_pub.publish(self.urdf_joints.pack((*sec_nanosec, *urdf)))
+        if grade:
+            self.grade_pub.publish(self.grade.pack((*sec_nanosec, *grade)))
+
+    def urdf_values(self, stamp_ns: int, D: np.ndarray, D_dot: list[float]) -> list[float]:
+        """Positions then rates of every URDF joint when urdf_joint_states is due, else []."""
+        last = self.urdf_last_ns
+        if last is not None and 0 <= stamp_ns - last < self.urdf_period_ns:
+            return []
+        positions, velocities = urdf_joint_states(self.exc, D, D_dot)
+        return [*positions.tolist(), *velocities.tolist()]
 
     def acceleration(
         self, differentiator: RateDifferentiator, names: Sequence[str], stamp_ns: int, rates: np.ndarray

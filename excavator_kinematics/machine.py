@@ -42,6 +42,8 @@ MACHINE = Machine(
         "cylinder_lengths": _JOINT_STATE,
         "joint_states": _JOINT_STATE,
         "open_chain_joint_states": _JOINT_STATE,
+        "urdf_joint_states": _JOINT_STATE,
+        "grade_height": "geometry_msgs/msg/PointStamped",
         "cylinder_rate_commands": _JOINT_STATE,
         "velocity_controller/commands": "std_msgs/msg/Float64MultiArray",
         "bucket_pose": "geometry_msgs/msg/PoseStamped",

@@ -26,7 +26,25 @@ FORWARD = {
     "acceleration_max_gap": Number(**_SECONDS, doc="a longer gap between messages restarts the differencing"),
     "warning_period": _WARNING_PERIOD,
     "qos_depth": Number(min=1, max=100_000, integer=True,
-                        doc="reliable keep-last depth of every topic (100: 0.1 s of 1 kHz input)"),
+                        doc="reliable keep-last depth of every topic (400: 0.4 s of 1 kHz input; "
+                            "Fast DDS caps a keep-last depth at 400 unless a profile raises "
+                            "max_samples_per_instance)"),
+    "urdf_joint_states_rate": Number(
+        min=0.0, max=10_000.0, unit="Hz",
+        doc="most urdf_joint_states per second of input stamps; 0 = every input",
+    ),
+    "grade": {
+        "enabled": Flag(doc="publish grade_height: the bucket tip above the design plane"),
+        "point": Numbers(3, Number(min=-1e4, max=1e4, unit="m"),
+                         doc="a point [x, y, z] of the plane (m, base frame)"),
+        "normal": Numbers(3, Number(min=-1e6, max=1e6), default=None,
+                          doc="the plane's upward normal [x, y, z] (any length); or give slope/cross_slope"),
+        "slope": Number(min=-1e4, max=1e4, unit="%", default=None,
+                        doc="rise of the plane per run along base x, percent (default 0)"),
+        "cross_slope": Number(min=-1e4, max=1e4, unit="%", default=None,
+                              doc="rise of the plane per run along base y, percent (default 0)"),
+        "frame": Text(empty=False, doc="frame_id of grade_height: the design surface's frame"),
+    },
     "topics": {
         "cylinder_lengths": _topic("input: sensor_msgs/JointState, boom/arm/bucket cylinder length and rate"),
         "joint_states": _topic("input: sensor_msgs/JointState, swing_joint angle and rate"),
@@ -34,6 +52,8 @@ FORWARD = {
         "bucket_twist": _topic("output: geometry_msgs/TwistStamped"),
         "bucket_accel": _topic("output: geometry_msgs/AccelStamped"),
         "open_chain_joint_states": _topic("output: sensor_msgs/JointState of the open chain"),
+        "urdf_joint_states": _topic("output: sensor_msgs/JointState of every joint of urdf/excavator.urdf"),
+        "grade_height": _topic("output: geometry_msgs/PointStamped, the tip in the design surface's frame"),
     },
 }
 

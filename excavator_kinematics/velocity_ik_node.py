@@ -125,7 +125,8 @@ class VelocityIk(MachineNode):
             if msg.header.frame_id != self.frame:
                 raise InputError(f"frame_id {msg.header.frame_id!r} is not the base frame {self.frame!r}")
             linear, angular = messages.twist_arrays(msg)
-            speed, turn = float(np.linalg.norm(linear)), float(np.linalg.norm(angular))
+            with np.errstate(over="ignore"):  # a norm that overflows is inf: refused just below
+                speed, turn = float(np.linalg.norm(linear)), float(np.linalg.norm(angular))
             if not (speed <= self.max_linear and turn <= self.max_angular):
                 raise InputError(
                     f"twist of {speed:.6g} m/s, {turn:.6g} rad/s is beyond {PLAUSIBILITY_FACTOR:g} x the "

@@ -494,6 +494,8 @@ TYPE_OF_TOPIC_KEY = {
     "bucket_twist": TWIST,
     "bucket_accel": ACCEL,
     "target_bucket_twist": TWIST,
+    "urdf_joint_states": JOINT_STATE,
+    "grade_height": "geometry_msgs/msg/PointStamped",
 }
 
 

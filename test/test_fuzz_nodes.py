@@ -1,13 +1,20 @@
 """Fuzz every node and service with malformed and extreme input (seeded, bounded, real processes).
 
 Each test sends a few thousand bad messages or requests in bursts (random bytes, truncated and
-corrupted serializations, counts of 0xFFFFFFFF, NaN/inf/1e308, wrong and repeated names, stamps going
-backwards, alternating huge rates) and after each burst one valid input whose output it waits for:
-the node took the whole burst (the burst fits its input queue, depth raised for the test) and still
-serves. It checks that the node is alive, that no output field is non-finite, that commands and
-simulated states keep their limits exactly, that the valid input gives the library's numbers, and
-that the callback backstop (``guarded``: "failed on") never fired, i.e. the checks at the entry
-caught everything. Counts are printed (``-s``) for the record.
+corrupted serializations, counts of 0xFFFFFFFF, NaN/inf/1e308, wrong and repeated names, 5000 names,
+stamps going backwards, alternating huge rates) and after each burst one valid input whose output it
+waits for: the node took the whole burst (the burst fits its input queue, depth raised for the test)
+and still serves. It checks that the node is alive, that no output field is non-finite, that
+commands and simulated states keep their limits exactly, that the valid input gives the library's
+numbers, that the entry checks fired (a rejection naming an implausible value is logged), and that
+the callback backstop (``guarded``: "failed on") never fired, i.e. the checks at the entry caught
+everything. Counts are printed (``-s``) for the record. Every node is started once, all at once
+(start-up is most of a node test's time).
+
+Raw bytes are never empty: a zero-length serialized message is not something a ROS publisher can
+produce (every serialization starts with a 4-byte encapsulation header), and Fast DDS 2.14 cannot
+carry it: the reader never acknowledges it, so every later sample of that writer is held back for
+good (reliable, in order). ``test_empty_payload_stalls_only_its_writer`` pins that transport limit.
 """
 
 from __future__ import annotations
@@ -22,13 +29,15 @@ import numpy as np
 import pytest
 import yaml
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
+from geometry_msgs.msg import AccelStamped, PointStamped, PoseStamped, TwistStamped
+from rclpy.duration import Duration
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from ros_harness import NodeProcess, Probe
 from sensor_msgs.msg import JointState
 
 from excavator_kinematics import messages
+from excavator_kinematics.display import DesignPlane
 from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator, bucket_angular_velocity
 from excavator_kinematics.plant import Plant
 from excavator_kinematics.rate_command import rate_command
@@ -43,7 +52,14 @@ EXC = Excavator.default()
 LIMITS = EXC.limits
 QOS = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
 TIMEOUT = 30.0
-BURST = 150  # messages per burst; the nodes' input queues are raised above this for the test
+# Messages per burst: Fast DDS caps a keep-last queue at 400 (max_samples_per_instance), and the
+# nodes' input queues are raised to that for the test.
+BURST = 200
+# Node settings for the fuzz: a deep input queue, and a short log throttle so rejections show.
+FUZZ_SETTINGS = {"warning_period": 0.1}
+# The forward node publishes grade_height too (every input: urdf_joint_states_rate 0).
+GRADE_SETTINGS = {"enabled": True, "point": [2.0, 0.0, -1.0], "slope": 5.0, "frame": "design_surface"}
+GRADE = DesignPlane.from_settings(GRADE_SETTINGS)
 EXTREMES = (math.nan, math.inf, -math.inf, 1.7e308, -1.7e308, 1e308, 1e160, -1e160, 5e-324, 1e19, -0.0)
 SERIAL = ("scara", "tool_changer", "palletizer", "pump_boom")
 EXCAVATOR_PARAMS = (str(config_path("excavator_cet200.yaml")), str(config_path("excavator_nodes.yaml")))
@@ -113,6 +129,40 @@ def tmp() -> Iterator[Path]:
         yield Path(directory)
 
 
+@pytest.fixture(scope="module")
+def nodes(tmp: Path) -> Iterator[dict[str, NodeProcess]]:
+    """Every node under test, started at once; a test takes its nodes out (``pop``) and stops them."""
+    started = {
+        "excavator_forward": start("excavator_forward", "/fz_fwd", tmp, EXCAVATOR_PARAMS, qos_depth=400,
+                                   urdf_joint_states_rate=0.0, **FUZZ_SETTINGS,
+                                   grade=GRADE_SETTINGS),
+        "excavator_velocity_ik": start("excavator_velocity_ik", "/fz_vik", tmp, EXCAVATOR_PARAMS,
+                                       input_queue_depth=400, command_timeout=30.0, state_timeout=30.0,
+                                       **FUZZ_SETTINGS),
+        "excavator_sim": start("excavator_sim", "/fz_sim", tmp, EXCAVATOR_PARAMS, input_queue_depth=400,
+                               rate=100.0, **FUZZ_SETTINGS),
+    }
+    for name in SERIAL:
+        params = (str(config_path(machine(name).config_file)),)
+        started[f"{name}_forward"] = start(f"{name}_forward", f"/fz_{name}", tmp, params, qos_depth=400)
+        started[f"{name}_ik_server"] = start(f"{name}_ik_server", f"/fz_{name}", tmp, params)
+    yield started
+    for process in started.values():
+        process.stop()
+
+
+def until_logged(probe: Probe, process: NodeProcess, text: str, send) -> None:
+    """``send()`` until the node's log holds ``text`` (a rejection may be held back by the throttle)."""
+    for _ in range(20):
+        send()
+        try:
+            probe.wait_until(lambda: text in process.log(), 0.5, repr(text))
+            return
+        except TimeoutError:
+            continue
+    raise TimeoutError(f"{text!r} never logged: {process.log()[-2000:]}")
+
+
 # ------------------------------------------------------------------------------ malformed input
 def joint_state(names, position=(), velocity=(), sec: int = 0, nanosec: int = 0,
                 frame: str = "") -> JointState:
@@ -154,8 +204,8 @@ def bad_joint_states(rng: np.random.Generator, names: tuple[str, ...], lower: np
         position = position[: rng.integers(0, n)]
     elif kind == 6:
         velocity = velocity[: rng.integers(0, n)]
-    elif kind == 7:  # many names
-        extra = [f"j{i}" for i in range(int(rng.integers(10, 60)))]
+    elif kind == 7:  # many names, now and then 5000
+        extra = [f"j{i}" for i in range(5000 if k % 5 == 0 else int(rng.integers(10, 60)))]
         return joint_state([*extra, *names], [0.0] * len(extra) + list(position),
                            [0.0] * len(extra) + list(velocity), sec)
     else:  # plausible but fast: up to 100 x the speed limits, a stamp 1 ns after the previous one
@@ -165,12 +215,13 @@ def bad_joint_states(rng: np.random.Generator, names: tuple[str, ...], lower: np
 
 
 def bad_bytes(rng: np.random.Generator, valid: bytes, k: int) -> bytes:
-    """Random bytes, a truncated or corrupted serialization, or one with a huge count."""
+    """Random bytes, a truncated or corrupted serialization, or one with a huge count; never empty
+    (module docstring)."""
     kind = k % 4
     if kind == 0:
-        return rng.integers(0, 256, int(rng.integers(0, 300)), dtype=np.uint8).tobytes()
+        return rng.integers(0, 256, int(rng.integers(1, 300)), dtype=np.uint8).tobytes()
     if kind == 1:
-        return valid[: int(rng.integers(0, len(valid)))]
+        return valid[: int(rng.integers(1, len(valid)))]
     data = bytearray(valid)
     if kind == 2:
         for _ in range(int(rng.integers(1, 6))):
@@ -182,14 +233,15 @@ def bad_bytes(rng: np.random.Generator, valid: bytes, k: int) -> bytes:
 
 
 # ------------------------------------------------------------------------------ excavator_forward
-def test_excavator_forward_survives_any_input(probe: Probe, tmp: Path) -> None:
+def test_excavator_forward_survives_any_input(probe: Probe, nodes: dict[str, NodeProcess]) -> None:
     ns = "/fz_fwd"
-    process = start("excavator_forward", ns, tmp, EXCAVATOR_PARAMS, qos_depth=5000)
+    process = nodes.pop("excavator_forward")
     node = probe.node
     cylinders = node.create_publisher(JointState, f"{ns}/cylinder_lengths", QOS)
     swing = node.create_publisher(JointState, f"{ns}/joint_states", QOS)
     topics = {f"{ns}/bucket_pose": PoseStamped, f"{ns}/bucket_twist": TwistStamped,
-              f"{ns}/bucket_accel": AccelStamped, f"{ns}/open_chain_joint_states": JointState}
+              f"{ns}/bucket_accel": AccelStamped, f"{ns}/open_chain_joint_states": JointState,
+              f"{ns}/urdf_joint_states": JointState, f"{ns}/grade_height": PointStamped}
     out = Outputs(probe, topics)
     pose_topic = f"{ns}/bucket_pose"
     rng = np.random.default_rng(9001)
@@ -218,19 +270,23 @@ def test_excavator_forward_survives_any_input(probe: Probe, tmp: Path) -> None:
                     continue
             raise TimeoutError(f"no pose for marker {sec}")
 
-        for burst in range(20):
+        for burst in range(10):
             for k in range(BURST):
-                i = burst * BURST + k
-                names = (JOINTS[0],) if i % 2 else CYLINDERS
-                columns = slice(0, 1) if i % 2 else slice(1, 4)
-                msg = bad_joint_states(rng, names, lower[columns], upper[columns], rates[columns], i)
+                # Alternate topics; each topic gets every kind of bad message and of bad bytes.
+                i, j = burst * BURST + k, (burst * BURST + k) // 2
+                on_swing = i % 2 == 1
+                columns = slice(0, 1) if on_swing else slice(1, 4)
+                msg = bad_joint_states(rng, (JOINTS[0],) if on_swing else CYLINDERS,
+                                       lower[columns], upper[columns], rates[columns], j)
                 data = serialize_message(msg)
                 if rng.random() < 0.4:
-                    data = bad_bytes(rng, data, i)
-                (swing if i % 2 else cylinders).publish(data)
+                    data = bad_bytes(rng, data, j)
+                (swing if on_swing else cylinders).publish(data)
                 sent += 1
             marker(100_000 + burst, LIMITS.reference, np.zeros(4))
             assert process.alive(), process.log()[-3000:]
+        until_logged(probe, process, "implausible", lambda: cylinders.publish(
+            joint_state(CYLINDERS, LIMITS.reference[1:], [1e9, 0.0, 0.0], 150_000)))
         # The library's numbers afterwards.
         D = LIMITS.reference + np.array([0.1, 0.05, -0.04, 0.03])
         D_dot = np.array([0.05, 0.02, -0.03, 0.04])
@@ -239,24 +295,42 @@ def test_excavator_forward_survives_any_input(probe: Probe, tmp: Path) -> None:
         p, o = pose.pose.position, pose.pose.orientation
         np.testing.assert_allclose([p.x, p.y, p.z, o.x, o.y, o.z, o.w],
                                    messages.bucket_pose_values(D[0], s.Q.tolist()), atol=1e-12)
-        twist = next(m for m in out.messages[f"{ns}/bucket_twist"] if m.header.stamp.sec == 200_000).twist
+        # Each output topic arrives on its own: wait for the twist and the grade of that marker too.
+        twists, grades = out.messages[f"{ns}/bucket_twist"], out.messages[f"{ns}/grade_height"]
+        probe.wait_until(lambda: any(m.header.stamp.sec == 200_000 for m in twists)
+                         and any(m.header.stamp.sec == 200_000 for m in grades), TIMEOUT, "twist and grade")
+        twist = next(m for m in twists if m.header.stamp.sec == 200_000).twist
         expected = [*s.Q_dot[:3], *bucket_angular_velocity(float(D[0]), float(D_dot[0]), float(s.Q_dot[3]))]
         np.testing.assert_allclose([twist.linear.x, twist.linear.y, twist.linear.z,
                                     twist.angular.x, twist.angular.y, twist.angular.z], expected, atol=1e-12)
+        grade = next(m for m in grades if m.header.stamp.sec == 200_000)
+        assert grade.point.z == pytest.approx(float(GRADE.height(s.Q[:3])), abs=1e-12)
+        # The transport limit of the module docstring, pinned: the node's reader never acknowledges
+        # an empty payload, so that writer is stalled for good, while a 1-byte payload is taken
+        # (and rejected by the node). Other writers are not affected: the node still serves. If the
+        # first assertion fails, Fast DDS carries empty payloads now: drop the limit from the docs
+        # and let bad_bytes send them again.
+        empty, one_byte = (node.create_publisher(JointState, f"{ns}/joint_states", QOS) for _ in range(2))
+        probe.wait_until(lambda: empty.get_subscription_count() > 0 and one_byte.get_subscription_count() > 0,
+                         TIMEOUT, "the extra writers matched")
+        one_byte.publish(b"\x00")
+        empty.publish(b"")
+        assert one_byte.wait_for_all_acked(Duration(seconds=TIMEOUT))
+        assert not empty.wait_for_all_acked(Duration(seconds=2))
+        marker(200_001, D, D_dot)
         assert process.alive()
     finally:
         log = process.stop()
     report("excavator_forward", sent=sent, outputs_checked=out.count(), non_finite=out.non_finite(), alive=1)
     assert out.non_finite() == 0
     assert "Traceback" not in log and "failed on" not in log, log[-3000:]
-    assert "implausible" in log and "rejected cylinder_lengths" in log
+    assert "rejected cylinder_lengths" in log and "rejected joint_states" in log
 
 
 # ------------------------------------------------------------------------------ excavator_velocity_ik
-def test_excavator_velocity_ik_survives_any_input(probe: Probe, tmp: Path) -> None:
+def test_excavator_velocity_ik_survives_any_input(probe: Probe, nodes: dict[str, NodeProcess]) -> None:
     ns = "/fz_vik"
-    process = start("excavator_velocity_ik", ns, tmp, EXCAVATOR_PARAMS, input_queue_depth=5000,
-                    command_timeout=30.0, state_timeout=30.0)
+    process = nodes.pop("excavator_velocity_ik")
     node = probe.node
     cylinders = node.create_publisher(JointState, f"{ns}/cylinder_lengths", QOS)
     swing = node.create_publisher(JointState, f"{ns}/joint_states", QOS)
@@ -289,21 +363,24 @@ def test_excavator_velocity_ik_survives_any_input(probe: Probe, tmp: Path) -> No
                     continue
             raise TimeoutError(f"no command for marker {sec}")
 
-        for burst in range(16):
+        for burst in range(10):
             for k in range(BURST):
                 i = burst * BURST + k
+                j = i // 3  # each topic gets every kind
                 if i % 3 == 0:
                     twist = extreme(rng, 6, 1.0)
                     msg = messages.bucket_twist(Time(sec=i), "base_link" if rng.random() < 0.8 else "map",
                                                 np.array(twist[:3]), np.array(twist[3:]))
                     target.publish(msg)
                 elif i % 3 == 1:
-                    cylinders.publish(bad_joint_states(rng, CYLINDERS, lower[1:], upper[1:], rates[1:], i))
+                    cylinders.publish(bad_joint_states(rng, CYLINDERS, lower[1:], upper[1:], rates[1:], j))
                 else:
-                    swing.publish(bad_joint_states(rng, JOINTS[:1], lower[:1], upper[:1], rates[:1], i))
+                    swing.publish(bad_joint_states(rng, JOINTS[:1], lower[:1], upper[:1], rates[:1], j))
                 sent += 1
             marker(100_000 + burst, rng.uniform(-0.3, 0.3, 3), np.zeros(3))
             assert process.alive(), process.log()[-3000:]
+        until_logged(probe, process, "implausible", lambda: target.publish(
+            messages.bucket_twist(Time(sec=150_000), "base_link", np.array([1e9, 0.0, 0.0]), np.zeros(3))))
         # The library's numbers afterwards (a fast target: the speed scaling is in it).
         linear = np.array([0.8, -0.4, 0.5])
         command = marker(200_000, linear, np.zeros(3))
@@ -319,13 +396,12 @@ def test_excavator_velocity_ik_survives_any_input(probe: Probe, tmp: Path) -> No
            above_speed_limit=over, alive=1)
     assert out.non_finite() == 0 and over == 0 and len(commands) == out.count()
     assert "Traceback" not in log and "failed on" not in log, log[-3000:]
-    assert "implausible" in log
 
 
 # ------------------------------------------------------------------------------ excavator_sim
-def test_excavator_sim_survives_any_input(probe: Probe, tmp: Path) -> None:
+def test_excavator_sim_survives_any_input(probe: Probe, nodes: dict[str, NodeProcess]) -> None:
     ns = "/fz_sim"
-    process = start("excavator_sim", ns, tmp, EXCAVATOR_PARAMS, input_queue_depth=5000, rate=200.0)
+    process = nodes.pop("excavator_sim")
     node = probe.node
     commands = node.create_publisher(JointState, f"{ns}/cylinder_rate_commands", QOS)
     topics = {f"{ns}/cylinder_lengths": JointState, f"{ns}/joint_states": JointState}
@@ -361,7 +437,7 @@ def test_excavator_sim_survives_any_input(probe: Probe, tmp: Path) -> None:
                     continue
             raise TimeoutError(f"the simulator never moved at {command}")
 
-        for burst in range(20):
+        for burst in range(10):
             for k in range(BURST):
                 i = burst * BURST + k
                 msg = bad_joint_states(rng, ACTUATORS, LIMITS.d_min, LIMITS.d_max, rates, i)
@@ -370,6 +446,8 @@ def test_excavator_sim_survives_any_input(probe: Probe, tmp: Path) -> None:
                 sent += 1
             marker(np.full(4, 0.001 * (-1) ** burst) * (1 + burst / 100))
             assert process.alive(), process.log()[-3000:]
+        until_logged(probe, process, "implausible", lambda: commands.publish(
+            joint_state(ACTUATORS, velocity=[1e9, 0.0, 0.0, 0.0])))
         # The library's numbers afterwards: the plant's response to a command beyond the limits.
         command = np.array([0.3, -0.2, 0.2, 0.25])
         plant = Plant(LIMITS, LIMITS.reference)
@@ -387,7 +465,6 @@ def test_excavator_sim_survives_any_input(probe: Probe, tmp: Path) -> None:
            outside_limits=outside, alive=1)
     assert out.non_finite() == 0 and outside == 0
     assert "Traceback" not in log and "failed on" not in log, log[-3000:]
-    assert "implausible" in log
 
 
 # ------------------------------------------------------------------------------ serial machines
@@ -470,14 +547,12 @@ def check_ik_answers(requests: list, responses: list, limits) -> int:
 
 
 @pytest.mark.parametrize("name", SERIAL)
-def test_serial_nodes_survive_any_input(probe: Probe, tmp: Path, name: str) -> None:
+def test_serial_nodes_survive_any_input(probe: Probe, nodes: dict[str, NodeProcess], name: str) -> None:
     record = machine(name)
     model = record.model()
     limits = record.limits(model)
     ns = f"/fz_{name}"
-    params = (str(config_path(record.config_file)),)
-    forward = start(f"{name}_forward", ns, tmp, params, qos_depth=5000)
-    server = start(f"{name}_ik_server", ns, tmp, params)
+    forward, server = nodes.pop(f"{name}_forward"), nodes.pop(f"{name}_ik_server")
     node = probe.node
     states = node.create_publisher(JointState, f"{ns}/joint_states", QOS)
     topics = {f"{ns}/tool_pose": PoseStamped, f"{ns}/tool_twist": TwistStamped}
@@ -503,7 +578,7 @@ def test_serial_nodes_survive_any_input(probe: Probe, tmp: Path, name: str) -> N
             probe.wait_until(lambda: any(m.header.stamp.sec == sec for m in out.messages[f"{ns}/tool_pose"]),
                              TIMEOUT, f"pose of marker {sec}")
 
-        for burst in range(10):
+        for burst in range(6):
             for k in range(BURST):
                 i = burst * BURST + k
                 msg = bad_joint_states(rng, limits.names, limits.lower, limits.upper, 1.0, i)
@@ -513,8 +588,9 @@ def test_serial_nodes_survive_any_input(probe: Probe, tmp: Path, name: str) -> N
                     states.publish(msg)
                 sent += 1
             marker(100_000 + burst)
-        ik_requests = [random_request(rng, model, limits, k) for k in range(1600)]
-        fk_requests = [random_fk(rng, limits, k) for k in range(400)]
+        # Every kind of request 60 times (8 kinds of IK request, 3 of FK request, frame every 7th).
+        ik_requests = [random_request(rng, model, limits, k) for k in range(480)]
+        fk_requests = [random_fk(rng, limits, k) for k in range(210)]
         ik_responses = calls(probe, ik, ik_requests)
         fk_responses = calls(probe, fk, fk_requests)
         ik_problems = check_ik_answers(ik_requests, ik_responses, limits)
