@@ -18,6 +18,7 @@ import argparse
 import fcntl
 import os
 import re
+import signal
 import subprocess
 import sys
 import tempfile
@@ -64,10 +65,16 @@ def run_once(output: Path) -> dict[str, object]:
         env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
         began = time.monotonic()
         with open(output / "demo.out", "w", encoding="utf-8") as log:
-            code = subprocess.call(
+            demo = subprocess.Popen(
                 [console_script("excavator_demo"), "--output", str(output)],
                 stdout=log, stderr=subprocess.STDOUT, env=env,
             )
+            try:
+                code = demo.wait()
+            except BaseException:  # stopped: the demo stops its own processes on SIGINT
+                demo.send_signal(signal.SIGINT)
+                demo.wait(150.0)
+                raise
         wall = time.monotonic() - began
     text = (output / "demo.out").read_text(encoding="utf-8")
     row: dict[str, object] = {"code": code, "wall": wall, "load": load, "domain": domain}
@@ -88,6 +95,9 @@ def main() -> int:
     parser.add_argument("--hog-core", type=int, default=0, help="core the busy loop is pinned to (default 0)")
     parser.add_argument("--no-hog", action="store_true", help="no busy loop (the unloaded reference)")
     args = parser.parse_args()
+    # SIGTERM (and SIGINT, also when started in the background) end the loop through the finally.
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     hog = None if args.no_hog else start_hog(args.hog_core)
     load = "no load" if hog is None else f"a busy loop pinned to core {args.hog_core}"
     print(f"demo_stress: {args.runs} runs of excavator_demo, {os.cpu_count()} cores, {load}", flush=True)

@@ -93,6 +93,7 @@ ROUND_TRIP_TIMEOUT = 20.0  # s
 # IK's command (a zero command would not show that the simulator listens); then back to the start.
 PROBE = 0.005  # m
 MOVING = 1e-4  # m/s: a cylinder rate in cylinder_lengths that shows the simulator moving
+MOVED = 1e-5  # m: or a cylinder this far from where the simulator starts (the probe moves it ~mm)
 SETTLED = 1e-3  # m: the cycle starts once the bucket is back within this of the path's start
 # The cycle clock advances with the pose stamps but at most this much from one acted-on pose to
 # the next: after a longer gap the IK's and the simulator's command timeouts (0.1 s) stopped the
@@ -153,6 +154,7 @@ class Driver:
     def __init__(self, node: Node, path: BucketPath) -> None:
         self.node, self.path = node, path
         self.probe = PROBE
+        self.active = False  # acts on poses only once every endpoint is matched (see run_cycle)
         self.running = False
         self.clock = CycleClock(MAX_CLOCK_STEP)
         self.delays: list[float] = []  # s from a pose's stamp to the driver receiving it (cycle only)
@@ -186,7 +188,7 @@ class Driver:
         age = (self.node.get_clock().now().nanoseconds - stamp) * 1e-9
         if self.running:
             self.delays.append(age)
-        if age > MAX_POSE_AGE:
+        if age > MAX_POSE_AGE or not self.active:
             self.skipped += self.running
             return
         t = self.clock.tick(stamp) if self.running else 0.0
@@ -258,7 +260,7 @@ def start_processes(output: Path) -> list[tuple[str, subprocess.Popen]]:
         for name in ("excavator_sim", "excavator_forward", "excavator_velocity_ik")
     }
     commands["record"] = [
-        console_script("record"),
+        console_script("mk_record"),
         "-o",
         str(output / "bag"),
         "--overwrite",
@@ -308,9 +310,11 @@ def expected_graph() -> list[tuple[str, str, str]]:
     ]
 
 
-def run_cycle(output: Path, path: BucketPath, timeout: float) -> tuple[str | None, Driver | None]:
+def run_cycle(
+    output: Path, path: BucketPath, timeout: float, at_rest: np.ndarray
+) -> tuple[str | None, Driver | None]:
     """Start everything, wait until the chain answers, drive ``path`` once; (None or what went
-    wrong, the driver)."""
+    wrong, the driver). ``at_rest``: the cylinder lengths the simulator starts at (m)."""
     started = time.monotonic()
     processes = start_processes(output)
     context = rclpy.Context()
@@ -349,8 +353,11 @@ def run_cycle(output: Path, path: BucketPath, timeout: float) -> tuple[str | Non
             seen["command"] |= any(v != 0.0 for v in msg.velocity)
 
         def moved(msg: JointState) -> None:
-            # Only once the IK answered: the simulator moving on the probe's command.
-            seen["motion"] |= seen["command"] and any(abs(v) > MOVING for v in msg.velocity)
+            # Displacement, not only speed: on a slow machine the probe's motion may be over before
+            # this callback first runs. Only a command moves the simulator off its start.
+            seen["motion"] |= any(abs(v) > MOVING for v in msg.velocity) or (
+                len(msg.position) == len(at_rest) and bool(np.max(np.abs(msg.position - at_rest)) > MOVED)
+            )
 
         # The start-up round trip watches the chain's outputs; these go again before the cycle.
         commands = node.create_subscription(JointState, "cylinder_rate_commands", answered, 1)
@@ -385,6 +392,7 @@ def run_cycle(output: Path, path: BucketPath, timeout: float) -> tuple[str | Non
         failure = spin_until(lambda: not graph_missing(), CONNECT_TIMEOUT, lambda: "; ".join(graph_missing()))
         if failure is None:
             say(f"connected: {len(processes)} processes, {len(expected) + len(matches)} endpoints matched")
+            driver.active = True
             # The round trip: a hold target raised by PROBE -> velocity IK (on the simulator's state)
             # -> cylinder_rate_commands -> the simulator moves -> excavator_forward -> bucket_pose.
             failure = spin_until(
@@ -455,7 +463,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     path = digging_cycle(
         np.r_[np.hypot(start_q[0], start_q[1]), np.arctan2(start_q[1], start_q[0]), start_q[2:]]
     )
-    failure, driver = run_cycle(args.output, path, args.timeout)
+    failure, driver = run_cycle(args.output, path, args.timeout, exc.limits.reference[1:])
     if failure is not None:
         print(f"excavator_demo: FAILED: {failure}", file=sys.stderr)
         return 1
