@@ -125,33 +125,6 @@ _ARRAY = SimpleNamespace(
 
 
 @dataclass(frozen=True)
-class Limits:
-    """Stroke ends, swing range and speed limits (SI units), all from the machine file."""
-
-    stroke_min: np.ndarray  # (3,) boom, arm, bucket cylinder minimum length
-    stroke_max: np.ndarray  # (3,)
-    swing_min: float
-    swing_max: float
-    max_cylinder_speed: np.ndarray  # (3,) m/s
-    max_swing_speed: float  # rad/s
-    reference: np.ndarray  # (4,) D of the reference state [theta1, d2, d3, d4]
-
-    @property
-    def d_min(self) -> np.ndarray:
-        """Lower limits of D = [theta1, d2, d3, d4]."""
-        return np.concatenate(([self.swing_min], self.stroke_min))
-
-    @property
-    def d_max(self) -> np.ndarray:
-        return np.concatenate(([self.swing_max], self.stroke_max))
-
-    @property
-    def max_rates(self) -> np.ndarray:
-        """Speed limits of D, [rad/s, m/s, m/s, m/s]."""
-        return np.concatenate(([self.max_swing_speed], self.max_cylinder_speed))
-
-
-@dataclass(frozen=True)
 class _Triangle:
     """A cylinder of length d closing a triangle at a pivot (paper eq. 1).
 
@@ -268,15 +241,7 @@ class Excavator:
         )
         self._pins_local["h_link_pin"] = h_pin
 
-        self.limits = Limits(
-            stroke_min=g.stroke_min,
-            stroke_max=g.stroke_max,
-            swing_min=g.swing_min,
-            swing_max=g.swing_max,
-            max_cylinder_speed=g.max_cylinder_speed,
-            max_swing_speed=g.max_swing_speed,
-            reference=g.reference,
-        )
+        self.limits = g.limits
         # Python floats of the limits with the tolerance applied, for the one-state fast path.
         self._lo = (self.limits.d_min - STROKE_TOLERANCE).tolist()
         self._hi = (self.limits.d_max + STROKE_TOLERANCE).tolist()

@@ -72,6 +72,33 @@ SCHEMA = {
 
 
 @dataclass(frozen=True)
+class Limits:
+    """Stroke ends, swing range and speed limits (SI units), all from the machine file."""
+
+    stroke_min: np.ndarray  # (3,) boom, arm, bucket cylinder minimum length
+    stroke_max: np.ndarray  # (3,)
+    swing_min: float
+    swing_max: float
+    max_cylinder_speed: np.ndarray  # (3,) m/s
+    max_swing_speed: float  # rad/s
+    reference: np.ndarray  # (4,) D of the reference state [theta1, d2, d3, d4]
+
+    @property
+    def d_min(self) -> np.ndarray:
+        """Lower limits of D = [theta1, d2, d3, d4]."""
+        return np.concatenate(([self.swing_min], self.stroke_min))
+
+    @property
+    def d_max(self) -> np.ndarray:
+        return np.concatenate(([self.swing_max], self.stroke_max))
+
+    @property
+    def max_rates(self) -> np.ndarray:
+        """Speed limits of D, [rad/s, m/s, m/s, m/s]."""
+        return np.concatenate(([self.max_swing_speed], self.max_cylinder_speed))
+
+
+@dataclass(frozen=True)
 class Description:
     """One machine's geometry and limits (SI units), as the kinematics reads them.
 
@@ -94,13 +121,7 @@ class Description:
     h_link_pin: tuple[float, float]
     h_link_length: float
     orientations: tuple[int, int, int, int]  # boom, arm, bucket cylinder, H-link
-    stroke_min: np.ndarray  # (3,) boom, arm, bucket cylinder
-    stroke_max: np.ndarray  # (3,)
-    swing_min: float
-    swing_max: float
-    max_cylinder_speed: np.ndarray  # (3,) m/s
-    max_swing_speed: float  # rad/s
-    reference: np.ndarray  # (4,) D of the reference state [theta1, d2, d3, d4]
+    limits: Limits
 
 
 def describe(params: Mapping[str, Any], prefix: str = SECTION) -> Description:
@@ -141,13 +162,15 @@ def describe(params: Mapping[str, Any], prefix: str = SECTION) -> Description:
         h_link_pin=point(params["h_link"]["bucket_pin"]),
         h_link_length=params["h_link"]["length"],
         orientations=(*(c["orientation"] for c in cylinders), params["h_link"]["orientation"]),
-        stroke_min=np.array([c["min_length"] for c in cylinders]),
-        stroke_max=np.array([c["max_length"] for c in cylinders]),
-        swing_min=swing["min_angle"],
-        swing_max=swing["max_angle"],
-        max_cylinder_speed=np.array([c["max_speed"] for c in cylinders]),
-        max_swing_speed=swing["max_speed"],
-        reference=np.array([swing["reference_angle"], *(c["reference_length"] for c in cylinders)]),
+        limits=Limits(
+            stroke_min=np.array([c["min_length"] for c in cylinders]),
+            stroke_max=np.array([c["max_length"] for c in cylinders]),
+            swing_min=swing["min_angle"],
+            swing_max=swing["max_angle"],
+            max_cylinder_speed=np.array([c["max_speed"] for c in cylinders]),
+            max_swing_speed=swing["max_speed"],
+            reference=np.array([swing["reference_angle"], *(c["reference_length"] for c in cylinders)]),
+        ),
     )
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from excavator_kinematics.kinematics import Limits
+from excavator_kinematics.parameters import Limits
 from manipulator_kinematics.params import ConfigError
 
 

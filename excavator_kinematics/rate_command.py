@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from excavator_kinematics.kinematics import Limits
+from excavator_kinematics.parameters import Limits
 
 
 @dataclass(frozen=True)

@@ -6,13 +6,10 @@ given in. The bag hooks are the shared serial-machine ones (``evaluate`` recompu
 tool_twist from joint_states; golden bag test/data/palletizer_forward_golden).
 """
 
-from manipulator_kinematics.bag import analysis, synthetic
-from manipulator_kinematics.registry import Machine
-from manipulator_kinematics.scene import serial_scene
-from manipulator_kinematics.urdf import serial_urdf
+from manipulator_kinematics.serial_machine import serial_machine
 from palletizer_kinematics.kinematics import CONFIG_FILE, SCHEMA, SECTION, Palletizer
 
-MACHINE = Machine(
+MACHINE = serial_machine(
     name="palletizer",
     summary="ABB IRB460-type palletizer (paper 004): single/double parallelogram, closed-form IK in "
     "axis angles, door trajectory, axis 2/3 statics",
@@ -20,15 +17,5 @@ MACHINE = Machine(
     config_file=CONFIG_FILE,
     schema=SCHEMA,
     factory=Palletizer.from_parameters,
-    topics={
-        "joint_states": "sensor_msgs/msg/JointState",
-        "tool_pose": "geometry_msgs/msg/PoseStamped",
-        "tool_twist": "geometry_msgs/msg/TwistStamped",
-    },
-    analyse=analysis.serial,
-    synthesize=synthetic.serial_bag,
-    forward_node="palletizer_forward",
-    # axis angles -> D-H angles (affine); the passive flange joint becomes two mimic joints
-    urdf=lambda model: serial_urdf("palletizer", model, to_chain=model.dh_angles),
-    scene=serial_scene,
+    to_chain=lambda model: model.dh_angles,
 )

@@ -47,7 +47,7 @@ def test_a_node_help_lists_its_parameters_with_defaults_and_topics(monkeypatch: 
     entries = {e.name: e for e in ENTRY_POINTS}
     text = in_process(entries["excavator_forward"], "--help", monkeypatch)[1]
     for line in ("excavator.boom.length = ", "swing_max_age = 0.1", "topics.bucket_pose = 'bucket_pose'",
-                 "qos_depth = 100"):
+                 "qos_depth = 400"):
         assert line in text, line
     server = in_process(entries["tool_changer_ik_server"], "-h", monkeypatch)[1]
     assert "solve_ik" in server and "solve_fk" in server and "base_frame = 'base_link'" in server
