@@ -6,48 +6,20 @@ call; and per target in one batched call of --batch targets) against ``scipy.opt
 yaw error, seeded at the home pose) on the same chain (``Palletizer.fkine``). Both run in this
 process, one after the other, in every round; the ratio is taken per round. Target: >= 50x per call.
 
-scipy is not a dependency of the project: when the venv lacks it, the script re-runs itself in a
-benchmark-only venv (``~/.cache/manipulator_kinematics/bench-scipy-venv``: numpy, scipy, PyYAML,
-created with pip on first use) with the repository on PYTHONPATH (the numpy core needs nothing else).
-
 Run: .venv/bin/python benchmarks/bench_palletizer_ik.py [--calls 300] [--batch 100000] [--rounds 3]
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
-import subprocess
-import sys
 import time
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
-VENV = (
-    Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
-    / "manipulator_kinematics"
-    / "bench-scipy-venv"
-)
+import numpy as np
+from scipy.optimize import least_squares
 
-try:
-    from scipy.optimize import least_squares
-except ImportError:
-    if os.environ.get("MK_BENCH_SCIPY_VENV"):
-        raise
-    if not (VENV / "bin" / "python").exists():
-        print(f"installing numpy, scipy, PyYAML into {VENV} (benchmark only) ...", file=sys.stderr)
-        subprocess.run([sys.executable, "-m", "venv", str(VENV)], check=True)
-        subprocess.run([str(VENV / "bin" / "pip"), "install", "-q", "numpy", "scipy", "pyyaml"], check=True)
-    environment = {**os.environ, "PYTHONPATH": str(REPO), "MK_BENCH_SCIPY_VENV": "1"}
-    sys.exit(
-        subprocess.run([str(VENV / "bin" / "python"), __file__, *sys.argv[1:]], env=environment).returncode
-    )
-
-import numpy as np  # noqa: E402
-
-from manipulator_kinematics.planar import wrap_angle  # noqa: E402
-from palletizer_kinematics.kinematics import Palletizer  # noqa: E402
+from manipulator_kinematics.planar import wrap_angle
+from palletizer_kinematics.kinematics import Palletizer
 
 
 def numerical_ik(model: Palletizer, target: np.ndarray, seed: np.ndarray) -> np.ndarray:

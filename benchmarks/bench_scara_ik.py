@@ -21,10 +21,11 @@ import argparse
 import json
 import math
 import os
-import subprocess
 import sys
 import time
 from pathlib import Path
+
+from peer_venv import run_worker
 
 REPO = Path(__file__).resolve().parent.parent
 CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
@@ -68,27 +69,10 @@ def rtb_worker() -> None:
     json.dump(out, sys.stdout)
 
 
-def run_rtb(job: dict, install: bool) -> tuple[dict | None, str]:
+def run_rtb(job: dict) -> tuple[dict | None, str]:
     """Timings from the Robotics Toolbox, or None and the reason it is unavailable."""
-    python = os.environ.get("MK_RTB_PYTHON") or str(RTB_VENV / "bin" / "python")
-    has_it = Path(python).exists() and subprocess.run(
-        [python, "-c", "import roboticstoolbox"], capture_output=True).returncode == 0
-    if not has_it and install and not os.environ.get("MK_RTB_PYTHON"):
-        print(f"installing {RTB_PACKAGE} into {RTB_VENV} (benchmark only) ...", file=sys.stderr)
-        try:
-            subprocess.run([sys.executable, "-m", "venv", str(RTB_VENV)], check=True, capture_output=True)
-            subprocess.run([str(RTB_VENV / "bin" / "pip"), "install", "-q", RTB_PACKAGE], check=True,
-                           capture_output=True, timeout=900)
-            has_it = True
-        except (subprocess.SubprocessError, OSError) as error:
-            return None, f"{RTB_PACKAGE} could not be installed: {error}"
-    if not has_it:
-        return None, f"{RTB_PACKAGE} not available at {python}"
-    done = subprocess.run([python, __file__, "--rtb-worker"], input=json.dumps(job), capture_output=True,
-                          text=True, timeout=1800)
-    if done.returncode != 0:
-        return None, f"Robotics Toolbox worker failed: {done.stderr.strip().splitlines()[-1:]}"
-    return json.loads(done.stdout), ""
+    return run_worker(__file__, "--rtb-worker", job, (RTB_PACKAGE,), "import roboticstoolbox", RTB_VENV,
+                      "MK_RTB_PYTHON", timeout=1800)
 
 
 # ---- the project's side -------------------------------------------------------------------------
@@ -166,7 +150,7 @@ def main() -> None:
             "targets": np.column_stack([p, phi]).tolist(),
             "seeds": seeds.tolist(),
         }
-        measured, why = run_rtb(job, install=True)
+        measured, why = run_rtb(job)
         if measured is None:
             rows.append(("Robotics Toolbox ikine_LM", "-", why, "-"))
         else:

@@ -20,10 +20,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import time
 from pathlib import Path
+
+from peer_venv import run_worker
 
 REPO = Path(__file__).resolve().parent.parent
 VENV = Path(os.environ.get("MK_BENCH_VENV", "/tmp/tool_changer_bench_venv"))
@@ -119,26 +120,8 @@ def peer_worker() -> None:
 
 
 def run_peers(job: dict) -> tuple[dict | None, str]:
-    python = os.environ.get("MK_BENCH_PYTHON") or str(VENV / "bin" / "python")
-    check = "import roboticstoolbox, pinocchio"
-    ready = Path(python).exists() and subprocess.run([python, "-c", check],
-                                                     capture_output=True).returncode == 0
-    if not ready and not os.environ.get("MK_BENCH_PYTHON"):
-        print(f"installing {', '.join(PACKAGES)} into {VENV} (benchmark only) ...", file=sys.stderr)
-        try:
-            subprocess.run([sys.executable, "-m", "venv", str(VENV)], check=True, capture_output=True)
-            subprocess.run([str(VENV / "bin" / "pip"), "install", "-q", *PACKAGES], check=True,
-                           capture_output=True, timeout=1800)
-            ready = True
-        except (subprocess.SubprocessError, OSError) as error:
-            return None, f"{', '.join(PACKAGES)} could not be installed: {error}"
-    if not ready:
-        return None, f"roboticstoolbox / pinocchio not available at {python}"
-    done = subprocess.run([python, __file__, "--peer-worker"], input=json.dumps(job), capture_output=True,
-                          text=True, timeout=3600)
-    if done.returncode != 0:
-        return None, f"peer worker failed: {done.stderr.strip().splitlines()[-1:]}"
-    return json.loads(done.stdout), ""
+    return run_worker(__file__, "--peer-worker", job, PACKAGES, "import roboticstoolbox, pinocchio", VENV,
+                      "MK_BENCH_PYTHON", timeout=3600)
 
 
 # ---- the project's side ----------------------------------------------------------------------------
