@@ -79,7 +79,7 @@ class ForwardKinematics(MachineNode):
         qos = QoSProfile(depth=settings["qos_depth"], reliability=ReliabilityPolicy.RELIABLE)
         topic = settings["topics"]
         # Outputs go out as bytes of a fixed layout: building them as rclpy messages would cost
-        # more than the kinematics (see manipulator_kinematics.packed).
+        # more than the kinematics (see manipulator_kinematics.codec.packed).
         header = Header(frame_id=self.frame)
         self.pose = PackedMessage(PoseStamped(header=header), STAMPED)
         self.twist = PackedMessage(TwistStamped(header=header), STAMPED)
