@@ -67,6 +67,16 @@ def ours(patterns: list[str]) -> set[str]:
     return {p.name for p in _TMP.iterdir() if any(fnmatch.fnmatchcase(p.name, q) for q in patterns)}
 
 
+@pytest.fixture(scope="module")
+def probe(request: pytest.FixtureRequest) -> Iterator[object]:
+    """The ROS test module's own node and executor (ros_harness.Probe), named after the module."""
+    from ros_harness import Probe  # ROS is imported by the ROS tests only
+
+    probe = Probe(f"{request.module.__name__.rsplit('.', 1)[-1]}_probe")
+    yield probe
+    probe.close()
+
+
 @pytest.fixture(scope="session", autouse=True)
 def no_files_left_behind() -> Iterator[None]:
     patterns = our_patterns()

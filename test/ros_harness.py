@@ -8,7 +8,7 @@ import signal
 import subprocess
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Self
 
@@ -18,6 +18,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
 from manipulator_kinematics.node_util import console_script
+from manipulator_kinematics_interfaces.srv import SolveFK, SolveIK
 
 REPO = Path(__file__).resolve().parent.parent
 #: Set by conftest.py to a directory of this test run, removed (and checked empty) at its end.
@@ -109,6 +110,30 @@ class NodeProcess:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+
+#: The IK/FK services every serial machine's IK server offers.
+IK_FK = ((SolveIK, "solve_ik"), (SolveFK, "solve_fk"))
+
+
+def start_with_services(
+    probe: Probe, exe: str, *ros_args: str, services: Sequence[tuple[type, str]], timeout: float,
+    namespace: str = "",
+) -> tuple[NodeProcess, list[Any]]:
+    """Start ``exe`` and wait until it serves every (type, name) of ``services`` to the probe;
+    the process and one client per service. A node that dies or never serves is stopped and the
+    failure shows its log."""
+    process = NodeProcess(exe, *ros_args)
+    clients = [probe.node.create_client(kind, f"{namespace}/{name}" if namespace else name)
+               for kind, name in services]
+    try:
+        probe.wait_until(lambda: all(c.service_is_ready() for c in clients) or not process.alive(), timeout,
+                         " and ".join(name for _, name in services))
+        assert process.alive(), process.log()
+    except BaseException:
+        print(process.stop())
+        raise
+    return process, clients
 
 
 class Probe:

@@ -117,13 +117,6 @@ def report(what: str, **counts: int) -> None:
 
 
 @pytest.fixture(scope="module")
-def probe() -> Iterator[Probe]:
-    p = Probe("fuzz_probe")
-    yield p
-    p.close()
-
-
-@pytest.fixture(scope="module")
 def tmp() -> Iterator[Path]:
     with tempfile.TemporaryDirectory(prefix="fuzz_nodes-") as directory:
         yield Path(directory)

@@ -4,10 +4,8 @@ serial machine (joint_states); a command line without a machine file is refused 
 from __future__ import annotations
 
 import subprocess
-from collections.abc import Iterator
 
 import numpy as np
-import pytest
 from builtin_interfaces.msg import Time
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_harness import NodeProcess, Probe
@@ -22,13 +20,6 @@ from manipulator_kinematics.scene import solids
 
 TIMEOUT = 20.0
 STAMP = Time(sec=1_700_000_123, nanosec=456_000_000)
-
-
-@pytest.fixture(scope="module")
-def probe() -> Iterator[Probe]:
-    probe = Probe("markers_test_probe")
-    yield probe
-    probe.close()
 
 
 def markers_for(probe: Probe, config: str, messages: dict[str, JointState]) -> MarkerArray:

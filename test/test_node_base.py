@@ -3,7 +3,6 @@ parameters, across processes with the SCARA's generic nodes (any registered mach
 from __future__ import annotations
 
 import subprocess
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -19,13 +18,6 @@ from manipulator_kinematics.params import config_path, load_parameters
 
 TIMEOUT = 15.0
 SCARA = load_parameters(config_path("scara.yaml"))["scara"]
-
-
-@pytest.fixture(scope="module")
-def probe() -> Iterator[Probe]:
-    probe = Probe("node_base_probe")
-    yield probe
-    probe.close()
 
 
 def machine_file(tmp_path: Path, section: dict, name: str = "machine.yaml") -> str:

@@ -8,7 +8,7 @@ import os
 import signal
 import subprocess
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -71,13 +71,6 @@ def build():
 
 sys.exit(run(build, sys.argv))
 """
-
-
-@pytest.fixture(scope="module")
-def probe() -> Iterator[Probe]:
-    probe = Probe("node_shutdown_probe")
-    yield probe
-    probe.close()
 
 
 def wait_for_log(probe: Probe, process: subprocess.Popen, log: Path, text: str) -> None:

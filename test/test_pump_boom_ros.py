@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Point, PoseStamped, TwistStamped
-from ros_harness import NodeProcess, Probe
+from ros_harness import IK_FK, NodeProcess, Probe, start_with_services
 from sensor_msgs.msg import JointState
 
 from manipulator_kinematics.model import matrix_quaternion
@@ -34,22 +34,12 @@ def boom() -> PumpBoom:
     return PumpBoom.default()
 
 
-@pytest.fixture(scope="module")
-def probe() -> Iterator[Probe]:
-    probe = Probe("pump_boom_test_probe")
-    yield probe
-    probe.close()
-
-
 def start_server(
     probe: Probe, *ros_args: str, namespace: str = ""
 ) -> tuple[NodeProcess, object, object, object]:
-    process = NodeProcess("pump_boom_ik_server", "--params-file", PARAMS, *ros_args)
-    clients = [probe.node.create_client(kind, f"{namespace}/{name}" if namespace else name)
-               for kind, name in ((SolveIK, "solve_ik"), (SolveFK, "solve_fk"), (PlanPath, "plan_path"))]
-    probe.wait_until(lambda: all(c.service_is_ready() for c in clients) or not process.alive(), TIMEOUT,
-                     "solve_ik, solve_fk and plan_path")
-    assert process.alive(), process.log()
+    process, clients = start_with_services(probe, "pump_boom_ik_server", "--params-file", PARAMS, *ros_args,
+                                           services=(*IK_FK, (PlanPath, "plan_path")), timeout=TIMEOUT,
+                                           namespace=namespace)
     return process, *clients
 
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, TwistStamped
-from ros_harness import NodeProcess, Probe
+from ros_harness import IK_FK, NodeProcess, Probe, start_with_services
 from sensor_msgs.msg import JointState
 
 from manipulator_kinematics.params import config_path
@@ -30,21 +30,10 @@ def scara() -> Scara:
 
 
 @pytest.fixture(scope="module")
-def probe() -> Iterator[Probe]:
-    probe = Probe("scara_test_probe")
-    yield probe
-    probe.close()
-
-
-@pytest.fixture(scope="module")
 def server(probe: Probe) -> Iterator[tuple[NodeProcess, object, object]]:
-    process = NodeProcess("scara_ik_server", "--params-file", PARAMS)
-    ik = probe.node.create_client(SolveIK, "solve_ik")
-    fk = probe.node.create_client(SolveFK, "solve_fk")
+    process, (ik, fk) = start_with_services(probe, "scara_ik_server", "--params-file", PARAMS, services=IK_FK,
+                                            timeout=TIMEOUT)
     try:
-        probe.wait_until(lambda: (ik.service_is_ready() and fk.service_is_ready()) or not process.alive(),
-                         TIMEOUT, "solve_ik and solve_fk")
-        assert process.alive(), process.log()
         yield process, ik, fk
     finally:
         log = process.stop()

@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 
 import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, TwistStamped
-from ros_harness import NodeProcess, Probe
+from ros_harness import IK_FK, NodeProcess, Probe, start_with_services
 from sensor_msgs.msg import JointState
 
 from manipulator_kinematics.model import matrix_quaternion, pose_matrix
@@ -29,13 +28,6 @@ def arm() -> ToolChanger:
     return ToolChanger.default()
 
 
-@pytest.fixture(scope="module")
-def probe() -> Iterator[Probe]:
-    probe = Probe("tool_changer_test_probe")
-    yield probe
-    probe.close()
-
-
 def ik_request(T: np.ndarray, names: tuple[str, ...], seed=None, branch: str = "") -> SolveIK.Request:
     request = SolveIK.Request(branch=branch, use_orientation=True)
     p, o = request.target.pose.position, request.target.pose.orientation
@@ -47,14 +39,10 @@ def ik_request(T: np.ndarray, names: tuple[str, ...], seed=None, branch: str = "
 
 
 def test_ik_and_fk_services_round_trip(probe: Probe, arm: ToolChanger) -> None:
-    process = NodeProcess("tool_changer_ik_server", "--params-file", PARAMS)
-    ik = probe.node.create_client(SolveIK, "solve_ik")
-    fk = probe.node.create_client(SolveFK, "solve_fk")
+    process, (ik, fk) = start_with_services(probe, "tool_changer_ik_server", "--params-file", PARAMS,
+                                            services=IK_FK, timeout=TIMEOUT)
     names = arm.joint_names
     try:
-        probe.wait_until(lambda: (ik.service_is_ready() and fk.service_is_ready()) or not process.alive(),
-                         TIMEOUT, "solve_ik and solve_fk")
-        assert process.alive(), process.log()
         # The note's verification pose: one valid solution, the generating vector.
         response = probe.call(ik, ik_request(arm.fkine(PAPER_Q), names), TIMEOUT)
         assert response.success and response.error_code.val == Codes.SUCCESS, response.message
