@@ -344,6 +344,26 @@ def parts_clip(x: Any, low: float = -1.0, high: float = 1.0) -> Any:
     return np.clip(x, low, high) if isinstance(x, np.ndarray) else min(max(x, low), high)
 
 
+def parts_pose_checks(pose: Sequence, rotation_tol: float = 1e-6,
+                      bottom_tol: float = 1e-12) -> tuple[Any, Any]:
+    """(finite, rigid) of a pose's 16 row-major parts (see evaluate_parts): every entry finite; the
+    rotation part orthonormal (R^T R = I to ``rotation_tol`` entry by entry) and proper (det > 0)
+    and the bottom row [0, 0, 0, 1] to ``bottom_tol`` (sum of the deviations)."""
+    nx, ox, ax, px, ny, oy, ay, py, nz, oz, az, pz, b0, b1, b2, b3 = pose
+    bottom = abs(b0) + abs(b1) + abs(b2) + abs(b3 - 1.0)
+    finite = (abs(nx) + abs(ox) + abs(ax) + abs(ny) + abs(oy) + abs(ay) + abs(nz) + abs(oz) + abs(az)
+              + abs(px) + abs(py) + abs(pz) + bottom) < math.inf
+    rigid = ((abs(nx * nx + ny * ny + nz * nz - 1.0) < rotation_tol)
+             & (abs(ox * ox + oy * oy + oz * oz - 1.0) < rotation_tol)
+             & (abs(ax * ax + ay * ay + az * az - 1.0) < rotation_tol)
+             & (abs(nx * ox + ny * oy + nz * oz) < rotation_tol)
+             & (abs(nx * ax + ny * ay + nz * az) < rotation_tol)
+             & (abs(ox * ax + oy * ay + oz * az) < rotation_tol)
+             & (nx * (oy * az - oz * ay) + ny * (oz * ax - ox * az) + nz * (ox * ay - oy * ax) > 0.0)
+             & (bottom < bottom_tol))
+    return finite, rigid
+
+
 @functools.cache
 def _packer(count: int) -> struct.Struct:
     return struct.Struct(f"{count}d")

@@ -22,13 +22,15 @@ TCP frame x6 = (cos yaw, sin yaw, 0), z6 = (0, 0, -1).
 Inverse kinematics, eqs. (3)-(8), every solution:
 
 * eq. (3): theta1 = atan2(py, px) ("front"), and theta1 + 180 deg ("back", the arm reaching over
-  axis 1: geometrically valid, outside the catalogue's A2 range for almost every target);
+  axis 1: geometrically valid, outside the catalogue's A2 range for almost every target); with
+  the TCP on axis 1 theta1 is free and taken as 0;
 * eq. (4): theta5 = theta1 - atan2(ny, nx); the flange range exceeds 360 deg, so both turns
   (|theta5| <= 180 deg, and the one 360 deg away: suffix ``_outer``) are candidates;
 * eqs. (5)-(6): with the wrist point (frame {4}) at X = rho - a1 - a4, Z = pz + d6 - d1 from axis 2
-  (rho = px cos theta1 + py sin theta1), c3 = (X^2 + Z^2 - a2^2 - a3^2) / (2 a2 a3),
-  theta3 = atan2(+-sqrt(1 - c3^2), c3): ``elbow_up`` (0 <= theta3 <= 180 deg, the home pose's
-  branch: the elbow above the line from axis 2 to the wrist) and ``elbow_down``;
+  (rho = px cos theta1 + py sin theta1 = +-r, r the TCP's distance from axis 1),
+  c3 = (X^2 + Z^2 - a2^2 - a3^2) / (2 a2 a3), theta3 = atan2(+-sqrt(1 - c3^2), c3): ``elbow_up``
+  (0 <= theta3 <= 180 deg, the home pose's branch: the elbow above the line from axis 2 to the
+  wrist) and ``elbow_down``;
 * eqs. (7)-(8): (a3 s3) c2 + (a3 c3 + a2) s2 = l2 with l2 = d1 - d6 - pz, solved as
   a cos + b sin = c: theta2 = atan2(b, a) + atan2(+-sqrt(a^2 + b^2 - c^2), c). Here
   a^2 + b^2 - c^2 = X^2, and the horizontal equation b c2 - a s2 = X fixes the sign: the root is
@@ -51,13 +53,22 @@ forward, A3 > 0 upper arm tipped down:
 The flange is called axis 6 as in ABB's catalogue (the paper's "axis 5"). A configuration is
 singular when |sin theta3| is below ``singular_elbow`` (arm stretched or folded) or the TCP is
 within ``singular_radius`` of axis 1 (theta1 undetermined): the 4x4 Jacobian of (x, y, z, yaw)
-has det = -r a2 a3 sin(theta3), r the TCP's distance from axis 1.
+has det = -r a2 a3 sin(theta3).
+
+Speed (benchmarks/bench_palletizer_ik.py): the IK runs on scalar parts, Python floats for one
+target and (N,) arrays for a batch (:func:`evaluate_parts`, one code path), every angle kept as a
+(sine, cosine)-like pair until one numpy arctan2 over all of them, so one target and a batch give
+the same bits (the math and numpy arctan2 differ in the last bit). numpy on the (8, 4) candidate
+arrays of one target would cost several times the arithmetic in per-call overhead. Returned
+angles A1..A3 and theta1..theta3 lie in [-pi, pi], the flange in [-2 pi, 2 pi].
 """
 
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from contextlib import nullcontext
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -67,16 +78,25 @@ from numpy.typing import ArrayLike
 
 from manipulator_kinematics.config import Names, Number, Numbers, Text, require, validate
 from manipulator_kinematics.model import (
+    TIE_TOLERANCE,
     IKSolutions,
     IKStatus,
     RequestError,
     describe_limits,
-    limit_status,
-    select,
 )
 from manipulator_kinematics.params import config_path, load_parameters
 from manipulator_kinematics.planar import wrap_angle
-from manipulator_kinematics.serial_chain import JointLimits, SerialChain, revolute, transl
+from manipulator_kinematics.serial_chain import (
+    JointLimits,
+    SerialChain,
+    evaluate_parts,
+    parts_clip,
+    parts_pose_checks,
+    parts_sqrt,
+    parts_where,
+    revolute,
+    transl,
+)
 from palletizer_kinematics.statics import MASS_SCHEMA, MassModel
 
 SECTION = "palletizer"
@@ -100,13 +120,15 @@ AXIS_MATRIX = {
 }
 #: Values this close (rad) outside a limit count as on it.
 LIMIT_TOL = 1e-10
-# Plain ints for array work (an IntEnum member costs a lookup and a conversion per use).
-_SUCCESS, _SINGULAR, _UNREACHABLE, _INVALID = (
-    int(s) for s in (IKStatus.SUCCESS, IKStatus.SINGULAR, IKStatus.UNREACHABLE, IKStatus.INVALID)
-)
-_HOME = np.array([b.startswith(HOME_BRANCH) for b in BRANCHES])
-_BOTTOM_ROW = np.array([0.0, 0.0, 0.0, 1.0])
-_EYE3 = np.eye(3)
+#: A target's rotation part is a rotation when R^T R = I to this, entry by entry, and det R > 0 ...
+ROTATION_TOL = 1e-6
+#: ... and its bottom row is [0, 0, 0, 1] to this (sum of the deviations).
+BOTTOM_TOL = 1e-12
+#: |c3| of eq. (5) up to 1 + this is reachable (the stretched or folded arm, to round-off).
+REACH_TOL = 1e-12
+# Plain ints for the scalar parts (an IntEnum member costs a lookup and a conversion per use).
+_SUCCESS, _SINGULAR, _JOINT_LIMITS, _UNREACHABLE, _INVALID = (int(s) for s in IKStatus)
+_ALL_BRANCHES = (True,) * len(BRANCHES)
 _ANGLE = Number(min=-2 * math.tau, max=2 * math.tau, unit="rad")
 
 #: The ``palletizer:`` section of a parameters file (manipulator_kinematics.config).
@@ -198,6 +220,12 @@ class Palletizer:
         self.singular_radius = float(singular_radius)
         self.tilt_tolerance = float(tilt_tolerance)
         self._to_dh = np.linalg.inv(AXIS_MATRIX[self.variant])
+        # Plain floats for the scalar parts of the IK (numpy scalars cost more than the arithmetic).
+        self._lengths = tuple(float(v) for v in (geometry.a1, geometry.a2, geometry.a3, geometry.a4,
+                                                 geometry.d1, geometry.d6))
+        self._bounds = tuple(float(v) for pair in zip(limits.lower - LIMIT_TOL, limits.upper + LIMIT_TOL,
+                                                      strict=True) for v in pair)
+        self._lean_min = math.cos(self.tilt_tolerance)  # cos of the largest tilt taken
 
     # ---- construction -------------------------------------------------------------------------
     @classmethod
@@ -211,7 +239,7 @@ class Palletizer:
                 f"{prefix}.joint_min[{i}]",
                 f"{lower[i]} must be below {prefix}.joint_max[{i}] = {upper[i]} ({names[i]})",
             )
-        # The IK returns A1..A3 in [-pi, pi) and the flange in [-2 pi, 2 pi): wider limits would
+        # The IK returns A1..A3 in [-pi, pi] and the flange in [-2 pi, 2 pi]: wider limits would
         # hide solutions.
         for i in range(3):
             for key, value in (("joint_min", lower[i]), ("joint_max", upper[i])):
@@ -331,38 +359,22 @@ class Palletizer:
     def ik_dh(self, position: ArrayLike, yaw: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Every D-H solution for TCP positions (..., 3) and flange yaws (...,), eqs. (3)-(8).
 
-        Returns ``theta`` (..., 8, 4) in :data:`BRANCHES` order (theta1..theta3 in [-pi, pi),
-        theta5 in [-2 pi, 2 pi); NaN where the arm cannot reach) and ``c3`` (..., 2) of eq. (5)
+        Returns ``theta`` (..., 8, 4) in :data:`BRANCHES` order (theta1..theta3 in [-pi, pi],
+        theta5 in [-2 pi, 2 pi]; NaN where the arm cannot reach) and ``c3`` (..., 2) of eq. (5)
         for the front and back arm (|c3| > 1: out of reach).
         """
         p = np.asarray(position, dtype=float)
         yaw = np.asarray(yaw, dtype=float)
-        g = self.geometry
-        front = np.arctan2(p[..., 1], p[..., 0])  # eq. (3)
-        theta1 = np.stack([front, wrap_angle(front + math.pi)], axis=-1)  # (..., 2)
-        rho = p[..., 0, None] * np.cos(theta1) + p[..., 1, None] * np.sin(theta1)
-        x = rho - g.a1 - g.a4
-        l2 = (g.d1 - g.d6 - p[..., 2])[..., None] * np.ones_like(x)
-        c3 = (x * x + l2 * l2 - g.a2**2 - g.a3**2) / (2.0 * g.a2 * g.a3)  # eq. (5)
-        with np.errstate(invalid="ignore"):
-            reach = np.abs(c3) <= 1.0 + 1e-12
-            s3 = np.sqrt(np.maximum(1.0 - c3 * c3, 0.0))
-        s3 = np.stack([s3, -s3], axis=-1)  # (..., 2 arms, 2 elbows): elbow up first
-        c3e = np.clip(c3, -1.0, 1.0)[..., None] * np.ones_like(s3)
-        theta3 = np.arctan2(s3, c3e)  # eq. (6)
-        a = g.a3 * s3
-        b = g.a3 * c3e + g.a2
-        theta2 = wrap_angle(np.arctan2(b, a) + np.arctan2(-x, l2)[..., None])  # eqs. (7)-(8)
-        theta5 = wrap_angle(theta1 - yaw[..., None])  # eq. (4)
-        outer = theta5 - np.copysign(math.tau, theta5)
-        shape = s3.shape + (2,)  # (..., arm, elbow, turn)
-        out = np.empty(shape + (4,))
-        out[..., 0] = theta1[..., None, None]
-        out[..., 1] = theta2[..., None]
-        out[..., 2] = theta3[..., None]
-        out[..., 3] = np.stack([theta5, outer], axis=-1)[..., None, :]
-        out[~np.broadcast_to(reach[..., None, None], shape)] = np.nan
-        return out.reshape(out.shape[:-4] + (8, 4)), c3
+        shape = np.broadcast_shapes(p.shape[:-1], yaw.shape)
+        pose = np.zeros(shape + (16,))
+        pose[..., 3:12:4] = p
+        pose[..., 15] = 1.0
+        turn = np.stack([np.cos(yaw), np.sin(yaw)], axis=-1)
+        angles, extra = self._candidates(pose, turn)
+        theta = np.repeat(angles[..., :4], 2, axis=-2)
+        theta[..., 1::2, 3] -= np.copysign(math.tau, theta[..., 1::2, 3])
+        theta[~np.repeat(np.abs(extra[..., 4:6]) <= 1.0 + REACH_TOL, 4, axis=-1)] = np.nan
+        return theta, extra[..., 4:6]
 
     def solve_ik(
         self,
@@ -386,64 +398,160 @@ class Palletizer:
         target = np.asarray(target, dtype=float)
         if target.ndim < 2 or target.shape[-2:] != (4, 4):
             raise RequestError(f"targets must have shape (..., 4, 4), got {target.shape}", IKStatus.INVALID)
+        shape = target.shape[:-2]
+        pose = target.reshape(shape + (16,))
         if seed is not None:
             seed = np.asarray(seed, dtype=float)
             if seed.ndim == 0 or seed.shape[-1] != 4 or not np.all(np.isfinite(seed)):
                 raise RequestError(f"seed must be 4 finite angles, got {seed.tolist()}", IKStatus.INVALID)
-        rotation, position = target[..., :3, :3], target[..., :3, 3]
-        with np.errstate(invalid="ignore"):
-            finite = np.all(np.isfinite(target), axis=(-2, -1))
-            orthonormal = np.all(
-                np.abs(rotation @ np.swapaxes(rotation, -1, -2) - _EYE3) < 1e-6, axis=(-2, -1)
-            )
-            proper = np.abs(target[..., 3, :] - _BOTTOM_ROW).max(axis=-1) < 1e-12
-            invalid = (
-                ~finite
-                | (use_orientation & ~(orthonormal & proper))
-                | ~np.all(np.isfinite(position), axis=-1)
-            )
-            if use_orientation:
-                yaw = np.arctan2(rotation[..., 1, 0], rotation[..., 0, 0])
-                tilt = np.arccos(np.clip(-rotation[..., 2, 2], -1.0, 1.0))
-            else:
-                yaw = (
-                    np.zeros(position.shape[:-1])
-                    if seed is None
-                    else np.broadcast_to(seed[..., 0] - seed[..., 3], position.shape[:-1])
-                )
-                tilt = np.zeros(position.shape[:-1])
-        tilted = tilt > self.tilt_tolerance
-        theta, c3 = self.ik_dh(np.where(invalid[..., None], 0.0, position), np.where(invalid, 0.0, yaw))
-        axis = self.axis_angles(theta)
-        axis[..., :3] = wrap_angle(axis[..., :3])
-        status = limit_status(axis, self._limits, LIMIT_TOL)
-        status[(status == _SUCCESS) & self.singular(theta)] = _SINGULAR
-        status[tilted | invalid] = _UNREACHABLE
-        status[invalid] = _INVALID
-        q = axis if mode == "axis" else theta
+            if seed.shape != shape + (4,):
+                seed = np.broadcast_to(seed, shape + (4,))
+        if use_orientation:
+            turn = pose[..., 0:5:4]  # (R00, R10): the TCP x axis, eq. (2)'s flange yaw
+        else:
+            yaw = np.zeros(shape) if seed is None else seed[..., 0] - seed[..., 3]
+            turn = np.stack([np.cos(yaw), np.sin(yaw)], axis=-1)
+        judge = functools.partial(self._judge, allowed=allowed, use_orientation=use_orientation, mode=mode)
+        if shape:
+            angles, extra = self._candidates(pose, turn)
+            parts = [angles.reshape(shape + (24,)), extra] + ([] if seed is None else [seed])
+            q, status, rule = evaluate_parts(judge, [_rows(part) for part in parts], ((8, 4), (8,), (3,)))
+            q, status, rule = (q.reshape(shape + (8, 4)), status.reshape(shape + (8,)),
+                               rule.reshape(shape + (3,)))
+        else:
+            # One target: the parts as floats straight through (evaluate_parts' packing per stage
+            # would cost a third of the call), the arctan2 still numpy's, so the bits are the batch's.
+            y, x, extra = self._closed_form(pose.tolist(), turn.tolist())
+            angles = np.arctan2(y, x).tolist()
+            q, status, rule = judge(angles, extra) if seed is None else judge(angles, extra, seed.tolist())
+            q, status, rule = np.array(q).reshape(8, 4), np.array(status), np.array(rule, dtype=float)
+            extra = np.array(extra, dtype=float)
         q[status >= _UNREACHABLE] = np.nan
-        masked = np.where(allowed, status, _UNREACHABLE)
-        first, first_tie = select(q, np.where(_HOME, masked, _UNREACHABLE), seed=seed)
-        other, other_tie = select(q, masked, seed=seed)
-        selected = np.where(first >= 0, first, other)
-        tie = np.where(first >= 0, first_tie, other_tie)
         context = {
-            "tilt": tilt,
-            "c3": c3,
+            "lean": extra[..., 2],
+            "c3": extra[..., 4:6],
+            "oriented": use_orientation,
             "mode": mode,
             "seeded": seed is not None,
             "branch": branch,
-            "axis": axis,
-            "home": first >= 0,
+            "home": rule[..., 2] != 0.0,
         }
         return IKSolutions(
             q=q,
-            status=status,
+            status=status.astype(np.int8),
             branches=BRANCHES,
-            selected=selected,
-            tie=tie,
+            selected=rule[..., 0].astype(np.intp),
+            tie=rule[..., 1] != 0.0,
             explain=lambda solutions, index: self._explain(solutions, index, context),
         )
+
+    def _candidates(self, pose: np.ndarray, turn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_closed_form` of poses (..., 16) and yaw pairs (..., 2): ``angles`` (..., 4, 6)
+        (one arctan2 over every pair) and ``extra`` (..., 8)."""
+        shape = pose.shape[:-1]
+        flat = [_rows(pose), _rows(turn)]
+        # Junk from targets that are not poses is flagged, not raised (floats never warn).
+        with np.errstate(invalid="ignore", over="ignore") if shape else nullcontext():
+            y, x, extra = evaluate_parts(self._closed_form, flat, ((4, 6), (4, 6), (8,)))
+            angles = np.arctan2(y, x)
+        return angles.reshape(shape + (4, 6)), extra.reshape(shape + (8,))
+
+    def _closed_form(self, pose: Sequence, turn: Sequence) -> tuple[list, list, list]:
+        """Eqs. (3)-(8) on scalar parts (floats for one target, (N,) arrays for a batch:
+        :func:`evaluate_parts`), every angle as a pair (y, x) for one arctan2 afterwards: sums of
+        angles are products of pairs, so no trigonometry runs here and one target and a batch give
+        the same bits.
+
+        ``pose`` the 16 entries of the TCP pose, row-major; ``turn`` (cos, sin) of the flange yaw
+        times any positive number. Returns y (32) and x (32): per configuration front/back arm x
+        elbow up/down, [theta1, theta2, theta3, theta5, A2, A3 (single), A3 (double), A3 of the
+        configured variant]; and [finite, rigid, cos(tilt), r, c3 front, c3 back, |sin theta3|
+        front, back] with r the TCP's distance from axis 1.
+        """
+        px, py, az, pz = pose[3], pose[7], pose[10], pose[11]
+        cy, sy = turn
+        a1, a2, a3, a4, d1, d6 = self._lengths
+        finite, rigid = parts_pose_checks(pose, ROTATION_TOL, BOTTOM_TOL)
+        # eq. (3): theta1 = atan2(py, px); on axis 1 (r = 0) theta1 is free: 0 by rule.
+        r = parts_sqrt(px * px + py * py)
+        on_axis = r == 0.0
+        c1, s1 = parts_where(on_axis, 1.0, px), parts_where(on_axis, 0.0, py)
+        l2 = d1 - d6 - pz  # eq. (7)'s right-hand side
+        y, x, c3s, s3s = [], [], [], []
+        for arm in (1.0, -1.0):  # front, back (theta1 + pi: the signed radius rho = -r)
+            c1k, s1k = arm * c1, arm * s1
+            wrist = arm * r - a1 - a4  # X of the wrist point from axis 2
+            c3 = (wrist * wrist + l2 * l2 - a2 * a2 - a3 * a3) / (2.0 * a2 * a3)  # eq. (5)
+            c3e = parts_clip(c3)
+            s3 = parts_sqrt(1.0 - c3e * c3e)
+            c3s.append(c3)
+            s3s.append(s3)
+            # eq. (4): theta5 = theta1 - yaw
+            y5, x5 = s1k * cy - c1k * sy, c1k * cy + s1k * sy
+            for elbow in (1.0, -1.0):  # up (the home pose's branch), down
+                s = elbow * s3  # eq. (6)
+                # eqs. (7)-(8): theta2 = atan2(b, a) + atan2(-X, l2), a = a3 s3, b = a3 c3 + a2
+                a, b = a3 * s, a3 * c3e + a2
+                y2, x2 = b * l2 - a * wrist, a * l2 + b * wrist
+                # A2 = theta2 + 90 deg; A3 = theta3 - 90 deg (single) or theta2 + theta3 (double).
+                if self.variant == "double":
+                    y3, x3 = y2 * c3e + x2 * s, x2 * c3e - y2 * s
+                else:
+                    y3, x3 = -c3e, s
+                y += [s1k, y2, s, y5, x2, y3]
+                x += [c1k, x2, c3e, x5, -y2, x3]
+        return y, x, [finite, rigid, -az, r, *c3s, *s3s]
+
+    def _judge(self, angles: Sequence, extra: Sequence, seed: Sequence | None = None, *,
+               allowed: tuple[bool, ...], use_orientation: bool, mode: str) -> tuple[list, list, list]:
+        """Statuses and the selection rule (module docstring) on scalar parts, like
+        :meth:`_closed_form`: one target in floats, a batch in arrays, the same bits.
+
+        ``angles`` and ``extra`` from :meth:`_closed_form` (after the arctan2); ``seed`` 4 of the
+        ``mode``'s angles or None; ``allowed`` the 8 candidates a requested branch leaves.
+        Returns the 8 candidates' angles, their statuses and [selected, tie, the home elbow branch
+        was selected].
+        """
+        finite, rigid, lean, r, *arms = extra
+        invalid = (finite == 0.0) | ((rigid == 0.0) if use_orientation else False)
+        blocked = invalid | ((lean < self._lean_min) if use_orientation else False)
+        failure = _UNREACHABLE + invalid * (_INVALID - _UNREACHABLE)
+        bounds = self._bounds
+        candidates, status = [], []
+        # Statuses by arithmetic on booleans (kind = JOINT_LIMITS - inside (JOINT_LIMITS - singular)
+        # is SUCCESS, SINGULAR or JOINT_LIMITS): parts_where per candidate would cost more than the
+        # rest of the IK for one target.
+        for config in range(4):
+            arm = config // 2
+            reach = (abs(arms[arm]) <= 1.0 + REACH_TOL) & (blocked == 0)
+            singular = (arms[2 + arm] < self.singular_elbow) | (r < self.singular_radius)
+            theta1, theta2, theta3, a6, a2, a3 = angles[6 * config : 6 * config + 6]
+            a1 = theta1
+            base = ((a1 >= bounds[0]) & (a1 <= bounds[1]) & (a2 >= bounds[2]) & (a2 <= bounds[3])
+                    & (a3 >= bounds[4]) & (a3 <= bounds[5]))
+            # The other flange turn, 360 deg away (A6 = theta5 in every mode and variant).
+            outer = a6 - (1.0 - 2.0 * (a6 < 0.0)) * math.tau
+            q1, q2, q3 = (a1, a2, a3) if mode == "axis" else (theta1, theta2, theta3)
+            for flange in (a6, outer):
+                inside = base & (flange >= bounds[6]) & (flange <= bounds[7])
+                kind = _JOINT_LIMITS - inside * (_JOINT_LIMITS - singular)
+                candidates += [q1, q2, q3, flange]
+                status.append(failure + reach * (kind - failure))
+        valid = [kind == _SUCCESS for kind in status]
+        cost = None
+        if seed is not None:  # squared distance to the seed, inf where not valid
+            s0, s1, s2, s3 = seed
+            cost = []
+            for i, ok in enumerate(valid):
+                q1, q2, q3, q4 = candidates[4 * i : 4 * i + 4]
+                d0, d1, d2, d3 = q1 - s0, q2 - s1, q3 - s2, q4 - s3
+                cost.append(parts_where(ok, d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3, math.inf))
+        # The home elbow branch is BRANCHES[0:2] (either flange turn).
+        home_choice, home_tie = _closest(valid, cost, allowed[:2])
+        choice, tie = _closest(valid, cost, allowed)
+        home = home_choice >= 0
+        rule = [parts_where(home, home_choice, choice), parts_where(home, home_tie, tie), home]
+        return candidates, status, rule
 
     def _mode(self, mode: str | None) -> str:
         if mode is None:
@@ -453,13 +561,13 @@ class Palletizer:
         return mode
 
     @staticmethod
-    def _allowed(branch: str | None) -> np.ndarray:
+    def _allowed(branch: str | None) -> tuple[bool, ...]:
         if branch is None:
-            return np.ones(len(BRANCHES), dtype=bool)
+            return _ALL_BRANCHES
         if branch in BRANCHES:
-            return np.array([b == branch for b in BRANCHES])
+            return tuple(b == branch for b in BRANCHES)
         if branch in ARM_BRANCHES:
-            return np.array([b.startswith(branch) and b[len(branch) :] in ("", "_outer") for b in BRANCHES])
+            return tuple(b.startswith(branch) and b[len(branch) :] in ("", "_outer") for b in BRANCHES)
         raise RequestError(f"unknown branch {branch!r}; known: {', '.join(ARM_BRANCHES + BRANCHES[1::2])}")
 
     def _explain(self, solutions: IKSolutions, index: tuple[int, ...], context: dict[str, Any]) -> str:
@@ -475,8 +583,9 @@ class Palletizer:
         outcome = IKStatus(int(solutions.outcome[index]))
         if outcome is IKStatus.INVALID:
             return "target is not finite or its rotation part is not a rotation matrix"
-        tilt = float(context["tilt"][index])
-        if tilt > self.tilt_tolerance:
+        lean = float(context["lean"][index])
+        if context["oriented"] and lean < self._lean_min:
+            tilt = math.acos(max(lean, -1.0))
             return (
                 f"the flange stays horizontal (tool z axis straight down): the target's z axis is tilted "
                 f"{math.degrees(tilt):.6g} deg (tolerance {math.degrees(self.tilt_tolerance):.3g} deg)"
@@ -492,10 +601,42 @@ class Palletizer:
         valid_branches = [i for i in range(len(BRANCHES)) if int(solutions.status[index][i]) == outcome]
         parts = []
         for i in valid_branches[:2]:
-            axis = context["axis"][index][i]
+            axis = solutions.q[index][i]
+            if context["mode"] == "dh":
+                axis = self.axis_angles(axis)
+                axis[:3] = wrap_angle(axis[:3])
             if outcome is IKStatus.JOINT_LIMITS:
                 parts.append(f"{BRANCHES[i]}: {describe_limits(axis, self._limits)}")
             else:
                 parts.append(f"{BRANCHES[i]}: singular (arm stretched or folded, or the TCP on axis 1)")
         what = "outside the axis limits" if outcome is IKStatus.JOINT_LIMITS else "singular"
         return f"every solution is {what}; " + "; ".join(parts)
+
+
+def _closest(valid: list, cost: list | None, allowed: Sequence[bool]) -> tuple[Any, Any]:
+    """:func:`manipulator_kinematics.model.select` on scalar parts, over the first ``len(allowed)``
+    candidates that those flags leave: without a seed (``cost`` None) the first valid one, else
+    the one of least ``cost`` (inf where not valid), the first of equals; -1 if none. And whether
+    another valid one is as close to the seed (a tie)."""
+    chosen: Any = -1
+    if cost is None:
+        for i in reversed(range(len(allowed))):
+            if allowed[i]:
+                chosen = chosen + valid[i] * (i - chosen)
+        return chosen, False
+    best: Any = math.inf
+    for i, keep in enumerate(allowed):
+        if keep:
+            better = cost[i] < best
+            chosen, best = chosen + better * (i - chosen), parts_where(better, cost[i], best)
+    near = best * (1.0 + TIE_TOLERANCE) + TIE_TOLERANCE
+    count = sum(valid[i] & (cost[i] <= near) for i, keep in enumerate(allowed) if keep)
+    return chosen, count > 1
+
+
+def _rows(values: np.ndarray) -> np.ndarray:
+    """Values (k,) of one target as they are, (..., k) of a batch as (k, N) rows for
+    :func:`evaluate_parts`."""
+    if values.ndim == 1:
+        return values
+    return np.ascontiguousarray(values.reshape(-1, values.shape[-1]).T)

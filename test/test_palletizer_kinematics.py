@@ -10,7 +10,14 @@ import numpy as np
 import pytest
 
 from manipulator_kinematics.config import ConfigError
-from manipulator_kinematics.model import IKStatus, RequestError, SerialModel, pose_matrix
+from manipulator_kinematics.model import (
+    IKStatus,
+    RequestError,
+    SerialModel,
+    pose_matrix,
+    quaternion_matrix,
+    select,
+)
 from manipulator_kinematics.params import config_path, load_parameters
 from manipulator_kinematics.planar import two_link_ik, wrap_angle
 from manipulator_kinematics.registry import machine
@@ -207,15 +214,65 @@ def test_both_variants_reach_the_same_pose(model: Palletizer) -> None:
     )
 
 
-def test_batch_equals_one_by_one(model: Palletizer) -> None:
-    q = random_axes(model, 12).reshape(3, 4, 4)
-    targets = model.fkine(q)
-    batch = model.solve_ik(targets)
-    assert batch.q.shape == (3, 4, 8, 4) and batch.selected.shape == (3, 4)
-    for index in np.ndindex(3, 4):
-        one = model.solve_ik(targets[index])
-        np.testing.assert_array_equal(one.q, batch.q[index])
-        assert int(one.selected) == int(batch.selected[index]) and one.note() == batch.note(index)
+def mixed_targets(model: Palletizer, n: int) -> np.ndarray:
+    """Reachable poses, poses out of reach or out of the limits, tilted, not finite, not rigid."""
+    targets = model.fkine(RNG.uniform(model.limits.lower - 0.3, model.limits.upper + 0.3, size=(n, 4)))
+    kind = np.arange(n) % 10
+    targets[kind == 1, :3, 3] *= 3.0  # out of reach
+    targets[kind == 2, :3, 3] *= 0.05  # inside the folded arm or on axis 1
+    targets[kind == 3, :3, :3] = targets[kind == 3, :3, :3] @ quaternion_matrix([0.0, 0.05, 0.0, 1.0])
+    targets[kind == 4, 1, 3] = np.nan
+    targets[kind == 5, 0, :3] *= 2.0  # not a rotation
+    targets[kind == 6, :2, 3] = 0.0  # TCP on axis 1
+    return targets
+
+
+@pytest.mark.parametrize("variant", ["single", "double"])
+def test_batch_equals_one_by_one(variant: str) -> None:
+    # One target runs on Python floats, a batch on arrays: the same steps and the same bits.
+    model = Palletizer.default(variant)
+    targets = mixed_targets(model, 300).reshape(3, 100, 4, 4)
+    seeds = RNG.uniform(model.limits.lower, model.limits.upper, size=(3, 100, 4))
+    for options in (
+        {},
+        {"seed": seeds},
+        {"seed": seeds[0, 0]},
+        {"mode": "dh", "seed": model.dh_angles(seeds)},
+        {"use_orientation": False, "seed": seeds},
+        {"use_orientation": False},
+        {"branch": "front_elbow_down"},
+        {"branch": "back_elbow_up_outer", "seed": seeds},
+    ):
+        batch = model.solve_ik(targets, **options)
+        assert batch.q.shape == (3, 100, 8, 4) and batch.selected.shape == (3, 100)
+        assert len(set(batch.status.ravel().tolist())) == 5  # every status occurs
+        seed = options.get("seed")
+        for index in np.ndindex(3, 100):
+            if seed is not None and seed.ndim > 1:
+                options["seed"] = seed[index]
+            one = model.solve_ik(targets[index], **options)
+            np.testing.assert_array_equal(one.q, batch.q[index])
+            np.testing.assert_array_equal(one.status, batch.status[index])
+            assert (int(one.selected), bool(one.tie)) == (int(batch.selected[index]), bool(batch.tie[index]))
+            assert one.note() == batch.note(index)
+
+
+def test_selection_is_the_shared_rule(model: Palletizer) -> None:
+    # Independent: model.select (numpy) over the home elbow branch, then over every candidate.
+    targets = mixed_targets(model, 2000)
+    seeds = RNG.uniform(model.limits.lower, model.limits.upper, size=(2000, 4))
+    home = np.array([b.startswith("front_elbow_up") for b in BRANCHES])
+    for seed in (None, seeds):
+        solutions = model.solve_ik(targets, seed=seed)
+        status = solutions.status
+        first, first_tie = select(solutions.q, np.where(home, status, IKStatus.UNREACHABLE), seed=seed)
+        other, other_tie = select(solutions.q, solutions.status, seed=seed)
+        np.testing.assert_array_equal(solutions.selected, np.where(first >= 0, first, other))
+        np.testing.assert_array_equal(solutions.tie, np.where(first >= 0, first_tie, other_tie))
+    # Two candidates exactly as far from the seed: a tie, reported.
+    target = model.fkine(np.radians([10.0, 20.0, 30.0, 100.0]))
+    between = np.radians([10.0, 20.0, 30.0, -80.0])  # 180 deg from A6 = 100 and -260
+    assert model.solve_ik(target, seed=between).tie
 
 
 def test_selection_prefers_home_elbow_then_seed_for_the_flange_turn(model: Palletizer) -> None:
@@ -251,12 +308,14 @@ def test_position_only_keeps_the_seed_yaw_or_home_yaw(model: Palletizer) -> None
 
 
 def test_failures_have_status_and_reason_never_nan(model: Palletizer) -> None:
+    mirrored = level_target([1.5, 0.0, 1.0], 0.0) @ np.diag([1.0, -1.0, 1.0, 1.0])  # det R = -1
     cases = {
         "far": (level_target([5.0, 0.0, 1.0], 0.0), IKStatus.UNREACHABLE, "beyond the stretched arm"),
         "limits": (level_target([-1.5, 0.0, 1.0], 0.0), IKStatus.JOINT_LIMITS, "axis_"),
         "nan": (level_target([np.nan, 0.0, 1.0], 0.0), IKStatus.INVALID, "not finite"),
         "tilted": (pose_matrix([1.5, 0.0, 1.0], [0.0, 0.1, 0.0, 1.0]), IKStatus.UNREACHABLE, "tilted"),
         "not a rotation": (np.diag([2.0, 1.0, 1.0, 1.0]), IKStatus.INVALID, "not a rotation"),
+        "a reflection": (mirrored, IKStatus.INVALID, "not a rotation"),
     }
     for name, (target, status, text) in cases.items():
         solutions = model.solve_ik(target)
@@ -269,6 +328,21 @@ def test_failures_have_status_and_reason_never_nan(model: Palletizer) -> None:
     assert abs(math.sin(model.dh_angles(stretched)[2])) < 1e-12
     singular = model.solve_ik(model.fkine(stretched))
     assert IKStatus(int(singular.outcome)) is IKStatus.SINGULAR and "singular" in singular.note()
+
+
+def test_singular_status_is_the_singular_predicate(model: Palletizer) -> None:
+    # The IK flags singular candidates from |sin theta3| and r of the target; `singular` computes
+    # them from the candidate's angles. Targets spread over both thresholds.
+    theta = model.dh_angles(random_axes(model, 3000))
+    theta[:1000, 2] = RNG.uniform(-0.02, 0.02, 1000)  # arm near stretched
+    targets = model.fkine_dh(theta)
+    near_axis = targets[1000:2000, :2, 3]
+    near_axis *= RNG.uniform(0.0, 0.02, (1000, 1)) / np.hypot(near_axis[:, 0], near_axis[:, 1])[:, None]
+    solutions = model.solve_ik(targets, mode="dh")
+    kept = (solutions.status == IKStatus.SUCCESS) | (solutions.status == IKStatus.SINGULAR)
+    flagged = solutions.status[kept] == IKStatus.SINGULAR
+    np.testing.assert_array_equal(flagged, model.singular(solutions.q[kept]))
+    assert 100 < flagged.sum() < flagged.size - 100
 
 
 def test_config_validation_names_the_key() -> None:

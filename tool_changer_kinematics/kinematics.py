@@ -83,6 +83,7 @@ from manipulator_kinematics.serial_chain import (
     parts_all,
     parts_any,
     parts_clip,
+    parts_pose_checks,
     parts_sqrt,
     parts_where,
     revolute,
@@ -329,16 +330,10 @@ class ToolChanger:
         [valid, rho, |sin theta5| of the 8 candidates (NaN if none), J3 origin distance from J2 of
         the 8]. Never raises: a target that is not a rigid transform gives junk and valid = 0.
         """
-        nx, ox, ax, px, ny, oy, ay, py, nz, oz, az, pz, b0, b1, b2, b3 = pose
+        nx, _, ax, px, ny, _, ay, py, nz, _, az, pz = pose[:12]
         a1, a2, a3, a4, d1, d5, d6 = self._lengths
-        valid = ((abs(nx * nx + ny * ny + nz * nz - 1.0) < ROTATION_TOL)
-                 & (abs(ox * ox + oy * oy + oz * oz - 1.0) < ROTATION_TOL)
-                 & (abs(ax * ax + ay * ay + az * az - 1.0) < ROTATION_TOL)
-                 & (abs(nx * ox + ny * oy + nz * oz) < ROTATION_TOL)
-                 & (abs(nx * ax + ny * ay + nz * az) < ROTATION_TOL)
-                 & (abs(ox * ax + oy * ay + oz * az) < ROTATION_TOL)
-                 & (nx * (oy * az - oz * ay) + ny * (oz * ax - ox * az) + nz * (ox * ay - oy * ax) > 0.0)
-                 & (abs(px) + abs(py) + abs(pz) + abs(b0) + abs(b1) + abs(b2) + abs(b3) < math.inf))
+        finite, rigid = parts_pose_checks(pose, ROTATION_TOL)
+        valid = finite & rigid
         # 1. Wrist centre and theta1 (front shoulder); on the J1 axis the seed's theta1.
         wx, wy, wz = px - d6 * ax, py - d6 * ay, pz - d6 * az
         rho = parts_sqrt(wx * wx + wy * wy)
