@@ -317,6 +317,14 @@ def evaluate_parts(function: Callable[..., Sequence[Sequence]], args: Sequence[n
     return [result.reshape((count, *shape)) for result, shape in zip(out, dims, strict=True)]
 
 
+def parts_rows(values: np.ndarray) -> np.ndarray:
+    """An argument for :func:`evaluate_parts`: values (k,) of one case as they are, (..., k) of a
+    batch as contiguous (k, N) rows."""
+    if values.ndim == 1:
+        return values
+    return np.ascontiguousarray(values.reshape(-1, values.shape[-1]).T)
+
+
 def parts_where(condition: Any, a: Any, b: Any) -> Any:
     """np.where for a batch's parts, a conditional expression for floats (see evaluate_parts)."""
     if isinstance(condition, np.ndarray):
@@ -405,6 +413,11 @@ class JointLimits:
         """(...,) True where every joint is inside its limits (within ``tol``); False for NaN."""
         q = np.asarray(q, dtype=float)
         return ((q >= self.lower - tol) & (q <= self.upper + tol)).all(axis=-1)
+
+    def bounds(self, tol: float = 0.0) -> tuple[float, ...]:
+        """[lower_0 - tol, upper_0 + tol, lower_1 - tol, ...] as plain floats (for scalar parts,
+        see :func:`evaluate_parts`)."""
+        return tuple(float(v) for pair in zip(self.lower - tol, self.upper + tol, strict=True) for v in pair)
 
     def clip(self, q: ArrayLike) -> np.ndarray:
         """q moved into the limits (NaN stays NaN)."""

@@ -78,11 +78,11 @@ from numpy.typing import ArrayLike
 
 from manipulator_kinematics.config import Names, Number, Numbers, Text, require, validate
 from manipulator_kinematics.model import (
-    TIE_TOLERANCE,
     IKSolutions,
     IKStatus,
     RequestError,
     describe_limits,
+    select_parts,
 )
 from manipulator_kinematics.params import config_path, load_parameters
 from manipulator_kinematics.planar import wrap_angle
@@ -92,6 +92,7 @@ from manipulator_kinematics.serial_chain import (
     evaluate_parts,
     parts_clip,
     parts_pose_checks,
+    parts_rows,
     parts_sqrt,
     parts_where,
     revolute,
@@ -223,8 +224,7 @@ class Palletizer:
         # Plain floats for the scalar parts of the IK (numpy scalars cost more than the arithmetic).
         self._lengths = tuple(float(v) for v in (geometry.a1, geometry.a2, geometry.a3, geometry.a4,
                                                  geometry.d1, geometry.d6))
-        self._bounds = tuple(float(v) for pair in zip(limits.lower - LIMIT_TOL, limits.upper + LIMIT_TOL,
-                                                      strict=True) for v in pair)
+        self._bounds = limits.bounds(LIMIT_TOL)
         self._lean_min = math.cos(self.tilt_tolerance)  # cos of the largest tilt taken
 
     # ---- construction -------------------------------------------------------------------------
@@ -415,7 +415,8 @@ class Palletizer:
         if shape:
             angles, extra = self._candidates(pose, turn)
             parts = [angles.reshape(shape + (24,)), extra] + ([] if seed is None else [seed])
-            q, status, rule = evaluate_parts(judge, [_rows(part) for part in parts], ((8, 4), (8,), (3,)))
+            rows = [parts_rows(part) for part in parts]
+            q, status, rule = evaluate_parts(judge, rows, ((8, 4), (8,), (3,)))
             q, status, rule = (q.reshape(shape + (8, 4)), status.reshape(shape + (8,)),
                                rule.reshape(shape + (3,)))
         else:
@@ -449,7 +450,7 @@ class Palletizer:
         """:meth:`_closed_form` of poses (..., 16) and yaw pairs (..., 2): ``angles`` (..., 4, 6)
         (one arctan2 over every pair) and ``extra`` (..., 8)."""
         shape = pose.shape[:-1]
-        flat = [_rows(pose), _rows(turn)]
+        flat = [parts_rows(pose), parts_rows(turn)]
         # Junk from targets that are not poses is flagged, not raised (floats never warn).
         with np.errstate(invalid="ignore", over="ignore") if shape else nullcontext():
             y, x, extra = evaluate_parts(self._closed_form, flat, ((4, 6), (4, 6), (8,)))
@@ -537,18 +538,9 @@ class Palletizer:
                 kind = _JOINT_LIMITS - inside * (_JOINT_LIMITS - singular)
                 candidates += [q1, q2, q3, flange]
                 status.append(failure + reach * (kind - failure))
-        valid = [kind == _SUCCESS for kind in status]
-        cost = None
-        if seed is not None:  # squared distance to the seed, inf where not valid
-            s0, s1, s2, s3 = seed
-            cost = []
-            for i, ok in enumerate(valid):
-                q1, q2, q3, q4 = candidates[4 * i : 4 * i + 4]
-                d0, d1, d2, d3 = q1 - s0, q2 - s1, q3 - s2, q4 - s3
-                cost.append(parts_where(ok, d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3, math.inf))
         # The home elbow branch is BRANCHES[0:2] (either flange turn).
-        home_choice, home_tie = _closest(valid, cost, allowed[:2])
-        choice, tie = _closest(valid, cost, allowed)
+        home_choice, home_tie = select_parts(candidates, status, seed=seed, allowed=allowed[:2])
+        choice, tie = select_parts(candidates, status, seed=seed, allowed=allowed)
         home = home_choice >= 0
         rule = [parts_where(home, home_choice, choice), parts_where(home, home_tie, tie), home]
         return candidates, status, rule
@@ -611,32 +603,3 @@ class Palletizer:
                 parts.append(f"{BRANCHES[i]}: singular (arm stretched or folded, or the TCP on axis 1)")
         what = "outside the axis limits" if outcome is IKStatus.JOINT_LIMITS else "singular"
         return f"every solution is {what}; " + "; ".join(parts)
-
-
-def _closest(valid: list, cost: list | None, allowed: Sequence[bool]) -> tuple[Any, Any]:
-    """:func:`manipulator_kinematics.model.select` on scalar parts, over the first ``len(allowed)``
-    candidates that those flags leave: without a seed (``cost`` None) the first valid one, else
-    the one of least ``cost`` (inf where not valid), the first of equals; -1 if none. And whether
-    another valid one is as close to the seed (a tie)."""
-    chosen: Any = -1
-    if cost is None:
-        for i in reversed(range(len(allowed))):
-            if allowed[i]:
-                chosen = chosen + valid[i] * (i - chosen)
-        return chosen, False
-    best: Any = math.inf
-    for i, keep in enumerate(allowed):
-        if keep:
-            better = cost[i] < best
-            chosen, best = chosen + better * (i - chosen), parts_where(better, cost[i], best)
-    near = best * (1.0 + TIE_TOLERANCE) + TIE_TOLERANCE
-    count = sum(valid[i] & (cost[i] <= near) for i, keep in enumerate(allowed) if keep)
-    return chosen, count > 1
-
-
-def _rows(values: np.ndarray) -> np.ndarray:
-    """Values (k,) of one target as they are, (..., k) of a batch as (k, N) rows for
-    :func:`evaluate_parts`."""
-    if values.ndim == 1:
-        return values
-    return np.ascontiguousarray(values.reshape(-1, values.shape[-1]).T)

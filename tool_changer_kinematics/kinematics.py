@@ -32,8 +32,8 @@ limits when there is one (J5's limits [0, 270] deg span more than a half turn).
 Speed (benchmarks/bench_tool_changer_ik.py): the steps run on scalar parts, Python floats for one
 target and (M,) arrays for chunks of a batch (the shared :func:`evaluate_parts`, one code path),
 with every angle kept as a (sine, cosine)-like pair (sums and differences of angles are products
-of pairs) until one arctan2 over all 48 at the end. numpy on (8, 6) arrays would cost more in
-per-call overhead than the arithmetic itself.
+of pairs) until one arctan2 over all 48; then the joint values, statuses and the selection on
+parts again. numpy on (8, 6) arrays would cost more in per-call overhead than the arithmetic.
 
 Degenerate targets, handled by a stated rule and never NaN for a solution that exists:
 
@@ -48,7 +48,7 @@ Candidates with |sin theta5| < ``wrist_singularity`` or the wrist centre within
 ``axis_singularity`` of the J1 axis get status SINGULAR (exact, but joint rates blow up there):
 the selection rule skips them, the explanation names them.
 
-Selection rule (the shared :func:`manipulator_kinematics.model.select`): only candidates inside
+Selection rule (the shared one, :func:`manipulator_kinematics.model.select_parts`): only candidates inside
 every joint limit (J4's [20, 65] deg stop included) and away from singularities count; of those
 the requested branch, else the one closest to the seed (sum of squared joint differences), else
 the first in branch order. Ties and "no valid solution" are reported. The paper's claim that J4's
@@ -57,9 +57,9 @@ stop alone makes the solution unique does not hold for this model (docs/tool_cha
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
-from contextlib import nullcontext
 from typing import Any
 
 import numpy as np
@@ -71,9 +71,8 @@ from manipulator_kinematics.model import (
     IKStatus,
     RequestError,
     describe_limits,
-    limit_status,
     matrix_quaternion,
-    select,
+    select_parts,
 )
 from manipulator_kinematics.params import config_path, load_parameters
 from manipulator_kinematics.serial_chain import (
@@ -84,6 +83,7 @@ from manipulator_kinematics.serial_chain import (
     parts_any,
     parts_clip,
     parts_pose_checks,
+    parts_rows,
     parts_sqrt,
     parts_where,
     revolute,
@@ -168,8 +168,11 @@ class ToolChanger:
         # so one more turn up where an angle is at or below the window's bottom is all that is left.
         top = np.minimum(0.5 * (limits.lower + limits.upper) + math.pi, limits.lower + 2 * math.pi)
         turns = np.floor((top + 2 * LIMIT_TOL - math.pi + offset) / (2 * math.pi))
-        self._wrap_offset = offset - 2 * math.pi * turns
-        self._wrap_bottom = top - 2 * math.pi
+        # q = theta - offset as that representative: one more turn up at or below the bottom
+        # (_judge). Plain floats for the scalar parts.
+        self._wrap_offset_parts = (offset - 2 * math.pi * turns).tolist()
+        self._wrap_bottom_parts = (top - 2 * math.pi).tolist()
+        self._bounds = limits.bounds(LIMIT_TOL)
 
     # ---- construction -------------------------------------------------------------------------
     @classmethod
@@ -298,26 +301,57 @@ class ToolChanger:
         shape = target.shape[:-2]
         flange = target if self._tool_inv is None else target @ self._tool_inv
         rule = self.offset[::5] if seed is None else seed[..., ::5] + self.offset[::5]  # theta1, theta6
+        judge = functools.partial(self._judge, branch=branch)
         if shape:  # rows of (k, M) arrays for evaluate_parts
-            pose = np.ascontiguousarray(flange.reshape(-1, 16).T)
-            rule = np.ascontiguousarray(np.broadcast_to(rule, shape + (2,)).T)
+            pose, rule = parts_rows(flange.reshape(-1, 16)), parts_rows(np.broadcast_to(rule, shape + (2,)))
+            # Junk from targets that are not poses is masked below (floats never warn).
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                y, x, extra = evaluate_parts(self._closed_form, (pose, np.cos(rule), np.sin(rule)),
+                                             ((8, 6), (8, 6), (18,)))
+            args = [np.arctan2(y, x).reshape(-1, 48), extra] + ([] if seed is None else [seed])
+            q, status, rule = evaluate_parts(judge, [parts_rows(arg) for arg in args], ((8, 6), (8,), (2,)))
         else:
-            pose = flange.reshape(16)
-        # Junk from targets that are not poses is masked below; floats never warn (nor cost errstate).
-        with np.errstate(invalid="ignore", divide="ignore", over="ignore") if shape else nullcontext():
-            y, x, extra = evaluate_parts(self._closed_form, (pose, np.cos(rule), np.sin(rule)),
-                                         ((8, 6), (8, 6), (18,)))
-        q = self._into_limits(np.arctan2(y, x))
+            # One target: floats straight through both stages (evaluate_parts' packing in between
+            # would cost a tenth of the call); the arctan2 is still numpy's, so the bits are a batch's.
+            rule_cos, rule_sin = np.cos(rule).tolist(), np.sin(rule).tolist()
+            y, x, extra = self._closed_form(flange.reshape(16).tolist(), rule_cos, rule_sin)
+            angles = np.arctan2(y, x).tolist()
+            q, status, rule = judge(angles, extra) if seed is None else judge(angles, extra, seed.tolist())
+            q, status, rule = np.array(q).reshape(8, 6), np.array(status), np.array(rule, dtype=float)
+            extra = np.array(extra, dtype=float)
         invalid, rho, s5 = extra[..., 0] == 0.0, extra[..., 1], extra[..., 2:10]
-        status = limit_status(q, self._limits, LIMIT_TOL)
-        singular = (s5 < self.wrist_singularity) | (rho < self.axis_singularity)[..., None]
-        status[(status == _SUCCESS) & singular] = _SINGULAR
         if parts_any(invalid):
-            status[invalid] = _INVALID
             q[invalid] = np.nan
-        selected, tie = select(q, status, seed=seed, branch=branch)
         diag = {"invalid": invalid, "rho": rho, "s5": s5, "reach": extra[..., 10:]}
-        return q, status, selected, tie, diag
+        return q, status.astype(np.int8), rule[..., 0].astype(np.intp), rule[..., 1] != 0.0, diag
+
+    def _judge(self, angles: Sequence, extra: Sequence, seed: Sequence | None = None, *,
+               branch: int | None) -> tuple[list, list, list]:
+        """Each candidate's joint values (into the limits: __init__), status and the selection rule on
+        scalar parts, like :meth:`_closed_form` (numpy on (8, 6) arrays would cost more than the
+        arithmetic for one target). ``angles`` the 48 arctan2 results, ``extra`` from
+        :meth:`_closed_form`, ``seed`` 6 joint values or None, ``branch`` the requested candidate.
+        Returns q (48), status (8) and [selected, tie].
+        """
+        invalid, near_axis = extra[0] == 0.0, extra[1] < self.axis_singularity
+        offset, bottom, bounds = self._wrap_offset_parts, self._wrap_bottom_parts, self._bounds
+        q, status = [], []
+        tau = 2 * math.pi
+        for i in range(8):
+            inside = True
+            for j in range(6):
+                value = angles[6 * i + j] - offset[j]
+                value = value + tau * (value <= bottom[j])
+                inside = inside & (value >= bounds[2 * j]) & (value <= bounds[2 * j + 1])
+                q.append(value)
+            exists = value == value  # not NaN: a branch without a solution is NaN in every joint
+            singular = (extra[2 + i] < self.wrist_singularity) | near_axis
+            # Arithmetic on booleans: SUCCESS, SINGULAR or JOINT_LIMITS, then UNREACHABLE, INVALID.
+            kind = _JOINT_LIMITS - inside * (_JOINT_LIMITS - singular)
+            kind = _UNREACHABLE + exists * (kind - _UNREACHABLE)
+            status.append(kind + invalid * (_INVALID - kind))
+        allowed = None if branch is None else [i == branch for i in range(8)]
+        return q, status, list(select_parts(q, status, seed=seed, allowed=allowed))
 
     def _closed_form(self, pose: Sequence, rule_cos: Sequence, rule_sin: Sequence) -> tuple[list, list, list]:
         """The module docstring's steps 1-4 on scalar parts (floats for one target, (M,) arrays for
@@ -407,13 +441,6 @@ class ToolChanger:
                     sin5.append(s5k)
                     reach.append(rk)
         return y, x, [valid, rho, *sin5, *reach]
-
-    def _into_limits(self, theta: np.ndarray) -> np.ndarray:
-        """q = theta - offset for theta in [-pi, pi] (arctan2), as each angle's representative modulo
-        2 pi inside its joint's limits, else the one nearest to them (__init__: one window per joint)."""
-        q = theta - self._wrap_offset
-        q += 2 * math.pi * (q <= self._wrap_bottom)  # (np.add's where= is slower on large arrays)
-        return q
 
     def _explain(self, solutions: IKSolutions, at: tuple[int, ...], diag: dict[str, np.ndarray], *,
                  seeded: bool, requested: str | None) -> str:
