@@ -317,6 +317,34 @@ def evaluate_parts(function: Callable[..., Sequence[Sequence]], args: Sequence[n
     return [result.reshape((count, *shape)) for result, shape in zip(out, dims, strict=True)]
 
 
+def evaluate_angle_parts(closed_form: Callable[..., Sequence[Sequence]], args: Sequence[np.ndarray],
+                         dims: Sequence[tuple[int, ...]], judge: Callable[..., Sequence[Sequence]],
+                         more: Sequence[np.ndarray],
+                         judged_dims: Sequence[tuple[int, ...]]) -> list[np.ndarray]:
+    """A closed-form IK as two stages of scalar parts (see :func:`evaluate_parts`) with one numpy
+    arctan2 between them: ``closed_form(*args)`` gives the candidates' angles as pairs y, x (of
+    ``dims[0]``) and diagnostics ``extra`` (``dims[2]``); ``judge(angles, extra, *more)`` gives
+    outputs of ``judged_dims`` (joint values, statuses, the selection). Returns [extra, *outputs].
+
+    ``args`` and ``more``: arrays (k,) for one target, which then runs on floats straight through
+    (evaluate_parts' packing between the stages would cost a seventh of the call), or (k, N) rows
+    for a batch. The arctan2 is numpy's in both cases (math's differs in the last bit), so one
+    target and a batch give the same bits.
+    """
+    if args[0].ndim == 1:
+        y, x, extra = closed_form(*[arg.tolist() for arg in args])
+        outputs = judge(np.arctan2(y, x).tolist(), extra, *[arg.tolist() for arg in more])
+        arrays = [np.array(out, dtype=float).reshape(shape)
+                  for out, shape in zip(outputs, judged_dims, strict=True)]
+        return [np.array(extra, dtype=float), *arrays]
+    # Junk from targets that are not poses is the judge's to flag; arrays must not warn about it.
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        y, x, extra = evaluate_parts(closed_form, args, dims)
+        angles = np.arctan2(y, x)
+    rows = [parts_rows(angles.reshape(len(angles), -1)), parts_rows(extra), *more]
+    return [extra, *evaluate_parts(judge, rows, judged_dims)]
+
+
 def parts_rows(values: np.ndarray) -> np.ndarray:
     """An argument for :func:`evaluate_parts`: values (k,) of one case as they are, (..., k) of a
     batch as contiguous (k, N) rows."""

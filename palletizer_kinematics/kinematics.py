@@ -56,7 +56,7 @@ within ``singular_radius`` of axis 1 (theta1 undetermined): the 4x4 Jacobian of 
 has det = -r a2 a3 sin(theta3).
 
 Speed (benchmarks/bench_palletizer_ik.py): the IK runs on scalar parts, Python floats for one
-target and (N,) arrays for a batch (:func:`evaluate_parts`, one code path), every angle kept as a
+target and (N,) arrays for a batch (:func:`evaluate_angle_parts`, one code path), every angle kept as a
 (sine, cosine)-like pair until one numpy arctan2 over all of them, so one target and a batch give
 the same bits (the math and numpy arctan2 differ in the last bit). numpy on the (8, 4) candidate
 arrays of one target would cost several times the arithmetic in per-call overhead. Returned
@@ -68,7 +68,6 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Mapping, Sequence
-from contextlib import nullcontext
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -89,6 +88,7 @@ from manipulator_kinematics.planar import wrap_angle
 from manipulator_kinematics.serial_chain import (
     JointLimits,
     SerialChain,
+    evaluate_angle_parts,
     evaluate_parts,
     parts_clip,
     parts_pose_checks,
@@ -369,8 +369,12 @@ class Palletizer:
         pose = np.zeros(shape + (16,))
         pose[..., 3:12:4] = p
         pose[..., 15] = 1.0
-        turn = np.stack([np.cos(yaw), np.sin(yaw)], axis=-1)
-        angles, extra = self._candidates(pose, turn)
+        turn = parts_rows(np.stack([np.cos(yaw), np.sin(yaw)], axis=-1))
+        # Junk (non-finite inputs) gives NaN, not warnings.
+        with np.errstate(invalid="ignore", over="ignore"):
+            y, x, extra = evaluate_parts(self._closed_form, [parts_rows(pose), turn], ((4, 6), (4, 6), (8,)))
+            angles = np.arctan2(y, x).reshape(shape + (4, 6))
+        extra = extra.reshape(shape + (8,))
         theta = np.repeat(angles[..., :4], 2, axis=-2)
         theta[..., 1::2, 3] -= np.copysign(math.tau, theta[..., 1::2, 3])
         theta[~np.repeat(np.abs(extra[..., 4:6]) <= 1.0 + REACH_TOL, 4, axis=-1)] = np.nan
@@ -412,21 +416,12 @@ class Palletizer:
             yaw = np.zeros(shape) if seed is None else seed[..., 0] - seed[..., 3]
             turn = np.stack([np.cos(yaw), np.sin(yaw)], axis=-1)
         judge = functools.partial(self._judge, allowed=allowed, use_orientation=use_orientation, mode=mode)
-        if shape:
-            angles, extra = self._candidates(pose, turn)
-            parts = [angles.reshape(shape + (24,)), extra] + ([] if seed is None else [seed])
-            rows = [parts_rows(part) for part in parts]
-            q, status, rule = evaluate_parts(judge, rows, ((8, 4), (8,), (3,)))
-            q, status, rule = (q.reshape(shape + (8, 4)), status.reshape(shape + (8,)),
-                               rule.reshape(shape + (3,)))
-        else:
-            # One target: the parts as floats straight through (evaluate_parts' packing per stage
-            # would cost a third of the call), the arctan2 still numpy's, so the bits are the batch's.
-            y, x, extra = self._closed_form(pose.tolist(), turn.tolist())
-            angles = np.arctan2(y, x).tolist()
-            q, status, rule = judge(angles, extra) if seed is None else judge(angles, extra, seed.tolist())
-            q, status, rule = np.array(q).reshape(8, 4), np.array(status), np.array(rule, dtype=float)
-            extra = np.array(extra, dtype=float)
+        extra, q, status, rule = evaluate_angle_parts(
+            self._closed_form, [parts_rows(pose), parts_rows(turn)], ((4, 6), (4, 6), (8,)),
+            judge, [] if seed is None else [parts_rows(seed)], ((8, 4), (8,), (3,)),
+        )
+        if len(shape) > 1:  # evaluate_angle_parts' batches are flat
+            extra, q, status, rule = (out.reshape(shape + out.shape[1:]) for out in (extra, q, status, rule))
         q[status >= _UNREACHABLE] = np.nan
         context = {
             "lean": extra[..., 2],
@@ -446,27 +441,16 @@ class Palletizer:
             explain=lambda solutions, index: self._explain(solutions, index, context),
         )
 
-    def _candidates(self, pose: np.ndarray, turn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`_closed_form` of poses (..., 16) and yaw pairs (..., 2): ``angles`` (..., 4, 6)
-        (one arctan2 over every pair) and ``extra`` (..., 8)."""
-        shape = pose.shape[:-1]
-        flat = [parts_rows(pose), parts_rows(turn)]
-        # Junk from targets that are not poses is flagged, not raised (floats never warn).
-        with np.errstate(invalid="ignore", over="ignore") if shape else nullcontext():
-            y, x, extra = evaluate_parts(self._closed_form, flat, ((4, 6), (4, 6), (8,)))
-            angles = np.arctan2(y, x)
-        return angles.reshape(shape + (4, 6)), extra.reshape(shape + (8,))
-
     def _closed_form(self, pose: Sequence, turn: Sequence) -> tuple[list, list, list]:
         """Eqs. (3)-(8) on scalar parts (floats for one target, (N,) arrays for a batch:
-        :func:`evaluate_parts`), every angle as a pair (y, x) for one arctan2 afterwards: sums of
+        :func:`evaluate_angle_parts`), every angle as a pair (y, x) for one arctan2 afterwards: sums of
         angles are products of pairs, so no trigonometry runs here and one target and a batch give
         the same bits.
 
         ``pose`` the 16 entries of the TCP pose, row-major; ``turn`` (cos, sin) of the flange yaw
-        times any positive number. Returns y (32) and x (32): per configuration front/back arm x
-        elbow up/down, [theta1, theta2, theta3, theta5, A2, A3 (single), A3 (double), A3 of the
-        configured variant]; and [finite, rigid, cos(tilt), r, c3 front, c3 back, |sin theta3|
+        times any positive number. Returns y (24) and x (24): per configuration (front/back arm x
+        elbow up/down) [theta1, theta2, theta3, theta5, A2, A3] (A3 of the configured variant;
+        A1 = theta1, A6 = theta5); and [finite, rigid, cos(tilt), r, c3 front, c3 back, |sin theta3|
         front, back] with r the TCP's distance from axis 1.
         """
         px, py, az, pz = pose[3], pose[7], pose[10], pose[11]

@@ -78,7 +78,7 @@ from manipulator_kinematics.params import config_path, load_parameters
 from manipulator_kinematics.serial_chain import (
     JointLimits,
     SerialChain,
-    evaluate_parts,
+    evaluate_angle_parts,
     parts_all,
     parts_any,
     parts_clip,
@@ -301,24 +301,14 @@ class ToolChanger:
         shape = target.shape[:-2]
         flange = target if self._tool_inv is None else target @ self._tool_inv
         rule = self.offset[::5] if seed is None else seed[..., ::5] + self.offset[::5]  # theta1, theta6
-        judge = functools.partial(self._judge, branch=branch)
-        if shape:  # rows of (k, M) arrays for evaluate_parts
-            pose, rule = parts_rows(flange.reshape(-1, 16)), parts_rows(np.broadcast_to(rule, shape + (2,)))
-            # Junk from targets that are not poses is masked below (floats never warn).
-            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-                y, x, extra = evaluate_parts(self._closed_form, (pose, np.cos(rule), np.sin(rule)),
-                                             ((8, 6), (8, 6), (18,)))
-            args = [np.arctan2(y, x).reshape(-1, 48), extra] + ([] if seed is None else [seed])
-            q, status, rule = evaluate_parts(judge, [parts_rows(arg) for arg in args], ((8, 6), (8,), (2,)))
-        else:
-            # One target: floats straight through both stages (evaluate_parts' packing in between
-            # would cost a tenth of the call); the arctan2 is still numpy's, so the bits are a batch's.
-            rule_cos, rule_sin = np.cos(rule).tolist(), np.sin(rule).tolist()
-            y, x, extra = self._closed_form(flange.reshape(16).tolist(), rule_cos, rule_sin)
-            angles = np.arctan2(y, x).tolist()
-            q, status, rule = judge(angles, extra) if seed is None else judge(angles, extra, seed.tolist())
-            q, status, rule = np.array(q).reshape(8, 6), np.array(status), np.array(rule, dtype=float)
-            extra = np.array(extra, dtype=float)
+        pose = parts_rows(flange.reshape(shape + (16,)))
+        if shape:
+            rule = parts_rows(np.broadcast_to(rule, shape + (2,)))
+        extra, q, status, rule = evaluate_angle_parts(
+            self._closed_form, [pose, np.cos(rule), np.sin(rule)], ((8, 6), (8, 6), (18,)),
+            functools.partial(self._judge, branch=branch), [] if seed is None else [parts_rows(seed)],
+            ((8, 6), (8,), (2,)),
+        )
         invalid, rho, s5 = extra[..., 0] == 0.0, extra[..., 1], extra[..., 2:10]
         if parts_any(invalid):
             q[invalid] = np.nan
