@@ -9,11 +9,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from excavator_kinematics import evaluation, synthetic, urdf_joints
 from excavator_kinematics.kinematics import ACTUATORS, Excavator
 from excavator_kinematics.parameters import SCHEMA, SECTION, describe
-from excavator_kinematics.scene import excavator_scene
-from manipulator_kinematics.registry import Machine
+from manipulator_kinematics.registry import Hook, Machine
 from manipulator_kinematics.serial_chain import JointLimits
 
 _JOINT_STATE = "sensor_msgs/msg/JointState"
@@ -53,9 +51,9 @@ MACHINE = Machine(
     },
     joint_names=lambda model: ACTUATORS,
     limits=_limits,
-    analyse=evaluation.analyse,
-    synthesize=synthetic.excavator_bag,
+    analyse=Hook("excavator_kinematics.evaluation:analyse"),
+    synthesize=Hook("excavator_kinematics.synthetic:excavator_bag"),
     forward_node="excavator_forward",
-    urdf=urdf_joints.excavator_urdf,
-    scene=excavator_scene,
+    urdf=Hook("excavator_kinematics.urdf_joints:excavator_urdf"),
+    scene=Hook("excavator_kinematics.scene:excavator_scene"),
 )

@@ -45,11 +45,15 @@ The drawing hook:
   ``joint_names(model)``; markers (``machine_markers``), Foxglove-ready bags
   (:mod:`manipulator_kinematics.bag.visual`) and animations draw it. Serial machines use
   :func:`manipulator_kinematics.scene.serial_scene`.
+
+Hooks are usually given as :class:`Hook` ("module:function", imported on the first call), so that
+loading the registry, which every node does at start-up, imports no bag, URDF or drawing code.
 """
 
 from __future__ import annotations
 
 import difflib
+import importlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import cache
@@ -62,6 +66,27 @@ from manipulator_kinematics.params import ConfigError, config_path, load_paramet
 from manipulator_kinematics.serial_chain import JointLimits
 
 GROUP = "manipulator_kinematics.machines"
+
+
+class Hook:
+    """A hook named ``"module:function"``, imported on its first call."""
+
+    def __init__(self, target: str) -> None:
+        self.target = target
+        self._function: Callable[..., Any] | None = None
+
+    def resolve(self) -> Callable[..., Any]:
+        """The function itself (ImportError or AttributeError if the name is wrong)."""
+        if self._function is None:
+            module, _, name = self.target.partition(":")
+            self._function = getattr(importlib.import_module(module), name)
+        return self._function
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        return self.resolve()(*args, **kwargs)
+
+    def __repr__(self) -> str:
+        return f"Hook({self.target!r})"
 
 
 def _joint_names(model: Any) -> tuple[str, ...]:

@@ -9,11 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from manipulator_kinematics.bag import analysis, synthetic
 from manipulator_kinematics.config import Schema
-from manipulator_kinematics.registry import Machine
-from manipulator_kinematics.scene import serial_scene
-from manipulator_kinematics.urdf import serial_urdf
+from manipulator_kinematics.registry import Hook, Machine
 
 #: The topics of the generic forward node (manipulator_kinematics.nodes.forward).
 SERIAL_TOPICS = {
@@ -36,6 +33,8 @@ def serial_machine(
     maps the model's joints to its D-H chain's (for the URDF) where they differ (the palletizer's
     axis angles)."""
 
+    serial_urdf = Hook("manipulator_kinematics.urdf:serial_urdf")
+
     def urdf(model: Any) -> str:
         return serial_urdf(name, model, to_chain=None if to_chain is None else to_chain(model))
 
@@ -47,9 +46,9 @@ def serial_machine(
         schema=schema,
         factory=factory,
         topics=SERIAL_TOPICS,
-        analyse=analysis.serial,
-        synthesize=synthetic.serial_bag,
+        analyse=Hook("manipulator_kinematics.bag.analysis:serial"),
+        synthesize=Hook("manipulator_kinematics.bag.synthetic:serial_bag"),
         forward_node=f"{name}_forward",
         urdf=urdf,
-        scene=serial_scene,
+        scene=Hook("manipulator_kinematics.scene:serial_scene"),
     )
