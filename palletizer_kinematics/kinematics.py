@@ -130,6 +130,8 @@ REACH_TOL = 1e-12
 # Plain ints for the scalar parts (an IntEnum member costs a lookup and a conversion per use).
 _SUCCESS, _SINGULAR, _JOINT_LIMITS, _UNREACHABLE, _INVALID = (int(s) for s in IKStatus)
 _ALL_BRANCHES = (True,) * len(BRANCHES)
+# The home elbow branch's candidates (either flange turn) lead BRANCHES.
+_HOME_COUNT = sum(b.startswith(HOME_BRANCH) for b in BRANCHES)
 _ANGLE = Number(min=-2 * math.tau, max=2 * math.tau, unit="rad")
 
 #: The ``palletizer:`` section of a parameters file (manipulator_kinematics.config).
@@ -416,12 +418,13 @@ class Palletizer:
             yaw = np.zeros(shape) if seed is None else seed[..., 0] - seed[..., 3]
             turn = np.stack([np.cos(yaw), np.sin(yaw)], axis=-1)
         judge = functools.partial(self._judge, allowed=allowed, use_orientation=use_orientation, mode=mode)
-        extra, q, status, rule = evaluate_angle_parts(
+        extra, q, status, choice = evaluate_angle_parts(
             self._closed_form, [parts_rows(pose), parts_rows(turn)], ((4, 6), (4, 6), (8,)),
             judge, [] if seed is None else [parts_rows(seed)], ((8, 4), (8,), (3,)),
         )
         if len(shape) > 1:  # evaluate_angle_parts' batches are flat
-            extra, q, status, rule = (out.reshape(shape + out.shape[1:]) for out in (extra, q, status, rule))
+            extra, q, status, choice = (out.reshape(shape + out.shape[1:])
+                                        for out in (extra, q, status, choice))
         q[status >= _UNREACHABLE] = np.nan
         context = {
             "lean": extra[..., 2],
@@ -430,14 +433,14 @@ class Palletizer:
             "mode": mode,
             "seeded": seed is not None,
             "branch": branch,
-            "home": rule[..., 2] != 0.0,
+            "home": choice[..., 2] != 0.0,
         }
         return IKSolutions(
             q=q,
             status=status.astype(np.int8),
             branches=BRANCHES,
-            selected=rule[..., 0].astype(np.intp),
-            tie=rule[..., 1] != 0.0,
+            selected=choice[..., 0].astype(np.intp),
+            tie=choice[..., 1] != 0.0,
             explain=lambda solutions, index: self._explain(solutions, index, context),
         )
 
@@ -522,12 +525,11 @@ class Palletizer:
                 kind = _JOINT_LIMITS - inside * (_JOINT_LIMITS - singular)
                 candidates += [q1, q2, q3, flange]
                 status.append(failure + reach * (kind - failure))
-        # The home elbow branch is BRANCHES[0:2] (either flange turn).
-        home_choice, home_tie = select_parts(candidates, status, seed=seed, allowed=allowed[:2])
-        choice, tie = select_parts(candidates, status, seed=seed, allowed=allowed)
+        home_choice, home_tie = select_parts(candidates, status, seed=seed, allowed=allowed[:_HOME_COUNT])
+        other_choice, other_tie = select_parts(candidates, status, seed=seed, allowed=allowed)
         home = home_choice >= 0
-        rule = [parts_where(home, home_choice, choice), parts_where(home, home_tie, tie), home]
-        return candidates, status, rule
+        choice = [parts_where(home, home_choice, other_choice), parts_where(home, home_tie, other_tie), home]
+        return candidates, status, choice
 
     def _mode(self, mode: str | None) -> str:
         if mode is None:

@@ -30,7 +30,7 @@ That gives 2 x 2 x 2 = 8 candidates, in the order of :data:`BRANCHES` (index = 4
 limits when there is one (J5's limits [0, 270] deg span more than a half turn).
 
 Speed (benchmarks/bench_tool_changer_ik.py): the steps run on scalar parts, Python floats for one
-target and (M,) arrays for chunks of a batch (the shared :func:`evaluate_parts`, one code path),
+target and (M,) arrays for chunks of a batch (the shared :func:`evaluate_angle_parts`, one code path),
 with every angle kept as a (sine, cosine)-like pair (sums and differences of angles are products
 of pairs) until one arctan2 over all 48; then the joint values, statuses and the selection on
 parts again. numpy on (8, 6) arrays would cost more in per-call overhead than the arithmetic.
@@ -304,7 +304,7 @@ class ToolChanger:
         pose = parts_rows(flange.reshape(shape + (16,)))
         if shape:
             rule = parts_rows(np.broadcast_to(rule, shape + (2,)))
-        extra, q, status, rule = evaluate_angle_parts(
+        extra, q, status, choice = evaluate_angle_parts(
             self._closed_form, [pose, np.cos(rule), np.sin(rule)], ((8, 6), (8, 6), (18,)),
             functools.partial(self._judge, branch=branch), [] if seed is None else [parts_rows(seed)],
             ((8, 6), (8,), (2,)),
@@ -313,7 +313,7 @@ class ToolChanger:
         if parts_any(invalid):
             q[invalid] = np.nan
         diag = {"invalid": invalid, "rho": rho, "s5": s5, "reach": extra[..., 10:]}
-        return q, status.astype(np.int8), rule[..., 0].astype(np.intp), rule[..., 1] != 0.0, diag
+        return q, status.astype(np.int8), choice[..., 0].astype(np.intp), choice[..., 1] != 0.0, diag
 
     def _judge(self, angles: Sequence, extra: Sequence, seed: Sequence | None = None, *,
                branch: int | None) -> tuple[list, list, list]:
