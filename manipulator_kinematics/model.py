@@ -97,6 +97,20 @@ class IKSolutions:
     def ok(self) -> np.ndarray:
         return self.selected >= 0
 
+    def failure(self, index: tuple[int, ...] | int = (), branch: str | None = None) -> IKStatus:
+        """Why one target has no selected solution: the one rule of every machine's services.
+
+        The best (least) failed status of its candidates, or of the ``branch`` asked for alone
+        (the other branches are no answer to that request): UNREACHABLE (NO_IK_SOLUTION) when
+        no geometric solution exists, JOINT_LIMITS only when solutions exist and every one breaks
+        a limit. INVALID if no candidate failed (nothing was selected all the same).
+        """
+        status = self.status[index if isinstance(index, tuple) else (index,)]
+        if branch is not None and branch in self.branches:
+            status = status[[self.branches.index(branch)]]
+        failed = status[status != _SUCCESS]
+        return IKStatus(int(failed.min())) if failed.size else IKStatus.INVALID
+
     @property
     def solution(self) -> np.ndarray:
         """(..., n) the selected candidate, NaN where there is none."""

@@ -74,11 +74,15 @@ def test_ik_and_fk_services_round_trip(probe: Probe, arm: ToolChanger) -> None:
         # Failures: a code and a reason, and the server keeps serving.
         far = np.eye(4)
         far[:3, 3] = (4.0, 0.0, 1.0)
+        branch_far = np.eye(4)
+        branch_far[:3, 3] = (1.5, 0.0, 1.0)
         for request, code, text in (
             (ik_request(far, names), Codes.NO_IK_SOLUTION, "cannot reach"),
             (ik_request(arm.fkine([0.3, 1.0, -1.2, 1.5, 1.0, 0.2]), names), Codes.JOINT_LIMITS_VIOLATED,
              "wrist_pitch_joint"),
             (ik_request(T, names, branch="elbow_up"), Codes.INVALID_MODE, "unknown branch"),
+            # Out of this branch's reach, only other branches have (limit-breaking) solutions.
+            (ik_request(branch_far, names, branch="front_up_noflip"), Codes.NO_IK_SOLUTION, "cannot reach"),
         ):
             response = probe.call(ik, request, TIMEOUT)
             assert not response.success and response.error_code.val == code, response.message

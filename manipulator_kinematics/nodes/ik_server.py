@@ -121,10 +121,8 @@ class IKServerNode(MachineNode):
         response.message = result.note()
         if not bool(result.ok):
             # A valid candidate can exist without a selection (the requested branch is not valid):
-            # the code is then the best failure, never SUCCESS with success = false.
-            failed = result.status[result.status != IKStatus.SUCCESS]
-            raise Rejected(CODES[IKStatus(int(failed.min())) if failed.size else IKStatus.INVALID],
-                           response.message)
+            # the code is then that branch's failure, never SUCCESS with success = false.
+            raise Rejected(CODES[result.failure(branch=request.branch or None)], response.message)
         ordered = result.ordered()
         if not (np.all(np.isfinite(result.solution)) and np.all(np.isfinite(result.q[ordered]))):
             raise Rejected(KinematicsErrorCodes.FAILURE,
