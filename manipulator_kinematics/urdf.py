@@ -56,6 +56,12 @@ MATERIALS = {
 }
 # Entries this close to zero are written as 0 (no -0.0 or 1e-17 round-off in committed files).
 _ZERO = 1e-15
+# Numbers are written with 15 significant digits (DBL_DIG: every such decimal survives the trip
+# to a double and back, so a config's 0.6545196915 comes out as typed): repr's 17 digits would
+# show the last bit of a computed value, which differs between CPUs (numpy's SIMD paths), and
+# make the shipped files depend on the machine they were made on. 15 digits keep every value
+# of these machines (|x| < 100 m) to 1e-13, far below what a URDF user can see.
+PRECISION = 15
 
 
 def machine_urdf(machine_name: str, model: Any = None) -> str:
@@ -72,7 +78,7 @@ def machine_urdf(machine_name: str, model: Any = None) -> str:
 # ---------------------------------------------------------------------------------------------- XML
 def _number(value: float) -> str:
     value = float(value)
-    return "0" if abs(value) < _ZERO else repr(value)
+    return "0" if abs(value) < _ZERO else f"{value:.{PRECISION}g}"
 
 
 def _numbers(values: ArrayLike) -> str:
