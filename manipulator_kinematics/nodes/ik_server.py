@@ -95,7 +95,8 @@ class IKServerNode(MachineNode):
                            f"target position {position.tolist()} is beyond {PLAUSIBILITY_FACTOR:g} x the "
                            f"machine's reach (|coordinate| <= {self.max_distance:.6g} m): implausible")
         # The norm of a finite quaternion can still overflow (1e308): that is not a rotation either.
-        norm = float(np.linalg.norm(quaternion))
+        with np.errstate(over="ignore"):  # inf: refused below, not a RuntimeWarning on stderr
+            norm = float(np.linalg.norm(quaternion))
         if request.use_orientation and not (np.isfinite(norm) and norm >= 1e-9):
             raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
                            f"target orientation is not a rotation: {quaternion.tolist()}")
