@@ -26,7 +26,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Union
 
-from manipulator_kinematics.params import ConfigError, shown
+from manipulator_kinematics.params import SHOWN, ConfigError, shown
 
 __all__ = [
     "ConfigError",
@@ -155,7 +155,8 @@ def validate(values: Any, schema: Schema, prefix: str = "") -> dict[str, Any]:
         raise ConfigError(f"{prefix or 'parameters'}: expected a mapping of keys, got {shown(values)}")
     for key in values:
         if key not in schema:
-            raise ConfigError(f"{_join(prefix, key)}: unknown key{_did_you_mean(str(key), schema)}")
+            name = _join(prefix, key) if len(str(key)) <= SHOWN else _join(prefix, shown(str(key)))
+            raise ConfigError(f"{name}: unknown key{_did_you_mean(str(key), schema)}")
     out: dict[str, Any] = {}
     for key, spec in schema.items():
         name = _join(prefix, key)

@@ -12,9 +12,10 @@ from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
 from ros_harness import NodeProcess, Probe
 
+from manipulator_kinematics.config import Number, validate
 from manipulator_kinematics.node_util import console_script
 from manipulator_kinematics.nodes.base import params_files
-from manipulator_kinematics.params import SHOWN, config_path, load_parameters, shown
+from manipulator_kinematics.params import SHOWN, ConfigError, config_path, load_parameters, shown
 
 TIMEOUT = 15.0
 SCARA = load_parameters(config_path("scara.yaml"))["scara"]
@@ -158,3 +159,6 @@ def test_shown_cuts_long_values_only() -> None:
     text = shown(list(range(100_000)))
     assert text.startswith("[0, 1, 2, ") and text.endswith("...9998, 99999] (100000 items)")
     assert len(text) < SHOWN + 20
+    with pytest.raises(ConfigError, match=r"^scara\.'x{79}\.\.\.x{11}': unknown key") as refused:
+        validate({"x" * 100_000: 1.0}, {"l1": Number()}, "scara")
+    assert len(str(refused.value)) < 300
