@@ -137,26 +137,26 @@ def _refuse_long_lists(path: Path, stream: Any) -> None:
     """ConfigError naming the first list of more than MAX_ITEMS items, read as YAML events up to
     its item MAX_ITEMS + 1: a 100,000-element list is refused in milliseconds, before PyYAML
     builds it (0.4 s) and rcl parses it (2 s)."""
-    open_: list[list[Any]] = []  # per open collection: [is_mapping, next_is_key, items, key]
+    stack: list[list[Any]] = []  # per open collection: [is_mapping, next_is_key, items, key]
     for event in yaml.parse(stream, Loader=_LOADER):
         if isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
-            open_.pop()
+            stack.pop()
             continue
         if not isinstance(event, (yaml.NodeEvent, yaml.CollectionStartEvent)):
             continue
-        if open_ and not open_[-1][0]:  # an item of a list
-            open_[-1][2] += 1
-            if open_[-1][2] > MAX_ITEMS:
-                keys = [str(c[3]) for c in open_ if c[0]]
+        if stack and not stack[-1][0]:  # an item of a list
+            stack[-1][2] += 1
+            if stack[-1][2] > MAX_ITEMS:
+                keys = [str(c[3])[:SHOWN] for c in stack if c[0]]
                 name = ".".join(keys[2:] if keys[1:2] == ["ros__parameters"] else keys[1:])
                 raise ConfigError(f"--params-file {path}: {keys[0] if keys else ''}: {name} has more "
                                   f"than the {MAX_ITEMS} items a parameter may have")
-        elif open_:  # a key of a mapping, or its value
-            if open_[-1][1]:
-                open_[-1][3] = getattr(event, "value", "?")
-            open_[-1][1] = not open_[-1][1]
+        elif stack:  # a key of a mapping, or its value
+            if stack[-1][1]:
+                stack[-1][3] = getattr(event, "value", "?")
+            stack[-1][1] = not stack[-1][1]
         if isinstance(event, yaml.CollectionStartEvent):
-            open_.append([isinstance(event, yaml.MappingStartEvent), True, 0, None])
+            stack.append([isinstance(event, yaml.MappingStartEvent), True, 0, None])
 
 
 def _leaves(nested: dict[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
