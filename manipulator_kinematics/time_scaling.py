@@ -13,8 +13,10 @@ v(s) >= 0 that takes the path in the least time subject to
 Discretisation (first-order time-optimal path parameterisation, the one of TOPP-RA's
 "interpolation" scheme): x = v^2 is linear in s between samples, so sdd is constant on each
 segment and the speed limits are enforced at the samples. With q'_i the second-order finite
-difference of the samples (``np.gradient``), each sample has a cap
-c_i = min(v_tip, min_j vmax_j / |q'_ij|)^2 (c_0 = c_{N-1} = 0: at rest). The fastest feasible
+difference of the samples (``np.gradient``) and r_ij the largest of |q'_ij| and the chords
+|q_{i+-1,j} - q_ij| / h next to it (a controller interpolating the positions follows the chords, and
+v is monotone on a segment, so the chords keep the limit between samples too), each sample has a
+cap c_i = min(v_tip, min_j vmax_j / r_ij)^2 (c_0 = c_{N-1} = 0: at rest). The fastest feasible
 profile is the lower envelope x_i = min_k (c_k + 2 a |s_i - s_k|): the minimum of the forward
 pass F_{i+1} = min(c_{i+1}, F_i + 2 a h_i) and the backward pass B_i = min(c_i, B_{i+1} + 2 a h_i)
 (every feasible profile lies below both, and their minimum is feasible). Each pass is one
@@ -28,7 +30,8 @@ one segment from rest to rest: accelerate at a, cruise at the cap if it is reach
 Per sample: qd = q' v; sdd = mean of the adjacent segments' accelerations (|sdd| <= a);
 qdd = q'' v^2 + q' sdd, q'' the three-point second difference (q''_0 = q''_1, q''_{N-1} = q''_{N-2}).
 ``active`` says which constraint sets the speed at each sample: :data:`TIP_SPEED`, joint j (>= 0)
-at its limit, or :data:`ACCELERATION` (on an acceleration or braking curve; the ends at rest).
+at its limit (at the sample or on a chord next to it), or :data:`ACCELERATION` (on an acceleration
+or braking curve; the ends at rest).
 
 Why our own and not toppra: the benchmark against it (same path, same limits) follows in
 ``benchmarks/bench_time_scaling.py``.
@@ -119,8 +122,13 @@ def time_scale(
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
         slope = np.diff(q, axis=0) / h[:, None]  # (N - 1, n) per segment
         dq = np.gradient(q, s, axis=0, edge_order=2) if n > 2 else np.vstack([slope, slope])
+        # A joint's rate per metre at a sample: the central difference, or a chord next to it if
+        # steeper (a controller interpolating the positions follows the chords; v is monotone on a
+        # segment, so a chord within the limit at both ends is within it all along).
+        chord = np.abs(slope)
+        rate = np.maximum.reduce([np.abs(dq), np.vstack([chord[:1], chord]), np.vstack([chord, chord[-1:]])])
         # caps (N, 1 + n): the tip, then each joint (inf where a joint does not move).
-        caps = np.hstack([np.full((n, 1), float(tip_speed)), vmax / np.abs(dq)])
+        caps = np.hstack([np.full((n, 1), float(tip_speed)), vmax / rate])
     if not (np.all(np.isfinite(dq)) and np.all(caps > 0.0)):
         raise ValueError("the path's joint derivative overflows: samples too close for their joint steps")
     which = np.argmin(caps, axis=1)  # ties go to the tip (column 0)

@@ -37,8 +37,19 @@ def jacobian_2r(q: np.ndarray) -> np.ndarray:
                      np.stack([L1 * np.cos(t1) + L2 * np.cos(t12), L2 * np.cos(t12)], -1)], -2)
 
 
+def joint_rate(q: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """|dq/ds| per sample: the central difference or a chord next to it, whichever is steeper."""
+    chord = np.abs(np.diff(q, axis=0) / np.diff(s)[:, None])
+    central = np.abs(np.gradient(q, s, axis=0, edge_order=2))
+    return np.maximum.reduce([central, np.vstack([chord[:1], chord]), np.vstack([chord, chord[-1:]])])
+
+
 def assert_within_limits(timed, vmax, tip_speed, acceleration) -> None:
     assert np.all(np.abs(timed.qd) <= np.asarray(vmax) * (1.0 + SPEED_RTOL))
+    # Along each chord too (what a controller interpolating the positions follows).
+    chord = np.abs(np.diff(timed.q, axis=0) / np.diff(timed.s)[:, None])
+    fastest = np.maximum(timed.speed[1:], timed.speed[:-1])[:, None]
+    assert np.all(chord * fastest <= np.asarray(vmax) * (1.0 + SPEED_RTOL))
     assert np.all(timed.speed <= tip_speed)
     assert np.all(np.abs(timed.sdd) <= acceleration * (1.0 + ACCELERATION_RTOL))
     assert timed.speed[0] == timed.speed[-1] == 0.0 and timed.t[0] == 0.0
@@ -81,9 +92,8 @@ def test_speed_is_the_lower_envelope_of_the_caps() -> None:
     q, s, _ = line_2r(400)
     vmax = np.array([0.45, 0.55])
     timed = time_scale(q, s, vmax, TIP, ACC)
-    dq = np.gradient(q, s, axis=0, edge_order=2)
     with np.errstate(divide="ignore"):
-        cap = np.minimum(TIP, np.min(vmax / np.abs(dq), axis=1)) ** 2
+        cap = np.minimum(TIP, np.min(vmax / joint_rate(q, s), axis=1)) ** 2
     cap[[0, -1]] = 0.0
     envelope = np.min(cap[None, :] + 2.0 * ACC * np.abs(s[:, None] - s[None, :]), axis=1)
     np.testing.assert_allclose(timed.speed**2, envelope, rtol=1e-12, atol=1e-15)
@@ -100,7 +110,8 @@ def test_slows_only_where_a_constraint_is_active() -> None:
     for joint in (0, 1):
         at_limit = timed.active == joint
         assert np.any(at_limit)
-        np.testing.assert_allclose(np.abs(timed.qd[at_limit, joint]), vmax[joint], rtol=SPEED_RTOL)
+        np.testing.assert_allclose(timed.speed[at_limit] * joint_rate(q, s)[at_limit, joint], vmax[joint],
+                                   rtol=SPEED_RTOL)
     # On acceleration curves the tip is slower than every cap and accelerates or brakes at a
     # on a segment next to it.
     on_curve = np.flatnonzero(timed.active[1:-1] == ACCELERATION) + 1
@@ -112,6 +123,21 @@ def test_slows_only_where_a_constraint_is_active() -> None:
     free = time_scale(q, s, [np.inf, np.inf], TIP, ACC)
     assert set(np.unique(free.active).tolist()) == {ACCELERATION, TIP_SPEED}
     assert free.duration < timed.duration
+
+
+def test_a_corner_keeps_the_chords_within_the_limits() -> None:
+    # Two lines meeting at a corner: q(s) has a kink, where the central difference understates
+    # the chords on either side; the chords set the cap there.
+    first, _, _ = line_2r(201, (1.6, -0.6), (1.0, 0.4))
+    second, _, _ = line_2r(201, (1.0, 0.4), (0.2, 0.2))
+    q = np.vstack([first, second[1:]])
+    s = np.concatenate([np.linspace(0.0, math.hypot(0.6, 1.0), 201),
+                        math.hypot(0.6, 1.0) + np.linspace(0.0, math.hypot(0.8, 0.2), 201)[1:]])
+    vmax = np.array([0.45, 0.55])
+    timed = time_scale(q, s, vmax, TIP, ACC)
+    assert_within_limits(timed, vmax, TIP, ACC)
+    central = np.abs(np.gradient(q, s, axis=0, edge_order=2))
+    assert np.any(joint_rate(q, s)[200] > 1.2 * central[200])  # the kink: chords steeper than the mean
 
 
 def test_limits_hold_on_a_long_path() -> None:
