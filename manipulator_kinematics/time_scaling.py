@@ -33,8 +33,14 @@ qdd = q'' v^2 + q' sdd, q'' the three-point second difference (q''_0 = q''_1, q'
 at its limit (at the sample or on a chord next to it), or :data:`ACCELERATION` (on an acceleration
 or braking curve; the ends at rest).
 
-Why our own and not toppra: the benchmark against it (same path, same limits) follows in
-``benchmarks/bench_time_scaling.py``.
+Why our own and not toppra (kept after ``benchmarks/bench_time_scaling.py``: pump boom pours, the
+same samples as toppra's grid, the same limits, the tip bounds given to toppra as a virtual joint
+q_s = s with speed limit v_tip and acceleration limit a, its constant-acceleration parametrizer):
+the durations agree to 0.25 % (146.43 / 146.38 s at 290 samples, 497.85 / 496.64 s at 1,996,
+498.01 / 498.15 s at 19,996), both keep every joint speed and the tip speed at or below the limit,
+and ours computes in 0.24 / 1.5 / 10.4 ms against toppra's 10 / 166 / 1,047 ms (40-110x; medians
+of 5 rounds, 2 shared cores). It also needs no new dependency (toppra 0.6.10 brings matplotlib)
+and bounds the tip speed and the path acceleration directly, where toppra needs the virtual joint.
 """
 
 from __future__ import annotations
