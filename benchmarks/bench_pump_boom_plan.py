@@ -24,6 +24,7 @@ import sys
 import time
 
 import numpy as np
+from tables import print_table
 
 from manipulator_kinematics.nodes.messages import joint_trajectory
 from pump_boom_kinematics.kinematics import PumpBoom
@@ -62,11 +63,7 @@ def main() -> None:
     print(f"\nLargest pump boom plans: {os.cpu_count()} cores (load average {load}), Python "
           f"{sys.version.split()[0]}, numpy {np.__version__}; {args.rounds} rounds, median / worst in s.\n")
     header = ("plan", "points", "step (m)", "plan (s)", "message (s)", "total (s)", "trajectory (s)")
-    widths = [max(len(r[i]) for r in [*rows, header]) for i in range(len(header))]
-    print("| " + " | ".join(h.ljust(w) for h, w in zip(header, widths, strict=True)) + " |")
-    print("|" + "|".join("-" * (w + 2) for w in widths) + "|")
-    for row in rows:
-        print("| " + " | ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) + " |")
+    print_table(header, rows)
 
 
 if __name__ == "__main__":

@@ -31,6 +31,7 @@ import time
 from pathlib import Path
 
 from peer_venv import run_worker
+from tables import print_table
 
 REPO = Path(__file__).resolve().parent.parent
 CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
@@ -168,11 +169,7 @@ def main() -> None:
                      f"{mine['duration'] / other['duration']:.4f}", f"{ms:.2f} / {theirs:.1f}",
                      f"{theirs / ms:.0f}x", f"{mine['joint_ratio']:.6f} / {other['joint_ratio']:.6f}",
                      f"{mine['tip_ratio']:.6f} / {other['tip_ratio']:.6f}"))
-    widths = [max(len(r[i]) for r in [*rows, header]) for i in range(len(header))]
-    print("| " + " | ".join(h.ljust(w) for h, w in zip(header, widths, strict=True)) + " |")
-    print("|" + "|".join("-" * (w + 2) for w in widths) + "|")
-    for row in rows:
-        print("| " + " | ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) + " |")
+    print_table(header, rows)
 
 
 if __name__ == "__main__":
