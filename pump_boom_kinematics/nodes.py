@@ -30,7 +30,12 @@ import numpy as np
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 
 from manipulator_kinematics.config import Number
-from manipulator_kinematics.joint_state import PLAUSIBILITY_FACTOR, InputError, joint_values
+from manipulator_kinematics.joint_state import (
+    PLAUSIBILITY_FACTOR,
+    InputError,
+    check_plausible_positions,
+    joint_values,
+)
 from manipulator_kinematics.nodes import forward_main, run_node
 from manipulator_kinematics.nodes.ik_server import SETTINGS, IKServerNode, Rejected
 from manipulator_kinematics.nodes.messages import joint_trajectory
@@ -95,6 +100,7 @@ class PumpBoomServer(IKServerNode):
         if len(request.seed.name) or len(request.seed.position):
             try:
                 seed, _ = joint_values(request.seed, self.joint_names, require_position=True)
+                check_plausible_positions(seed, self.joint_names, self.limits.lower, self.limits.upper)
             except InputError as error:
                 raise Rejected(KinematicsErrorCodes.INVALID_ROBOT_STATE, f"seed: {error}") from None
         # 0 = the machine's default; anything else (negative, NaN, tiny, huge) the planner checks.

@@ -267,6 +267,8 @@ def test_plan_path_truncated_and_refused(probe: Probe, server, boom: PumpBoom) -
         "speed negative": (plan_request(line, tip_speed=-0.2), invalid, "tip_speed -0.2 m/s is outside"),
         "mode": (plan_request(line, mode="phi"), Codes.INVALID_MODE, "unknown mode 'phi'"),
         "seed": (plan_request(line, seed=[0.0, 1.0]), Codes.INVALID_ROBOT_STATE, "seed:"),
+        "seed huge": (plan_request(line, seed=[1e300, 1.0, 2.0, 2.0, 2.0, 2.0]), Codes.INVALID_ROBOT_STATE,
+                      "seed: slew_joint = 1e+300 is beyond 1000 x its range"),
     }
     for name, (request, code, text) in cases.items():
         response = call(probe, plan_client, request)
