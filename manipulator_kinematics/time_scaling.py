@@ -10,9 +10,9 @@ v(s) >= 0 that takes the path in the least time subject to
 * the path acceleration bound    |sdd| = |d(v^2)/ds| / 2 <= a     (tip acceleration along the path);
 * rest at both ends              v(0) = v(L) = 0.
 
-Discretisation (first-order time-optimal path parameterisation, the one of TOPP-RA's
-"interpolation" scheme): x = v^2 is linear in s between samples, so sdd is constant on each
-segment and the speed limits are enforced at the samples. With q'_i the second-order finite
+Discretisation (time-optimal path parameterisation as in TOPP-RA): x = v^2 is linear in s
+between samples, so sdd is constant on each segment and the speed limits are enforced at the
+samples. With q'_i the second-order finite
 difference of the samples (``np.gradient``) and r_ij the largest of |q'_ij| and the chords
 |q_{i+-1,j} - q_ij| / h next to it (a controller interpolating the positions follows the chords, and
 v is monotone on a segment, so the chords keep the limit between samples too), each sample has a
