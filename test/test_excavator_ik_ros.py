@@ -1,5 +1,6 @@
-"""excavator_ik_server across processes: SolveIK / SolveFK round trips against the library, and
-bad requests answered with success = false, a code and a reason (isolated domain)."""
+"""excavator_ik_server across processes: SolveIK / SolveFK round trips against the library,
+plan_path against the library's plan, and bad requests answered with success = false, a code and
+a reason (isolated domain)."""
 from __future__ import annotations
 
 import copy
@@ -9,14 +10,16 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Point
 from ros_harness import IK_FK, NodeProcess, Probe, start_with_services
 from sensor_msgs.msg import JointState
 
 from excavator_kinematics.kinematics import ACTUATORS, Excavator
+from excavator_kinematics.path import plan_path
 from manipulator_kinematics.model import matrix_quaternion
 from manipulator_kinematics.params import config_path, load_parameters
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
-from manipulator_kinematics_interfaces.srv import SolveFK, SolveIK
+from manipulator_kinematics_interfaces.srv import PlanPath, SolveFK, SolveIK
 
 EXC = Excavator.default()
 NAMES = list(ACTUATORS)
@@ -27,11 +30,11 @@ REFERENCE = EXC.limits.reference
 
 
 @pytest.fixture(scope="module")
-def server(probe: Probe) -> Iterator[tuple[NodeProcess, object, object]]:
-    process, (ik, fk) = start_with_services(probe, "excavator_ik_server", *PARAMS, services=IK_FK,
-                                            timeout=TIMEOUT)
+def server(probe: Probe) -> Iterator[tuple[NodeProcess, object, object, object]]:
+    process, (ik, fk, plan) = start_with_services(probe, "excavator_ik_server", *PARAMS,
+                                                  services=(*IK_FK, (PlanPath, "plan_path")), timeout=TIMEOUT)
     try:
-        yield process, ik, fk
+        yield process, ik, fk, plan
     finally:
         log = process.stop()
         assert "Traceback" not in log, log
@@ -61,7 +64,7 @@ def fk_request(D, D_dot=None, stamp: Time | None = None) -> SolveFK.Request:
 
 
 def test_ik_and_fk_round_trip_with_the_library(probe: Probe, server) -> None:
-    _, ik, fk = server
+    _, ik, fk, _ = server
     rng = np.random.default_rng(18)
     states = np.vstack((REFERENCE, rng.uniform(EXC.joint_limits.lower, EXC.joint_limits.upper, (4, 4))))
     for D in states:
@@ -105,7 +108,7 @@ def outside_stroke_pose() -> np.ndarray:
 
 
 def test_bad_requests_fail_with_a_code_and_a_reason(probe: Probe, server) -> None:
-    process, ik, fk = server
+    process, ik, fk, _ = server
     pose = EXC.fkine(REFERENCE)
     far, nan, rolled = pose.copy(), pose.copy(), pose.copy()
     far[0, 3] = 15.0
@@ -148,4 +151,58 @@ def test_bad_requests_fail_with_a_code_and_a_reason(probe: Probe, server) -> Non
     response = call(probe, ik, ik_request(pose))
     assert response.success
     np.testing.assert_allclose(response.solution.position, REFERENCE, atol=1e-9)
+    assert process.alive()
+
+
+def path_request(waypoints, step: float = 0.0, tip_speed: float = 0.0, seed=None,
+                 mode: str = "") -> PlanPath.Request:
+    request = PlanPath.Request(step=step, tip_speed=tip_speed, mode=mode)
+    request.waypoints = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in waypoints]
+    if seed is not None:
+        request.seed = JointState(name=NAMES, position=[float(v) for v in seed])
+    return request
+
+
+def test_plan_path_is_the_librarys_plan_and_stops_at_the_workspace(probe: Probe, server) -> None:
+    process, _, _, planner = server
+    start = EXC.pose(REFERENCE)[:3]
+    waypoints = [start, start + [1.5, 0.0, 0.0], start + [1.5, 0.0, -1.0]]
+    response = call(probe, planner, path_request(waypoints, seed=REFERENCE))
+    assert response.success and response.error_code.val == Codes.SUCCESS, response.message
+    assert response.last_reachable_waypoint == 2 and "acceleration" in response.message
+    # The settings' defaults (config/excavator_nodes.yaml): step 0.05 m, 0.5 m/s, 0.5 m/s^2.
+    expected = plan_path(EXC, waypoints, 0.05, 0.5, 0.5, seed=REFERENCE).timing
+    trajectory = response.trajectory
+    assert list(trajectory.joint_names) == NAMES and trajectory.header.frame_id == "base_link"
+    points = trajectory.points
+    assert len(points) == len(expected.t)
+    t = [p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in points]
+    np.testing.assert_allclose(t, expected.t, atol=1e-9)
+    for name, values in (("positions", expected.q), ("velocities", expected.qd),
+                         ("accelerations", expected.qdd)):
+        np.testing.assert_allclose([getattr(p, name) for p in points], values, atol=1e-12)
+    assert np.all(np.abs(expected.qd) <= EXC.limits.max_rates * (1 + 1e-12))
+    # Out of the workspace: the reachable part, the reason and the last waypoint reached.
+    short = call(probe, planner, path_request([start, start + [0.5, 0.0, 0.0], start + [8.5, 0.0, 0.0]],
+                                              seed=REFERENCE))
+    assert not short.success and short.error_code.val == Codes.NO_IK_SOLUTION
+    assert short.last_reachable_waypoint == 1 and "farthest reachable point" in short.message, short.message
+    last = short.trajectory.points[-1]
+    assert len(short.trajectory.points) > 10 and list(last.velocities) == [0.0] * 4
+    bad = {
+        "none": (path_request([]), Codes.INVALID_GOAL_CONSTRAINTS, "at least one"),
+        "nan": (path_request([start, [math.nan, 0.0, 0.0]]), Codes.INVALID_GOAL_CONSTRAINTS, "finite"),
+        "step": (path_request([start], step=-1.0), Codes.INVALID_GOAL_CONSTRAINTS, "step -1.0"),
+        "mode": (path_request([start], mode="region"), Codes.INVALID_MODE, "unknown mode 'region'"),
+        "slow": (path_request([start], tip_speed=1e-300), Codes.INVALID_GOAL_CONSTRAINTS, ">= 0.001"),
+        "far": (path_request([start, [1e300, 0.0, 0.0]]), Codes.INVALID_GOAL_CONSTRAINTS, "implausible"),
+        "points": (path_request([start, start + [1000.0, 0.0, 0.0]], step=1e-4),
+                   Codes.INVALID_GOAL_CONSTRAINTS, "at most 1000000"),
+        "first": (path_request([[30.0, 0.0, 0.0]]), Codes.NO_IK_SOLUTION, "first waypoint"),
+        "seed": (path_request([start], seed=[0.0, 1.0]), Codes.INVALID_ROBOT_STATE, "seed"),
+    }
+    for name, (request, code, text) in bad.items():
+        response = call(probe, planner, request)
+        assert not response.success and response.error_code.val == code, (name, response.message)
+        assert text in response.message, (name, response.message)
     assert process.alive()

@@ -30,7 +30,7 @@ import numpy as np
 import pytest
 import yaml
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import AccelStamped, PointStamped, PoseStamped, TwistStamped
+from geometry_msgs.msg import AccelStamped, Point, PointStamped, PoseStamped, TwistStamped
 from rclpy.duration import Duration
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
@@ -47,7 +47,7 @@ from manipulator_kinematics.model import RequestError, matrix_quaternion
 from manipulator_kinematics.params import config_path, load_parameters
 from manipulator_kinematics.registry import machine
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
-from manipulator_kinematics_interfaces.srv import SolveFK, SolveIK
+from manipulator_kinematics_interfaces.srv import PlanPath, SolveFK, SolveIK
 
 EXC = Excavator.default()
 LIMITS = EXC.limits
@@ -655,22 +655,48 @@ class WideExcavator:
         return self.model.fkine(self.model.joint_limits.clip(q))
 
 
+def random_path(rng: np.random.Generator, model: Excavator, k: int) -> PlanPath.Request:
+    """A PlanPath request: plausible waypoints near the machine, or malformed (extremes, NaN,
+    bad steps and speeds, wrong seeds, many waypoints)."""
+    start = model.pose(model.limits.reference)[:3]
+    count = int(rng.integers(0, 5)) if k % 5 else int(rng.integers(0, 200))
+    waypoints = start + rng.normal(scale=2.0, size=(count, 3))
+    request = PlanPath.Request(step=float(rng.choice([0.0, 0.05, 0.5, 1e-300, -1.0, math.nan, math.inf])),
+                               tip_speed=float(rng.choice([0.0, 0.2, 3.0, 1e-300, -0.5, math.nan, 1e308])),
+                               mode=str(rng.choice(["", "", "pose", "region", "x" * 300])))
+    if k % 3 == 1 and count:
+        waypoints[rng.integers(count)] = extreme(rng, 3, 10.0)
+    request.waypoints = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in waypoints]
+    if k % 4 == 2:
+        seed = extreme(rng, 4, 1.0) if rng.random() < 0.5 else list(model.limits.reference)
+        request.seed = JointState(name=list(ACTUATORS)[: int(rng.integers(2, 5))], position=seed)
+    return request
+
+
 def test_excavator_ik_server_survives_any_input(probe: Probe, nodes: dict[str, NodeProcess]) -> None:
     record = machine("excavator")
     model = record.model()
     server = nodes.pop("excavator_ik_server")
     ik = probe.node.create_client(SolveIK, "/fz_eik/solve_ik")
     fk = probe.node.create_client(SolveFK, "/fz_eik/solve_fk")
+    planner = probe.node.create_client(PlanPath, "/fz_eik/plan_path")
+    rng = np.random.default_rng(9200)
     try:
-        probe.wait_until(lambda: (ik.service_is_ready() and fk.service_is_ready()) or not server.alive(),
-                         TIMEOUT, "excavator_ik_server")
+        clients = (ik, fk, planner)
+        probe.wait_until(lambda: all(c.service_is_ready() for c in clients) or not server.alive(), TIMEOUT,
+                         "excavator_ik_server")
         assert server.alive(), server.log()
         probe.call(ik, SolveIK.Request(), TIMEOUT)
-        counts = fuzz_ik_server(probe, ik, fk, model, record.limits(model), np.random.default_rng(9200),
-                                targets=WideExcavator())
+        counts = fuzz_ik_server(probe, ik, fk, model, record.limits(model), rng, targets=WideExcavator())
+        plans = calls(probe, planner, [random_path(rng, model, k) for k in range(150)], window=2)
+        plan_problems = sum(
+            not ((r.success and r.error_code.val == Codes.SUCCESS and len(r.trajectory.points) > 0)
+                 or (not r.success and r.error_code.val != Codes.SUCCESS and r.message))
+            or not all_finite(r.trajectory) for r in plans)
         alive = server.alive()
     finally:
         log = server.stop()
-    report("excavator_ik_server", **counts, alive=int(alive))
-    assert alive and counts["ik_problems"] == 0 and counts["fk_problems"] == 0
+    report("excavator_ik_server", **counts, plan_requests=len(plans),
+           plan_successes=sum(r.success for r in plans), plan_problems=plan_problems, alive=int(alive))
+    assert alive and counts["ik_problems"] == 0 and counts["fk_problems"] == 0 and plan_problems == 0
     assert "Traceback" not in log and "failed on" not in log and "unexpectedly" not in log, log[-3000:]
