@@ -80,6 +80,9 @@ def test_one_target_is_a_batch_of_one() -> None:
         one = EXC.ik(Q[i])
         assert np.array_equal(one.q, batch.q[i], equal_nan=True)
         assert np.array_equal(one.status, batch.status[i]) and int(one.selected) == batch.selected[i]
+    free = EXC.position_ik(Q[:5, :3])
+    for i in range(5):
+        assert np.array_equal(EXC.position_ik(Q[i, :3]).q, free.q[i], equal_nan=True)
 
 
 def numerical_solutions(Q: np.ndarray, starts: np.ndarray) -> np.ndarray:
