@@ -23,8 +23,7 @@ def _model(params: dict[str, Any]) -> Excavator:
 
 
 def _limits(model: Excavator) -> JointLimits:
-    # The cylinders' values are lengths (m), the swing an angle (rad).
-    return JointLimits(ACTUATORS, model.limits.d_min, model.limits.d_max, prismatic=(False, True, True, True))
+    return model.joint_limits
 
 
 MACHINE = Machine(

@@ -51,3 +51,5 @@ def test_a_node_help_lists_its_parameters_with_defaults_and_topics(monkeypatch: 
         assert line in text, line
     server = in_process(entries["tool_changer_ik_server"], "-h", monkeypatch)[1]
     assert "solve_ik" in server and "solve_fk" in server and "base_frame = 'base_link'" in server
+    excavator = in_process(entries["excavator_ik_server"], "--help", monkeypatch)[1]
+    assert "solve_ik" in excavator and "excavator.boom.length = " in excavator

@@ -210,19 +210,26 @@ def scara_forward_traffic(probe: Probe, namespace: str) -> tuple[Callable[[], No
     return send, counter(probe, PoseStamped, f"{namespace}/tool_pose")
 
 
-def scara_ik_server_traffic(probe: Probe, namespace: str) -> tuple[Callable[[], None], Callable[[], int]]:
-    client = probe.node.create_client(SolveFK, f"{namespace}/solve_fk")
-    answered: list[object] = []
-    request = SolveFK.Request(joint_state=JointState(name=["rail_joint", "shoulder_joint", "elbow_joint"],
-                                                     position=[0.1, 0.5, 1.0]))
+Traffic = Callable[[Probe, str], tuple[Callable[[], None], Callable[[], int]]]
 
-    def send() -> None:
-        # Requests sent before the server's response reader matched are lost (rmw_fastrtps):
-        # only answers count, and requests keep coming.
-        if client.service_is_ready():
-            client.call_async(request).add_done_callback(answered.append)
 
-    return send, lambda: len(answered)
+def fk_server_traffic(names: list[str], position: list[float]) -> Traffic:
+    """Traffic of an IK/FK server: solve_fk requests of one joint state; answers count."""
+
+    def traffic(probe: Probe, namespace: str) -> tuple[Callable[[], None], Callable[[], int]]:
+        client = probe.node.create_client(SolveFK, f"{namespace}/solve_fk")
+        answered: list[object] = []
+        request = SolveFK.Request(joint_state=JointState(name=names, position=position))
+
+        def send() -> None:
+            # Requests sent before the server's response reader matched are lost (rmw_fastrtps):
+            # only answers count, and requests keep coming.
+            if client.service_is_ready():
+                client.call_async(request).add_done_callback(answered.append)
+
+        return send, lambda: len(answered)
+
+    return traffic
 
 
 EXCAVATOR = ("--params-file", str(config_path("excavator_cet200.yaml")),
@@ -232,7 +239,9 @@ KINDS = [
     Kind("excavator_forward", EXCAVATOR, forward_traffic),
     Kind("excavator_velocity_ik", EXCAVATOR, velocity_ik_traffic),
     Kind("excavator_sim", EXCAVATOR, sim_traffic),
-    Kind("scara_ik_server", SCARA, scara_ik_server_traffic),
+    Kind("excavator_ik_server", EXCAVATOR, fk_server_traffic(list(ACTUATORS), [0.0, 2.8, 3.3, 2.3])),
+    Kind("scara_ik_server", SCARA,
+         fk_server_traffic(["rail_joint", "shoulder_joint", "elbow_joint"], [0.1, 0.5, 1.0])),
     Kind("scara_forward", SCARA, scara_forward_traffic),
 ]
 
