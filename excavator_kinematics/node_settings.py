@@ -45,6 +45,19 @@ FORWARD = {
                               doc="rise of the plane per run along base y, percent (default 0)"),
         "frame": Text(empty=False, doc="frame_id of grade_height: the design surface's frame"),
     },
+    "design_surface": {
+        "file": Text(doc="LandXML 1.2 file of the design TIN (read at start-up); empty: none"),
+        "surface": Text(doc="name of the Surface in the file; empty: the file's only surface"),
+        "site_frame": Text(empty=False, doc="frame_id of the site (x easting, y northing, z up)"),
+        "site_pose_source": Text(choices=("fixed", "topic"),
+                                 doc="base_link in the site frame: fixed (site_position, site_rpy) "
+                                     "or from topics.site_pose"),
+        "site_position": Numbers(3, Number(min=-1e8, max=1e8, unit="m"),
+                                 doc="fixed position of base_link in the site frame (m)"),
+        "site_rpy": Numbers(3, Number(min=-7.0, max=7.0, unit="rad"),
+                            doc="fixed roll, pitch, yaw of base_link in the site frame (rad, fixed axes)"),
+        "site_pose_max_age": Number(**_SECONDS, doc="max |stamp(cylinder_lengths) - stamp(site pose)|"),
+    },
     "topics": {
         "cylinder_lengths": _topic("input: sensor_msgs/JointState, boom/arm/bucket cylinder length and rate"),
         "joint_states": _topic("input: sensor_msgs/JointState, swing_joint angle and rate"),
@@ -54,6 +67,11 @@ FORWARD = {
         "open_chain_joint_states": _topic("output: sensor_msgs/JointState of the open chain"),
         "urdf_joint_states": _topic("output: sensor_msgs/JointState of every joint of urdf/excavator.urdf"),
         "grade_height": _topic("output: geometry_msgs/PointStamped, the tip in the design surface's frame"),
+        "site_pose": _topic("input: geometry_msgs/PoseStamped, base_link in the site frame (GNSS)"),
+        "grade_tip": _topic("output: geometry_msgs/PointStamped, tip x, y and height above the TIN"),
+        "grade_left": _topic("output: geometry_msgs/PointStamped, left end of the cutting edge"),
+        "grade_right": _topic("output: geometry_msgs/PointStamped, right end of the cutting edge"),
+        "grade_status": _topic("output: diagnostic_msgs/DiagnosticArray, inside/outside the TIN"),
     },
 }
 

@@ -56,7 +56,8 @@ SCHEMA = {
     "base_height": Number(min=-30.0, max=30.0, unit="m"),
     "boom": {"foot_pin": _POINT, "length": _LENGTH},
     "arm": {"length": _LENGTH},
-    "bucket": {"length": _LENGTH},
+    # width: of the cutting edge, whose ends the grade outputs report (design_surface).
+    "bucket": {"length": _LENGTH, "width": _LENGTH},
     "boom_cylinder": _cylinder(base_pin=_POINT, rod_pin=_POINT),
     "arm_cylinder": _cylinder(base_pin=_POINT, rod_pin=_POINT),
     "bucket_cylinder": _cylinder(base_pin=_POINT),
@@ -113,6 +114,7 @@ class Description:
     boom_length: float  # l2
     arm_length: float  # l3
     bucket_length: float  # l4
+    bucket_width: float  # cutting edge, the tip in its middle
     boom_cylinder_pins: tuple[tuple[float, float], tuple[float, float]]  # base, rod
     arm_cylinder_pins: tuple[tuple[float, float], tuple[float, float]]  # base, rod
     bucket_cylinder_base: tuple[float, float]
@@ -154,6 +156,7 @@ def describe(params: Mapping[str, Any], prefix: str = SECTION) -> Description:
         boom_length=params["boom"]["length"],
         arm_length=params["arm"]["length"],
         bucket_length=params["bucket"]["length"],
+        bucket_width=params["bucket"]["width"],
         boom_cylinder_pins=(point(cylinders[0]["base_pin"]), point(cylinders[0]["rod_pin"])),
         arm_cylinder_pins=(point(cylinders[1]["base_pin"]), point(cylinders[1]["rod_pin"])),
         bucket_cylinder_base=point(cylinders[2]["base_pin"]),

@@ -496,6 +496,11 @@ TYPE_OF_TOPIC_KEY = {
     "target_bucket_twist": TWIST,
     "urdf_joint_states": JOINT_STATE,
     "grade_height": "geometry_msgs/msg/PointStamped",
+    "site_pose": POSE,
+    "grade_tip": "geometry_msgs/msg/PointStamped",
+    "grade_left": "geometry_msgs/msg/PointStamped",
+    "grade_right": "geometry_msgs/msg/PointStamped",
+    "grade_status": "diagnostic_msgs/msg/DiagnosticArray",
 }
 
 
