@@ -185,6 +185,7 @@ class Excavator:
         one from a parameters file's section); raises ConfigError unless the linkage assembles
         over the whole stroke box."""
         g = description
+        self.description = g
         self.name = g.name
         self.l1, self.l0 = g.foot
         self.l2, self.l3, self.l4 = g.boom_length, g.arm_length, g.bucket_length

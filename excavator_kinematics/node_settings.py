@@ -98,6 +98,25 @@ VELOCITY_IK = {
     },
 }
 
+IMU_STATE = {
+    "max_skew": Number(**_SECONDS, doc="largest spread of the four sensors' latest stamps in one set"),
+    "gravity_time_constant": Number(**_SECONDS, doc="complementary filter of the gravity direction "
+                                    "(sensors without orientation); 0 = the accelerometer as it is"),
+    "max_angular_rate": Number(min=0.0, max=1e3, unit="rad/s", exclusive_min=True,
+                               doc="a gyro reading beyond this is implausible"),
+    "max_dynamic_acceleration": Number(min=0.0, max=1e3, unit="m/s^2", exclusive_min=True,
+                                       doc="| |linear_acceleration| - g | beyond this: no gravity direction"),
+    "warning_period": _WARNING_PERIOD,
+    "qos_depth": _QOS_DEPTH,
+    "topics": {
+        "imu_cab": _topic("input: sensor_msgs/Imu on the upper structure"),
+        "imu_boom": _topic("input: sensor_msgs/Imu on the boom"),
+        "imu_arm": _topic("input: sensor_msgs/Imu on the arm"),
+        "imu_bucket_linkage": _topic("input: sensor_msgs/Imu on the H-link or the bucket (machine file)"),
+        "cylinder_lengths": _topic("output: sensor_msgs/JointState, cylinder lengths and rates"),
+    },
+}
+
 SIM = {
     "rate": Number(min=0.0, max=10_000.0, unit="Hz", exclusive_min=True,
                    doc="rate of cylinder_lengths and joint_states"),
