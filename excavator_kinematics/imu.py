@@ -53,12 +53,34 @@ GRAVITY = 9.80665
 
 
 class ImuJoints(NamedTuple):
-    """theta2..theta4 and their rates (..., 3); cylinder lengths and rates (..., 3)."""
+    """theta2..theta4 and their rates (..., 3); cylinder lengths and rates (..., 3); world up in
+    the upper structure's frame (..., 3), the machine's tilt (:func:`level_rotation`)."""
 
     theta: np.ndarray
     theta_dot: np.ndarray
     lengths: np.ndarray
     rates: np.ndarray
+    up_cab: np.ndarray
+
+
+def level_rotation(up: ArrayLike) -> np.ndarray:
+    """(..., 3, 3) rows: the axes of the gravity-aligned *level frame* in a body frame whose world
+    up is ``up`` (..., 3): z = up, x = the body's x projected onto the horizontal, y = z x x. Same
+    origin and heading as the body, roll and pitch taken out (REP 105's gravity-aligned frames);
+    ``p_level = R @ p_body``. Needs a body x that is not vertical (any machine standing)."""
+    z = np.asarray(up, dtype=float)
+    z = z / np.linalg.norm(z, axis=-1, keepdims=True)
+    x = np.array([1.0, 0.0, 0.0]) - z[..., :1] * z
+    x = x / np.linalg.norm(x, axis=-1, keepdims=True)
+    return np.stack([x, np.cross(z, x), z], axis=-2)
+
+
+def base_up(up_cab: ArrayLike, theta1: ArrayLike) -> np.ndarray:
+    """World up in base_link (..., 3) from up in the upper structure's frame and the swing: the
+    upper structure is base_link turned by theta1 about z, so u_base = Rz(theta1) u_upper."""
+    u = np.asarray(up_cab, dtype=float)
+    c, s = np.cos(theta1), np.sin(theta1)
+    return np.stack([c * u[..., 0] - s * u[..., 1], s * u[..., 0] + c * u[..., 1], u[..., 2]], axis=-1)
 
 
 def up_from_orientation(quaternion_xyzw: ArrayLike) -> np.ndarray:
@@ -151,7 +173,7 @@ class ImuArm:
         theta_dot = np.stack([relative_dot[..., 0], relative_dot[..., 1], theta4_dot], axis=-1)
         lengths = self.exc.cylinder_lengths(theta.reshape(-1, 3)).reshape(theta.shape)
         k, _ = self.exc.k_entries(lengths.reshape(-1, 3))
-        return ImuJoints(theta, theta_dot, lengths, theta_dot / k.reshape(theta.shape))
+        return ImuJoints(theta, theta_dot, lengths, theta_dot / k.reshape(theta.shape), up_body[..., 0, :])
 
     def theta4_from_h_link(self, psi: np.ndarray, psi_dot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """theta4 and its rate from the H-link's angle psi in the arm frame (R -> H) and its rate.

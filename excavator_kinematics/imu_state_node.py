@@ -9,7 +9,10 @@ complementary filter of :class:`excavator_kinematics.imu.TiltFilter` (time const
 relative to the upper structure (a tilted cab cancels) and the cylinder lengths and rates, which
 go out on ``cylinder_lengths`` (sensor_msgs/JointState, boom/arm/bucket_cylinder, position and
 velocity): the topic excavator_forward and excavator_velocity_ik read, so the chain runs on IMUs
-unchanged (the swing still comes from its encoder on ``joint_states``).
+unchanged (the swing still comes from its encoder on ``joint_states``). With each set it also
+publishes ``machine_tilt`` (geometry_msgs/Vector3Stamped, frame_id ``upper_structure_frame``):
+world up in the upper structure's frame from the cab IMU, from which excavator_forward's
+``level.*`` builds the gravity-aligned level frame (:func:`excavator_kinematics.imu.level_rotation`).
 
 A set is published once every sensor has a message newer than the last set and the four stamps
 lie within ``max_skew`` s, stamped with the newest. A reading that is not finite, a quaternion
@@ -25,9 +28,11 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+from geometry_msgs.msg import Vector3, Vector3Stamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from sensor_msgs.msg import Imu, JointState
+from std_msgs.msg import Header
 
 from excavator_kinematics import messages
 from excavator_kinematics.imu import GRAVITY, SENSORS, ImuArm, TiltFilter, up_from_orientation
@@ -62,6 +67,8 @@ class ImuState(MachineNode):
         qos = QoSProfile(depth=s["qos_depth"], reliability=ReliabilityPolicy.RELIABLE)
         topics = s["topics"]
         self.cylinder_pub = self.create_publisher(JointState, topics["cylinder_lengths"], qos)
+        self.tilt_pub = self.create_publisher(Vector3Stamped, topics["machine_tilt"], qos)
+        self.upper_frame = s["upper_structure_frame"]
         for name in SENSORS:
             self.create_subscription(Imu, topics[f"imu_{name}"], lambda msg, n=name: self.on_imu(n, msg), qos)
         linkage = self.exc.description.imu["bucket_linkage"]["body"]
@@ -132,8 +139,11 @@ class ImuState(MachineNode):
             return
         newest = max(stamps)
         self.published_ns = newest
-        self.cylinder_pub.publish(messages.joint_state(Time(nanoseconds=newest).to_msg(), CYLINDERS,
-                                                       joints.lengths, joints.rates))
+        stamp = Time(nanoseconds=newest).to_msg()
+        self.cylinder_pub.publish(messages.joint_state(stamp, CYLINDERS, joints.lengths, joints.rates))
+        x, y, z = joints.up_cab.tolist()
+        self.tilt_pub.publish(Vector3Stamped(header=Header(stamp=stamp, frame_id=self.upper_frame),
+                                             vector=Vector3(x=x, y=y, z=z)))
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -43,6 +43,8 @@ MACHINE = Machine(
         "urdf_joint_states": _JOINT_STATE,
         "grade_height": "geometry_msgs/msg/PointStamped",
         "site_pose": "geometry_msgs/msg/PoseStamped",
+        "machine_tilt": "geometry_msgs/msg/Vector3Stamped",
+        "bucket_pose_level": "geometry_msgs/msg/PoseStamped",
         "imu/cab": "sensor_msgs/msg/Imu",
         "imu/boom": "sensor_msgs/msg/Imu",
         "imu/arm": "sensor_msgs/msg/Imu",

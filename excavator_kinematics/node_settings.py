@@ -45,6 +45,11 @@ FORWARD = {
                               doc="rise of the plane per run along base y, percent (default 0)"),
         "frame": Text(empty=False, doc="frame_id of grade_height: the design surface's frame"),
     },
+    "level": {
+        "enabled": Flag(doc="publish bucket_pose_level from the machine tilt (topics.machine_tilt)"),
+        "frame": Text(empty=False, doc="frame_id of bucket_pose_level: base_link levelled by gravity"),
+        "tilt_max_age": Number(**_SECONDS, doc="max |stamp(cylinder_lengths) - stamp(machine_tilt)|"),
+    },
     "design_surface": {
         "file": Text(doc="LandXML 1.2 file of the design TIN (read at start-up); empty: none"),
         "surface": Text(doc="name of the Surface in the file; empty: the file's only surface"),
@@ -68,6 +73,8 @@ FORWARD = {
         "urdf_joint_states": _topic("output: sensor_msgs/JointState of every joint of urdf/excavator.urdf"),
         "grade_height": _topic("output: geometry_msgs/PointStamped, the tip in the design surface's frame"),
         "site_pose": _topic("input: geometry_msgs/PoseStamped, base_link in the site frame (GNSS)"),
+        "machine_tilt": _topic("input: geometry_msgs/Vector3Stamped, up in the upper structure's frame"),
+        "bucket_pose_level": _topic("output: geometry_msgs/PoseStamped in the level frame"),
         "grade_tip": _topic("output: geometry_msgs/PointStamped, tip x, y and height above the TIN"),
         "grade_left": _topic("output: geometry_msgs/PointStamped, left end of the cutting edge"),
         "grade_right": _topic("output: geometry_msgs/PointStamped, right end of the cutting edge"),
@@ -106,6 +113,7 @@ IMU_STATE = {
                                doc="a gyro reading beyond this is implausible"),
     "max_dynamic_acceleration": Number(min=0.0, max=1e3, unit="m/s^2", exclusive_min=True,
                                        doc="| |linear_acceleration| - g | beyond this: no gravity direction"),
+    "upper_structure_frame": Text(empty=False, doc="frame_id of machine_tilt"),
     "warning_period": _WARNING_PERIOD,
     "qos_depth": _QOS_DEPTH,
     "topics": {
@@ -114,6 +122,7 @@ IMU_STATE = {
         "imu_arm": _topic("input: sensor_msgs/Imu on the arm"),
         "imu_bucket_linkage": _topic("input: sensor_msgs/Imu on the H-link or the bucket (machine file)"),
         "cylinder_lengths": _topic("output: sensor_msgs/JointState, cylinder lengths and rates"),
+        "machine_tilt": _topic("output: geometry_msgs/Vector3Stamped, up in the upper structure's frame"),
     },
 }
 

@@ -15,6 +15,8 @@ from excavator_kinematics.imu import (
     SENSORS,
     ImuArm,
     TiltFilter,
+    base_up,
+    level_rotation,
     up_from_acceleration,
     up_from_orientation,
 )
@@ -242,3 +244,87 @@ def test_imu_state_node_publishes_cylinder_lengths_and_refuses_bad_sensors():
         assert tuple(message.name) == CYLINDERS
         np.testing.assert_allclose(message.position, D[1:], rtol=0, atol=1e-9)
         np.testing.assert_allclose(message.velocity, D_dot[1:], rtol=0, atol=1e-7)
+
+
+def test_level_frame_from_the_cab_imu_gives_heights_along_gravity():
+    """Machine tilt (item 2): the cab IMU's up vector, turned into base_link by the swing, gives
+    the level frame, in which every point's z is its height along gravity above base_link's origin
+    (the world rotation applied by hand), its x axis is horizontal and under base_link's x."""
+    arm = ImuArm(EXC, imu_section("h_link"))
+    D, D_dot = states(20)
+    for tilt in [(0.0, 0.0, 0.3), (0.087, -0.05, 1.0), (-0.12, 0.2, -2.5)]:
+        world_base = Rotation.from_euler("xyz", tilt)
+        for d, v in zip(D, D_dot, strict=True):
+            q, omega, _ = readings(d, v, "h_link", tilt)
+            up_cab = arm.joints(up_from_orientation(q), omega).up_cab
+            R = level_rotation(base_up(up_cab, d[0]))
+            pins = EXC.pins(d)
+            for name in ("bucket_tip", "arm_pin", "h_link_pin"):
+                p = pins[name]
+                assert (R @ p)[2] == pytest.approx(world_base.apply(p)[2], abs=1e-12)
+                assert np.linalg.norm(R @ p) == pytest.approx(np.linalg.norm(p), abs=1e-12)
+            x_world = world_base.apply(R[0])
+            assert x_world[2] == pytest.approx(0.0, abs=1e-12)
+            base_x = world_base.apply([1.0, 0.0, 0.0])
+            assert np.cross(base_x, x_world)[2] == pytest.approx(0.0, abs=1e-12)
+    np.testing.assert_allclose(level_rotation([0.0, 0.0, 1.0]), np.eye(3), atol=0)
+
+
+def test_whole_chain_on_imus_across_processes():
+    """excavator_imu_state -> excavator_forward over DDS on a machine standing on a 5 % slope
+    (pitch 2.86 deg) and a 2 % cross slope: bucket_pose equals the core's pose of D (the chain runs
+    on IMUs unchanged) and bucket_pose_level's z the tip's height along gravity."""
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from ros_harness import NodeProcess, Probe
+    from sensor_msgs.msg import Imu, JointState
+
+    from excavator_kinematics.kinematics import JOINTS
+    from manipulator_kinematics.params import config_path
+
+    tilt = (math.atan(0.02), -math.atan(0.05), 0.0)
+    D = LIM.reference + np.array([0.3, 0.1, -0.2, 0.1])
+    D_dot = np.zeros(4)
+    q, omega, f = readings(D, D_dot, "h_link", tilt, mountings={key: [0.0, 0.0, 0.0] for key in SENSORS})
+    files = [config_path("excavator_cet200.yaml"), config_path("excavator_nodes.yaml")]
+    args = [a for p in files for a in ("--params-file", str(p))]
+    imu_node = NodeProcess("excavator_imu_state", *args, "-r", "__ns:=/chain")
+    forward = NodeProcess("excavator_forward", *args, "-r", "__ns:=/chain", params={
+        "/chain/excavator_forward": {"ros__parameters": {"level": {"enabled": True}}}})
+    qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+    probe = Probe("chain_probe")
+    node = probe.node
+    got: dict[str, list] = {"pose": [], "level": []}
+    node.create_subscription(PoseStamped, "/chain/bucket_pose", got["pose"].append, qos)
+    node.create_subscription(PoseStamped, "/chain/bucket_pose_level", got["level"].append, qos)
+    pubs = [node.create_publisher(Imu, f"/chain/imu/{name}", qos) for name in SENSORS]
+    swing_pub = node.create_publisher(JointState, "/chain/joint_states", qos)
+    try:
+        probe.wait_until(lambda: all(p.get_subscription_count() for p in pubs)
+                         and swing_pub.get_subscription_count()
+                         and node.count_publishers("/chain/bucket_pose_level"), 30.0, "both nodes")
+        for k in range(1, 60):
+            stamp = k * 10_000_000
+            swing = JointState(name=[JOINTS[0]], position=[D[0]], velocity=[0.0])
+            swing.header.stamp.nanosec = stamp
+            swing_pub.publish(swing)
+            for i, pub in enumerate(pubs):
+                pub.publish(imu_message(stamp, q[i], omega[i], f[i], with_orientation=True))
+            try:
+                probe.wait_until(lambda: got["pose"] and got["level"], 0.5, "the poses")
+                break
+            except TimeoutError:
+                continue
+        assert got["pose"] and got["level"], imu_node.log()[-2000:] + forward.log()[-2000:]
+    finally:
+        logs = imu_node.stop() + forward.stop()
+        probe.close()
+    assert "Traceback" not in logs, logs
+    tip = EXC.pose(D)[:3]
+    p = got["pose"][0].pose.position
+    np.testing.assert_allclose([p.x, p.y, p.z], tip, rtol=0, atol=1e-9)
+    level = got["level"][0]
+    assert level.header.frame_id == "base_level"
+    height = Rotation.from_euler("xyz", tilt).apply(tip)[2]
+    assert level.pose.position.z == pytest.approx(height, abs=1e-9)
+    assert abs(height - tip[2]) > 0.2  # the slope matters at this reach

@@ -497,6 +497,8 @@ TYPE_OF_TOPIC_KEY = {
     "urdf_joint_states": JOINT_STATE,
     "grade_height": "geometry_msgs/msg/PointStamped",
     "site_pose": POSE,
+    "machine_tilt": "geometry_msgs/msg/Vector3Stamped",
+    "bucket_pose_level": POSE,
     "imu_cab": "sensor_msgs/msg/Imu",
     "imu_boom": "sensor_msgs/msg/Imu",
     "imu_arm": "sensor_msgs/msg/Imu",
