@@ -80,7 +80,8 @@ def base_up(up_cab: ArrayLike, theta1: ArrayLike) -> np.ndarray:
     upper structure is base_link turned by theta1 about z, so u_base = Rz(theta1) u_upper."""
     u = np.asarray(up_cab, dtype=float)
     c, s = np.cos(theta1), np.sin(theta1)
-    return np.stack([c * u[..., 0] - s * u[..., 1], s * u[..., 0] + c * u[..., 1], u[..., 2]], axis=-1)
+    x, y = c * u[..., 0] - s * u[..., 1], s * u[..., 0] + c * u[..., 1]
+    return np.stack([x, y, np.broadcast_to(u[..., 2], x.shape)], axis=-1)
 
 
 def up_from_orientation(quaternion_xyzw: ArrayLike) -> np.ndarray:

@@ -328,3 +328,42 @@ def test_whole_chain_on_imus_across_processes():
     height = Rotation.from_euler("xyz", tilt).apply(tip)[2]
     assert level.pose.position.z == pytest.approx(height, abs=1e-9)
     assert abs(height - tip[2]) > 0.2  # the slope matters at this reach
+
+
+def test_mk_evaluate_checks_bucket_pose_level(tmp_path):
+    """mk_evaluate recomputes bucket_pose_level from machine_tilt: exact messages give zero, a
+    planted 2 mm error in 5 of 50 is reported as such."""
+    from excavator_kinematics.synthetic import excavator_bag
+    from manipulator_kinematics.bag.evaluate import Setup, evaluate_bag
+    from manipulator_kinematics.bag.reader import BagReader
+    from manipulator_kinematics.bag.synthetic import Topic, write_bag
+    from manipulator_kinematics.bag.types import decode_messages, encode_messages
+
+    topics = excavator_bag(EXC, 50, 50.0)
+    pose = topics["/bucket_pose"]
+    fields = decode_messages(pose.msgtype, pose.raw)
+    n = len(pose.raw)
+    up_cab = Rotation.from_euler("xyz", [0.04, -0.06, 0.0]).inv().apply([0.0, 0.0, 1.0])
+    cylinders = decode_messages("sensor_msgs/msg/JointState", topics["/cylinder_lengths"].raw)
+    stamp = {k: np.asarray(cylinders[k]) for k in ("header.stamp.sec", "header.stamp.nanosec")}
+    tilt = {**stamp, "header.frame_id": "upper_structure",
+            **{f"vector.{a}": np.full(n, up_cab[i]) for i, a in enumerate("xyz")}}
+    topics["/machine_tilt"] = Topic("geometry_msgs/msg/Vector3Stamped", pose.log_time,
+                                    encode_messages("geometry_msgs/msg/Vector3Stamped", n, tilt))
+    joints = decode_messages("sensor_msgs/msg/JointState", topics["/open_chain_joint_states"].raw)
+    theta1 = np.asarray(joints["position"])[:, 0]
+    tip = np.column_stack([np.asarray(fields[f"pose.position.{a}"]) for a in "xyz"])
+    level = np.einsum("nij,nj->ni", level_rotation(base_up(up_cab, theta1)), tip)
+    level[10:15, 2] += 2e-3
+    values = {**{k: np.asarray(v) for k, v in fields.items() if k != "header.frame_id"},
+              "header.frame_id": "base_level",
+              **{f"pose.position.{a}": level[:, i] for i, a in enumerate("xyz")}}
+    raw = encode_messages(pose.msgtype, n, values)
+    topics["/bucket_pose_level"] = Topic(pose.msgtype, pose.log_time, raw)
+    write_bag(tmp_path / "bag", topics, overwrite=True)
+    report, _ = evaluate_bag(BagReader(tmp_path / "bag"), Setup())
+    (machine,) = [m for m in report["machines"] if m["kind"] == "excavator"]
+    entry = machine["consistency"]["bucket_pose_level"]
+    assert entry["matched"] == n
+    assert entry["position_m"]["max"] == pytest.approx(2e-3, abs=1e-9)
+    assert entry["position_m"]["rms"] == pytest.approx(2e-3 * math.sqrt(5 / n), abs=1e-9)
