@@ -213,3 +213,52 @@ class ImuArm:
 
 def _cross(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     return p[..., 0] * q[..., 1] - p[..., 1] * q[..., 0]
+
+
+def simulated_readings(arm: ImuArm, D: ArrayLike, D_dot: ArrayLike, tilt_rpy: ArrayLike,
+                       rng: np.random.Generator | None = None, orientation_noise: float = 0.0,
+                       gyro_noise: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What the four IMUs of ``arm`` read at states D (N, 4) moving at D_dot (N, 4), the machine
+    standing still at roll, pitch, yaw ``tilt_rpy``: orientations [x, y, z, w] (N, 4, 4), angular
+    velocities (N, 4, 3) and specific forces (N, 4, 3, gravity only) in each sensor's frame.
+
+    Body frames as in the module docstring: the upper structure is the tilt times the swing, each
+    body turns from it by its side angle about -y (theta2, theta2 + theta3, and theta2..4 for the
+    bucket or the H-link's angle for the H-link). Noise, when asked for: a random rotation of
+    ``orientation_noise`` rad (normal, per axis) on each orientation and normal gyro noise (rad/s).
+    """
+    exc = arm.exc
+    D, D_dot = np.asarray(D, dtype=float), np.asarray(D_dot, dtype=float)
+    n = len(D)
+    s = exc.state(D, D_dot)
+    theta, theta_dot = s.theta, s.theta_dot
+    side = np.zeros((n, 4))
+    side_dot = np.zeros((n, 4))
+    side[:, 1:] = np.cumsum(theta[:, 1:], axis=1)
+    side_dot[:, 1:] = np.cumsum(theta_dot[:, 1:], axis=1)
+    if arm.on_h_link:
+        pins = exc.pins(D)
+        c, si = np.cos(D[:, 0]), np.sin(D[:, 0])
+        h = pins["h_link_pin"] - pins["bucket_cylinder_rod"]
+        h_angle = np.arctan2(h[:, 2], h[:, 0] * c + h[:, 1] * si)
+        psi = h_angle - side[:, 2]
+        _, ratio = arm.theta4_from_h_link(psi, np.ones(n))  # d theta4 / d psi
+        side[:, 3], side_dot[:, 3] = h_angle, side_dot[:, 2] + theta_dot[:, 3] / ratio
+    world_base = Rotation.from_euler("xyz", tilt_rpy)
+    upper = world_base * Rotation.from_euler("z", D[:, :1])
+    omega_upper = world_base.apply(np.column_stack([np.zeros((n, 2)), D_dot[:, 0]]))
+    quaternions, omegas, forces = [], [], []
+    for i in range(4):
+        body = upper * Rotation.from_euler("y", -side[:, i, None])
+        sensor = body * Rotation.from_matrix(arm.mounting[i])
+        omega_world = omega_upper + upper.apply(np.column_stack([np.zeros(n), -side_dot[:, i], np.zeros(n)]))
+        orientation = sensor
+        if orientation_noise > 0.0 and rng is not None:
+            orientation = sensor * Rotation.from_rotvec(rng.normal(0.0, orientation_noise, (n, 3)))
+        omega = sensor.inv().apply(omega_world)
+        if gyro_noise > 0.0 and rng is not None:
+            omega = omega + rng.normal(0.0, gyro_noise, (n, 3))
+        quaternions.append(orientation.as_quat())
+        omegas.append(omega)
+        forces.append(sensor.inv().apply(np.tile([0.0, 0.0, GRAVITY], (n, 1))))
+    return np.stack(quaternions, axis=1), np.stack(omegas, axis=1), np.stack(forces, axis=1)

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from excavator_kinematics.design_surface import read_landxml
 from excavator_kinematics.imu import (
     GRAVITY,
     SENSORS,
@@ -367,3 +368,48 @@ def test_mk_evaluate_checks_bucket_pose_level(tmp_path):
     assert entry["matched"] == n
     assert entry["position_m"]["max"] == pytest.approx(2e-3, abs=1e-9)
     assert entry["position_m"]["rms"] == pytest.approx(2e-3 * math.sqrt(5 / n), abs=1e-9)
+
+
+def test_simulated_readings_match_the_independent_generator():
+    """imu.simulated_readings (used by the slope example) against this file's pin-based generator."""
+    from excavator_kinematics.imu import simulated_readings
+
+    for body in ("h_link", "bucket"):
+        arm = ImuArm(EXC, imu_section(body))
+        D, D_dot = states(30)
+        q, omega, f = simulated_readings(arm, D, D_dot, (0.05, -0.04, 0.3))
+        data = [readings(d, v, body, (0.05, -0.04, 0.3)) for d, v in zip(D, D_dot, strict=True)]
+        expected = up_from_orientation(np.array([x[0] for x in data]))
+        np.testing.assert_allclose(up_from_orientation(q), expected, atol=1e-12)
+        np.testing.assert_allclose(omega, np.array([x[1] for x in data]), atol=1e-8)
+        np.testing.assert_allclose(f, np.array([x[2] for x in data]), atol=1e-12)
+
+
+def test_slope_example_writes_bag_and_png(tmp_path):
+    """The example (item 4) end to end, short: the bag opens with the surface mesh and the three
+    grade topics, the PNG is written, and the IMU estimate's height error is within 4 x the
+    first-order bound of its noise."""
+    from matplotlib.image import imread
+
+    from excavator_kinematics.slope_example import run
+    from manipulator_kinematics.bag.reader import BagReader
+
+    result = run(tmp_path, seconds=2.0, rate=50.0)
+    assert result["samples"] == 101
+    # Height noise: the tip moves by about r sigma_theta2 (r ~ 7 m, sigma_theta2 = sqrt(2) 0.05 deg).
+    assert result["rms_m"] < 4 * 7.0 * math.sqrt(2) * math.radians(0.05)
+    topics = BagReader(tmp_path / "bag").topics
+    for name in ("/design_surface", "/grade/tip", "/grade/left", "/grade/right", "/imu/cab",
+                 "/cylinder_lengths"):
+        assert name in topics, sorted(topics)
+    assert imread(tmp_path / "grade_heights.png").shape[1] > 500
+    assert read_landxml(tmp_path / "ditch.xml").faces.shape == (50, 3)
+
+
+def test_mounting_figure_is_drawn(tmp_path):
+    from matplotlib.image import imread
+
+    from excavator_kinematics.imu_figure import draw
+
+    draw(EXC, tmp_path / "frames.png")
+    assert imread(tmp_path / "frames.png").shape[1] > 500
