@@ -29,6 +29,8 @@ setup(
             "excavator_velocity_ik = excavator_kinematics.velocity_ik_node:main",
             "excavator_sim = excavator_kinematics.sim_node:main",
             "excavator_ik_server = excavator_kinematics.ik_server_node:main",
+            "excavator_imu_state = excavator_kinematics.imu_state_node:main",
+            "excavator_slope_example = excavator_kinematics.slope_example:main",
             # SCARA-type arm (paper 002)
             "scara_ik_server = scara_kinematics.nodes:ik_server",
             "scara_forward = scara_kinematics.nodes:forward",

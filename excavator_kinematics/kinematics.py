@@ -188,9 +188,11 @@ class Excavator:
         one from a parameters file's section); raises ConfigError unless the linkage assembles
         over the whole stroke box."""
         g = description
+        self.description = g
         self.name = g.name
         self.l1, self.l0 = g.foot
         self.l2, self.l3, self.l4 = g.boom_length, g.arm_length, g.bucket_length
+        self.bucket_width = g.bucket_width
         foot = np.array(g.foot)
         arm_pin = np.array([self.l2, 0.0])  # boom frame
         self._bucket_pin = np.array([self.l3, 0.0])  # arm frame

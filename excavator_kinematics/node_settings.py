@@ -45,6 +45,24 @@ FORWARD = {
                               doc="rise of the plane per run along base y, percent (default 0)"),
         "frame": Text(empty=False, doc="frame_id of grade_height: the design surface's frame"),
     },
+    "level": {
+        "enabled": Flag(doc="publish bucket_pose_level from the machine tilt (topics.machine_tilt)"),
+        "frame": Text(empty=False, doc="frame_id of bucket_pose_level: base_link levelled by gravity"),
+        "tilt_max_age": Number(**_SECONDS, doc="max |stamp(cylinder_lengths) - stamp(machine_tilt)|"),
+    },
+    "design_surface": {
+        "file": Text(doc="LandXML 1.2 file of the design TIN (read at start-up); empty: none"),
+        "surface": Text(doc="name of the Surface in the file; empty: the file's only surface"),
+        "site_frame": Text(empty=False, doc="frame_id of the site (x easting, y northing, z up)"),
+        "site_pose_source": Text(choices=("fixed", "topic"),
+                                 doc="base_link in the site frame: fixed (site_position, site_rpy) "
+                                     "or from topics.site_pose"),
+        "site_position": Numbers(3, Number(min=-1e8, max=1e8, unit="m"),
+                                 doc="fixed position of base_link in the site frame (m)"),
+        "site_rpy": Numbers(3, Number(min=-7.0, max=7.0, unit="rad"),
+                            doc="fixed roll, pitch, yaw of base_link in the site frame (rad, fixed axes)"),
+        "site_pose_max_age": Number(**_SECONDS, doc="max |stamp(cylinder_lengths) - stamp(site pose)|"),
+    },
     "topics": {
         "cylinder_lengths": _topic("input: sensor_msgs/JointState, boom/arm/bucket cylinder length and rate"),
         "joint_states": _topic("input: sensor_msgs/JointState, swing_joint angle and rate"),
@@ -54,6 +72,13 @@ FORWARD = {
         "open_chain_joint_states": _topic("output: sensor_msgs/JointState of the open chain"),
         "urdf_joint_states": _topic("output: sensor_msgs/JointState of every joint of urdf/excavator.urdf"),
         "grade_height": _topic("output: geometry_msgs/PointStamped, the tip in the design surface's frame"),
+        "site_pose": _topic("input: geometry_msgs/PoseStamped, base_link in the site frame (GNSS)"),
+        "machine_tilt": _topic("input: geometry_msgs/Vector3Stamped, up in the upper structure's frame"),
+        "bucket_pose_level": _topic("output: geometry_msgs/PoseStamped in the level frame"),
+        "grade_tip": _topic("output: geometry_msgs/PointStamped, tip x, y and height above the TIN"),
+        "grade_left": _topic("output: geometry_msgs/PointStamped, left end of the cutting edge"),
+        "grade_right": _topic("output: geometry_msgs/PointStamped, right end of the cutting edge"),
+        "grade_status": _topic("output: diagnostic_msgs/DiagnosticArray, inside/outside the TIN"),
     },
 }
 
@@ -77,6 +102,27 @@ VELOCITY_IK = {
         "joint_states": _topic("input: sensor_msgs/JointState, swing_joint"),
         "rate_commands": _topic("output: sensor_msgs/JointState velocities of swing_joint and the cylinders"),
         "rate_command_array": _topic("output: std_msgs/Float64MultiArray in that order (publish_array)"),
+    },
+}
+
+IMU_STATE = {
+    "max_skew": Number(**_SECONDS, doc="largest spread of the four sensors' latest stamps in one set"),
+    "gravity_time_constant": Number(**_SECONDS, doc="complementary filter of the gravity direction "
+                                    "(sensors without orientation); 0 = the accelerometer as it is"),
+    "max_angular_rate": Number(min=0.0, max=1e3, unit="rad/s", exclusive_min=True,
+                               doc="a gyro reading beyond this is implausible"),
+    "max_dynamic_acceleration": Number(min=0.0, max=1e3, unit="m/s^2", exclusive_min=True,
+                                       doc="| |linear_acceleration| - g | beyond this: no gravity direction"),
+    "upper_structure_frame": Text(empty=False, doc="frame_id of machine_tilt"),
+    "warning_period": _WARNING_PERIOD,
+    "qos_depth": _QOS_DEPTH,
+    "topics": {
+        "imu_cab": _topic("input: sensor_msgs/Imu on the upper structure"),
+        "imu_boom": _topic("input: sensor_msgs/Imu on the boom"),
+        "imu_arm": _topic("input: sensor_msgs/Imu on the arm"),
+        "imu_bucket_linkage": _topic("input: sensor_msgs/Imu on the H-link or the bucket (machine file)"),
+        "cylinder_lengths": _topic("output: sensor_msgs/JointState, cylinder lengths and rates"),
+        "machine_tilt": _topic("output: geometry_msgs/Vector3Stamped, up in the upper structure's frame"),
     },
 }
 

@@ -496,6 +496,17 @@ TYPE_OF_TOPIC_KEY = {
     "target_bucket_twist": TWIST,
     "urdf_joint_states": JOINT_STATE,
     "grade_height": "geometry_msgs/msg/PointStamped",
+    "site_pose": POSE,
+    "machine_tilt": "geometry_msgs/msg/Vector3Stamped",
+    "bucket_pose_level": POSE,
+    "imu_cab": "sensor_msgs/msg/Imu",
+    "imu_boom": "sensor_msgs/msg/Imu",
+    "imu_arm": "sensor_msgs/msg/Imu",
+    "imu_bucket_linkage": "sensor_msgs/msg/Imu",
+    "grade_tip": "geometry_msgs/msg/PointStamped",
+    "grade_left": "geometry_msgs/msg/PointStamped",
+    "grade_right": "geometry_msgs/msg/PointStamped",
+    "grade_status": "diagnostic_msgs/msg/DiagnosticArray",
 }
 
 
