@@ -19,7 +19,7 @@ At exit the two signals are ignored: the interpreter's finalization puts back th
 handlers of every signal with a Python handler (not of ignored ones), and a signal then would
 end the process with -2 or -15 after all. Only the interpreter's own start-up, before the
 console script's first import, is outside this module's reach (the operating system's defaults
-apply; about 20 ms).
+apply: 27-549 ms from exec in 50 runs at a load average of 8-13 on 2 cores).
 
 No import beyond the standard library's ``atexit``, ``os``, ``signal`` and ``sys``: this runs
 before them.
