@@ -10,7 +10,6 @@ unless the node applies changes itself and opts out.
 from __future__ import annotations
 
 import shutil
-import signal
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -20,9 +19,8 @@ import rclpy
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.signals import SignalHandlerOptions, get_current_signal_handlers_options
 
-from manipulator_kinematics import executor
+from manipulator_kinematics import executor, stopping
 from manipulator_kinematics.params import ConfigError, check_ros_arguments
 from manipulator_kinematics.throttle import ThrottledLog
 
@@ -83,11 +81,9 @@ def run(
     every other gets :func:`refuse_runtime_changes`. A machine description or setting that fails
     validation ends the process with its message and exit code 2 (nothing to serve).
     """
-    # rclpy's handlers (installed by init) turn SIGINT and SIGTERM into a shutdown of the
-    # context, which ends the spin. For SIGINT they also call the Python handler found at init,
-    # which by default raises KeyboardInterrupt wherever the main thread is: in a callback or
-    # half-way through destroy_node. This one is that handler, and stays quiet once rclpy's are in.
-    signal.signal(signal.SIGINT, _interrupt_until_rclpy_handles_it)
+    # A signal from here on is only recorded (manipulator_kinematics.stopping): rclpy's handlers,
+    # installed by init, shut the context down, which ends the spin, and then call ours.
+    stopping.hold()
     argv = list(args) if args is not None else sys.argv
     try:
         check_ros_arguments(argv)
@@ -100,6 +96,8 @@ def run(
         return 2
     node = None
     try:
+        if stopping.requested():  # during rclpy.init, before its handlers were in
+            return 0
         name = executor.executor_name()
         node = node_factory()
         if refuse_parameter_changes:
@@ -108,18 +106,26 @@ def run(
     except ConfigError as error:
         print(f"configuration error: {error}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        pass  # SIGINT before rclpy.init
     except Exception:
         # A signal shuts the context down from rclpy's own thread, also while the node is being
         # built: rclpy then raises RCLError or RuntimeError from wherever the main thread was.
-        if rclpy.ok():
+        if not stopping.requested():
             raise
     finally:
+        _shut_down(node)
+    return 0
+
+
+def _shut_down(node: Node | None) -> None:
+    """Destroy ``node`` and shut rclpy down; a signal's shutdown racing either is no failure."""
+    try:
         if node is not None:
             node.destroy_node()
+    except Exception:
+        if not stopping.requested():
+            raise
+    finally:
         rclpy.try_shutdown()
-    return 0
 
 
 def refuse_runtime_changes(node: Node) -> None:
@@ -135,8 +141,3 @@ def refuse_runtime_changes(node: Node) -> None:
         return SetParametersResult(successful=True)
 
     node.add_on_set_parameters_callback(on_set)
-
-
-def _interrupt_until_rclpy_handles_it(signum: int, frame: object) -> None:
-    if get_current_signal_handlers_options() == SignalHandlerOptions.NO:
-        raise KeyboardInterrupt

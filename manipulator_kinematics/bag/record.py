@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import importlib
 import math
-import signal
 import sys
 import threading
 import time
@@ -33,6 +32,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
+from manipulator_kinematics import stopping
 from manipulator_kinematics.bag.cli import guarded, parse_assignments, split_ros_args
 from manipulator_kinematics.bag.topics import package_topics
 from manipulator_kinematics.bag.types import BagError, TopicQos
@@ -250,14 +250,13 @@ def record(argv: Sequence[str]) -> int:
     except ConfigError as error:
         raise BagError(str(error)) from None
 
-    # Our own handlers instead of rclpy's: those shut the context down at once, losing what is
-    # still queued, and their SIGINT also raises KeyboardInterrupt wherever the recorder is, which
-    # could cut a bag write in half. SIGTERM (what launch and test harnesses send) stops the
-    # recording like Ctrl-C.
+    # No handlers from rclpy: those shut the context down at once, losing what is still queued.
+    # A signal (SIGTERM too: what launch and test harnesses send) only sets ``stop``, whatever the
+    # recorder is doing (manipulator_kinematics.stopping), and the recording then ends itself.
+    stopping.hold()
     rclpy.init(args=[NAME, *ros_args], signal_handler_options=SignalHandlerOptions.NO)
     stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stopping.on_request(stop.set)
     node = Node("bag_recorder")
     writer: BagWriter | None = None
     try:
