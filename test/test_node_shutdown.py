@@ -314,6 +314,7 @@ EXECUTABLES: dict[str, Callable[[Path], tuple[tuple[str, ...], tuple[str, ...]]]
     # name: scratch directory -> (our arguments, ROS arguments)
     **{exe: (lambda _, ros=ros: ((), ros)) for exe, ros in (
         ("excavator_forward", EXCAVATOR), ("excavator_velocity_ik", EXCAVATOR), ("excavator_sim", EXCAVATOR),
+        ("excavator_ik_server", EXCAVATOR), ("excavator_imu_state", EXCAVATOR),
         ("scara_forward", SCARA), ("scara_ik_server", SCARA), ("tool_changer_forward", ()),
         ("tool_changer_ik_server", ()), ("palletizer_forward", ()), ("palletizer_ik_server", ()),
         ("pump_boom_forward", ()), ("pump_boom_ik_server", ()), ("machine_markers", SCARA))},
@@ -387,8 +388,8 @@ def test_every_executable_ends_with_exit_0_on_a_signal_at_any_moment(
 
 
 # Console scripts that are one-shot batch jobs (plots, tables, the demo's driver): Python's defaults.
-BATCH = {"excavator_demo", "excavator_working_ranges", "pump_boom_regions", "pump_boom_plots",
-         "tool_changer_plots", "palletizer_plots"}
+BATCH = {"excavator_demo", "excavator_slope_example", "excavator_working_ranges", "pump_boom_regions",
+         "pump_boom_plots", "tool_changer_plots", "palletizer_plots"}
 
 
 def test_every_node_and_mk_tool_is_named_in_its_package_init_and_importing_leaves_signals_alone() -> None:
