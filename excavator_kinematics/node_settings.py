@@ -68,6 +68,8 @@ VELOCITY_IK = {
                              doc="the whole command slows: no actuator reaches its end sooner than this"),
     "bucket_angle_gives_way": Flag(doc="at a stroke end keep the tip's linear direction and let the bucket "
                                        "angle rate give way; false: the whole twist's direction is kept"),
+    "line_gain": Number(min=0.0, max=100.0, unit="1/s",
+                        doc="a constant target's drift from its line is corrected at this rate; 0 = off"),
     "status_period": Number(**_SECONDS, doc="an unchanged status is published again after this long"),
     "twist_residual_tolerance": Number(min=0.0, max=1e3, unit="rad/s",
                                        doc="unachievable angular velocity before a (throttled) warning"),

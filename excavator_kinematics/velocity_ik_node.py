@@ -41,7 +41,7 @@ from std_msgs.msg import Float64MultiArray, Header
 from excavator_kinematics import messages
 from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
 from excavator_kinematics.node_settings import NODES_CONFIG, VELOCITY_IK
-from excavator_kinematics.rate_command import SLOWED, STOPPED, TRACKING, describe, rate_command
+from excavator_kinematics.rate_command import SLOWED, STOPPED, TRACKING, describe, rate_command, toward_line
 from excavator_kinematics.state_input import PLAUSIBILITY_FACTOR, InputError, Plausible, SwingHold
 from excavator_kinematics.twist import split_twist
 from manipulator_kinematics.joint_state import joint_values
@@ -73,6 +73,15 @@ class VelocityIk(MachineNode):
         self.residual_tolerance = float(s["twist_residual_tolerance"])
         self.bucket_angle_gives_way = bool(s["bucket_angle_gives_way"])
         self.status_period_ns = int(s["status_period"] * 1e9)
+        self.line_gain = float(s["line_gain"])
+        # The commanded line: (target linear, angular, Q where it began, its Q_dot); a new target
+        # (other numbers) or a stop begins a new one.
+        self.line: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        # Why the machine stopped on this line: it stays stopped until the target changes (also
+        # across a timeout or a stale state: the same target again is still the same line), so it
+        # does not creep on and off at the end (the correction toward the line, or the secondary
+        # task's minimum speed, can tip a command just past the stop).
+        self.stopped_on_line: str | None = None
         self.status_sent: tuple[int, str] | None = None  # (node clock ns, message) of the last status
         self.log = ThrottledLog(self, s["warning_period"])
         self.swing = SwingHold(s["swing_max_age"])
@@ -181,7 +190,8 @@ class VelocityIk(MachineNode):
         _, linear, angular = self.target
         try:
             D = self.exc.validate(self.state())
-            tip = self.exc.pose(D)[:3]
+            Q = self.exc.pose(D)
+            tip = Q[:3]
             split = split_twist(D[0], tip, linear, angular)
             residual = float(np.linalg.norm(split.residual))
             if residual > self.residual_tolerance:
@@ -190,10 +200,22 @@ class VelocityIk(MachineNode):
                     f"target twist not achievable: angular velocity residual {residual:.4f} rad/s "
                     f"({split.residual.round(4).tolist()}); following its linear velocity and alpha rate",
                 )
+            line = self.line
+            if line is None or not (np.array_equal(line[0], linear) and np.array_equal(line[1], angular)):
+                line = self.line = (linear, angular, Q, split.q_dot)
+                self.stopped_on_line = None
+            correction = toward_line(line[2], line[3], Q, self.line_gain, not self.bucket_angle_gives_way)
+            if correction is None:  # moved, not drifted: a new line from here
+                self.line, correction = (linear, angular, Q, split.q_dot), np.zeros(4)
+                self.stopped_on_line = None
+            if self.stopped_on_line is not None:
+                self.publish(stamp, np.zeros(4))
+                self.report(stamp, LEVELS[STOPPED], self.stopped_on_line)
+                return
             rates = rate_command(
                 self.exc.jc0(D),
                 D,
-                split.q_dot,
+                split.q_dot + correction,
                 self.exc.limits,
                 self.condition_threshold,
                 self.stroke_horizon,
@@ -211,6 +233,8 @@ class VelocityIk(MachineNode):
         self.publish(stamp, rates.d_dot)
         self.moving = True
         state, message = describe(rates, ACTUATORS)
+        if state == STOPPED:
+            self.stopped_on_line = message
         self.report(stamp, LEVELS[state], message, scale=rates.scale, condition=rates.condition)
 
     def report(self, stamp: Time, level: bytes, message: str, scale: float = 0.0,

@@ -20,6 +20,7 @@ from excavator_kinematics.rate_command import (
     rate_command,
     scale_to_speed,
     stroke_scale,
+    toward_line,
 )
 from excavator_kinematics.twist import bucket_angles, split_twist, swing_rate, twist_from_q_dot
 
@@ -371,3 +372,17 @@ def test_bucket_angle_gives_way_keeps_the_tip_line_further(linear: tuple[float, 
     assert travel >= off_line(plain, linear)[0] - 1e-6
     assert np.all((factors >= -1e-12) & (factors <= 1.0 + 1e-12))
     assert any(c.gives_way for c in commands) and np.abs(alphas - alphas[0]).max() > np.radians(5)
+
+
+def test_the_way_back_to_the_line() -> None:
+    """toward_line: gain x the across-line offset of the tip and the bucket angle's offset from the
+    angle the target gives at the tip's progress; None beyond LINE_RESTART; no line without a
+    linear velocity."""
+    start, q_dot = np.array([1.0, 0.0, 1.0, -2.0]), np.array([2.0, 0.0, 0.0, 1.0])
+    Q = np.array([1.5, 0.01, 0.98, -2.0 + 0.25 + 0.02])  # 0.5 m along: the angle should be -1.75
+    np.testing.assert_allclose(toward_line(start, q_dot, Q, 2.0), [0.0, -0.02, 0.04, -0.04], atol=1e-15)
+    np.testing.assert_allclose(toward_line(start, q_dot, Q, 2.0, hold_angle=False), [0.0, -0.02, 0.04, 0.0],
+                               atol=1e-15)
+    assert toward_line(start, q_dot, Q + [0.0, 0.06, 0.0, 0.0], 2.0) is None  # moved, not drifted
+    np.testing.assert_allclose(toward_line(start, q_dot, start + q_dot * 0.3, 2.0), 0.0, atol=1e-15)
+    np.testing.assert_array_equal(toward_line(start, np.array([0.0, 0.0, 0.0, 1.0]), Q, 2.0), 0.0)
