@@ -19,6 +19,7 @@ ideal rates D_dot = JC0^-1 Q_dot are scaled as a whole by ONE factor in [0, 1], 
    |D_dot_i| <= max_rates_i in floating point (the product is clipped, see :func:`scale_to_speed`).
 
 The achieved bucket rate JC0 D_dot is then that factor times Q_dot (to round-off).
+:func:`toward_line` gives the node's correction toward a constant target's line (added to Q_dot).
 
 Optional secondary task (``bucket_angle_gives_way``): where a stroke end sets the factor, the tip's
 linear velocity keeps its direction and the bucket angle rate gives way. Every D_dot = c x + tau n

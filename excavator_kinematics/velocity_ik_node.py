@@ -15,7 +15,9 @@ ideal ones times one factor in [0, 1], so a target the machine cannot follow is 
 in its own direction, never bent into another one. ``status`` (diagnostic_msgs/DiagnosticArray,
 one DiagnosticStatus) says which: tracking, slowed (by what) or stopped (why), on every change and
 at least every ``status_period`` s while commanding; each change to slowed or stopped is logged
-once (throttled).
+once (throttled). A constant target's drift from its line is corrected (``line_gain``,
+:func:`excavator_kinematics.rate_command.toward_line`), and a stop at a stroke end holds until
+the target changes.
 
 Stopping: no accepted target for ``command_timeout`` s, or a target/state that cannot be used
 while moving, publishes zero rates once and holds (publishes nothing) until the next good target.
@@ -74,8 +76,8 @@ class VelocityIk(MachineNode):
         self.bucket_angle_gives_way = bool(s["bucket_angle_gives_way"])
         self.status_period_ns = int(s["status_period"] * 1e9)
         self.line_gain = float(s["line_gain"])
-        # The commanded line: (target linear, angular, Q where it began, its Q_dot); a new target
-        # (other numbers) or a stop begins a new one.
+        # The commanded line: (target linear, angular, Q where it began, its Q_dot); a target with
+        # other numbers begins a new one, so does a bucket farther than LINE_RESTART from it.
         self.line: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
         # Why the machine stopped on this line: it stays stopped until the target changes (also
         # across a timeout or a stale state: the same target again is still the same line), so it
@@ -248,8 +250,12 @@ class VelocityIk(MachineNode):
         if changed and log and level != DiagnosticStatus.OK:
             self.log("warning" if message.startswith(STOPPED) else "info", message)
         self.status_sent = (now, message)
-        values = {"scale": f"{scale:.6g}", "condition": f"{condition:.6g}",
-                  "bucket_angle_gives_way": str(self.bucket_angle_gives_way).lower()}
+        # No NaN in the status either: a condition not computed (no command) is "n/a".
+        values = {
+            "scale": f"{scale:.6g}",
+            "condition": f"{condition:.6g}" if np.isfinite(condition) else "n/a",
+            "bucket_angle_gives_way": str(self.bucket_angle_gives_way).lower(),
+        }
         status = DiagnosticStatus(
             level=level, name=self.get_fully_qualified_name(), message=message, hardware_id=self.exc.name,
             values=[KeyValue(key=k, value=v) for k, v in values.items()],
