@@ -89,7 +89,13 @@ VELOCITY_IK = {
     "swing_max_age": _SWING_MAX_AGE,
     "condition_threshold": Number(min=1.0, max=1e12,
                                   doc="cond(JC0) above which damped least squares starts"),
-    "stroke_horizon": Number(**_SECONDS, doc="slow down to reach a stroke end no sooner than this"),
+    "stroke_horizon": Number(**_SECONDS, exclusive_min=True,
+                             doc="the whole command slows: no actuator reaches its end sooner than this"),
+    "bucket_angle_gives_way": Flag(doc="at a stroke end keep the tip's linear direction and let the bucket "
+                                       "angle rate give way; false: the whole twist's direction is kept"),
+    "line_gain": Number(min=0.0, max=100.0, unit="1/s",
+                        doc="a constant target's drift from its line is corrected at this rate; 0 = off"),
+    "status_period": Number(**_SECONDS, doc="an unchanged status is published again after this long"),
     "twist_residual_tolerance": Number(min=0.0, max=1e3, unit="rad/s",
                                        doc="unachievable angular velocity before a (throttled) warning"),
     "warning_period": _WARNING_PERIOD,
@@ -102,6 +108,7 @@ VELOCITY_IK = {
         "joint_states": _topic("input: sensor_msgs/JointState, swing_joint"),
         "rate_commands": _topic("output: sensor_msgs/JointState velocities of swing_joint and the cylinders"),
         "rate_command_array": _topic("output: std_msgs/Float64MultiArray in that order (publish_array)"),
+        "status": _topic("output: diagnostic_msgs/DiagnosticArray: tracking / slowed (by what) / stopped"),
     },
 }
 
