@@ -43,6 +43,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from manipulator_kinematics.params import ConfigError
+from manipulator_kinematics.plain import plain
 from manipulator_kinematics.registry import machine as find
 from manipulator_kinematics.registry import machines
 from manipulator_kinematics.serial_chain import JointLimits, SerialChain, transl, trotx, trotz
@@ -299,7 +300,7 @@ def _owners(K: np.ndarray, names: Sequence[str]) -> dict[int, int]:
 # ------------------------------------------------------------------------------------------- CLI
 def main(argv: Sequence[str] | None = None) -> int:
     """``mk_urdf MACHINE [-o FILE] [--params-file FILE]`` or ``mk_urdf --all DIR``."""
-    parser = argparse.ArgumentParser(prog="mk_urdf", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="mk_urdf", description=plain(__doc__.splitlines()[0]))
     parser.add_argument("machine", nargs="?", help="registered machine name (omit with --all)")
     parser.add_argument("-o", "--output", type=Path,
                         help="URDF file to write (default: standard output)")

@@ -13,6 +13,7 @@ from typing import Any
 
 from manipulator_kinematics.config import REQUIRED, Schema
 from manipulator_kinematics.params import config_path, flatten, load_parameters
+from manipulator_kinematics.plain import plain
 from manipulator_kinematics.registry import Machine, machines
 
 HELP_FLAGS = ("-h", "--help")
@@ -28,7 +29,7 @@ def wants_help(argv: list[str]) -> bool:
 def help_text(node_class: type, machine: Machine | None, node_name: str, defaults_file: str | None) -> str:
     """The help of ``node_class`` run as ``node_name`` for ``machine`` (None: any registered one,
     chosen by the params file given)."""
-    doc = inspect.getdoc(inspect.getmodule(node_class)) or ""
+    doc = plain(inspect.getdoc(inspect.getmodule(node_class)) or "")
     settings_file = defaults_file or (machine.config_file if machine else "")
     defaults = load_parameters(config_path(settings_file), f"/**/{node_name}")
     settings = _rows(node_class.SETTINGS, flatten(defaults))
