@@ -49,6 +49,7 @@ from manipulator_kinematics.codec.packed import PackedMessage
 from manipulator_kinematics.joint_state import InputError, decode_joint_state
 from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes import MachineNode, run_node
+from manipulator_kinematics.nodes.base import input_qos
 from manipulator_kinematics.registry import Machine
 
 NODE = "excavator_forward"
@@ -106,8 +107,9 @@ class ForwardKinematics(MachineNode):
         self.grade_pub = (self.create_publisher(PointStamped, topic["grade_height"], qos)
                           if self.plane is not None else None)
         # raw: the callbacks decode the bytes themselves (decode_joint_state), at a third of the cost.
-        self.create_subscription(JointState, topic["joint_states"], self.on_swing, qos, raw=True)
-        self.create_subscription(JointState, topic["cylinder_lengths"], self.on_cylinders, qos, raw=True)
+        inputs = input_qos(settings["qos_depth"], settings["input_reliability"])
+        self.create_subscription(JointState, topic["joint_states"], self.on_swing, inputs, raw=True)
+        self.create_subscription(JointState, topic["cylinder_lengths"], self.on_cylinders, inputs, raw=True)
         self.get_logger().info(
             f"{self.exc.name}: {topic['cylinder_lengths']} + {topic['joint_states']} -> "
             f"{topic['bucket_pose']}, {topic['bucket_twist']}, {topic['bucket_accel']}, "

@@ -30,6 +30,7 @@ from typing import Any, ClassVar
 
 import yaml
 from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from manipulator_kinematics.config import Flag, Names, Number, Numbers, Schema, Text, validate
 from manipulator_kinematics.node_util import param
@@ -163,6 +164,24 @@ def describe(spec: Any) -> str:
     return ""
 
 
+#: Reliability of a node's input subscriptions (setting ``input_reliability``). A best-effort
+#: subscription hears reliable and best-effort publishers (a sensor driver on SensorDataQoS);
+#: a reliable one only reliable publishers, and lets none of their messages get lost. Each node's
+#: default is in its config file, with the reason (docs/architecture.md, "Input QoS").
+RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
+
+
+def input_reliability(what: str) -> Text:
+    """The ``input_reliability`` setting of a node whose inputs are ``what``."""
+    return Text(choices=tuple(RELIABILITY), doc=f"QoS reliability of the subscriptions to {what}: "
+                "best_effort hears both kinds of publisher, reliable only reliable ones")
+
+
+def input_qos(depth: int, reliability: str) -> QoSProfile:
+    """Keep-last ``depth`` subscription QoS with the ``input_reliability`` setting's policy."""
+    return QoSProfile(depth=depth, reliability=RELIABILITY[reliability])
+
+
 class MachineNode(Node):
     """Base of the package's nodes: ``self.machine``, ``self.model`` and ``self.settings``.
 
@@ -206,6 +225,17 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
 
 
 __all__ = [
-    "ConfigError", "MachineNode", "apply_precedence", "command_line_values", "declare", "describe",
-    "machine_section", "node_settings", "params_files", "ros_arguments",
+    "RELIABILITY",
+    "ConfigError",
+    "MachineNode",
+    "apply_precedence",
+    "command_line_values",
+    "declare",
+    "describe",
+    "input_qos",
+    "input_reliability",
+    "machine_section",
+    "node_settings",
+    "params_files",
+    "ros_arguments",
 ]

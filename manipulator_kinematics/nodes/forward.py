@@ -25,13 +25,14 @@ from manipulator_kinematics.config import Number, Text
 from manipulator_kinematics.joint_state import InputError, check_plausible_positions, joint_values
 from manipulator_kinematics.model import describe_limits
 from manipulator_kinematics.node_util import ThrottledLog
-from manipulator_kinematics.nodes.base import MachineNode
+from manipulator_kinematics.nodes.base import MachineNode, input_qos, input_reliability
 from manipulator_kinematics.nodes.messages import pose_stamped, twist_stamped
 from manipulator_kinematics.registry import Machine
 
 SETTINGS = {
     "base_frame": Text(empty=False, doc="frame_id of tool_pose and tool_twist (the machine's base)"),
-    "qos_depth": Number(min=1, max=100_000, integer=True, doc="reliable keep-last depth of every topic"),
+    "qos_depth": Number(min=1, max=100_000, integer=True, doc="keep-last depth of every topic"),
+    "input_reliability": input_reliability("joint_states"),
     "warning_period": Number(min=0.0, max=3600.0, unit="s",
                              doc="the same kind of rejection is logged at most this often"),
     "topics": {
@@ -58,7 +59,8 @@ class ForwardNode(MachineNode):
         topics = s["topics"]
         self.pose_pub = self.create_publisher(PoseStamped, topics["tool_pose"], qos)
         self.twist_pub = self.create_publisher(TwistStamped, topics["tool_twist"], qos)
-        self.create_subscription(JointState, topics["joint_states"], self.on_joint_state, qos)
+        self.create_subscription(JointState, topics["joint_states"], self.on_joint_state,
+                                 input_qos(s["qos_depth"], s["input_reliability"]))
         self.get_logger().info(
             f"{machine.name}: {topics['joint_states']} {list(self.joint_names)} -> {topics['tool_pose']}, "
             f"{topics['tool_twist']} in frame {self.frame!r}")

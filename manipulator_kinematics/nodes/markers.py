@@ -37,7 +37,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from manipulator_kinematics.config import Names, Number, Text
 from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes import run_node
-from manipulator_kinematics.nodes.base import MachineNode, params_files
+from manipulator_kinematics.nodes.base import MachineNode, input_qos, input_reliability, params_files
 from manipulator_kinematics.nodes.help import help_text, wants_help
 from manipulator_kinematics.params import ConfigError, load_parameters
 from manipulator_kinematics.registry import Machine, by_section, machines
@@ -50,7 +50,8 @@ SETTINGS = {
     "base_frame": Text(empty=False, doc="frame_id of the markers (the machine's base)"),
     "rate": Number(min=0.0, max=1000.0, exclusive_min=True, unit="Hz",
                    doc="most MarkerArrays per second; a new state is drawn at the next tick"),
-    "qos_depth": Number(min=1, max=100_000, integer=True, doc="reliable keep-last depth of every topic"),
+    "qos_depth": Number(min=1, max=100_000, integer=True, doc="keep-last depth of every topic"),
+    "input_reliability": input_reliability("topics.states"),
     "warning_period": Number(min=0.0, max=3600.0, unit="s",
                              doc="the same kind of rejection is logged at most this often"),
     "topics": {
@@ -99,7 +100,8 @@ class MarkersNode(MachineNode):
         qos = QoSProfile(depth=s["qos_depth"], reliability=ReliabilityPolicy.RELIABLE)
         self.publisher = self.create_publisher(MarkerArray, s["topics"]["markers"], qos)
         for topic in s["topics"]["states"]:
-            self.create_subscription(JointState, topic, self.on_state, qos)
+            self.create_subscription(JointState, topic, self.on_state,
+                                     input_qos(s["qos_depth"], s["input_reliability"]))
         self.create_timer(1.0 / s["rate"], self.on_tick)
         self.get_logger().info(
             f"{machine.name}: {s['topics']['states']} {list(self.joint_names)} -> {s['topics']['markers']} "
