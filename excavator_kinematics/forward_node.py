@@ -69,7 +69,7 @@ class ForwardKinematics(MachineNode):
         super().__init__(node_name, machine, argv)
         settings = self.settings
         self.exc: Excavator = self.model
-        self.frame = settings["base_frame"]
+        self.frame = settings["frame_prefix"] + settings["base_frame"]
         self.swing = SwingHold(settings["swing_max_age"])
         tau, gap = settings["acceleration_time_constant"], settings["acceleration_max_gap"]
         self.cylinder_acceleration = RateDifferentiator(tau, gap)
@@ -98,7 +98,8 @@ class ForwardKinematics(MachineNode):
         self.urdf_last_ns: int | None = None
         grade = settings["grade"]
         self.plane = DesignPlane.from_settings(grade) if grade["enabled"] else None
-        self.grade = PackedMessage(PointStamped(header=Header(frame_id=grade["frame"])), STAMPED)
+        grade_frame = settings["frame_prefix"] + grade["frame"]
+        self.grade = PackedMessage(PointStamped(header=Header(frame_id=grade_frame)), STAMPED)
         self.pose_pub = self.create_publisher(PoseStamped, topic["bucket_pose"], qos)
         self.twist_pub = self.create_publisher(TwistStamped, topic["bucket_twist"], qos)
         self.accel_pub = self.create_publisher(AccelStamped, topic["bucket_accel"], qos)

@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from manipulator_kinematics.config import Flag, Number, Numbers, Text
-from manipulator_kinematics.nodes.base import input_reliability
+from manipulator_kinematics.nodes.base import FRAME_PREFIX, input_reliability
 
 NODES_CONFIG = "excavator_nodes.yaml"
 
@@ -22,6 +22,7 @@ _SWING_MAX_AGE = Number(**_SECONDS, doc="max |stamp(cylinder_lengths) - stamp(jo
 
 FORWARD = {
     "base_frame": Text(empty=False, doc="frame_id of bucket_pose, bucket_twist and bucket_accel"),
+    "frame_prefix": FRAME_PREFIX,
     "swing_max_age": _SWING_MAX_AGE,
     "acceleration_time_constant": Number(**_SECONDS, doc="low-pass on the accelerations; 0 = raw"),
     "acceleration_max_gap": Number(**_SECONDS, doc="a longer gap between messages restarts the differencing"),
@@ -61,6 +62,7 @@ FORWARD = {
 
 VELOCITY_IK = {
     "base_frame": Text(empty=False, doc="the frame_id of target_bucket_twist (empty frame_id: this one)"),
+    "frame_prefix": FRAME_PREFIX,
     "command_timeout": Number(**_SECONDS, doc="no accepted target for this long: zero rates once, then hold"),
     "state_timeout": Number(**_SECONDS, doc="a cylinder/swing state older than this is refused"),
     "swing_max_age": _SWING_MAX_AGE,

@@ -55,7 +55,7 @@ class VelocityIk(MachineNode):
         super().__init__(node_name, machine, argv)
         s = self.settings
         self.exc: Excavator = self.model
-        self.frame = s["base_frame"]
+        self.frame = s["frame_prefix"] + s["base_frame"]
         self.command_timeout_ns = int(s["command_timeout"] * 1e9)
         self.state_timeout_ns = int(s["state_timeout"] * 1e9)
         self.condition_threshold = float(s["condition_threshold"])

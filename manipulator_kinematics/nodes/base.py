@@ -171,6 +171,11 @@ def describe(spec: Any) -> str:
 RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
 
 
+#: Setting ``frame_prefix`` of every node that publishes or accepts frame_ids.
+FRAME_PREFIX = Text(doc="put before base_frame (and every other frame_id the node publishes or accepts), as "
+                        "robot_state_publisher's frame_prefix: 'm1/' puts a machine's frames under m1/")
+
+
 def input_reliability(what: str) -> Text:
     """The ``input_reliability`` setting of a node whose inputs are ``what``."""
     return Text(choices=tuple(RELIABILITY), doc=f"QoS reliability of the subscriptions to {what}: "
@@ -225,6 +230,7 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
 
 
 __all__ = [
+    "FRAME_PREFIX",
     "RELIABILITY",
     "ConfigError",
     "MachineNode",

@@ -25,12 +25,13 @@ from manipulator_kinematics.config import Number, Text
 from manipulator_kinematics.joint_state import InputError, check_plausible_positions, joint_values
 from manipulator_kinematics.model import describe_limits
 from manipulator_kinematics.node_util import ThrottledLog
-from manipulator_kinematics.nodes.base import MachineNode, input_qos, input_reliability
+from manipulator_kinematics.nodes.base import FRAME_PREFIX, MachineNode, input_qos, input_reliability
 from manipulator_kinematics.nodes.messages import pose_stamped, twist_stamped
 from manipulator_kinematics.registry import Machine
 
 SETTINGS = {
     "base_frame": Text(empty=False, doc="frame_id of tool_pose and tool_twist (the machine's base)"),
+    "frame_prefix": FRAME_PREFIX,
     "qos_depth": Number(min=1, max=100_000, integer=True, doc="keep-last depth of every topic"),
     "input_reliability": input_reliability("joint_states"),
     "warning_period": Number(min=0.0, max=3600.0, unit="s",
@@ -51,7 +52,7 @@ class ForwardNode(MachineNode):
     def __init__(self, node_name: str, machine: Machine, argv: Sequence[str]) -> None:
         super().__init__(node_name, machine, argv)
         s = self.settings
-        self.frame = s["base_frame"]
+        self.frame = s["frame_prefix"] + s["base_frame"]
         self.joint_names = machine.joint_names(self.model)
         self.limits = machine.limits(self.model)
         self.log = ThrottledLog(self, s["warning_period"])
