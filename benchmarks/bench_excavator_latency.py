@@ -121,7 +121,9 @@ def start_node(kind: str, executor: str, depth: int, work: Path) -> subprocess.P
     else:
         overrides = work / "bench_params.yaml"
         overrides.write_text(
-            yaml.safe_dump({"/**/excavator_forward": {"ros__parameters": {"qos_depth": depth}}})
+            # reliable like the echo's queue (the node's default input_reliability is best_effort)
+            yaml.safe_dump({"/**/excavator_forward": {"ros__parameters": {
+                "qos_depth": depth, "input_reliability": "reliable"}}})
         )
         command = node_command(FORWARD, overrides)
     log = (work / "node.log").open("w")

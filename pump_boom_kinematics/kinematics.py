@@ -71,6 +71,7 @@ ENVELOPE_TOL = 1e-9
 PAPER_EXAMPLE = {"fixed": (0.0, 75.0, 165.0, 160.0), "theta5": (160.0, 240.0), "theta6": (30.0, 170.0)}
 
 SCHEMA = {
+    "name": Text(empty=False, default="pump_boom", doc="the machine's name: the robot name of its URDF"),
     "root": Numbers(2, Number(min=-20.0, max=20.0, unit="m")),
     "lengths": Numbers(5, Number(min=0.0, max=100.0, unit="m", exclusive_min=True)),
     "joint_names": Names(6),
@@ -180,7 +181,9 @@ class PumpBoom:
         pour_step: float = 0.1,
         tip_speed: float = 0.2,
         table_file: str | Path | None = None,
+        name: str = "pump_boom",
     ) -> None:
+        self.name = name
         self.root = np.asarray(root, dtype=float)
         self.lengths = np.asarray(lengths, dtype=float)
         if self.root.shape != (2,) or self.lengths.shape != (5,) or not np.all(self.lengths > 0.0):
@@ -243,6 +246,7 @@ class PumpBoom:
             pour_step=p["pour"]["step"],
             tip_speed=p["pour"]["tip_speed"],
             table_file=regions["table_file"],
+            name=p["name"],
         )
 
     @classmethod

@@ -27,6 +27,8 @@ from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.bag.visual import add_visuals
 from manipulator_kinematics.bag.writer import BagWriter
 from manipulator_kinematics.nodes.base import command_line_values
+from manipulator_kinematics.params import config_path, load_parameters
+from manipulator_kinematics.registry import machine
 from manipulator_kinematics.urdf import machine_urdf, prefixed_urdf
 from manipulator_kinematics_interfaces.srv import SolveIK
 from palletizer_kinematics.kinematics import Palletizer
@@ -209,6 +211,16 @@ def test_the_urdf_takes_a_prefix_on_every_link() -> None:
     ends = [e.get("link") for j in root.iter("joint") for e in (j.find("parent"), j.find("child"))]
     assert links and all(name.startswith("m1/") for name in links + ends)
     assert "m1/base_link" in links and "m1/tool" in links
+
+
+@pytest.mark.parametrize("name", ["excavator", "scara", "pump_boom", "tool_changer", "palletizer"])
+def test_the_urdf_robot_name_comes_from_the_machine_file(name: str) -> None:
+    record = machine(name)
+    section = load_parameters(config_path(record.config_file))[record.section]
+    shipped = ET.fromstring(machine_urdf(name)).get("name")
+    assert shipped == section["name"]
+    renamed = record.model_from({**section, "name": "left_machine"})
+    assert ET.fromstring(record.urdf(renamed)).get("name") == "left_machine"
 
 
 def tree(messages: dict[str, list]) -> dict[str, str]:
