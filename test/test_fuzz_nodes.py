@@ -126,9 +126,11 @@ def tmp() -> Iterator[Path]:
 def nodes(tmp: Path) -> Iterator[dict[str, NodeProcess]]:
     """Every node under test, started at once; a test takes its nodes out (``pop``) and stops them."""
     started = {
+        # reliable inputs: the empty-payload limit pinned below is one of reliable readers (a
+        # best-effort reader, the default, acknowledges nothing, so no writer can stall on it)
         "excavator_forward": start("excavator_forward", "/fz_fwd", tmp, EXCAVATOR_PARAMS, qos_depth=400,
                                    urdf_joint_states_rate=0.0, **FUZZ_SETTINGS,
-                                   grade=GRADE_SETTINGS),
+                                   grade=GRADE_SETTINGS, input_reliability="reliable"),
         "excavator_velocity_ik": start("excavator_velocity_ik", "/fz_vik", tmp, EXCAVATOR_PARAMS,
                                        input_queue_depth=400, command_timeout=30.0, state_timeout=30.0,
                                        **FUZZ_SETTINGS),
