@@ -6,6 +6,7 @@ dotted parameter names in ROS (``excavator.boom.length``). Cores take the nested
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -13,6 +14,16 @@ from typing import Any
 import yaml
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "config"
+
+
+class RosLoader(yaml.SafeLoader):
+    """YAML as rcl reads a parameter: a plain ``1e3`` is a number (YAML 1.2), as rcl's parser
+    takes it, not the string PyYAML's YAML 1.1 rules make of it; quoted values stay strings."""
+
+
+RosLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."))
 
 
 class ConfigError(ValueError):
@@ -49,7 +60,7 @@ def load_parameters(path: str | Path, node_name: str = "/**") -> dict[str, Any]:
     more specific section winning: ``/**``, then ``/**/<name>``, then ``<name>`` / ``/<ns>/<name>``.
     """
     with open(path, encoding="utf-8") as stream:
-        document = yaml.safe_load(stream) or {}
+        document = yaml.load(stream, Loader=RosLoader) or {}
     if not isinstance(document, dict):
         raise ConfigError(f"{path}: not a ROS parameters file (top level is not a mapping)")
     base = node_name.rsplit("/", 1)[-1]

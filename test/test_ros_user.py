@@ -57,6 +57,11 @@ def test_the_precedence_rule_without_ros(tmp_path: Path) -> None:
     assert values == {"x": 1, "scara.l2": 0.35, "y": 2, "z": 3, "w": 2}
     elsewhere = command_line_values("/node", argv)
     assert elsewhere["scara.l2"] == 0.35 and "w" not in elsewhere
+    # values as rcl reads them: a plain 1e3 is a number (PyYAML alone makes it a string)
+    exponent = tmp_path / "c.yaml"
+    exponent.write_text("/**:\n  ros__parameters:\n    rate: 2e2\n    name: '1e3'\n")
+    argv = ["exe", "--ros-args", "--params-file", str(exponent), "-p", "depth:=1e3"]
+    assert command_line_values("/node", argv) == {"rate": 200.0, "name": "1e3", "depth": 1000.0}
 
 
 #: node kind -> executable, machine file, a setting with its value in a node section of a file and

@@ -34,7 +34,14 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from manipulator_kinematics.config import Flag, Names, Number, Numbers, Schema, Text, validate
 from manipulator_kinematics.node_util import param
-from manipulator_kinematics.params import ConfigError, config_path, flatten, load_parameters, unflatten
+from manipulator_kinematics.params import (
+    ConfigError,
+    RosLoader,
+    config_path,
+    flatten,
+    load_parameters,
+    unflatten,
+)
 from manipulator_kinematics.registry import Machine
 
 #: Parameters rclpy declares on every node by itself.
@@ -78,7 +85,7 @@ def command_line_values(node_name: str, argv: Sequence[str]) -> dict[str, Any]:
         target, _, name = name.rpartition(":")
         if target in ("", base, node_name):
             try:
-                assigned[name] = yaml.safe_load(text) if text else ""
+                assigned[name] = yaml.load(text, Loader=RosLoader) if text else ""
             except yaml.YAMLError:  # rcl takes such a value as a string
                 assigned[name] = text
     return {**files, **assigned}
