@@ -150,13 +150,14 @@ def publish(rate: float, duration: float, depth: int, sent_file: Path, kind: str
 def start_node(kind: str, executor: str, depth: int, node_depth: int | None, work: Path) -> subprocess.Popen:
     """The node under test; a forward node keeps its configured qos_depth when ``node_depth`` is None."""
     overrides = work / "bench_params.yaml"
-    settings = {} if node_depth is None else {"qos_depth": node_depth}
+    # reliable like the echo's queue (the nodes' default input_reliability is best_effort)
+    settings = {"input_reliability": "reliable", **({} if node_depth is None else {"qos_depth": node_depth})}
     overrides.write_text(yaml.safe_dump({f"/**/{kind}": {"ros__parameters": settings}}))
     if kind == ECHO:
         command = [sys.executable, __file__, "--echo", "--depth", str(depth)]
     elif kind in SERIAL:
         command = [console_script(kind), "--ros-args", "-r", "joint_states:=cylinder_lengths",
-                   "-r", "tool_twist:=bucket_twist", *(["--params-file", str(overrides)] if settings else [])]
+                   "-r", "tool_twist:=bucket_twist", "--params-file", str(overrides)]
     else:
         command = node_command(FORWARD, overrides)
     log = (work / "node.log").open("w")

@@ -63,6 +63,7 @@ from manipulator_kinematics import registry
 from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.node_util import console_script
 from manipulator_kinematics.params import config_path
+from manipulator_kinematics.ros_domain import isolated
 
 FRAME = "base_link"
 GAIN = 2.0  # 1/s, bucket position and angle
@@ -463,7 +464,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     path = digging_cycle(
         np.r_[np.hypot(start_q[0], start_q[1]), np.arctan2(start_q[1], start_q[0]), start_q[2:]]
     )
-    failure, driver = run_cycle(args.output, path, args.timeout, exc.limits.reference[1:])
+    with isolated() as network:  # never join a ROS graph around (manipulator_kinematics.ros_domain)
+        print(f"excavator_demo: {network}", flush=True)
+        failure, driver = run_cycle(args.output, path, args.timeout, exc.limits.reference[1:])
     if failure is not None:
         print(f"excavator_demo: FAILED: {failure}", file=sys.stderr)
         return 1

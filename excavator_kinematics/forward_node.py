@@ -56,6 +56,7 @@ from manipulator_kinematics.codec.packed import PackedMessage
 from manipulator_kinematics.joint_state import InputError, decode_joint_state
 from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes import MachineNode, run_node
+from manipulator_kinematics.nodes.base import input_qos
 from manipulator_kinematics.registry import Machine
 
 NODE = "excavator_forward"
@@ -75,7 +76,7 @@ class ForwardKinematics(MachineNode):
         super().__init__(node_name, machine, argv)
         settings = self.settings
         self.exc: Excavator = self.model
-        self.frame = settings["base_frame"]
+        self.frame = settings["frame_prefix"] + settings["base_frame"]
         self.swing = SwingHold(settings["swing_max_age"])
         tau, gap = settings["acceleration_time_constant"], settings["acceleration_max_gap"]
         self.cylinder_acceleration = RateDifferentiator(tau, gap)
@@ -104,7 +105,8 @@ class ForwardKinematics(MachineNode):
         self.urdf_last_ns: int | None = None
         grade = settings["grade"]
         self.plane = DesignPlane.from_settings(grade) if grade["enabled"] else None
-        self.grade = PackedMessage(PointStamped(header=Header(frame_id=grade["frame"])), STAMPED)
+        grade_frame = settings["frame_prefix"] + grade["frame"]
+        self.grade = PackedMessage(PointStamped(header=Header(frame_id=grade_frame)), STAMPED)
         self.pose_pub = self.create_publisher(PoseStamped, topic["bucket_pose"], qos)
         self.twist_pub = self.create_publisher(TwistStamped, topic["bucket_twist"], qos)
         self.accel_pub = self.create_publisher(AccelStamped, topic["bucket_accel"], qos)
@@ -118,8 +120,9 @@ class ForwardKinematics(MachineNode):
         level = settings["level"]
         self.level = LevelPose(self, level, topic, qos, self.log) if level["enabled"] else None
         # raw: the callbacks decode the bytes themselves (decode_joint_state), at a third of the cost.
-        self.create_subscription(JointState, topic["joint_states"], self.on_swing, qos, raw=True)
-        self.create_subscription(JointState, topic["cylinder_lengths"], self.on_cylinders, qos, raw=True)
+        inputs = input_qos(settings["qos_depth"], settings["input_reliability"])
+        self.create_subscription(JointState, topic["joint_states"], self.on_swing, inputs, raw=True)
+        self.create_subscription(JointState, topic["cylinder_lengths"], self.on_cylinders, inputs, raw=True)
         self.get_logger().info(
             f"{self.exc.name}: {topic['cylinder_lengths']} + {topic['joint_states']} -> "
             f"{topic['bucket_pose']}, {topic['bucket_twist']}, {topic['bucket_accel']}, "

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from manipulator_kinematics.config import Flag, Number, Numbers, Text
+from manipulator_kinematics.nodes.base import FRAME_PREFIX, input_reliability
 
 NODES_CONFIG = "excavator_nodes.yaml"
 
@@ -21,6 +22,7 @@ _SWING_MAX_AGE = Number(**_SECONDS, doc="max |stamp(cylinder_lengths) - stamp(jo
 
 FORWARD = {
     "base_frame": Text(empty=False, doc="frame_id of bucket_pose, bucket_twist and bucket_accel"),
+    "frame_prefix": FRAME_PREFIX,
     "swing_max_age": _SWING_MAX_AGE,
     "acceleration_time_constant": Number(**_SECONDS, doc="low-pass on the accelerations; 0 = raw"),
     "acceleration_max_gap": Number(**_SECONDS, doc="a longer gap between messages restarts the differencing"),
@@ -29,6 +31,7 @@ FORWARD = {
                         doc="reliable keep-last depth of every topic (400: 0.4 s of 1 kHz input; "
                             "Fast DDS caps a keep-last depth at 400 unless a profile raises "
                             "max_samples_per_instance)"),
+    "input_reliability": input_reliability("cylinder_lengths and joint_states"),
     "urdf_joint_states_rate": Number(
         min=0.0, max=10_000.0, unit="Hz",
         doc="most urdf_joint_states per second of input stamps; 0 = every input",
@@ -83,7 +86,8 @@ FORWARD = {
 }
 
 VELOCITY_IK = {
-    "base_frame": Text(empty=False, doc="the only frame_id accepted on target_bucket_twist"),
+    "base_frame": Text(empty=False, doc="the frame_id of target_bucket_twist (empty frame_id: this one)"),
+    "frame_prefix": FRAME_PREFIX,
     "command_timeout": Number(**_SECONDS, doc="no accepted target for this long: zero rates once, then hold"),
     "state_timeout": Number(**_SECONDS, doc="a cylinder/swing state older than this is refused"),
     "swing_max_age": _SWING_MAX_AGE,
@@ -102,6 +106,7 @@ VELOCITY_IK = {
     "publish_array": Flag(doc="also publish Float64MultiArray for a ros2_control forward command controller"),
     "qos_depth": _QOS_DEPTH,
     "input_queue_depth": _INPUT_DEPTH,
+    "input_reliability": input_reliability("target_bucket_twist, cylinder_lengths and joint_states"),
     "topics": {
         "target_bucket_twist": _topic("input: geometry_msgs/TwistStamped in base_frame"),
         "cylinder_lengths": _topic("input: sensor_msgs/JointState, cylinder lengths"),
@@ -145,6 +150,7 @@ SIM = {
                                             "default: the machine's reference lengths"),
     "qos_depth": _QOS_DEPTH,
     "input_queue_depth": _INPUT_DEPTH,
+    "input_reliability": input_reliability("rate_commands"),
     "topics": {
         "rate_commands": _topic("input: sensor_msgs/JointState velocities (rate commands)"),
         "cylinder_lengths": _topic("output: sensor_msgs/JointState, cylinder lengths and rates"),

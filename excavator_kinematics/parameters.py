@@ -51,7 +51,7 @@ def _cylinder(**pins: Any) -> dict[str, Any]:
 
 #: The ``excavator:`` section of a parameters file; every key is required.
 SCHEMA = {
-    "name": Text(empty=False),
+    "name": Text(empty=False, doc="the machine's name: the robot name of its URDF"),
     # Height of the base frame's origin above the level ground the machine stands on: z = 0 of
     # the working ranges (SAE J1193 / ISO 7135 ground reference plane) is z = -base_height.
     "base_height": Number(min=-30.0, max=30.0, unit="m"),

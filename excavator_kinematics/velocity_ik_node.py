@@ -49,6 +49,7 @@ from excavator_kinematics.twist import split_twist
 from manipulator_kinematics.joint_state import joint_values
 from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes import MachineNode, run_node
+from manipulator_kinematics.nodes.base import input_qos
 from manipulator_kinematics.registry import Machine
 
 NODE = "excavator_velocity_ik"
@@ -67,7 +68,7 @@ class VelocityIk(MachineNode):
         super().__init__(node_name, machine, argv)
         s = self.settings
         self.exc: Excavator = self.model
-        self.frame = s["base_frame"]
+        self.frame = s["frame_prefix"] + s["base_frame"]
         self.command_timeout_ns = int(s["command_timeout"] * 1e9)
         self.state_timeout_ns = int(s["state_timeout"] * 1e9)
         self.condition_threshold = float(s["condition_threshold"])
@@ -103,7 +104,7 @@ class VelocityIk(MachineNode):
         qos = QoSProfile(depth=s["qos_depth"], reliability=ReliabilityPolicy.RELIABLE)
         # A controller acts on the latest target and state: a short input queue drops what a busy
         # moment left behind instead of working through it late (a backlog is a delay in the loop).
-        latest = QoSProfile(depth=s["input_queue_depth"], reliability=ReliabilityPolicy.RELIABLE)
+        latest = input_qos(s["input_queue_depth"], s["input_reliability"])
         self.command_pub = self.create_publisher(JointState, s["topics"]["rate_commands"], qos)
         self.array_pub = (
             self.create_publisher(Float64MultiArray, s["topics"]["rate_command_array"], qos)
@@ -151,7 +152,7 @@ class VelocityIk(MachineNode):
 
     def on_target(self, msg: TwistStamped) -> None:
         try:
-            if msg.header.frame_id != self.frame:
+            if msg.header.frame_id not in ("", self.frame):  # empty: the base frame, as on the services
                 raise InputError(f"frame_id {msg.header.frame_id!r} is not the base frame {self.frame!r}")
             linear, angular = messages.twist_arrays(msg)
             with np.errstate(over="ignore"):  # a norm that overflows is inf: refused just below

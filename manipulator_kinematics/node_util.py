@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -53,14 +53,22 @@ def make_node(name: str) -> Node:
     return Node(name, automatically_declare_parameters_from_overrides=True)
 
 
-def param(node: Node, name: str, default: Any, description: str = "") -> Any:
+def param(node: Node, name: str, default: Any, description: str = "",
+          bounds: tuple[float, float] | None = None, constraints: str = "") -> Any:
     """Value of parameter ``name``, declaring it with ``default`` when no override exists; either
-    way it gets a read-only descriptor, so ``ros2 param describe`` shows it as a start-up setting."""
+    way it gets a read-only descriptor, so ``ros2 param describe`` shows it as a start-up setting,
+    with ``bounds`` (min, max) as its range when it is a single number and ``constraints`` (what
+    values it takes) after that."""
     given = node.get_parameter(name) if node.has_parameter(name) else None
     kind = given.type_ if given is not None else Parameter.Type.from_parameter_value(default)
     descriptor = ParameterDescriptor(
-        description=description, type=kind.value, read_only=True, additional_constraints=STARTUP_ONLY
+        description=description, type=kind.value, read_only=True,
+        additional_constraints=f"{STARTUP_ONLY}; {constraints}" if constraints else STARTUP_ONLY,
     )
+    if bounds is not None and kind == Parameter.Type.DOUBLE:
+        descriptor.floating_point_range = [FloatingPointRange(from_value=bounds[0], to_value=bounds[1])]
+    elif bounds is not None and kind == Parameter.Type.INTEGER:
+        descriptor.integer_range = [IntegerRange(from_value=int(bounds[0]), to_value=int(bounds[1]))]
     if given is not None:
         node.set_descriptor(name, descriptor)
         return given.value

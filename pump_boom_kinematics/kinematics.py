@@ -76,6 +76,7 @@ STEP_RANGE = (1e-3, 10.0)
 TIP_SPEED_RANGE = (1e-3, 10.0)
 
 SCHEMA = {
+    "name": Text(empty=False, default="pump_boom", doc="the machine's name: the robot name of its URDF"),
     "root": Numbers(2, Number(min=-20.0, max=20.0, unit="m")),
     "lengths": Numbers(5, Number(min=0.0, max=100.0, unit="m", exclusive_min=True)),
     "joint_names": Names(6),
@@ -187,7 +188,9 @@ class PumpBoom:
         tip_speed: float = 0.2,
         table_file: str | Path | None = None,
         joint_speed: ArrayLike | None = None,
+        name: str = "pump_boom",
     ) -> None:
+        self.name = name
         self.root = np.asarray(root, dtype=float)
         self.lengths = np.asarray(lengths, dtype=float)
         if self.root.shape != (2,) or self.lengths.shape != (5,) or not np.all(self.lengths > 0.0):
@@ -255,6 +258,7 @@ class PumpBoom:
             tip_speed=p["pour"]["tip_speed"],
             table_file=regions["table_file"],
             joint_speed=p["joint_max_speed"],
+            name=p["name"],
         )
 
     @classmethod

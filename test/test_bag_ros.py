@@ -19,7 +19,7 @@ from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from ros_harness import NodeProcess, Probe
+from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Int64
 
@@ -99,7 +99,7 @@ def replay_into(
     received: dict[str, list] = {t: [] for t in outputs}
     for topic in outputs:
         probe.node.create_subscription(TYPES[expected[topic].msgtype], topic, received[topic].append, QOS)
-    with NodeProcess(*node) as process:
+    with NodeProcess(*node, *RELIABLE_INPUTS) as process:
         probe.wait_until(
             lambda: all(probe.node.count_publishers(t) for t in outputs) or not process.alive(),
             TIMEOUT,

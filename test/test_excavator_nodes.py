@@ -17,7 +17,7 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from ros_harness import NodeProcess, Probe
+from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
@@ -48,10 +48,10 @@ COMMAND_NAMES = (JOINTS[0], *CYLINDERS)
 
 def start(exe: str, namespace: str, **overrides: object) -> NodeProcess:
     """Console script ``exe`` (node of the same name) in ``namespace`` with the package's config,
-    plus ``overrides`` in one more params file for this node (a later file wins; ``-p`` would
-    not beat a node section, and ``-p node:name:=v`` does not reach a namespaced node)."""
+    reliable inputs (the tests check an output per input), plus ``overrides`` in one more params
+    file for this node (a later file wins)."""
     params = {f"{namespace}/{exe}": {"ros__parameters": overrides}} if overrides else None
-    return NodeProcess(exe, *PARAMS, "-r", f"__ns:={namespace}", params=params)
+    return NodeProcess(exe, *PARAMS, *RELIABLE_INPUTS, "-r", f"__ns:={namespace}", params=params)
 
 
 class Collector:

@@ -127,19 +127,22 @@ def tmp() -> Iterator[Path]:
 def nodes(tmp: Path) -> Iterator[dict[str, NodeProcess]]:
     """Every node under test, started at once; a test takes its nodes out (``pop``) and stops them."""
     started = {
+        # Reliable inputs (the default is best_effort): each burst is checked to arrive whole, and
+        # the empty-payload limit pinned below is one of reliable readers.
         "excavator_forward": start("excavator_forward", "/fz_fwd", tmp, EXCAVATOR_PARAMS, qos_depth=400,
                                    urdf_joint_states_rate=0.0, **FUZZ_SETTINGS,
-                                   grade=GRADE_SETTINGS),
+                                   grade=GRADE_SETTINGS, input_reliability="reliable"),
         "excavator_velocity_ik": start("excavator_velocity_ik", "/fz_vik", tmp, EXCAVATOR_PARAMS,
                                        input_queue_depth=400, command_timeout=30.0, state_timeout=30.0,
-                                       **FUZZ_SETTINGS),
+                                       input_reliability="reliable", **FUZZ_SETTINGS),
         "excavator_sim": start("excavator_sim", "/fz_sim", tmp, EXCAVATOR_PARAMS, input_queue_depth=400,
                                rate=100.0, **FUZZ_SETTINGS),
         "excavator_ik_server": start("excavator_ik_server", "/fz_eik", tmp, EXCAVATOR_PARAMS),
     }
     for name in SERIAL:
         params = (str(config_path(machine(name).config_file)),)
-        started[f"{name}_forward"] = start(f"{name}_forward", f"/fz_{name}", tmp, params, qos_depth=400)
+        started[f"{name}_forward"] = start(f"{name}_forward", f"/fz_{name}", tmp, params, qos_depth=400,
+                                           input_reliability="reliable")
         started[f"{name}_ik_server"] = start(f"{name}_ik_server", f"/fz_{name}", tmp, params)
     yield started
     for process in started.values():

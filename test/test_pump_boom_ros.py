@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Point, PoseStamped, TwistStamped
-from ros_harness import IK_FK, NodeProcess, Probe, start_with_services
+from ros_harness import IK_FK, RELIABLE_INPUTS, NodeProcess, Probe, start_with_services
 from sensor_msgs.msg import JointState
 
 from manipulator_kinematics.model import matrix_quaternion
@@ -339,7 +339,7 @@ def test_forward_node_publishes_the_tip_pose_and_twist(probe: Probe, boom: PumpB
     pose_sub = node.create_subscription(PoseStamped, "pump_boom_test/tool_pose", poses.append, 10)
     twist_sub = node.create_subscription(TwistStamped, "pump_boom_test/tool_twist", twists.append, 10)
     process = NodeProcess(
-        "pump_boom_forward", "--params-file", PARAMS,
+        "pump_boom_forward", "--params-file", PARAMS, *RELIABLE_INPUTS,
         "-p", "pump_boom_forward:topics.joint_states:=pump_boom_test/joint_states",
         "-p", "pump_boom_forward:topics.tool_pose:=pump_boom_test/tool_pose",
         "-p", "pump_boom_forward:topics.tool_twist:=pump_boom_test/tool_twist",

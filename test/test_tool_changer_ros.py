@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, TwistStamped
-from ros_harness import IK_FK, NodeProcess, Probe, start_with_services
+from ros_harness import IK_FK, RELIABLE_INPUTS, NodeProcess, Probe, start_with_services
 from sensor_msgs.msg import JointState
 
 from manipulator_kinematics.model import matrix_quaternion, pose_matrix
@@ -100,7 +100,7 @@ def test_forward_node_publishes_pose_and_twist(probe: Probe, arm: ToolChanger) -
     publisher = node.create_publisher(JointState, "tc_test/joint_states", 10)
     pose_sub = node.create_subscription(PoseStamped, "tool_pose", poses.append, 10)
     twist_sub = node.create_subscription(TwistStamped, "tool_twist", twists.append, 10)
-    process = NodeProcess("tool_changer_forward", "--params-file", PARAMS,
+    process = NodeProcess("tool_changer_forward", "--params-file", PARAMS, *RELIABLE_INPUTS,
                           "-p", "tool_changer_forward:topics.joint_states:=tc_test/joint_states")
     rng = np.random.default_rng(11)
     states = rng.uniform(arm.limits.lower, arm.limits.upper, (4, 6))

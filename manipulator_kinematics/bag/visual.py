@@ -19,6 +19,10 @@ namespace of the bag. A machine's state is gathered by joint name from its Joint
 node), stamped with the header stamp and written at the record time of the message that
 completed it. With one machine in the bag the frames are the URDF's own names; with several,
 each machine's frames (and the links of its URDF) get the prefix ``<namespace>_<machine>/``.
+``frame_prefix`` ({namespace: prefix}, e.g. ``{"/m1": "m1/"}``) sets a machine's prefix instead,
+as the nodes' and robot_state_publisher's ``frame_prefix`` do at run time; ``root_frame`` (e.g.
+``world``) adds a static identity transform from it to each machine's base frame, so several
+machines form one TF tree.
 Messages are serialised with rosbags' ROS 2 Jazzy type store.
 """
 
@@ -43,7 +47,7 @@ from manipulator_kinematics.bag.writer import BagWriter
 from manipulator_kinematics.model import matrix_quaternion
 from manipulator_kinematics.registry import Machine
 from manipulator_kinematics.scene import Scene, solids
-from manipulator_kinematics.urdf import rotation_rpy
+from manipulator_kinematics.urdf import prefixed_urdf, rotation_rpy
 
 #: JointState topics a machine's state is gathered from (as config/machine_markers.yaml).
 STATE_TOPICS = ("joint_states", "cylinder_lengths")
@@ -116,20 +120,6 @@ def joint_transforms(joints: Sequence[UrdfJoint], values: Mapping[str, np.ndarra
             motion[..., :3, :3] = np.eye(3) + s * k + (1.0 - c) * (k @ k)
         out[j.name] = j.origin @ motion
     return out
-
-
-def prefixed_urdf(text: str, prefix: str) -> str:
-    """The URDF with ``prefix`` before every link name (several machines in one tf tree)."""
-    if not prefix:
-        return text
-    root = ET.fromstring(text)
-    for link in root.iter("link"):
-        link.set("name", prefix + link.get("name"))
-    for joint in root.iter("joint"):
-        for end in ("parent", "child"):
-            element = joint.find(end)
-            element.set("link", prefix + element.get("link"))
-    return ET.tostring(root, encoding="unicode")
 
 
 # ---------------------------------------------------------------------------------------- states
@@ -258,8 +248,10 @@ class Added:
     topics: dict[str, tuple[str, TopicQos, list[int], list[bytes]]]
 
 
-def visual_topics(bag: BagReader, params: Sequence[Path] = (), rate: float = 30.0) -> list[Added]:
+def visual_topics(bag: BagReader, params: Sequence[Path] = (), rate: float = 30.0,
+                  frame_prefix: Mapping[str, str] | None = None, root_frame: str = "") -> list[Added]:
     """The visual topics (module docstring) of every machine with a scene hook found in ``bag``."""
+    frame_prefix = {"/" + ns.strip("/"): p for ns, p in (frame_prefix or {}).items()}
     setup = load_setup(params)
     ours = package_topics()
     grouped: dict[str, dict[str, str]] = {}
@@ -277,7 +269,8 @@ def visual_topics(bag: BagReader, params: Sequence[Path] = (), rate: float = 30.
     added = []
     for namespace, data, machine in found:
         space = namespace.strip("/").replace("/", "_")
-        prefix = "" if len(found) == 1 else f"{space}_{machine.name}/".lstrip("_")
+        automatic = "" if len(found) == 1 else f"{space}_{machine.name}/".lstrip("_")
+        prefix = frame_prefix.get(namespace, automatic)
         base = "" if namespace == "/" else namespace
         model = setup.model(machine)
         log_time, stamp, states = gather_states(data, machine.joint_names(model))
@@ -308,12 +301,16 @@ def visual_topics(bag: BagReader, params: Sequence[Path] = (), rate: float = 30.
         topics[TF] = ("tf2_msgs/msg/TFMessage", TopicQos(reliable=True, depth=100), tf_times, tf_raw)
         topics[f"{base}/{MARKERS}"] = ("visualization_msgs/msg/MarkerArray", TopicQos(reliable=True),
                                        marker_times, marker_raw)
+        fixed = [j for j in joints if j.kind == "fixed"]
+        edges = [(prefix + j.parent, prefix + j.child) for j in fixed]
+        origins = [j.origin[None] for j in fixed]
+        if root_frame:
+            edges.append((root_frame, prefix + BASE_FRAME))
+            origins.append(np.eye(4)[None])
+        if edges:
+            static = tf_messages(np.array([stamp[0]]), edges, origins)
+            topics[TF_STATIC] = ("tf2_msgs/msg/TFMessage", LATCHED, [first], static)
         if urdf is not None:
-            fixed = [j for j in joints if j.kind == "fixed"]
-            if fixed:
-                edges = [(prefix + j.parent, prefix + j.child) for j in fixed]
-                static = tf_messages(np.array([stamp[0]]), edges, [j.origin[None] for j in fixed])
-                topics[TF_STATIC] = ("tf2_msgs/msg/TFMessage", LATCHED, [first], static)
             topics[f"{base}{DESCRIPTION}"] = ("std_msgs/msg/String", LATCHED, [first],
                                              [string_message(prefixed_urdf(urdf, prefix))])
         added.append(Added(machine.name, namespace, len(states), topics))
@@ -328,13 +325,15 @@ def add_visuals(
     rate: float = 30.0,
     overwrite: bool = False,
     storage: str | None = None,
+    frame_prefix: Mapping[str, str] | None = None,
+    root_frame: str = "",
 ) -> list[Added]:
     """Write ``output``: every message of the bag ``source`` and its visual topics (module
     docstring). ``output`` may be ``source`` itself: the new bag is written beside it and
     replaces it once complete. BagError if no registered machine with a scene is in the bag."""
     source, output = Path(source), Path(output)
     bag = BagReader(source)
-    added = visual_topics(bag, params, rate)
+    added = visual_topics(bag, params, rate, frame_prefix, root_frame)
     if not added:
         raise BagError(f"{source}: no registered machine's state topics in the bag: nothing to draw")
     merged: dict[str, tuple[str, TopicQos, list[int], list[bytes]]] = {}

@@ -38,12 +38,14 @@ from manipulator_kinematics.joint_state import (
 )
 from manipulator_kinematics.model import describe_limits, matrix_quaternion
 from manipulator_kinematics.node_util import ThrottledLog
-from manipulator_kinematics.nodes.base import MachineNode
+from manipulator_kinematics.nodes.base import FRAME_PREFIX, MachineNode, input_qos, input_reliability
 from manipulator_kinematics.registry import Machine
 
 SETTINGS = {
     "base_frame": Text(empty=False, doc="frame_id of tool_pose and tool_twist (the machine's base)"),
-    "qos_depth": Number(min=1, max=100_000, integer=True, doc="reliable keep-last depth of every topic"),
+    "frame_prefix": FRAME_PREFIX,
+    "qos_depth": Number(min=1, max=100_000, integer=True, doc="keep-last depth of every topic"),
+    "input_reliability": input_reliability("joint_states"),
     "warning_period": Number(min=0.0, max=3600.0, unit="s",
                              doc="the same kind of rejection is logged at most this often"),
     "topics": {
@@ -64,7 +66,7 @@ class ForwardNode(MachineNode):
     def __init__(self, node_name: str, machine: Machine, argv: Sequence[str]) -> None:
         super().__init__(node_name, machine, argv)
         s = self.settings
-        self.frame = s["base_frame"]
+        self.frame = s["frame_prefix"] + s["base_frame"]
         self.joint_names = machine.joint_names(self.model)
         self.limits = machine.limits(self.model)
         self.log = ThrottledLog(self, s["warning_period"])
@@ -75,7 +77,8 @@ class ForwardNode(MachineNode):
         self.twist = PackedMessage(TwistStamped(header=header), STAMPED)
         self.pose_pub = self.create_publisher(PoseStamped, topics["tool_pose"], qos)
         self.twist_pub = self.create_publisher(TwistStamped, topics["tool_twist"], qos)
-        self.create_subscription(JointState, topics["joint_states"], self.on_joint_state, qos, raw=True)
+        self.create_subscription(JointState, topics["joint_states"], self.on_joint_state,
+                                 input_qos(s["qos_depth"], s["input_reliability"]), raw=True)
         self.get_logger().info(
             f"{machine.name}: {topics['joint_states']} {list(self.joint_names)} -> {topics['tool_pose']}, "
             f"{topics['tool_twist']} in frame {self.frame!r}")

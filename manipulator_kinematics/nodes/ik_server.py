@@ -33,7 +33,7 @@ from manipulator_kinematics.joint_state import (
     joint_values,
 )
 from manipulator_kinematics.model import IKStatus, RequestError, describe_limits, pose_matrix
-from manipulator_kinematics.nodes.base import MachineNode
+from manipulator_kinematics.nodes.base import FRAME_PREFIX, MachineNode
 from manipulator_kinematics.nodes.messages import joint_state, pose_array, pose_stamped, twist_stamped
 from manipulator_kinematics.registry import Machine
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes
@@ -41,6 +41,7 @@ from manipulator_kinematics_interfaces.srv import SolveFK, SolveIK
 
 SETTINGS = {
     "base_frame": Text(empty=False, doc="frame of targets and results; an empty target frame_id means it"),
+    "frame_prefix": FRAME_PREFIX,
 }
 
 CODES = {
@@ -68,7 +69,7 @@ class IKServerNode(MachineNode):
 
     def __init__(self, node_name: str, machine: Machine, argv: Sequence[str]) -> None:
         super().__init__(node_name, machine, argv)
-        self.frame = self.settings["base_frame"]
+        self.frame = self.settings["frame_prefix"] + self.settings["base_frame"]
         self.joint_names = machine.joint_names(self.model)
         self.limits = machine.limits(self.model)
         self.max_distance = PLAUSIBILITY_FACTOR * max(self._reach(), 1.0)
