@@ -30,7 +30,7 @@ ROSDEP = {
     "mcap_ros2": "mcap-ros2-support",
     **{ros: ros for ros in ("rclpy", "rcl_interfaces", "ament_index_python", "builtin_interfaces", "std_msgs",
                             "sensor_msgs", "geometry_msgs", "trajectory_msgs", "visualization_msgs",
-                            "manipulator_kinematics_interfaces")},
+                            "diagnostic_msgs", "manipulator_kinematics_interfaces")},
 }
 #: keys needed without an import of ours: (key, why, a text in the source or launch files that needs it)
 INDIRECT = (
