@@ -247,6 +247,80 @@ def test_imu_state_node_publishes_cylinder_lengths_and_refuses_bad_sensors():
         np.testing.assert_allclose(message.velocity, D_dot[1:], rtol=0, atol=1e-7)
 
 
+def test_imu_state_node_says_which_sensors_fell_silent():
+    """Gap a: the max_age timer. Before any message: "since start-up"; the boom falling silent
+    while the others go on, then all four: a reason naming them, and no set stamped after the
+    last complete one; all four back: output again."""
+    import re
+
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rclpy.time import Time
+    from ros_harness import NodeProcess, Probe
+    from sensor_msgs.msg import Imu, JointState
+
+    from manipulator_kinematics.params import config_path
+
+    D = LIM.reference + np.array([0.5, 0.12, -0.3, 0.2])
+    q, omega, f = readings(D, np.zeros(4), "h_link", mountings={key: [0.0, 0.0, 0.0] for key in SENSORS})
+    files = [config_path("excavator_cet200.yaml"), config_path("excavator_nodes.yaml")]
+    process = NodeProcess("excavator_imu_state", *[a for p in files for a in ("--params-file", str(p))],
+                          "-r", "__ns:=/imu_stale",
+                          params={"/imu_stale/excavator_imu_state": {"ros__parameters": {
+                              "max_age": 0.3, "warning_period": 0.2}}})
+    qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+    probe = Probe("imu_stale_probe")
+    node = probe.node
+    got: list[JointState] = []
+    node.create_subscription(JointState, "/imu_stale/cylinder_lengths", got.append, qos)
+    pubs = dict(zip(SENSORS, (node.create_publisher(Imu, f"/imu_stale/imu/{n}", qos) for n in SENSORS),
+                    strict=True))
+    clock = {"k": 0}
+
+    def send(names) -> bool:
+        """One message from each of ``names`` with the next stamp (10 ms apart); False, for wait_until."""
+        clock["k"] += 1
+        for i, name in enumerate(SENSORS):
+            if name in names:
+                pubs[name].publish(imu_message(clock["k"] * 10_000_000, q[i], omega[i], f[i], True))
+        return False
+
+    def stamp_ns(msg: JointState) -> int:
+        return Time.from_msg(msg.header.stamp).nanoseconds
+
+    def stale_lines(pattern: str) -> int:
+        return len(re.findall(pattern, process.log()))
+
+    def keep_sending(names, pattern: str, lines: int, timeout: float = 15.0) -> None:
+        """Send ``names`` every spin until ``pattern`` is logged ``lines`` more times."""
+        before = stale_lines(pattern)
+        probe.wait_until(lambda: send(names) or stale_lines(pattern) >= before + lines, timeout, pattern)
+
+    try:
+        probe.wait_until(lambda: "no message since start-up" in process.log(), 15.0, "the start-up reason")
+        probe.wait_until(lambda: all(p.get_subscription_count() for p in pubs.values()), 30.0,
+                         "subscriptions")
+        probe.wait_until(lambda: send(SENSORS) or len(got) >= 3, 15.0, "cylinder states")
+        last_full = clock["k"] * 10_000_000
+        # The boom falls silent, the others go on: the boom is named (twice: time passes), no output.
+        keep_sending(("cab", "arm", "bucket_linkage"), r"imu boom \(no message for [\d.]+ s\) stale", 2)
+        assert all(stamp_ns(m) <= last_full for m in got), [stamp_ns(m) for m in got][-5:]
+        # All four back: output resumes (the stale boom recovered with its next message).
+        count = len(got)
+        probe.wait_until(lambda: send(SENSORS) or len(got) > count + 2, 15.0, "output after recovery")
+        last_full = clock["k"] * 10_000_000
+        # All four fall silent: one reason names all of them.
+        all_four = (r"imu cab \(no message for [\d.]+ s\), boom \(.*\), arm \(.*\), "
+                    r"bucket_linkage \(.*\) stale")
+        keep_sending((), all_four, 2)
+        assert all(stamp_ns(m) <= last_full for m in got)
+        assert process.alive()
+    finally:
+        log = process.stop()
+        probe.close()
+    assert "Traceback" not in log, log
+    assert "max_age 0.3 s" in log
+
+
 def test_level_frame_from_the_cab_imu_gives_heights_along_gravity():
     """Machine tilt (item 2): the cab IMU's up vector, turned into base_link by the swing, gives
     the level frame, in which every point's z is its height along gravity above base_link's origin
