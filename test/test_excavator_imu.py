@@ -480,6 +480,143 @@ def test_slope_example_writes_bag_and_png(tmp_path):
     assert read_landxml(tmp_path / "ditch.xml").faces.shape == (50, 3)
 
 
+def tf_tree(bag_path) -> tuple[dict, dict]:
+    """The bag's transforms, decoded with rosbags (not the project's codec): static child ->
+    (parent, 4x4) and, per header stamp (ns), dynamic child -> (parent, 4x4)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from manipulator_kinematics.bag.reader import BagReader
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    static: dict[str, tuple[str, np.ndarray]] = {}
+    dynamic: dict[int, dict[str, tuple[str, np.ndarray]]] = {}
+    for topic, _, raw in BagReader(bag_path).messages(["/tf", "/tf_static"]):
+        for t in store.deserialize_cdr(raw, "tf2_msgs/msg/TFMessage").transforms:
+            r, p = t.transform.rotation, t.transform.translation
+            pose = np.eye(4)
+            pose[:3, :3] = Rotation.from_quat([r.x, r.y, r.z, r.w]).as_matrix()
+            pose[:3, 3] = [p.x, p.y, p.z]
+            stamp = t.header.stamp.sec * 1_000_000_000 + t.header.stamp.nanosec
+            target = static if topic == "/tf_static" else dynamic.setdefault(stamp, {})
+            target[t.child_frame_id] = (t.header.frame_id, pose)
+    return static, dynamic
+
+
+def compose(frame: str, edges: dict[str, tuple[str, np.ndarray]]) -> tuple[list[str], np.ndarray]:
+    """The chain from ``frame`` up to the root (frames, child first) and root -> frame."""
+    chain, pose = [frame], np.eye(4)
+    while frame in edges:
+        frame, step = edges[frame]
+        pose = step @ pose
+        chain.append(frame)
+        assert len(chain) < 100, chain
+    return chain, pose
+
+
+def test_slope_example_bag_is_one_tf_tree(tmp_path):
+    """Gap b: the example's bag composes site -> base_level -> base_link -> URDF links; the bucket
+    tip through the tree is bucket_pose_site (the estimate placed by the cab IMU's tilt) to 1e-6 m,
+    and base_level -> base_link is the level rotation of machine_tilt."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from excavator_kinematics.slope_example import run
+    from manipulator_kinematics.bag.reader import BagReader
+    from manipulator_kinematics.bag.visual import urdf_joints
+    from manipulator_kinematics.registry import machine
+
+    run(tmp_path, seconds=1.0, rate=20.0)
+    bag = tmp_path / "bag"
+    static, dynamic = tf_tree(bag)
+    store = get_typestore(Stores.ROS2_JAZZY)
+    poses = [store.deserialize_cdr(raw, "geometry_msgs/msg/PoseStamped")
+             for _, _, raw in BagReader(bag).messages(["/bucket_pose_site"])]
+    tilts = [store.deserialize_cdr(raw, "geometry_msgs/msg/Vector3Stamped")
+             for _, _, raw in BagReader(bag).messages(["/machine_tilt"])]
+    joints = {m.header.stamp.sec * 10**9 + m.header.stamp.nanosec: m.position[0]
+              for _, _, m in ((t, x, store.deserialize_cdr(raw, "sensor_msgs/msg/JointState"))
+                              for t, x, raw in BagReader(bag).messages(["/joint_states"]))}
+    assert len(poses) == len(tilts) == 21
+    links = {j.child for j in urdf_joints(machine("excavator").urdf(EXC))}
+    for pose, tilt in zip(poses, tilts, strict=True):
+        stamp = pose.header.stamp.sec * 10**9 + pose.header.stamp.nanosec
+        assert pose.header.frame_id == "site"
+        edges = {**static, **dynamic[stamp]}
+        chain, tip = compose("bucket_tip", edges)
+        assert chain[-4:] == ["upper_structure", "base_link", "base_level", "site"], chain
+        assert "bucket" in chain
+        assert {compose(link, edges)[0][-1] for link in links} == {"site"}
+        p = pose.pose.position
+        np.testing.assert_allclose(tip[:3, 3], [p.x, p.y, p.z], rtol=0, atol=1e-6)
+        o = pose.pose.orientation
+        np.testing.assert_allclose(Rotation.from_matrix(tip[:3, :3]).as_quat(canonical=True),
+                                   Rotation.from_quat([o.x, o.y, o.z, o.w]).as_quat(canonical=True),
+                                   atol=1e-9)
+        # base_level -> base_link: world up in base_link is the tilt turned by the swing, and
+        # base_level's z is that up (independent of level_rotation: the third row of R^T).
+        parent, level = dynamic[stamp]["base_link"]
+        assert parent == "base_level"
+        up = Rotation.from_euler("z", joints[stamp]).apply([tilt.vector.x, tilt.vector.y, tilt.vector.z])
+        np.testing.assert_allclose(level[:3, :3].T @ [0.0, 0.0, 1.0], up, atol=1e-12)
+        # ...and base_level keeps base_link's heading: base_link's x has no y part in base_level.
+        assert abs(level[1, 0]) < 1e-12 and level[0, 0] > 0
+
+
+def test_bag_visuals_write_the_level_frame_from_machine_tilt(tmp_path):
+    """Gap b, the visual writer alone: a recorded excavator bag with machine_tilt (a pitched and
+    rolled machine, the cab swung) gets base_level -> base_link equal to the machine's known roll
+    and pitch; without machine_tilt, no level frame."""
+    from builtin_interfaces.msg import Time
+    from geometry_msgs.msg import Vector3, Vector3Stamped
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Header
+
+    from excavator_kinematics.kinematics import CYLINDERS, JOINTS
+    from manipulator_kinematics.bag.synthetic import Topic, write_bag
+    from manipulator_kinematics.bag.visual import add_visuals
+    from manipulator_kinematics.codec.packed import serialize_unpadded
+
+    roll, pitch, swing = 0.04, -0.07, 0.8
+    tilted = Rotation.from_euler("xyz", [roll, pitch, 0.0])  # base_link in a level frame
+    up_upper = (Rotation.from_euler("z", swing).inv() * tilted.inv()).apply([0.0, 0.0, 1.0])
+    stamps = np.array([1_000_000_000 + k * 10_000_000 for k in range(5)], dtype=np.int64)
+    D = LIM.reference
+
+    def header(s: int, frame: str = "") -> Header:
+        return Header(stamp=Time(sec=int(s // 10**9), nanosec=int(s % 10**9)), frame_id=frame)
+
+    def topics(with_tilt: bool) -> dict[str, Topic]:
+        out = {
+            "/joint_states": [JointState(header=header(s), name=[JOINTS[0]], position=[swing])
+                              for s in stamps],
+            "/cylinder_lengths": [JointState(header=header(s), name=list(CYLINDERS), position=D[1:].tolist())
+                                  for s in stamps],
+        }
+        if with_tilt:  # from the third state on: the first two have no level frame
+            x, y, z = up_upper.tolist()
+            out["/machine_tilt"] = [Vector3Stamped(header=header(s, "upper_structure"),
+                                                   vector=Vector3(x=x, y=y, z=z)) for s in stamps[2:]]
+        kinds = {"/machine_tilt": "geometry_msgs/msg/Vector3Stamped"}
+        return {name: Topic(kinds.get(name, "sensor_msgs/msg/JointState"),
+                            np.array([m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in msgs]),
+                            [serialize_unpadded(m) for m in msgs]) for name, msgs in out.items()}
+
+    for with_tilt in (True, False):
+        source, output = tmp_path / f"rec{with_tilt}", tmp_path / f"vis{with_tilt}"
+        write_bag(source, topics(with_tilt))
+        add_visuals(source, output)
+        static, dynamic = tf_tree(output)
+        levels = {s: edges["base_link"] for s, edges in dynamic.items() if "base_link" in edges}
+        if not with_tilt:
+            assert not levels
+            continue
+        assert sorted(levels) == stamps[2:].tolist()
+        for parent, pose in levels.values():
+            assert parent == "base_level"
+            np.testing.assert_allclose(pose[:3, :3], tilted.as_matrix(), atol=1e-12)
+            np.testing.assert_allclose(pose[:3, 3], 0.0, atol=0)
+        assert compose("bucket_tip", {**static, **dynamic[int(stamps[3])]})[0][-1] == "base_level"
+
+
 def test_mounting_figure_is_drawn(tmp_path):
     from matplotlib.image import imread
 
