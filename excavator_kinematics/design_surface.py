@@ -278,5 +278,6 @@ class SitePose:
         return cls(Rotation.from_euler("xyz", rpy).as_matrix(), np.asarray(position, dtype=float))
 
     def apply(self, points: ArrayLike) -> np.ndarray:
-        """Points (..., 3) of the base frame in the site frame."""
-        return np.asarray(points, dtype=float) @ self.rotation.T + self.translation
+        """Points (..., 3) of the base frame in the site frame; with one rotation per state
+        (N, 3, 3) (a tilt measured at each), points (N, k, 3)."""
+        return np.asarray(points, dtype=float) @ np.swapaxes(self.rotation, -1, -2) + self.translation

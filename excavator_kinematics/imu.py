@@ -46,6 +46,7 @@ from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from excavator_kinematics.kinematics import Excavator, StrokeError
+from manipulator_kinematics.model import level_rotation  # noqa: F401 - re-exported (the level frame; shared with bag visuals)
 
 #: The four sensors, in the order of every (..., 4, 3) array here.
 SENSORS = ("cab", "boom", "arm", "bucket_linkage")
@@ -61,18 +62,6 @@ class ImuJoints(NamedTuple):
     lengths: np.ndarray
     rates: np.ndarray
     up_cab: np.ndarray
-
-
-def level_rotation(up: ArrayLike) -> np.ndarray:
-    """(..., 3, 3) rows: the axes of the gravity-aligned *level frame* in a body frame whose world
-    up is ``up`` (..., 3): z = up, x = the body's x projected onto the horizontal, y = z x x. Same
-    origin and heading as the body, roll and pitch taken out (REP 105's gravity-aligned frames);
-    ``p_level = R @ p_body``. Needs a body x that is not vertical (any machine standing)."""
-    z = np.asarray(up, dtype=float)
-    z = z / np.linalg.norm(z, axis=-1, keepdims=True)
-    x = np.array([1.0, 0.0, 0.0]) - z[..., :1] * z
-    x = x / np.linalg.norm(x, axis=-1, keepdims=True)
-    return np.stack([x, np.cross(z, x), z], axis=-2)
 
 
 def base_up(up_cab: ArrayLike, theta1: ArrayLike) -> np.ndarray:

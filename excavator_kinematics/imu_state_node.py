@@ -20,6 +20,12 @@ that is not of unit length (1e-3), a rate beyond ``max_angular_rate`` or a speci
 magnitude is more than ``max_dynamic_acceleration`` from g is rejected (the sensor then counts as
 missing until its next good message); a missing sensor, a skew beyond ``max_skew`` or angles the
 machine cannot take mean no output; each with a throttled reason.
+
+Staleness: a timer every ``max_age`` / 4 s (node clock) finds the sensors whose newest message
+arrived more than ``max_age`` s ago, or that have sent nothing in the first ``max_age`` s after
+start-up; they count as missing (their filter restarts) until their next good message, and a
+throttled "no cylinder state: imu ... stale" names them. So a sensor, or all four, falling silent
+is said, not only a set that never completes.
 """
 
 from __future__ import annotations
@@ -64,6 +70,12 @@ class ImuState(MachineNode):
         # Per sensor: (stamp ns, up (3,), omega (3,)) of its latest good message, or None.
         self.latest: dict[str, tuple[int, np.ndarray, np.ndarray] | None] = dict.fromkeys(SENSORS)
         self.published_ns = -1
+        self.max_age_ns = int(s["max_age"] * 1e9)
+        # Per sensor: node-clock time its newest message (good or not) arrived; start-up until then.
+        started = self.get_clock().now().nanoseconds
+        self.arrived: dict[str, int] = dict.fromkeys(SENSORS, started)
+        self.heard: set[str] = set()
+        self.create_timer(s["max_age"] / 4.0, self.check_stale)
         qos = QoSProfile(depth=s["qos_depth"], reliability=ReliabilityPolicy.RELIABLE)
         topics = s["topics"]
         self.cylinder_pub = self.create_publisher(JointState, topics["cylinder_lengths"], qos)
@@ -78,6 +90,8 @@ class ImuState(MachineNode):
         )
 
     def on_imu(self, name: str, msg: Imu) -> None:
+        self.arrived[name] = self.get_clock().now().nanoseconds
+        self.heard.add(name)
         stamp_ns = Time.from_msg(msg.header.stamp).nanoseconds
         q, w, f = msg.orientation, msg.angular_velocity, msg.linear_acceleration
         omega = np.array([w.x, w.y, w.z])
@@ -96,6 +110,20 @@ class ImuState(MachineNode):
             up = self.filters[name].update(dt, omega, [f.x, f.y, f.z])
         self.latest[name] = (stamp_ns, up, omega)
         self.publish_if_complete()
+
+    def check_stale(self) -> None:
+        """Timer: sensors silent for more than ``max_age`` count as missing, with a reason."""
+        now = self.get_clock().now().nanoseconds
+        stale = [name for name in SENSORS if now - self.arrived[name] > self.max_age_ns]
+        if not stale:
+            return
+        for name in stale:
+            self.latest[name] = None
+            self.filters[name].up = None
+        said = [f"{name} (no message for {(now - self.arrived[name]) * 1e-9:.3f} s)" if name in self.heard
+                else f"{name} (no message since start-up)" for name in stale]
+        self.log("warning", f"no cylinder state: imu {', '.join(said)} stale, "
+                 f"max_age {self.max_age_ns * 1e-9:g} s", kind=f"stale {' '.join(stale)}")
 
     def implausible(self, has_orientation: bool, q: tuple[float, ...], omega: np.ndarray,
                     f: tuple[float, ...]) -> str:

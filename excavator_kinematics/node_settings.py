@@ -119,6 +119,9 @@ VELOCITY_IK = {
 
 IMU_STATE = {
     "max_skew": Number(**_SECONDS, doc="largest spread of the four sensors' latest stamps in one set"),
+    "max_age": Number(**_SECONDS, exclusive_min=True,
+                      doc="a sensor whose newest message arrived longer ago (node clock) is stale: no "
+                          "output, a reason; also the grace after start-up; checked every max_age / 4"),
     "gravity_time_constant": Number(**_SECONDS, doc="complementary filter of the gravity direction "
                                     "(sensors without orientation); 0 = the accelerometer as it is"),
     "max_angular_rate": Number(min=0.0, max=1e3, unit="rad/s", exclusive_min=True,

@@ -14,14 +14,19 @@ An offline run of the chain a retrofit machine uses (no processes, no DDS; issue
    0.05 deg per axis on each orientation, 0.005 rad/s on each gyro), and
    :class:`excavator_kinematics.imu.ImuArm` turns the readings back into cylinder lengths;
 4. forward kinematics, the cutting edge in the site frame and its heights above the TIN, for the
-   estimate and for the truth.
+   estimate and for the truth. The estimate places the machine on the site as a retrofit does:
+   ``site`` -> ``base_level`` from the machine's position and heading (GNSS; here exact), and
+   ``base_level`` -> ``base_link`` from the cab IMU's tilt (``machine_tilt``, noisy).
 
 Writes to ``--output`` (default out/slope_example): ``ditch.xml``; ``bag/`` (rosbag2, mcap) with
 the IMU messages, cylinder_lengths (from the IMUs), joint_states, bucket_pose, grade/tip|left|right
-(PointStamped, z = height above the TIN) and ``design_surface`` (visualization_msgs/Marker
-TRIANGLE_LIST in frame ``site``, the surface as a mesh: open the bag in Foxglove, set the 3D
-panel's display frame to ``site`` and plot ``/grade/tip.point.z``, ``/grade/left.point.z``,
-``/grade/right.point.z``); ``grade_heights.png``, the tip and corner heights along the cut.
+(PointStamped, z = height above the TIN), ``machine_tilt``, ``bucket_pose_site`` (the estimate's
+bucket pose in ``site``) and ``design_surface`` (visualization_msgs/Marker TRIANGLE_LIST in frame
+``site``, the surface as a mesh), and the bag visuals (:func:`manipulator_kinematics.bag.visual.add_visuals`:
+robot_description, /tf with base_level -> base_link from machine_tilt, /tf_static with
+site -> base_level): open the bag in Foxglove, set the 3D panel's display frame to ``site`` and
+plot ``/grade/tip.point.z``, ``/grade/left.point.z``, ``/grade/right.point.z``;
+``grade_heights.png``, the tip and corner heights along the cut.
 """
 
 from __future__ import annotations
@@ -32,10 +37,19 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from excavator_kinematics.design_surface import SitePose, Tin, cutting_edge, read_landxml, write_landxml
-from excavator_kinematics.imu import SENSORS, ImuArm, simulated_readings, up_from_orientation
+from excavator_kinematics.imu import (
+    SENSORS,
+    ImuArm,
+    base_up,
+    level_rotation,
+    simulated_readings,
+    up_from_orientation,
+)
 from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator, bucket_quaternion
+from manipulator_kinematics.model import pose_matrix
 from manipulator_kinematics.planar import ELBOW_NEGATIVE, two_link_ik
 
 SLOPE = 0.05  # rise per run of the ground, ahead of the machine
@@ -43,6 +57,7 @@ HEADING = 0.6  # rad, the machine's heading in the site frame (x east)
 SITE = np.array([512_300.0, 5_402_100.0, 231.4])  # base_link in the site frame (m)
 DEPTH, BOTTOM, SIDE = 1.5, 0.2, 1.0  # ditch depth, bottom width (m), side slope run per rise
 OFFSET = -0.15  # m, the cut's side offset from the ditch axis (base y, left +)
+SITE_FRAME = "site"
 
 
 def ditch(start: float = 2.0, end: float = 12.0) -> Tin:
@@ -94,9 +109,9 @@ def heights(exc: Excavator, tin: Tin, site: SitePose, D: np.ndarray) -> np.ndarr
 
 def run(output: Path, seconds: float = 8.0, rate: float = 50.0, seed: int = 21) -> dict[str, float]:
     """The whole example; returns the RMS and max height error of the IMU estimate (m)."""
-    from rclpy.serialization import serialize_message
-
     from manipulator_kinematics.bag.synthetic import Topic, write_bag
+    from manipulator_kinematics.bag.visual import LEVEL_FRAME, add_visuals
+    from manipulator_kinematics.codec.packed import serialize_unpadded
 
     exc = Excavator.default()
     output.mkdir(parents=True, exist_ok=True)
@@ -110,14 +125,20 @@ def run(output: Path, seconds: float = 8.0, rate: float = 50.0, seed: int = 21) 
     q, omega, f = simulated_readings(arm, D, D_dot, tilt, rng, math.radians(0.05), 0.005)
     estimate = arm.joints(up_from_orientation(q), omega)
     D_imu = np.column_stack([D[:, 0], estimate.lengths])
-    true, got = heights(exc, tin, site, D), heights(exc, tin, site, D_imu)
+    # The machine's place on the site: position and heading (site -> base_level), then the cab
+    # IMU's tilt (base_level -> base_link, p_level = R p_base) at each sample.
+    heading = pose_matrix(SITE, [0.0, 0.0, math.sin(HEADING / 2), math.cos(HEADING / 2)])
+    imu_site = SitePose(heading[:3, :3] @ level_rotation(base_up(estimate.up_cab, D_imu[:, 0])), SITE)
+    true, got = heights(exc, tin, site, D), heights(exc, tin, imu_site, D_imu)
     error = got - true
     stamps = (1_700_000_000 * 10**9 + np.round(t * 1e9)).astype(np.int64)
-    topics = _messages(exc, tin, stamps, q, omega, f, D_imu, estimate.rates, D_dot[:, 0], site, got)
+    topics = _messages(exc, tin, stamps, q, omega, f, D_imu, estimate.rates, D_dot[:, 0], imu_site, got,
+                       estimate.up_cab)
     write_bag(output / "bag", {
         name: Topic(kind, np.array([_stamp_ns(m) for m in messages], dtype=np.int64),
-                    [serialize_message(m) for m in messages])
+                    [serialize_unpadded(m) for m in messages])
         for name, (kind, messages) in topics.items()}, overwrite=True)
+    add_visuals(output / "bag", output / "bag", extra_static=[(SITE_FRAME, LEVEL_FRAME, heading)])
     tip_x = exc.pose(D)[:, 0]
     _plot(output / "grade_heights.png", tip_x[0] - tip_x, true, got)
     return {"rms_m": float(np.sqrt(np.mean(error**2))), "max_m": float(np.max(np.abs(error))),
@@ -129,10 +150,11 @@ def _stamp_ns(message) -> int:
 
 
 def _messages(exc, tin, stamps, q, omega, f, D_imu, rates, swing_rate, site,
-              grade) -> dict[str, tuple[str, list]]:
-    """Every topic of the bag: type and messages (rclpy message objects)."""
+              grade, up_cab) -> dict[str, tuple[str, list]]:
+    """Every topic of the bag: type and messages (rclpy message objects); ``site``: the
+    estimate's base_link in the site frame at each sample."""
     from builtin_interfaces.msg import Time
-    from geometry_msgs.msg import Point, PointStamped, PoseStamped
+    from geometry_msgs.msg import Point, PointStamped, PoseStamped, Vector3, Vector3Stamped
     from sensor_msgs.msg import Imu, JointState
     from std_msgs.msg import ColorRGBA, Header
     from visualization_msgs.msg import Marker
@@ -165,17 +187,31 @@ def _messages(exc, tin, stamps, q, omega, f, D_imu, rates, swing_rate, site,
         p.pose.orientation.x, p.pose.orientation.y, p.pose.orientation.z, p.pose.orientation.w = o
         poses.append(p)
     out["/bucket_pose"] = ("geometry_msgs/msg/PoseStamped", poses)
+    out["/machine_tilt"] = ("geometry_msgs/msg/Vector3Stamped", [
+        Vector3Stamped(header=header(s, "upper_structure"), vector=Vector3(x=u[0], y=u[1], z=u[2]))
+        for s, u in zip(stamps.tolist(), up_cab.tolist(), strict=True)])
+    tip_site = site.apply(Q[:, None, :3])[:, 0]
+    turn = Rotation.from_matrix(site.rotation)
+    in_base = Rotation.from_quat([[p.pose.orientation.x, p.pose.orientation.y, p.pose.orientation.z,
+                                   p.pose.orientation.w] for p in poses])
+    site_poses = []
+    for s, tip, o in zip(stamps.tolist(), tip_site, (turn * in_base).as_quat(), strict=True):
+        m = PoseStamped(header=header(s, SITE_FRAME))
+        m.pose.position.x, m.pose.position.y, m.pose.position.z = tip.tolist()
+        m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w = o.tolist()
+        site_poses.append(m)
+    out["/bucket_pose_site"] = ("geometry_msgs/msg/PoseStamped", site_poses)
     edge = site.apply(cutting_edge(Q[:, :3], D_imu[:, 0], exc.bucket_width))
     for i, name in enumerate(("tip", "left", "right")):
         out[f"/grade/{name}"] = ("geometry_msgs/msg/PointStamped", [
-            PointStamped(header=header(s, "site"),
+            PointStamped(header=header(s, SITE_FRAME),
                          point=Point(x=float(e[i, 0]), y=float(e[i, 1]), z=float(h[i])))
             for s, e, h in zip(stamps.tolist(), edge, grade, strict=True) if np.isfinite(h[i])])
     # The surface as a mesh, relative to the TIN's own origin (Marker points are float64, but a
     # viewer renders in float32: UTM coordinates would lose centimetres).
     local = tin.vertices - tin.origin
-    mesh = Marker(header=header(int(stamps[0]), "site"), ns="design_surface", id=0, type=Marker.TRIANGLE_LIST,
-                  action=Marker.ADD, frame_locked=False)
+    mesh = Marker(header=header(int(stamps[0]), SITE_FRAME), ns="design_surface", id=0,
+                  type=Marker.TRIANGLE_LIST, action=Marker.ADD, frame_locked=False)
     mesh.pose.position.x, mesh.pose.position.y, mesh.pose.position.z = tin.origin.tolist()
     mesh.pose.orientation.w = 1.0
     mesh.scale.x = mesh.scale.y = mesh.scale.z = 1.0

@@ -248,6 +248,18 @@ def describe_limits(q: np.ndarray, limits: JointLimits) -> str:
     return ", ".join(parts) or "inside every limit"
 
 
+def level_rotation(up: ArrayLike) -> np.ndarray:
+    """(..., 3, 3) rows: the axes of the gravity-aligned *level frame* in a body frame whose world
+    up is ``up`` (..., 3): z = up, x = the body's x projected onto the horizontal, y = z x x. Same
+    origin and heading as the body, roll and pitch taken out (REP 105's gravity-aligned frames);
+    ``p_level = R @ p_body``. Needs a body x that is not vertical (any machine standing)."""
+    z = np.asarray(up, dtype=float)
+    z = z / np.linalg.norm(z, axis=-1, keepdims=True)
+    x = np.array([1.0, 0.0, 0.0]) - z[..., :1] * z
+    x = x / np.linalg.norm(x, axis=-1, keepdims=True)
+    return np.stack([x, np.cross(z, x), z], axis=-2)
+
+
 def pose_matrix(position: ArrayLike, quaternion: ArrayLike | None = None) -> np.ndarray:
     """4x4 from a position (3,) and a unit quaternion (x, y, z, w) (identity rotation if None)."""
     matrix = np.eye(4)

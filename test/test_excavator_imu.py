@@ -247,6 +247,80 @@ def test_imu_state_node_publishes_cylinder_lengths_and_refuses_bad_sensors():
         np.testing.assert_allclose(message.velocity, D_dot[1:], rtol=0, atol=1e-7)
 
 
+def test_imu_state_node_says_which_sensors_fell_silent():
+    """Gap a: the max_age timer. Before any message: "since start-up"; the boom falling silent
+    while the others go on, then all four: a reason naming them, and no set stamped after the
+    last complete one; all four back: output again."""
+    import re
+
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rclpy.time import Time
+    from ros_harness import NodeProcess, Probe
+    from sensor_msgs.msg import Imu, JointState
+
+    from manipulator_kinematics.params import config_path
+
+    D = LIM.reference + np.array([0.5, 0.12, -0.3, 0.2])
+    q, omega, f = readings(D, np.zeros(4), "h_link", mountings={key: [0.0, 0.0, 0.0] for key in SENSORS})
+    files = [config_path("excavator_cet200.yaml"), config_path("excavator_nodes.yaml")]
+    process = NodeProcess("excavator_imu_state", *[a for p in files for a in ("--params-file", str(p))],
+                          "-r", "__ns:=/imu_stale",
+                          params={"/imu_stale/excavator_imu_state": {"ros__parameters": {
+                              "max_age": 0.3, "warning_period": 0.2}}})
+    qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+    probe = Probe("imu_stale_probe")
+    node = probe.node
+    got: list[JointState] = []
+    node.create_subscription(JointState, "/imu_stale/cylinder_lengths", got.append, qos)
+    pubs = dict(zip(SENSORS, (node.create_publisher(Imu, f"/imu_stale/imu/{n}", qos) for n in SENSORS),
+                    strict=True))
+    clock = {"k": 0}
+
+    def send(names) -> bool:
+        """One message from each of ``names`` with the next stamp (10 ms apart); False, for wait_until."""
+        clock["k"] += 1
+        for i, name in enumerate(SENSORS):
+            if name in names:
+                pubs[name].publish(imu_message(clock["k"] * 10_000_000, q[i], omega[i], f[i], True))
+        return False
+
+    def stamp_ns(msg: JointState) -> int:
+        return Time.from_msg(msg.header.stamp).nanoseconds
+
+    def stale_lines(pattern: str) -> int:
+        return len(re.findall(pattern, process.log()))
+
+    def keep_sending(names, pattern: str, lines: int, timeout: float = 15.0) -> None:
+        """Send ``names`` every spin until ``pattern`` is logged ``lines`` more times."""
+        before = stale_lines(pattern)
+        probe.wait_until(lambda: send(names) or stale_lines(pattern) >= before + lines, timeout, pattern)
+
+    try:
+        probe.wait_until(lambda: "no message since start-up" in process.log(), 15.0, "the start-up reason")
+        probe.wait_until(lambda: all(p.get_subscription_count() for p in pubs.values()), 30.0,
+                         "subscriptions")
+        probe.wait_until(lambda: send(SENSORS) or len(got) >= 3, 15.0, "cylinder states")
+        last_full = clock["k"] * 10_000_000
+        # The boom falls silent, the others go on: the boom is named (twice: time passes), no output.
+        keep_sending(("cab", "arm", "bucket_linkage"), r"imu boom \(no message for [\d.]+ s\) stale", 2)
+        assert all(stamp_ns(m) <= last_full for m in got), [stamp_ns(m) for m in got][-5:]
+        # All four back: output resumes (the stale boom recovered with its next message).
+        count = len(got)
+        probe.wait_until(lambda: send(SENSORS) or len(got) > count + 2, 15.0, "output after recovery")
+        last_full = clock["k"] * 10_000_000
+        # All four fall silent: one reason names all of them.
+        all_four = (r"imu cab \(no message for [\d.]+ s\), boom \(.*\), arm \(.*\), "
+                    r"bucket_linkage \(.*\) stale")
+        keep_sending((), all_four, 2)
+        assert all(stamp_ns(m) <= last_full for m in got)
+        assert process.alive()
+    finally:
+        log = process.stop()
+        probe.close()
+    assert "Traceback" not in log, log
+    assert "max_age 0.3 s" in log
+
+
 def test_level_frame_from_the_cab_imu_gives_heights_along_gravity():
     """Machine tilt (item 2): the cab IMU's up vector, turned into base_link by the swing, gives
     the level frame, in which every point's z is its height along gravity above base_link's origin
@@ -404,6 +478,143 @@ def test_slope_example_writes_bag_and_png(tmp_path):
         assert name in topics, sorted(topics)
     assert imread(tmp_path / "grade_heights.png").shape[1] > 500
     assert read_landxml(tmp_path / "ditch.xml").faces.shape == (50, 3)
+
+
+def tf_tree(bag_path) -> tuple[dict, dict]:
+    """The bag's transforms, decoded with rosbags (not the project's codec): static child ->
+    (parent, 4x4) and, per header stamp (ns), dynamic child -> (parent, 4x4)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from manipulator_kinematics.bag.reader import BagReader
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    static: dict[str, tuple[str, np.ndarray]] = {}
+    dynamic: dict[int, dict[str, tuple[str, np.ndarray]]] = {}
+    for topic, _, raw in BagReader(bag_path).messages(["/tf", "/tf_static"]):
+        for t in store.deserialize_cdr(raw, "tf2_msgs/msg/TFMessage").transforms:
+            r, p = t.transform.rotation, t.transform.translation
+            pose = np.eye(4)
+            pose[:3, :3] = Rotation.from_quat([r.x, r.y, r.z, r.w]).as_matrix()
+            pose[:3, 3] = [p.x, p.y, p.z]
+            stamp = t.header.stamp.sec * 1_000_000_000 + t.header.stamp.nanosec
+            target = static if topic == "/tf_static" else dynamic.setdefault(stamp, {})
+            target[t.child_frame_id] = (t.header.frame_id, pose)
+    return static, dynamic
+
+
+def compose(frame: str, edges: dict[str, tuple[str, np.ndarray]]) -> tuple[list[str], np.ndarray]:
+    """The chain from ``frame`` up to the root (frames, child first) and root -> frame."""
+    chain, pose = [frame], np.eye(4)
+    while frame in edges:
+        frame, step = edges[frame]
+        pose = step @ pose
+        chain.append(frame)
+        assert len(chain) < 100, chain
+    return chain, pose
+
+
+def test_slope_example_bag_is_one_tf_tree(tmp_path):
+    """Gap b: the example's bag composes site -> base_level -> base_link -> URDF links; the bucket
+    tip through the tree is bucket_pose_site (the estimate placed by the cab IMU's tilt) to 1e-6 m,
+    and base_level -> base_link is the level rotation of machine_tilt."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from excavator_kinematics.slope_example import run
+    from manipulator_kinematics.bag.reader import BagReader
+    from manipulator_kinematics.bag.visual import urdf_joints
+    from manipulator_kinematics.registry import machine
+
+    run(tmp_path, seconds=1.0, rate=20.0)
+    bag = tmp_path / "bag"
+    static, dynamic = tf_tree(bag)
+    store = get_typestore(Stores.ROS2_JAZZY)
+    poses = [store.deserialize_cdr(raw, "geometry_msgs/msg/PoseStamped")
+             for _, _, raw in BagReader(bag).messages(["/bucket_pose_site"])]
+    tilts = [store.deserialize_cdr(raw, "geometry_msgs/msg/Vector3Stamped")
+             for _, _, raw in BagReader(bag).messages(["/machine_tilt"])]
+    joints = {m.header.stamp.sec * 10**9 + m.header.stamp.nanosec: m.position[0]
+              for _, _, m in ((t, x, store.deserialize_cdr(raw, "sensor_msgs/msg/JointState"))
+                              for t, x, raw in BagReader(bag).messages(["/joint_states"]))}
+    assert len(poses) == len(tilts) == 21
+    links = {j.child for j in urdf_joints(machine("excavator").urdf(EXC))}
+    for pose, tilt in zip(poses, tilts, strict=True):
+        stamp = pose.header.stamp.sec * 10**9 + pose.header.stamp.nanosec
+        assert pose.header.frame_id == "site"
+        edges = {**static, **dynamic[stamp]}
+        chain, tip = compose("bucket_tip", edges)
+        assert chain[-4:] == ["upper_structure", "base_link", "base_level", "site"], chain
+        assert "bucket" in chain
+        assert {compose(link, edges)[0][-1] for link in links} == {"site"}
+        p = pose.pose.position
+        np.testing.assert_allclose(tip[:3, 3], [p.x, p.y, p.z], rtol=0, atol=1e-6)
+        o = pose.pose.orientation
+        np.testing.assert_allclose(Rotation.from_matrix(tip[:3, :3]).as_quat(canonical=True),
+                                   Rotation.from_quat([o.x, o.y, o.z, o.w]).as_quat(canonical=True),
+                                   atol=1e-9)
+        # base_level -> base_link: world up in base_link is the tilt turned by the swing, and
+        # base_level's z is that up (independent of level_rotation: the third row of R^T).
+        parent, level = dynamic[stamp]["base_link"]
+        assert parent == "base_level"
+        up = Rotation.from_euler("z", joints[stamp]).apply([tilt.vector.x, tilt.vector.y, tilt.vector.z])
+        np.testing.assert_allclose(level[:3, :3].T @ [0.0, 0.0, 1.0], up, atol=1e-12)
+        # ...and base_level keeps base_link's heading: base_link's x has no y part in base_level.
+        assert abs(level[1, 0]) < 1e-12 and level[0, 0] > 0
+
+
+def test_bag_visuals_write_the_level_frame_from_machine_tilt(tmp_path):
+    """Gap b, the visual writer alone: a recorded excavator bag with machine_tilt (a pitched and
+    rolled machine, the cab swung) gets base_level -> base_link equal to the machine's known roll
+    and pitch; without machine_tilt, no level frame."""
+    from builtin_interfaces.msg import Time
+    from geometry_msgs.msg import Vector3, Vector3Stamped
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Header
+
+    from excavator_kinematics.kinematics import CYLINDERS, JOINTS
+    from manipulator_kinematics.bag.synthetic import Topic, write_bag
+    from manipulator_kinematics.bag.visual import add_visuals
+    from manipulator_kinematics.codec.packed import serialize_unpadded
+
+    roll, pitch, swing = 0.04, -0.07, 0.8
+    tilted = Rotation.from_euler("xyz", [roll, pitch, 0.0])  # base_link in a level frame
+    up_upper = (Rotation.from_euler("z", swing).inv() * tilted.inv()).apply([0.0, 0.0, 1.0])
+    stamps = np.array([1_000_000_000 + k * 10_000_000 for k in range(5)], dtype=np.int64)
+    D = LIM.reference
+
+    def header(s: int, frame: str = "") -> Header:
+        return Header(stamp=Time(sec=int(s // 10**9), nanosec=int(s % 10**9)), frame_id=frame)
+
+    def topics(with_tilt: bool) -> dict[str, Topic]:
+        out = {
+            "/joint_states": [JointState(header=header(s), name=[JOINTS[0]], position=[swing])
+                              for s in stamps],
+            "/cylinder_lengths": [JointState(header=header(s), name=list(CYLINDERS), position=D[1:].tolist())
+                                  for s in stamps],
+        }
+        if with_tilt:  # from the third state on: the first two have no level frame
+            x, y, z = up_upper.tolist()
+            out["/machine_tilt"] = [Vector3Stamped(header=header(s, "upper_structure"),
+                                                   vector=Vector3(x=x, y=y, z=z)) for s in stamps[2:]]
+        kinds = {"/machine_tilt": "geometry_msgs/msg/Vector3Stamped"}
+        return {name: Topic(kinds.get(name, "sensor_msgs/msg/JointState"),
+                            np.array([m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in msgs]),
+                            [serialize_unpadded(m) for m in msgs]) for name, msgs in out.items()}
+
+    for with_tilt in (True, False):
+        source, output = tmp_path / f"rec{with_tilt}", tmp_path / f"vis{with_tilt}"
+        write_bag(source, topics(with_tilt))
+        add_visuals(source, output)
+        static, dynamic = tf_tree(output)
+        levels = {s: edges["base_link"] for s, edges in dynamic.items() if "base_link" in edges}
+        if not with_tilt:
+            assert not levels
+            continue
+        assert sorted(levels) == stamps[2:].tolist()
+        for parent, pose in levels.values():
+            assert parent == "base_level"
+            np.testing.assert_allclose(pose[:3, :3], tilted.as_matrix(), atol=1e-12)
+            np.testing.assert_allclose(pose[:3, 3], 0.0, atol=0)
+        assert compose("bucket_tip", {**static, **dynamic[int(stamps[3])]})[0][-1] == "base_level"
 
 
 def test_mounting_figure_is_drawn(tmp_path):

@@ -10,7 +10,14 @@
   fixed ones on /tf_static; the values of every moving joint come from ``Scene.joints``, mimic
   joints follow their URDF rule); without one, ``base_link`` -> each frame of the scene;
 * ``machine_markers`` (visualization_msgs/MarkerArray): the scene as markers, as the
-  ``machine_markers`` node draws it, at most ``rate`` per second.
+  ``machine_markers`` node draws it, at most ``rate`` per second;
+* with a ``machine_tilt`` topic in the machine's namespace (geometry_msgs/Vector3Stamped: world up
+  in its header's frame, a URDF link, as excavator_imu_state publishes it from the cab IMU): at
+  every state with a valid tilt at or before its stamp, ``base_level`` -> ``base_link`` on /tf,
+  the gravity-aligned level frame as the parent (REP 105, like odom -> base_link;
+  :func:`manipulator_kinematics.model.level_rotation`), so the tree's root is ``base_level``.
+  ``extra_static`` transforms (e.g. ``site`` -> ``base_level``, the machine's place on a site)
+  go on /tf_static with the URDF's fixed joints.
 
 The machines are found as ``evaluate`` finds them (:func:`manipulator_kinematics.bag.evaluate.machines_in`):
 through the registry, with the models of ``params`` files or the shipped ones, in every
@@ -44,7 +51,7 @@ from manipulator_kinematics.bag.reader import BagReader, TopicArrays
 from manipulator_kinematics.bag.topics import JOINT_STATE, package_topics
 from manipulator_kinematics.bag.types import BagError, TopicQos
 from manipulator_kinematics.bag.writer import BagWriter
-from manipulator_kinematics.model import matrix_quaternion
+from manipulator_kinematics.model import level_rotation, matrix_quaternion
 from manipulator_kinematics.registry import Machine
 from manipulator_kinematics.scene import Scene, solids
 from manipulator_kinematics.urdf import prefixed_urdf, rotation_rpy
@@ -52,6 +59,7 @@ from manipulator_kinematics.urdf import prefixed_urdf, rotation_rpy
 #: JointState topics a machine's state is gathered from (as config/machine_markers.yaml).
 STATE_TOPICS = ("joint_states", "cylinder_lengths")
 BASE_FRAME = "base_link"
+TILT, LEVEL_FRAME = "machine_tilt", "base_level"
 MARKERS = "machine_markers"
 TF, TF_STATIC, DESCRIPTION = "/tf", "/tf_static", "/robot_description"
 LATCHED = TopicQos(reliable=True, transient_local=True, depth=1)
@@ -120,6 +128,43 @@ def joint_transforms(joints: Sequence[UrdfJoint], values: Mapping[str, np.ndarra
             motion[..., :3, :3] = np.eye(3) + s * k + (1.0 - c) * (k @ k)
         out[j.name] = j.origin @ motion
     return out
+
+
+def link_pose(joints: Sequence[UrdfJoint], moving: Mapping[str, np.ndarray], frame: str,
+              root: str = BASE_FRAME) -> np.ndarray:
+    """``root`` -> ``frame`` (..., 4, 4) through the URDF's joints (``moving``: joint_transforms)."""
+    parent_of = {j.child: j for j in joints}
+    pose = np.eye(4)
+    while frame != root:
+        joint = parent_of.get(frame)
+        if joint is None:
+            raise BagError(f"frame {frame!r} is not a link of the URDF below {root!r}")
+        pose = moving.get(joint.name, joint.origin) @ pose
+        frame = joint.parent
+    return pose
+
+
+def level_poses(tilt: TopicArrays, stamp_ns: np.ndarray, joints: Sequence[UrdfJoint],
+                moving: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Which states (M,) have a tilt and base_level -> base_link (K, 4, 4) for them: the latest
+    finite, unit (1e-3), upward tilt at or before each stamp, turned into base_link through the
+    URDF at that state."""
+    up = np.column_stack([tilt[f"vector.{axis}"] for axis in "xyz"]).astype(float)
+    valid = np.isfinite(up).all(axis=1) & (np.abs(np.linalg.norm(up, axis=1) - 1.0) <= 1e-3) & (up[:, 2] > 0)
+    frames = set(np.asarray(tilt["header.frame_id"])[valid].tolist())
+    if len(frames) > 1:
+        raise BagError(f"{tilt.topic}: the tilt changes frame ({sorted(frames)})")
+    stamps = tilt.stamp_ns()[valid]
+    order = np.argsort(stamps, kind="stable")
+    row = np.searchsorted(stamps[order], stamp_ns, side="right") - 1
+    have = row >= 0
+    if not frames or not have.any():
+        return have, np.empty((0, 4, 4))
+    frame = frames.pop() or BASE_FRAME
+    rotation = np.broadcast_to(link_pose(joints, moving, frame)[..., :3, :3], (len(stamp_ns), 3, 3))[have]
+    pose = np.broadcast_to(np.eye(4), (int(have.sum()), 4, 4)).copy()
+    pose[:, :3, :3] = level_rotation(np.einsum("kij,kj->ki", rotation, up[valid][order][row[have]]))
+    return have, pose
 
 
 # ---------------------------------------------------------------------------------------- states
@@ -249,8 +294,10 @@ class Added:
 
 
 def visual_topics(bag: BagReader, params: Sequence[Path] = (), rate: float = 30.0,
-                  frame_prefix: Mapping[str, str] | None = None, root_frame: str = "") -> list[Added]:
-    """The visual topics (module docstring) of every machine with a scene hook found in ``bag``."""
+                  frame_prefix: Mapping[str, str] | None = None, root_frame: str = "",
+                  extra_static: Sequence[tuple[str, str, np.ndarray]] = ()) -> list[Added]:
+    """The visual topics (module docstring) of every machine with a scene hook found in ``bag``;
+    ``extra_static``: (parent, child, (4, 4) pose) transforms for /tf_static."""
     frame_prefix = {"/" + ns.strip("/"): p for ns, p in (frame_prefix or {}).items()}
     setup = load_setup(params)
     ours = package_topics()
@@ -260,8 +307,8 @@ def visual_topics(bag: BagReader, params: Sequence[Path] = (), rate: float = 30.
         if split is not None and info.count and info.msgtype == ours[split[1]]:
             grouped.setdefault(split[0], {})[split[1]] = topic
     # The JointState topics are all it takes: to find the machines (evaluate's rule) and their states.
-    arrays = bag.arrays([t for names in grouped.values() for t in names.values()
-                         if bag.topics[t].msgtype == JOINT_STATE])
+    arrays = bag.arrays([t for names in grouped.values() for n, t in names.items()
+                         if bag.topics[t].msgtype == JOINT_STATE or n == TILT])
     found = []
     for namespace, names in sorted(grouped.items()):
         data = {name: arrays[topic] for name, topic in names.items() if topic in arrays}
@@ -294,6 +341,10 @@ def visual_topics(bag: BagReader, params: Sequence[Path] = (), rate: float = 30.
                 poses = list(scene.frames.values())
             tf_raw += tf_messages(t_stamp, edges, poses)
             tf_times += t_log.tolist()
+            if TILT in data and urdf is not None:
+                have, level = level_poses(data[TILT], t_stamp, joints, moving)
+                tf_raw += tf_messages(t_stamp[have], [(prefix + LEVEL_FRAME, prefix + BASE_FRAME)], [level])
+                tf_times += t_log[have].tolist()
             shown = decimate(t_stamp, rate)
             marker_raw += marker_messages(scene.take(shown), t_stamp[shown], prefix + BASE_FRAME)
             marker_times += t_log[shown].tolist()
@@ -301,9 +352,10 @@ def visual_topics(bag: BagReader, params: Sequence[Path] = (), rate: float = 30.
         topics[TF] = ("tf2_msgs/msg/TFMessage", TopicQos(reliable=True, depth=100), tf_times, tf_raw)
         topics[f"{base}/{MARKERS}"] = ("visualization_msgs/msg/MarkerArray", TopicQos(reliable=True),
                                        marker_times, marker_raw)
+        extras = () if added else extra_static  # once, with the first machine
         fixed = [j for j in joints if j.kind == "fixed"]
-        edges = [(prefix + j.parent, prefix + j.child) for j in fixed]
-        origins = [j.origin[None] for j in fixed]
+        edges = [(prefix + j.parent, prefix + j.child) for j in fixed] + [e[:2] for e in extras]
+        origins = [j.origin[None] for j in fixed] + [e[2][None] for e in extras]
         if root_frame:
             edges.append((root_frame, prefix + BASE_FRAME))
             origins.append(np.eye(4)[None])
@@ -327,13 +379,14 @@ def add_visuals(
     storage: str | None = None,
     frame_prefix: Mapping[str, str] | None = None,
     root_frame: str = "",
+    extra_static: Sequence[tuple[str, str, np.ndarray]] = (),
 ) -> list[Added]:
     """Write ``output``: every message of the bag ``source`` and its visual topics (module
     docstring). ``output`` may be ``source`` itself: the new bag is written beside it and
     replaces it once complete. BagError if no registered machine with a scene is in the bag."""
     source, output = Path(source), Path(output)
     bag = BagReader(source)
-    added = visual_topics(bag, params, rate, frame_prefix, root_frame)
+    added = visual_topics(bag, params, rate, frame_prefix, root_frame, extra_static)
     if not added:
         raise BagError(f"{source}: no registered machine's state topics in the bag: nothing to draw")
     merged: dict[str, tuple[str, TopicQos, list[int], list[bytes]]] = {}
@@ -378,6 +431,7 @@ def add_visuals(
 
 
 __all__ = [
-    "Added", "UrdfJoint", "add_visuals", "decimate", "gather_states", "joint_transforms", "marker_messages",
+    "Added", "UrdfJoint", "add_visuals", "decimate", "gather_states", "joint_transforms", "level_poses",
+    "link_pose", "marker_messages",
     "tf_messages", "urdf_joints", "visual_topics",
 ]
