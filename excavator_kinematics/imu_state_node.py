@@ -46,6 +46,7 @@ from excavator_kinematics.kinematics import CYLINDERS, Excavator, StrokeError
 from excavator_kinematics.node_settings import IMU_STATE, NODES_CONFIG
 from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes import MachineNode, run_node
+from manipulator_kinematics.nodes.base import input_qos
 from manipulator_kinematics.registry import Machine
 
 NODE = "excavator_imu_state"
@@ -80,9 +81,11 @@ class ImuState(MachineNode):
         topics = s["topics"]
         self.cylinder_pub = self.create_publisher(JointState, topics["cylinder_lengths"], qos)
         self.tilt_pub = self.create_publisher(Vector3Stamped, topics["machine_tilt"], qos)
-        self.upper_frame = s["upper_structure_frame"]
+        self.upper_frame = s["frame_prefix"] + s["upper_structure_frame"]
+        sensors = input_qos(s["qos_depth"], s["input_reliability"])
         for name in SENSORS:
-            self.create_subscription(Imu, topics[f"imu_{name}"], lambda msg, n=name: self.on_imu(n, msg), qos)
+            self.create_subscription(Imu, topics[f"imu_{name}"], lambda msg, n=name: self.on_imu(n, msg),
+                                     sensors)
         linkage = self.exc.description.imu["bucket_linkage"]["body"]
         self.get_logger().info(
             f"{self.exc.name}: {', '.join(topics[f'imu_{n}'] for n in SENSORS)} (bucket linkage IMU on the "

@@ -129,8 +129,10 @@ IMU_STATE = {
     "max_dynamic_acceleration": Number(min=0.0, max=1e3, unit="m/s^2", exclusive_min=True,
                                        doc="| |linear_acceleration| - g | beyond this: no gravity direction"),
     "upper_structure_frame": Text(empty=False, doc="frame_id of machine_tilt"),
+    "frame_prefix": FRAME_PREFIX,
     "warning_period": _WARNING_PERIOD,
     "qos_depth": _QOS_DEPTH,
+    "input_reliability": input_reliability("the four Imu topics"),
     "topics": {
         "imu_cab": _topic("input: sensor_msgs/Imu on the upper structure"),
         "imu_boom": _topic("input: sensor_msgs/Imu on the boom"),
