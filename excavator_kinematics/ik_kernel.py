@@ -175,9 +175,9 @@ def _margins(k: np.ndarray, D: np.ndarray, margin: np.ndarray) -> None:
 
 @njit(cache=True)
 def widest_margin_angles(k: np.ndarray, x: float, y: float, z: float, grid_size: int, peaks: int,
-                         points: int, levels: int) -> np.ndarray:
+                         golden: float, steps: int) -> np.ndarray:
     """inverse.widest_margin_angles for one position: (4,) per branch the bucket angle of the
-    largest stroke margin, the same grid, peaks and refinement steps."""
+    largest stroke margin; the same grid, peaks and golden-section steps."""
     D, reach, row = np.empty((4, 4)), np.empty(4, dtype=np.int8), np.empty(4)
     heading = math.atan2(y, x)
     step = 2.0 * math.pi / grid_size
@@ -187,8 +187,9 @@ def widest_margin_angles(k: np.ndarray, x: float, y: float, z: float, grid_size:
         candidates(k, x, y, z, np.full(4, grid[g]), heading, D, reach)
         _margins(k, D, row)
         margin[g] = row
-    best, value = np.empty((peaks, 4)), np.empty((peaks, 4))
+    step = grid[1] - grid[0]
     result = np.full(4, -math.pi)
+    best, value = np.empty((peaks, 4)), np.empty((peaks, 4))
     for b in range(4):
         # The best local maxima of the grid (circular), ties in grid order (a stable sort).
         key = np.empty(grid_size)
@@ -204,25 +205,42 @@ def widest_margin_angles(k: np.ndarray, x: float, y: float, z: float, grid_size:
                     first = g
             taken[first] = True
             best[p, b], value[p, b] = grid[first], margin[first, b]
-    offsets = np.arange(-points, points + 1) / points
-    at = np.empty(4)
-    scores = np.empty((len(offsets), 4))
-    for _ in range(levels):
-        for p in range(peaks):
-            for i in range(len(offsets)):
-                for b in range(4):
-                    at[b] = best[p, b] + step * offsets[i]
-                candidates(k, x, y, z, at, heading, D, reach)
-                _margins(k, D, row)
-                scores[i] = row
+    for p in range(peaks):
+        # Golden-section search on [peak - step, peak + step], the four branches side by side.
+        low, high = best[p] - step, best[p] + step
+        inner_low, inner_high = high - golden * (high - low), low + golden * (high - low)
+        value_low, value_high = np.empty(4), np.empty(4)
+        candidates(k, x, y, z, inner_low, heading, D, reach)
+        _margins(k, D, value_low)
+        candidates(k, x, y, z, inner_high, heading, D, reach)
+        _margins(k, D, value_high)
+        left = np.empty(4, dtype=np.bool_)
+        new = np.empty(4)
+        for _ in range(steps):
             for b in range(4):
-                top = 0
-                for i in range(1, len(offsets)):
-                    if scores[i, b] > scores[top, b]:
-                        top = i
-                best[p, b] += step * offsets[top]
-                value[p, b] = scores[top, b]
-        step = step / points
+                left[b] = value_low[b] >= value_high[b]
+                if left[b]:  # the maximum is in [low, inner_high]
+                    high[b] = inner_high[b]
+                    inner_high[b], value_high[b] = inner_low[b], value_low[b]
+                    new[b] = high[b] - golden * (high[b] - low[b])
+                else:
+                    low[b] = inner_low[b]
+                    inner_low[b], value_low[b] = inner_high[b], value_high[b]
+                    new[b] = low[b] + golden * (high[b] - low[b])
+            candidates(k, x, y, z, new, heading, D, reach)
+            _margins(k, D, row)
+            for b in range(4):
+                if left[b]:
+                    inner_low[b], value_low[b] = new[b], row[b]
+                else:
+                    inner_high[b], value_high[b] = new[b], row[b]
+        for b in range(4):
+            if value_low[b] >= value_high[b]:
+                refined, refined_value = inner_low[b], value_low[b]
+            else:
+                refined, refined_value = inner_high[b], value_high[b]
+            if refined_value > value[p, b]:  # never worse than the grid point
+                best[p, b], value[p, b] = refined, refined_value
     for b in range(4):
         if np.isfinite(margin[:, b]).any():
             winner = 0

@@ -75,13 +75,12 @@ _SUCCESS, _SINGULAR, _UNREACHABLE = int(IKStatus.SUCCESS), int(IKStatus.SINGULAR
 _INVALID = int(IKStatus.INVALID)
 _SCALARS = 30  # float fields of Constants, first in Constants.packed
 _REACHABLE, _TOO_FAR, _TOO_CLOSE, _NOT_FINITE = (int(r) for r in Reach)  # in Reach's order
-# Stroke-margin search of the position mode (widest_margin_angles): to within
-# 2 pi / _GRID / _POINTS**_LEVELS = 2e-8 rad.
+# Stroke-margin search of the position mode (widest_margin_angles): golden-section steps shrink
+# the bracket of 2 grid steps to 4 pi / _GRID * _GOLDEN**_GOLDEN_STEPS = 1.8e-8 rad.
 _GRID = 144
 _PEAKS = 3
-_POINTS = 8
-_LEVELS = 7
-_OFFSETS = np.arange(-_POINTS, _POINTS + 1) / _POINTS
+_GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
+_GOLDEN_STEPS = 32
 
 
 class Constants(NamedTuple):
@@ -452,8 +451,8 @@ def widest_margin_angles(model: Excavator, position: np.ndarray) -> np.ndarray:
     The margin along alpha is piecewise smooth, its maxima where a margin peaks, where two
     margins are equal or where a linkage stops closing, and it has several: a grid of ``_GRID``
     angles over the full turn brackets them; each of the ``_PEAKS`` best local maxima of the grid
-    is refined ``_LEVELS`` times by the best of ``2 _POINTS + 1`` angles over +- one step about
-    it, the step divided by ``_POINTS`` each time; the best refined one wins.
+    is refined by ``_GOLDEN_STEPS`` golden-section steps over +- one grid step about it; the best
+    refined one wins.
     """
     n = len(position)
     grid = np.linspace(-np.pi, np.pi, _GRID, endpoint=False)
@@ -465,16 +464,30 @@ def widest_margin_angles(model: Excavator, position: np.ndarray) -> np.ndarray:
     ranked = np.argsort(np.where(peak, -margin, np.inf), axis=1, kind="stable")[:, :_PEAKS]
     best = grid[ranked]
     value = np.take_along_axis(margin, ranked, axis=1)
-    at = np.repeat(position, _PEAKS * len(_OFFSETS), axis=0)
     step = grid[1] - grid[0]
-    for _ in range(_LEVELS):
-        alpha = best[:, :, None, :] + step * _OFFSETS[:, None]  # (N, peak, K, branch)
+    at = np.repeat(position, _PEAKS, axis=0)
+
+    def margins(alpha: np.ndarray) -> np.ndarray:  # (N, peak, branch): candidate b at alpha[..., b]
         D, _, _ = _block_candidates(model, at, alpha.reshape(-1, 4), None)
-        margin = stroke_margins(model, D).reshape(alpha.shape)
-        better = np.argmax(margin, axis=2)  # (N, peak, branch)
-        best = best + step * _OFFSETS[better]
-        value = np.max(margin, axis=2)
-        step = step / _POINTS
+        return stroke_margins(model, D).reshape(alpha.shape)
+
+    # Golden-section search for the maximum on [peak - step, peak + step], every peak and branch
+    # at once: each step keeps the part with the better inner point and evaluates one new point.
+    low, high = best - step, best + step
+    inner_low, inner_high = high - _GOLDEN * (high - low), low + _GOLDEN * (high - low)
+    value_low, value_high = margins(inner_low), margins(inner_high)
+    for _ in range(_GOLDEN_STEPS):
+        left = value_low >= value_high  # the maximum is in [low, inner_high], else in [inner_low, high]
+        low, high = np.where(left, low, inner_low), np.where(left, inner_high, high)
+        kept, kept_value = np.where(left, inner_low, inner_high), np.where(left, value_low, value_high)
+        new = np.where(left, high - _GOLDEN * (high - low), low + _GOLDEN * (high - low))
+        value_new = margins(new)
+        inner_low, value_low = np.where(left, new, kept), np.where(left, value_new, kept_value)
+        inner_high, value_high = np.where(left, kept, new), np.where(left, kept_value, value_new)
+    left = value_low >= value_high
+    refined, refined_value = np.where(left, inner_low, inner_high), np.where(left, value_low, value_high)
+    better = refined_value > value  # never worse than the grid point
+    best, value = np.where(better, refined, best), np.where(better, refined_value, value)
     winner = np.argmax(value, axis=1)[:, None, :]  # (N, 1, branch)
     return np.where(found, np.take_along_axis(best, winner, axis=1)[:, 0, :], -np.pi)
 
@@ -497,7 +510,8 @@ def solve_position(model: Excavator, position: ArrayLike, seed: ArrayLike | None
     elif position.shape == (3,) and compiled:
         finite = bool(np.isfinite(position).all())
         x, y, z = position.tolist() if finite else (0.0, 0.0, 0.0)
-        alpha = _kernel().widest_margin_angles(model._ik.packed, x, y, z, _GRID, _PEAKS, _POINTS, _LEVELS)
+        alpha = _kernel().widest_margin_angles(model._ik.packed, x, y, z, _GRID, _PEAKS, _GOLDEN,
+                                               _GOLDEN_STEPS)
         return _solve_one(model, position, alpha, finite, seed, index)
     else:
         finite = np.isfinite(flat).all(axis=-1, keepdims=True)
