@@ -37,7 +37,7 @@ _SUCCESS, _LIMITS, _UNREACHABLE = int(IKStatus.SUCCESS), int(IKStatus.JOINT_LIMI
 _SINGULAR, _INVALID = int(IKStatus.SINGULAR), int(IKStatus.INVALID)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _triangle_length(theta: float, o: float, offset: float, aa_bb: float, two_ab: float) -> float:
     """Eq. 1's second line (inverse._triangle_length)."""
     t = o * math.tan(0.5 * (theta - offset))
@@ -47,7 +47,7 @@ def _triangle_length(theta: float, o: float, offset: float, aa_bb: float, two_ab
     return math.sqrt(aa_bb - two_ab * (1.0 - tt) / (1.0 + tt))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def candidates(k: np.ndarray, x: float, y: float, z: float, alpha: np.ndarray, heading: float,
                D: np.ndarray, reach: np.ndarray) -> None:
     """D (4, 4) and reach (4,) of one target, candidate b at bucket angle alpha[b], in
@@ -113,7 +113,7 @@ def candidates(k: np.ndarray, x: float, y: float, z: float, alpha: np.ndarray, h
         D[b, 3] = d4
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def judge(k: np.ndarray, x: float, y: float, finite: bool, swing_axis: float, D: np.ndarray,
           status: np.ndarray) -> None:
     """Step 5's statuses (inverse.status)."""
@@ -133,7 +133,7 @@ def judge(k: np.ndarray, x: float, y: float, finite: bool, swing_axis: float, D:
             status[b] = _INVALID
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def pick(k: np.ndarray, D: np.ndarray, status: np.ndarray, seed: np.ndarray, seeded: bool, branch: int,
          tie_tolerance: float) -> tuple[int, bool]:
     """manipulator_kinematics.model.select for one target: (selected, tie)."""
@@ -159,7 +159,7 @@ def pick(k: np.ndarray, D: np.ndarray, status: np.ndarray, seed: np.ndarray, see
     return chosen, near > 1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _margins(k: np.ndarray, D: np.ndarray, margin: np.ndarray) -> None:
     """inverse.stroke_margins of the four candidates D (4, 4)."""
     for b in range(4):
@@ -173,7 +173,7 @@ def _margins(k: np.ndarray, D: np.ndarray, margin: np.ndarray) -> None:
         margin[b] = worst
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def widest_margin_angles(k: np.ndarray, x: float, y: float, z: float, grid_size: int, peaks: int,
                          golden: float, steps: int) -> np.ndarray:
     """inverse.widest_margin_angles for one position: (4,) per branch the bucket angle of the

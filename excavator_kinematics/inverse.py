@@ -38,6 +38,7 @@ folded once (:class:`Constants`); one target runs the same steps compiled
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -389,18 +390,48 @@ def _seed(seed: ArrayLike | None) -> np.ndarray | None:
     return None if seed is None else np.asarray(seed, dtype=float)
 
 
-def _kernel():
-    """The compiled kernel module, imported (and its functions loaded from numba's cache, or
-    compiled) on the first single-target call: a process that only runs batches never waits."""
+_compiled: list = []  # the kernel module, once its functions are ready
+_loading = threading.Lock()
+_loader: list[threading.Thread] = []
+
+
+def _load_kernel(packed: np.ndarray) -> None:
+    """Import the kernel and run each function once: numba loads it from its on-disk cache (about
+    a second with numba's import) or compiles it (several seconds, the first time)."""
     from excavator_kinematics import ik_kernel
 
-    return ik_kernel
+    D, reach, judged = np.empty((4, 4)), np.empty(4, dtype=np.int8), np.empty(4, dtype=np.int8)
+    alpha = np.zeros(4)
+    ik_kernel.candidates(packed, 5.0, 0.0, 0.0, alpha, 0.0, D, reach)
+    ik_kernel.judge(packed, 5.0, 0.0, True, SWING_AXIS, D, judged)
+    ik_kernel.pick(packed, D, judged, alpha, False, -1, TIE_TOLERANCE)
+    ik_kernel.widest_margin_angles(packed, 5.0, 0.0, 0.0, _GRID, _PEAKS, _GOLDEN, _GOLDEN_STEPS)
+    _compiled.append(ik_kernel)
 
 
-def _solve_one(model: Excavator, position: np.ndarray, alpha: np.ndarray, finite: bool,
+def compiled_kernel(model: Excavator, wait: bool = False):
+    """The compiled kernel module (:mod:`excavator_kinematics.ik_kernel`) if ready, else None.
+
+    The first single-target call starts loading it in a background thread and, like every call
+    until it is ready, takes the numpy path (the same results within 1e-12): a node's first
+    request never waits seconds for numba, and a process that only runs batches never imports
+    it. ``wait``: load it now (tests, benchmarks).
+    """
+    if not _compiled:
+        with _loading:
+            if not _loader:
+                _loader.append(threading.Thread(target=_load_kernel, args=(model._ik.packed,), daemon=True,
+                                                name="excavator_ik_kernel"))
+                _loader[0].start()
+        if wait:
+            _loader[0].join()
+    return _compiled[0] if _compiled else None
+
+
+def _solve_one(kernel, model: Excavator, position: np.ndarray, alpha: np.ndarray, finite: bool,
                seed: np.ndarray | None, branch: int | None) -> IKSolutions:
     """One target through the kernel: tip ``position`` (3,), candidate b at bucket angle alpha[b]."""
-    kernel, k = _kernel(), model._ik.packed
+    k = model._ik.packed
     x, y, z = position.tolist()
     D, reach, judged = np.empty((4, 4)), np.empty(4, dtype=np.int8), np.empty(4, dtype=np.int8)
     kernel.candidates(k, x, y, z, alpha, math.atan2(y, x), D, reach)
@@ -417,13 +448,15 @@ def _solve_one(model: Excavator, position: np.ndarray, alpha: np.ndarray, finite
 def solve_pose(model: Excavator, Q: ArrayLike, seed: ArrayLike | None = None,
                branch: str | None = None, compiled: bool = True) -> IKSolutions:
     """Every candidate for targets Q = [x, y, z, alpha] (..., 4) and the selected one; one target
-    (4,) runs the compiled kernel (:mod:`excavator_kinematics.ik_kernel`) unless not ``compiled``."""
+    (4,) runs the compiled kernel (:func:`compiled_kernel`) unless not ``compiled``."""
     index = _branch_index(branch)
     Q = np.asarray(Q, dtype=float)
     if Q.shape[-1:] != (4,):
         raise ValueError(f"expected Q = [x, y, z, alpha] of shape (..., 4), got shape {Q.shape}")
-    if Q.shape == (4,) and compiled:
-        return _solve_one(model, Q[:3], np.full(4, Q[3]), bool(np.isfinite(Q).all()), _seed(seed), index)
+    kernel = compiled_kernel(model) if Q.shape == (4,) and compiled else None
+    if kernel is not None:
+        return _solve_one(kernel, model, Q[:3], np.full(4, Q[3]), bool(np.isfinite(Q).all()), _seed(seed),
+                          index)
     D, reach, judged = candidates(model, Q)
     return _solutions(model, np.broadcast_to(Q[..., None, :], D.shape), D, reach, judged, _seed(seed), index)
 
@@ -502,17 +535,17 @@ def solve_position(model: Excavator, position: ArrayLike, seed: ArrayLike | None
         raise ValueError(f"expected a position [x, y, z] of shape (..., 3), got shape {position.shape}")
     flat = position.reshape(-1, 3)
     seed = _seed(seed)
+    kernel = compiled_kernel(model) if position.shape == (3,) and compiled else None
     if seed is not None:
         alpha = np.broadcast_to(seed_bucket_angle(model, seed), position.shape[:-1]).reshape(-1, 1)
-        if position.shape == (3,) and compiled:
-            return _solve_one(model, position, np.full(4, alpha[0, 0]), bool(np.isfinite(position).all()),
-                              seed, index)
-    elif position.shape == (3,) and compiled:
+        if kernel is not None:
+            return _solve_one(kernel, model, position, np.full(4, alpha[0, 0]),
+                              bool(np.isfinite(position).all()), seed, index)
+    elif kernel is not None:
         finite = bool(np.isfinite(position).all())
         x, y, z = position.tolist() if finite else (0.0, 0.0, 0.0)
-        alpha = _kernel().widest_margin_angles(model._ik.packed, x, y, z, _GRID, _PEAKS, _GOLDEN,
-                                               _GOLDEN_STEPS)
-        return _solve_one(model, position, alpha, finite, seed, index)
+        alpha = kernel.widest_margin_angles(model._ik.packed, x, y, z, _GRID, _PEAKS, _GOLDEN, _GOLDEN_STEPS)
+        return _solve_one(kernel, model, position, alpha, finite, seed, index)
     else:
         finite = np.isfinite(flat).all(axis=-1, keepdims=True)
         usable = np.where(finite, flat, 0.0)

@@ -13,6 +13,7 @@ from scipy.optimize import least_squares
 
 from excavator_kinematics.inverse import (
     BRANCHES,
+    compiled_kernel,
     open_chain_candidates,
     solve_pose,
     solve_position,
@@ -108,6 +109,7 @@ def test_the_compiled_kernel_is_the_numpy_path_for_one_target() -> None:
     """ik_kernel (one target) against the vectorised numpy path over 10^4 targets, seeded and not
     and with a branch asked for: the same statuses and selections, D within 1e-12 (the kernel
     takes cos and sin from libm, the numpy path by the half-angle tangent)."""
+    assert compiled_kernel(EXC, wait=True) is not None
     Q = mixed_targets(10_000, 31)
     seeds = random_states(len(Q), 32)
     for seed, branch in ((None, None), (seeds, None), (seeds, "front_elbow_down")):
@@ -126,6 +128,7 @@ def test_the_compiled_position_search_is_the_numpy_one() -> None:
     """Position only, one position through the kernel against the numpy search: the same statuses,
     the widest margins equal within 1e-9 and D within 1e-6 (the search resolves alpha to 2e-8 rad;
     near-equal margins may stop a refinement step apart)."""
+    assert compiled_kernel(EXC, wait=True) is not None
     P = mixed_targets(300, 33)[:, :3]
     batch = EXC.position_ik(P)
     for i in range(len(P)):
