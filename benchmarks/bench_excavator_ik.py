@@ -118,8 +118,8 @@ def main() -> None:
     args = parser.parse_args()
     ready, cold, warm = first_calls()
     print(f"fresh process: import + machine {ready:.2f} s; kernel ready (a background thread; single "
-          f"calls take the numpy path meanwhile): {cold:.2f} s with an empty numba cache (compile), {warm:.3f} s "
-          "from the cache")
+          f"calls take the numpy path meanwhile): {cold:.2f} s with an empty numba cache (compile), "
+          f"{warm:.3f} s from the cache")
     model = Excavator.default()
     compiled_kernel(model, wait=True)
     rng = np.random.default_rng(200)
