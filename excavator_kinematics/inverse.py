@@ -25,19 +25,28 @@ so radians and metres weigh alike), else the first in branch order.
 Position only (mode ``position``): the bucket angle alpha is free. It is the seed's (alpha of the
 seed's pose, the seed first moved into the limits), else for each branch the angle with the
 largest stroke margin: max over alpha of min over the three cylinders of the distance to the
-nearer stroke end as a fraction of the stroke (on a 1 deg grid, refined four times tenfold, so to
-within 2e-6 rad).
+nearer stroke end as a fraction of the stroke (:func:`widest_margin_angles`: the three best local
+maxima of a 2.5 deg grid, each refined to within 2e-8 rad; a feasible band of alpha narrower
+than the grid step can be missed).
+
+Speed: a batch runs vectorised in blocks of :data:`BATCH_BLOCK` targets, the machine's numbers
+folded once (:class:`Constants`); one target runs the same steps compiled
+(:mod:`excavator_kinematics.ik_kernel`, numba), the numpy path staying the reference
+(``compiled=False``). benchmarks/bench_excavator_ik.py measures both against scipy's least squares.
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+import threading
+from collections.abc import Callable
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from manipulator_kinematics.model import (
+    TIE_TOLERANCE,
     IKSolutions,
     IKStatus,
     RequestError,
@@ -45,7 +54,7 @@ from manipulator_kinematics.model import (
     limit_status,
     select,
 )
-from manipulator_kinematics.planar import ELBOW_NEGATIVE, ELBOW_POSITIVE, two_link_ik, wrap_angle
+from manipulator_kinematics.planar import Reach, wrap_angle
 
 if TYPE_CHECKING:
     from excavator_kinematics.kinematics import Excavator
@@ -56,15 +65,187 @@ BRANCHES = ("front_elbow_up", "front_elbow_down", "behind_elbow_up", "behind_elb
 MODES = ("pose", "position")
 #: A tip closer to the swing axis than this (m) has no defined swing: SINGULAR.
 SWING_AXIS = 1e-9
+#: A candidate this far (m, rad) outside a limit is inside (model.limit_status' tolerance).
+LIMIT_TOL = 1e-10
 #: A 6-D target counts as in its boom plane / with a level bucket pin axis within this (m, rad).
 PLANE_TOL = 1e-9
-# Stroke-margin search of the position mode: a grid over a full turn, then ``_REFINE`` levels of
-# ``2 * _POINTS`` steps of a tenth of the previous step each side of the best angle.
-_GRID = 360
-_REFINE = 4
-_POINTS = 10
-_ELBOWS = (ELBOW_NEGATIVE, ELBOW_POSITIVE)  # two_link_ik's branch index of elbow up, elbow down
+# Targets per block of a large batch (as kinematics.BATCH_BLOCK): the temporaries of one block
+# stay below malloc's mmap threshold and in cache.
+BATCH_BLOCK = 8192
 _SUCCESS, _SINGULAR, _UNREACHABLE = int(IKStatus.SUCCESS), int(IKStatus.SINGULAR), int(IKStatus.UNREACHABLE)
+_INVALID = int(IKStatus.INVALID)
+_SCALARS = 30  # float fields of Constants, first in Constants.packed
+_REACHABLE, _TOO_FAR, _TOO_CLOSE, _NOT_FINITE = (int(r) for r in Reach)  # in Reach's order
+# Stroke-margin search of the position mode (widest_margin_angles): golden-section steps shrink
+# the bracket of 2 grid steps to 4 pi / _GRID * _GOLDEN**_GOLDEN_STEPS = 1.8e-8 rad.
+_GRID = 144
+_PEAKS = 3
+_GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
+_GOLDEN_STEPS = 32
+
+
+class Constants(NamedTuple):
+    """The machine's numbers the IK reads, as Python floats, folded once per machine
+    (:meth:`Excavator.__init__`): a call recomputes nothing from the geometry."""
+
+    l0: float
+    l1: float
+    l2: float
+    l3: float
+    l4: float
+    l2l2_l3l3: float  # l2^2 + l3^2
+    two_l2l3: float
+    reach_max: float  # l2 + l3 + the planar arm's tolerance
+    reach_min: float  # |l2 - l3| - that tolerance
+    # Boom and arm triangles (eq. 1): d^2 = a^2 + b^2 - 2ab cos gamma, gamma = o (theta - offset).
+    boom_o: float
+    boom_offset: float
+    boom_aa_bb: float
+    boom_two_ab: float
+    arm_o: float
+    arm_offset: float
+    arm_aa_bb: float
+    arm_two_ab: float
+    # Bucket linkage (eq. 2 backwards): the H-link pin H on its circle about the bucket pin, the
+    # rod pin R on the side-link circle about the pivot; vectors relative to the pivot.
+    h_phase: float
+    h_radius: float
+    pin_from_pivot_x: float  # bucket pin - pivot
+    pin_from_pivot_y: float
+    base_from_pivot_x: float  # bucket cylinder base pin - pivot
+    base_from_pivot_y: float
+    side: float
+    side_hh: float  # side^2 - h_link^2
+    two_side: float
+    side_o: float
+    h_o: float
+    stroke_lo: float  # bucket stroke with the stroke tolerance
+    stroke_hi: float
+    stroke_min: np.ndarray  # (3,) the strokes, for the stroke margin
+    stroke_max: np.ndarray
+    stroke_range: np.ndarray
+    weights: np.ndarray  # (4,) 1 / range of each actuator: the seed distance of model.select
+    # cos and sin of an array: the forward model's (kinematics._cos_sin_of_array: numpy's float64
+    # sin and cos run element by element, its tan is vectorised).
+    cos_sin: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+    # The float fields above, the limits widened by limit_status' tolerance, the weights and the
+    # strokes in one array: the constants of the compiled kernel (ik_kernel).
+    packed: np.ndarray
+
+    @classmethod
+    def of(cls, model: Excavator, cos_sin: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+           arm_tol: float = 1e-12) -> Constants:
+        boom, arm = model._boom, model._arm
+        pivot, pin = model._pivot, model._bucket_pin
+        base = model._pins_local["bucket_cylinder_base"]
+        k = cls(
+            model.l0, model.l1, model.l2, model.l3, model.l4,
+            model.l2**2 + model.l3**2, 2.0 * model.l2 * model.l3,
+            model.l2 + model.l3 + arm_tol, abs(model.l2 - model.l3) - arm_tol,
+            float(boom.orientation), boom.offset, boom.a**2 + boom.b**2, 2.0 * boom.a * boom.b,
+            float(arm.orientation), arm.offset, arm.a**2 + arm.b**2, 2.0 * arm.a * arm.b,
+            model._h_phase, model._h_radius,
+            float(pin[0] - pivot[0]), float(pin[1] - pivot[1]),
+            float(base[0] - pivot[0]), float(base[1] - pivot[1]),
+            model._side, model._side**2 - model._h_link**2, 2.0 * model._side,
+            float(model._side_triangle.orientation), float(model._h_orientation),
+            model._lo[3], model._hi[3],
+            model.limits.stroke_min, model.limits.stroke_max,
+            model.limits.stroke_max - model.limits.stroke_min,
+            1.0 / (model.joint_limits.upper - model.joint_limits.lower), cos_sin, np.empty(0),
+        )
+        lower, upper = model.joint_limits.lower - LIMIT_TOL, model.joint_limits.upper + LIMIT_TOL
+        return k._replace(packed=np.concatenate((np.array(k[:_SCALARS], dtype=float), lower, upper, k.weights,
+                                                 k.stroke_min, k.stroke_max)))
+
+
+# Per candidate in BRANCHES order: the sign of the boom-plane radius (the tip in front of or
+# behind the swing axis) and of the elbow angle beta added to the boom angle (elbow up: theta3 <= 0).
+_RADIUS_SIGN = np.array([1.0, 1.0, -1.0, -1.0])
+_SWING_SIGN = np.array([1.0, -1.0])  # the same per swing (front, behind)
+_ELBOW_SIGN = np.array([1.0, -1.0, 1.0, -1.0])
+
+
+def open_chain_columns(k: Constants, x: np.ndarray, y: np.ndarray, z: np.ndarray, alpha: np.ndarray,
+                       heading: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Steps 1-3 of the module docstring on flat targets: x, y, z, heading (N, 1), alpha (N, 1)
+    or (N, 4) (one per candidate): (theta2, theta3, theta4, reach), each (N, 4) in BRANCHES
+    order, NaN where the bucket pin is out of the arm's reach (reach of
+    :class:`manipulator_kinematics.planar.Reach`).
+
+    With one alpha per target, the arm is solved once per swing (N, 2), both elbows from it.
+    """
+    per_swing = alpha.shape[-1] == 1
+    ch, sh = k.cos_sin(heading)
+    rho = (x * ch + y * sh) * (_SWING_SIGN if per_swing else _RADIUS_SIGN)
+    # Bucket pin relative to the boom foot pin, in the boom plane of each swing.
+    ca, sa = k.cos_sin(alpha)
+    pin_r = rho - k.l4 * ca - k.l1
+    pin_z = z - k.l4 * sa - k.l0
+    # The planar 2R arm (l2, l3) to the pin, as manipulator_kinematics.planar.two_link_ik.
+    r = np.hypot(pin_r, pin_z)
+    reach = np.where(r > k.reach_max, _TOO_FAR, np.where(r < k.reach_min, _TOO_CLOSE, _REACHABLE))
+    reach = np.where(np.isfinite(r), reach, _NOT_FINITE).astype(np.int8)
+    cos_elbow = np.where(reach == _REACHABLE, np.clip((r * r - k.l2l2_l3l3) / k.two_l2l3, -1.0, 1.0), np.nan)
+    elbow = np.arccos(cos_elbow)
+    sin_elbow = np.sqrt(1.0 - cos_elbow * cos_elbow)  # sin(arccos c)
+    beta = np.arctan2(k.l3 * sin_elbow, k.l2 + k.l3 * cos_elbow)
+    base = np.arctan2(pin_z, pin_r)
+    if per_swing:  # (N, 2) -> (N, 4): both elbows of each swing
+        base, beta, elbow, reach = (np.repeat(v, 2, axis=-1) for v in (base, beta, elbow, reach))
+    theta2 = base + _ELBOW_SIGN * beta
+    theta3 = -_ELBOW_SIGN * elbow
+    theta4 = alpha - theta2 - theta3  # eq. 3: alpha = theta2 + theta3 + theta4
+    return theta2, theta3, theta4, reach
+
+
+def _triangle_length(theta: np.ndarray, o: float, offset: float, aa_bb: float, two_ab: float) -> np.ndarray:
+    """Eq. 1's second line: the cylinder length of joint angle theta, NaN off the assembly
+    (the triangle closes for gamma = o (theta - offset) in (0, pi) modulo 2 pi).
+
+    By the half angle t = tan(gamma / 2): gamma is in (0, pi) where t > 0, and
+    cos gamma = (1 - t^2) / (1 + t^2) (one vectorised tan instead of a remainder and a cos).
+    """
+    t = o * np.tan(0.5 * (theta - offset))
+    tt = t * t
+    return np.where(t > 0.0, np.sqrt(aa_bb - two_ab * (1.0 - tt) / (1.0 + tt)), np.nan)
+
+
+def linkage_length_columns(k: Constants, theta2: np.ndarray, theta3: np.ndarray,
+                           theta4: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The cylinder lengths d2, d3, d4 of joint angles (any one shape), NaN where a linkage cannot
+    close (:meth:`Excavator.linkage_lengths`).
+
+    Bucket (eq. 2 backwards): H = bucket pin + h_radius (cos, sin)(theta4 + H phase); the rod pin R
+    is where the side-link circle about the pivot meets the H-link circle about H, turned by
+    +-spread from the pivot-to-H direction (cos spread = c by the law of cosines); of the two, the
+    one on the forward model's assembly (R on the side triangle's branch about the pivot, H on the
+    bucket four-bar's branch about the bucket pin), the one inside the stroke where both are.
+    """
+    d2 = _triangle_length(theta2, k.boom_o, k.boom_offset, k.boom_aa_bb, k.boom_two_ab)
+    d3 = _triangle_length(theta3, k.arm_o, k.arm_offset, k.arm_aa_bb, k.arm_two_ab)
+    cp, sp = k.cos_sin(theta4 + k.h_phase)
+    hx, hy = k.h_radius * cp, k.h_radius * sp  # H - bucket pin
+    tx, ty = k.pin_from_pivot_x + hx, k.pin_from_pivot_y + hy  # H - pivot
+    ff = tx * tx + ty * ty
+    f = np.sqrt(ff)
+    c = (ff + k.side_hh) / (k.two_side * f)
+    with np.errstate(invalid="ignore"):  # |c| > 1: the links cannot meet, NaN marks it
+        s = np.sqrt(1.0 - c * c)
+    u = k.side / f
+    uc, us = u * c, u * s
+    d4 = np.full_like(f, np.nan)
+    for turn in (-1.0, 1.0):  # where both close on the assembly, the one inside the stroke wins
+        rx, ry = uc * tx - turn * us * ty, uc * ty + turn * us * tx  # R - pivot
+        side = k.base_from_pivot_x * ry - k.base_from_pivot_y * rx
+        ex, ey = rx - k.pin_from_pivot_x, ry - k.pin_from_pivot_y  # R - bucket pin
+        four_bar = ex * hy - ey * hx
+        bx, by = rx - k.base_from_pivot_x, ry - k.base_from_pivot_y
+        length = np.sqrt(bx * bx + by * by)
+        in_stroke = (length >= k.stroke_lo) & (length <= k.stroke_hi)
+        keep = (side * k.side_o > 0.0) & (four_bar * k.h_o > 0.0) & (np.isnan(d4) | in_stroke)
+        d4 = np.where(keep, length, d4)
+    return d2, d3, d4
 
 
 def open_chain_candidates(model: Excavator, Q: np.ndarray,
@@ -76,37 +257,71 @@ def open_chain_candidates(model: Excavator, Q: np.ndarray,
     ``heading`` (...,): the swing of the first two candidates (a 6-D target's boom plane); the tip
     then lies at the signed radius x cos + y sin of it. Default atan2(y, x), the tip in front.
     """
-    x, y, z, alpha = np.moveaxis(Q, -1, 0)
+    flat = Q.reshape(-1, 4)
+    x, y, z, alpha = (flat[:, i : i + 1] for i in range(4))
+    heading = np.arctan2(y, x) if heading is None else np.reshape(heading, (-1, 1))
+    theta2, theta3, theta4, reach = open_chain_columns(model._ik, x, y, z, alpha, heading)
+    theta = np.stack((_swings(heading, theta2.shape), theta2, theta3, theta4), axis=-1)
+    return theta.reshape(Q.shape[:-1] + (4, 4)), reach.reshape(Q.shape[:-1] + (4,))
+
+
+def _swings(heading: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """theta1 (N, 4) of the candidates: the heading, then the heading + pi (wrapped)."""
+    swing = np.empty(shape)
+    swing[:, :2] = heading
+    swing[:, 2:] = wrap_angle(heading + np.pi)
+    return swing
+
+
+def _block_candidates(model: Excavator, Q: np.ndarray, alpha: np.ndarray,
+                      heading: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """D (N, 4, 4), reach (N, 4) and status (N, 4) of flat targets Q (N, >= 3) at bucket angles
+    alpha (N, 1) or (N, 4) (one per candidate); heading (N, 1) or None."""
+    k = model._ik
+    x, y, z = Q[:, 0:1], Q[:, 1:2], Q[:, 2:3]
     if heading is None:
         heading = np.arctan2(y, x)
-    swing = np.stack((heading, wrap_angle(heading + np.pi)), axis=-1)  # (..., 2)
-    rho = x * np.cos(heading) + y * np.sin(heading)
-    rho = np.stack((rho, -rho), axis=-1)
-    # Bucket pin relative to the boom foot pin, in the boom plane of each swing.
-    pin_r = rho - model.l4 * np.cos(alpha)[..., None] - model.l1
-    pin_z = (z - model.l4 * np.sin(alpha) - model.l0)[..., None]
-    arm = two_link_ik(pin_r, pin_z, model.l2, model.l3)  # theta1, theta2: (..., 2 swings, 2 elbows)
-    theta2, theta3 = arm.theta1[..., _ELBOWS], arm.theta2[..., _ELBOWS]
-    theta4 = alpha[..., None, None] - theta2 - theta3
-    swing = np.broadcast_to(swing[..., None], theta2.shape)
-    shape = Q.shape[:-1] + (4,)
-    theta = np.stack((swing, theta2, theta3, theta4), axis=-1).reshape(shape + (4,))
-    return theta, np.broadcast_to(arm.reach[..., None], theta2.shape).reshape(shape)
+    with np.errstate(invalid="ignore"):
+        theta2, theta3, theta4, reach = open_chain_columns(k, x, y, z, alpha, heading)
+        d2, d3, d4 = linkage_length_columns(k, theta2, theta3, theta4)
+    D = np.stack((_swings(heading, theta2.shape), d2, d3, d4), axis=-1)
+    return D, reach, status(model, D, Q)
+
+
+def _in_blocks(n: int, columns: int, work) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """D (n, columns, 4), reach and status (n, columns) of ``work(block slice)``, block by block:
+    the temporaries of one block stay in cache (kinematics.BATCH_BLOCK)."""
+    if n <= BATCH_BLOCK:
+        return work(slice(0, n))
+    D = np.empty((n, columns, 4))
+    reach = np.empty((n, columns), dtype=np.int8)
+    judged = np.empty((n, columns), dtype=np.int8)
+    for start in range(0, n, BATCH_BLOCK):
+        block = slice(start, min(start + BATCH_BLOCK, n))
+        D[block], reach[block], judged[block] = work(block)
+    return D, reach, judged
 
 
 def candidates(model: Excavator, Q: np.ndarray, heading: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
-    """Every D reaching Q = [x, y, z, alpha] (..., 4): (D (..., 4, 4), reach (..., 4)), the
-    open-chain candidates turned into cylinder lengths; NaN where there is no solution."""
-    theta, reach = open_chain_candidates(model, Q, heading)
-    D = np.concatenate((theta[..., :1], model.linkage_lengths(theta[..., 1:])), axis=-1)
-    return D, reach
+    """Every D reaching Q = [x, y, z, alpha] (..., 4): (D (..., 4, 4), reach (..., 4), status
+    (..., 4)), the open-chain candidates turned into cylinder lengths; NaN where there is no
+    solution."""
+    flat = Q.reshape(-1, 4)
+    headings = None if heading is None else np.reshape(heading, (-1, 1))
+    D, reach, judged = _in_blocks(len(flat), 4, lambda b: _block_candidates(
+        model, flat[b], flat[b, 3:4], None if headings is None else headings[b]))
+    shape = Q.shape[:-1] + (4,)
+    return D.reshape(shape + (4,)), reach.reshape(shape), judged.reshape(shape)
 
 
 def status(model: Excavator, D: np.ndarray, Q: np.ndarray) -> np.ndarray:
-    """(..., 4) IKStatus of candidates D (..., 4, 4) of targets Q (..., 4) (module docstring)."""
-    judged = limit_status(D, model.joint_limits)
-    on_axis = np.hypot(Q[..., 0], Q[..., 1]) <= SWING_AXIS
-    return np.where(on_axis[..., None] & (judged == _SUCCESS), _SINGULAR, judged).astype(np.int8)
+    """(N, 4) IKStatus of candidates D (N, 4, 4) of flat targets Q (N, >= 3) (module docstring):
+    the shared limit_status, SINGULAR on the swing axis, INVALID for a target that is not finite."""
+    judged = limit_status(D, model.joint_limits, LIMIT_TOL)
+    on_axis = np.hypot(Q[:, 0], Q[:, 1]) <= SWING_AXIS
+    judged[on_axis[:, None] & (judged == _SUCCESS)] = _SINGULAR
+    judged[~np.isfinite(Q).all(axis=-1)] = _INVALID
+    return judged
 
 
 def _branch_index(branch: str | None) -> int | None:
@@ -119,12 +334,14 @@ def _branch_index(branch: str | None) -> int | None:
 
 
 def _solutions(model: Excavator, Q: np.ndarray, D: np.ndarray, reach: np.ndarray, judged: np.ndarray,
-               seed: np.ndarray | None, branch: int | None, other_heading: bool = False) -> IKSolutions:
+               seed: np.ndarray | None, branch: int | None, other_heading: bool = False,
+               selection: tuple[np.ndarray, np.ndarray] | None = None) -> IKSolutions:
     """IKSolutions of candidates D (..., 4, 4) of targets Q (..., 4, 4) (one per candidate) with
     statuses ``judged``; ``other_heading``: the last two candidates are refused for facing the
-    other way (a 6-D target)."""
-    weights = 1.0 / (model.joint_limits.upper - model.joint_limits.lower)
-    selected, tie = select(D, judged, seed=seed, branch=branch, weights=weights)
+    other way (a 6-D target); ``selection``: (selected, tie) when already made (the kernel)."""
+    if selection is None:
+        selection = select(D, judged, seed=seed, branch=branch, weights=model._ik.weights)
+    selected, tie = selection
 
     def explain(solutions: IKSolutions, index: tuple[int, ...]) -> str:
         chosen = int(solutions.selected[index])
@@ -173,18 +390,74 @@ def _seed(seed: ArrayLike | None) -> np.ndarray | None:
     return None if seed is None else np.asarray(seed, dtype=float)
 
 
+_compiled: list = []  # the kernel module, once its functions are ready
+_loading = threading.Lock()
+_loader: list[threading.Thread] = []
+
+
+def _load_kernel(packed: np.ndarray) -> None:
+    """Import the kernel and run each function once: numba loads it from its on-disk cache (about
+    a second with numba's import) or compiles it (several seconds, the first time)."""
+    from excavator_kinematics import ik_kernel
+
+    D, reach, judged = np.empty((4, 4)), np.empty(4, dtype=np.int8), np.empty(4, dtype=np.int8)
+    alpha = np.zeros(4)
+    ik_kernel.candidates(packed, 5.0, 0.0, 0.0, alpha, 0.0, D, reach)
+    ik_kernel.judge(packed, 5.0, 0.0, True, SWING_AXIS, D, judged)
+    ik_kernel.pick(packed, D, judged, alpha, False, -1, TIE_TOLERANCE)
+    ik_kernel.widest_margin_angles(packed, 5.0, 0.0, 0.0, _GRID, _PEAKS, _GOLDEN, _GOLDEN_STEPS)
+    _compiled.append(ik_kernel)
+
+
+def compiled_kernel(model: Excavator, wait: bool = False):
+    """The compiled kernel module (:mod:`excavator_kinematics.ik_kernel`) if ready, else None.
+
+    The first single-target call starts loading it in a background thread and, like every call
+    until it is ready, takes the numpy path (the same results within 1e-12): a node's first
+    request never waits seconds for numba, and a process that only runs batches never imports
+    it. ``wait``: load it now (tests, benchmarks).
+    """
+    if not _compiled:
+        with _loading:
+            if not _loader:
+                _loader.append(threading.Thread(target=_load_kernel, args=(model._ik.packed,), daemon=True,
+                                                name="excavator_ik_kernel"))
+                _loader[0].start()
+        if wait:
+            _loader[0].join()
+    return _compiled[0] if _compiled else None
+
+
+def _solve_one(kernel, model: Excavator, position: np.ndarray, alpha: np.ndarray, finite: bool,
+               seed: np.ndarray | None, branch: int | None) -> IKSolutions:
+    """One target through the kernel: tip ``position`` (3,), candidate b at bucket angle alpha[b]."""
+    k = model._ik.packed
+    x, y, z = position.tolist()
+    D, reach, judged = np.empty((4, 4)), np.empty(4, dtype=np.int8), np.empty(4, dtype=np.int8)
+    kernel.candidates(k, x, y, z, alpha, math.atan2(y, x), D, reach)
+    kernel.judge(k, x, y, finite, SWING_AXIS, D, judged)
+    seeded = seed is not None
+    selected, tie = kernel.pick(k, D, judged, seed if seeded else alpha, seeded,
+                                -1 if branch is None else branch,
+                                TIE_TOLERANCE)
+    Q = np.empty((4, 4))
+    Q[:, :3], Q[:, 3] = position, alpha
+    return _solutions(model, Q, D, reach, judged, seed, branch, selection=(np.array(selected), np.array(tie)))
+
+
 def solve_pose(model: Excavator, Q: ArrayLike, seed: ArrayLike | None = None,
-               branch: str | None = None) -> IKSolutions:
-    """Every candidate for targets Q = [x, y, z, alpha] (..., 4) and the selected one."""
+               branch: str | None = None, compiled: bool = True) -> IKSolutions:
+    """Every candidate for targets Q = [x, y, z, alpha] (..., 4) and the selected one; one target
+    (4,) runs the compiled kernel (:func:`compiled_kernel`) unless not ``compiled``."""
     index = _branch_index(branch)
     Q = np.asarray(Q, dtype=float)
     if Q.shape[-1:] != (4,):
         raise ValueError(f"expected Q = [x, y, z, alpha] of shape (..., 4), got shape {Q.shape}")
-    finite = np.all(np.isfinite(Q), axis=-1)
-    with np.errstate(invalid="ignore"):
-        D, reach = candidates(model, Q)
-    judged = status(model, D, Q)
-    judged[~finite] = int(IKStatus.INVALID)
+    kernel = compiled_kernel(model) if Q.shape == (4,) and compiled else None
+    if kernel is not None:
+        return _solve_one(kernel, model, Q[:3], np.full(4, Q[3]), bool(np.isfinite(Q).all()), _seed(seed),
+                          index)
+    D, reach, judged = candidates(model, Q)
     return _solutions(model, np.broadcast_to(Q[..., None, :], D.shape), D, reach, judged, _seed(seed), index)
 
 
@@ -194,64 +467,98 @@ def seed_bucket_angle(model: Excavator, seed: ArrayLike) -> np.ndarray:
     return model.pose(seed.reshape(-1, 4))[:, 3].reshape(seed.shape[:-1])
 
 
-def widest_margin_angles(model: Excavator, position: np.ndarray) -> np.ndarray:
-    """(..., 4) per branch the bucket angle with the largest stroke margin at ``position`` (..., 3)
-    (module docstring); NaN-free: a branch without any solution gets -pi."""
-    grid = np.linspace(-np.pi, np.pi, _GRID, endpoint=False)
-    alpha = np.broadcast_to(grid[:, None], position.shape[:-1] + (_GRID, 4))  # (..., G, branch)
-    step = grid[1] - grid[0]
-    offsets = np.arange(-_POINTS, _POINTS + 1) / _POINTS
-    for level in range(_REFINE + 1):
-        margin = _branch_margins(model, position, alpha)  # (..., k, branch)
-        best = np.take_along_axis(alpha, np.argmax(margin, axis=-2)[..., None, :], axis=-2)[..., 0, :]
-        if level < _REFINE:
-            alpha = best[..., None, :] + step * offsets[:, None]
-            step = step / _POINTS
-    return best
-
-
-def _branch_margins(model: Excavator, position: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    """Stroke margins (..., k, 4) of branch b's candidate at bucket angle alpha[..., k, b]."""
-    Q = np.concatenate(
-        (np.broadcast_to(position[..., None, None, :], alpha.shape + (3,)), alpha[..., None]), axis=-1
-    )  # (..., k, branch, 4)
-    with np.errstate(invalid="ignore"):
-        D, _ = candidates(model, Q)  # (..., k, branch, candidate, 4)
-    mine = np.arange(4)
-    lengths = D[..., mine, mine, 1:]  # candidate b of the target built for branch b
-    limits = model.limits
-    margin = np.minimum(lengths - limits.stroke_min, limits.stroke_max - lengths) / (
-        limits.stroke_max - limits.stroke_min)
+def stroke_margins(model: Excavator, D: np.ndarray) -> np.ndarray:
+    """(...) min over the three cylinders of the distance to the nearer stroke end as a fraction
+    of the stroke, of candidates D (..., 4); -inf where a candidate has no solution (NaN)."""
+    k = model._ik
+    lengths = D[..., 1:]
+    margin = np.minimum(lengths - k.stroke_min, k.stroke_max - lengths) / k.stroke_range
     margin = np.min(margin, axis=-1)
     return np.where(np.isnan(margin), -np.inf, margin)
 
 
+def widest_margin_angles(model: Excavator, position: np.ndarray) -> np.ndarray:
+    """(N, 4) per branch the bucket angle with the largest stroke margin at flat positions (N, 3)
+    (module docstring). A branch without a solution at any grid angle gets -pi.
+
+    The margin along alpha is piecewise smooth, its maxima where a margin peaks, where two
+    margins are equal or where a linkage stops closing, and it has several: a grid of ``_GRID``
+    angles over the full turn brackets them; each of the ``_PEAKS`` best local maxima of the grid
+    is refined by ``_GOLDEN_STEPS`` golden-section steps over +- one grid step about it; the best
+    refined one wins.
+    """
+    n = len(position)
+    grid = np.linspace(-np.pi, np.pi, _GRID, endpoint=False)
+    D, _, _ = _block_candidates(model, np.repeat(position, _GRID, axis=0), np.tile(grid, n)[:, None], None)
+    margin = stroke_margins(model, D).reshape(n, _GRID, 4)
+    found = np.isfinite(margin).any(axis=1)
+    peak = (margin >= np.roll(margin, 1, axis=1)) & (margin >= np.roll(margin, -1, axis=1))
+    # (N, peak, branch): the best peaks first, ties in grid order
+    ranked = np.argsort(np.where(peak, -margin, np.inf), axis=1, kind="stable")[:, :_PEAKS]
+    best = grid[ranked]
+    value = np.take_along_axis(margin, ranked, axis=1)
+    step = grid[1] - grid[0]
+    at = np.repeat(position, _PEAKS, axis=0)
+
+    def margins(alpha: np.ndarray) -> np.ndarray:  # (N, peak, branch): candidate b at alpha[..., b]
+        D, _, _ = _block_candidates(model, at, alpha.reshape(-1, 4), None)
+        return stroke_margins(model, D).reshape(alpha.shape)
+
+    # Golden-section search for the maximum on [peak - step, peak + step], every peak and branch
+    # at once: each step keeps the part with the better inner point and evaluates one new point.
+    low, high = best - step, best + step
+    inner_low, inner_high = high - _GOLDEN * (high - low), low + _GOLDEN * (high - low)
+    value_low, value_high = margins(inner_low), margins(inner_high)
+    for _ in range(_GOLDEN_STEPS):
+        left = value_low >= value_high  # the maximum is in [low, inner_high], else in [inner_low, high]
+        low, high = np.where(left, low, inner_low), np.where(left, inner_high, high)
+        kept, kept_value = np.where(left, inner_low, inner_high), np.where(left, value_low, value_high)
+        new = np.where(left, high - _GOLDEN * (high - low), low + _GOLDEN * (high - low))
+        value_new = margins(new)
+        inner_low, value_low = np.where(left, new, kept), np.where(left, value_new, kept_value)
+        inner_high, value_high = np.where(left, kept, new), np.where(left, kept_value, value_new)
+    left = value_low >= value_high
+    refined, refined_value = np.where(left, inner_low, inner_high), np.where(left, value_low, value_high)
+    better = refined_value > value  # never worse than the grid point
+    best, value = np.where(better, refined, best), np.where(better, refined_value, value)
+    winner = np.argmax(value, axis=1)[:, None, :]  # (N, 1, branch)
+    return np.where(found, np.take_along_axis(best, winner, axis=1)[:, 0, :], -np.pi)
+
+
 def solve_position(model: Excavator, position: ArrayLike, seed: ArrayLike | None = None,
-                   branch: str | None = None) -> IKSolutions:
-    """Every candidate for tip positions (..., 3), the bucket angle free (module docstring)."""
+                   branch: str | None = None, compiled: bool = True) -> IKSolutions:
+    """Every candidate for tip positions (..., 3), the bucket angle free (module docstring); one
+    position (3,) runs the compiled kernel unless not ``compiled``."""
     index = _branch_index(branch)
     position = np.asarray(position, dtype=float)
     if position.shape[-1:] != (3,):
         raise ValueError(f"expected a position [x, y, z] of shape (..., 3), got shape {position.shape}")
-    finite = np.all(np.isfinite(position), axis=-1)
+    flat = position.reshape(-1, 3)
     seed = _seed(seed)
+    kernel = compiled_kernel(model) if position.shape == (3,) and compiled else None
     if seed is not None:
-        alpha = np.broadcast_to(seed_bucket_angle(model, seed), position.shape[:-1])
-        Q = np.concatenate((position, alpha[..., None]), axis=-1)
-        with np.errstate(invalid="ignore"):
-            D, reach = candidates(model, Q)
-        Q = np.broadcast_to(Q[..., None, :], D.shape)
+        alpha = np.broadcast_to(seed_bucket_angle(model, seed), position.shape[:-1]).reshape(-1, 1)
+        if kernel is not None:
+            return _solve_one(kernel, model, position, np.full(4, alpha[0, 0]),
+                              bool(np.isfinite(position).all()), seed, index)
+    elif kernel is not None:
+        finite = bool(np.isfinite(position).all())
+        x, y, z = position.tolist() if finite else (0.0, 0.0, 0.0)
+        alpha = kernel.widest_margin_angles(model._ik.packed, x, y, z, _GRID, _PEAKS, _GOLDEN, _GOLDEN_STEPS)
+        return _solve_one(kernel, model, position, alpha, finite, seed, index)
     else:
-        alpha = widest_margin_angles(model, np.where(finite[..., None], position, 0.0))
-        at = np.broadcast_to(position[..., None, :], alpha.shape + (3,))
-        Q = np.concatenate((at, alpha[..., None]), axis=-1)
-        with np.errstate(invalid="ignore"):
-            D, reach = candidates(model, Q)  # (..., branch, candidate, 4): keep candidate == branch
-        mine = np.arange(4)
-        D, reach = D[..., mine, mine, :], reach[..., mine, mine]
-    judged = status(model, D, Q[..., 0, :])
-    judged[~finite] = int(IKStatus.INVALID)
-    return _solutions(model, Q, D, reach, judged, seed, index)
+        finite = np.isfinite(flat).all(axis=-1, keepdims=True)
+        usable = np.where(finite, flat, 0.0)
+        alpha = np.empty((len(flat), 4))
+        block = max(BATCH_BLOCK // _GRID, 1)  # positions per block of the search
+        for start in range(0, len(flat), block):
+            alpha[start : start + block] = widest_margin_angles(model, usable[start : start + block])
+    D, reach, judged = _in_blocks(len(flat), 4, lambda b: _block_candidates(model, flat[b], alpha[b], None))
+    shape = position.shape[:-1] + (4,)
+    alpha = np.broadcast_to(alpha, (len(flat), 4))
+    Q = np.concatenate((np.broadcast_to(flat[:, None, :], (len(flat), 4, 3)), alpha[..., None]), axis=-1)
+    return _solutions(model, Q.reshape(shape + (4,)), D.reshape(shape + (4,)), reach.reshape(shape),
+                      judged.reshape(shape), seed, index)
 
 
 def bucket_rotation(theta1: np.ndarray, alpha: np.ndarray) -> np.ndarray:
@@ -320,12 +627,10 @@ def solve_ik(model: Excavator, target: ArrayLike, *, use_orientation: bool = Tru
     lateral = -position[..., 0] * np.sin(heading) + position[..., 1] * np.cos(heading)
     off_plane = np.abs(lateral) > PLANE_TOL
     Q = np.concatenate((position, alpha[..., None]), axis=-1)
-    with np.errstate(invalid="ignore"):
-        D, reach = candidates(model, Q, heading)
-    judged = status(model, D, Q)
+    D, reach, judged = candidates(model, Q, heading)
     judged[..., 2:] = _UNREACHABLE  # the other heading: not this orientation
     judged[rolled | off_plane] = _UNREACHABLE
-    judged[~finite] = int(IKStatus.INVALID)
+    judged[~finite] = _INVALID
     solutions = _solutions(model, np.broadcast_to(Q[..., None, :], D.shape), D, reach, judged,
                            _seed(seed), index, other_heading=True)
 

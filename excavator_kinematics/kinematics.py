@@ -255,6 +255,7 @@ class Excavator:
         self._hi = (self.limits.d_max + STROKE_TOLERANCE).tolist()
         self._lo_column, self._hi_column = np.array(self._lo)[:, None], np.array(self._hi)[:, None]
         self._check_whole_stroke()
+        self._ik = inverse.Constants.of(self, _cos_sin_of_array)
 
     def _check_whole_stroke(self) -> None:
         """Every length in the stroke box must assemble; a bad pin or length fails here, naming it."""
@@ -461,39 +462,10 @@ class Excavator:
         assembly); for the bucket, H from theta4, then the rod pin R as the intersection of the
         side-link and H-link circles on the assembly branch (eq. 2 backwards).
         """
-        lengths = np.empty_like(angles)
-        for i, tri in enumerate((self._boom, self._arm)):
-            gamma = tri.orientation * (angles[..., i] - tri.offset)
-            gamma = (gamma + np.pi) % (2.0 * np.pi) - np.pi
-            length = np.sqrt(tri.a**2 + tri.b**2 - 2.0 * tri.a * tri.b * np.cos(gamma))
-            lengths[..., i] = np.where(gamma > 0.0, length, np.nan)
-        psi = angles[..., 2] + self._h_phase
-        H = self._bucket_pin + self._h_radius * np.stack((np.cos(psi), np.sin(psi)), axis=-1)
-        to_h = H - self._pivot
-        f = np.hypot(to_h[..., 0], to_h[..., 1])
-        c = (f * f + self._side**2 - self._h_link**2) / (2.0 * f * self._side)
-        base = np.arctan2(to_h[..., 1], to_h[..., 0])
-        with np.errstate(invalid="ignore"):  # |c| > 1: the links cannot meet, NaN marks it
-            spread = np.arccos(c)
-        base_pin = self._pins_local["bucket_cylinder_base"]
-        to_base = base_pin - self._pivot
-        rel_h = H - self._bucket_pin
-        lengths[..., 2] = np.nan
-        for s in (-1.0, 1.0):  # where both close on the assembly, the one inside the stroke wins
-            turn = base + s * spread
-            R = self._pivot + self._side * np.stack((np.cos(turn), np.sin(turn)), axis=-1)
-            # The forward model's assembly (eq. 2): R on the side triangle's branch about the pivot,
-            # H on the bucket four-bar's branch about the bucket pin; else this length gives
-            # another theta4.
-            to_r, rel_r = R - self._pivot, R - self._bucket_pin
-            side = np.sign(to_base[0] * to_r[..., 1] - to_base[1] * to_r[..., 0])
-            four_bar = np.sign(rel_r[..., 0] * rel_h[..., 1] - rel_r[..., 1] * rel_h[..., 0])
-            on_assembly = (side == self._side_triangle.orientation) & (four_bar == self._h_orientation)
-            length = np.hypot(R[..., 0] - base_pin[0], R[..., 1] - base_pin[1])
-            in_stroke = (length >= self._lo[3]) & (length <= self._hi[3])
-            keep = on_assembly & (np.isnan(lengths[..., 2]) | in_stroke)
-            lengths[..., 2] = np.where(keep, length, lengths[..., 2])
-        return lengths
+        angles = np.asarray(angles, dtype=float)
+        with np.errstate(invalid="ignore"):
+            columns = inverse.linkage_length_columns(self._ik, angles[..., 0], angles[..., 1], angles[..., 2])
+        return np.stack(columns, axis=-1)
 
     # ------------------------------------------------------------------ open chain (eqs. 3-5)
     def pose(self, D: Any) -> np.ndarray:

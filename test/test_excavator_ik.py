@@ -11,7 +11,14 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from excavator_kinematics.inverse import BRANCHES, open_chain_candidates
+from excavator_kinematics.inverse import (
+    BRANCHES,
+    compiled_kernel,
+    open_chain_candidates,
+    solve_pose,
+    solve_position,
+    stroke_margins,
+)
 from excavator_kinematics.kinematics import Excavator
 from manipulator_kinematics.model import IKStatus, RequestError, matrix_quaternion, quaternion_matrix
 from manipulator_kinematics.params import config_path, load_parameters
@@ -74,15 +81,62 @@ def test_every_open_chain_candidate_meets_eq_3_behind_the_swing_axis_too() -> No
 
 
 def test_one_target_is_a_batch_of_one() -> None:
+    """The numpy path (the reference; one target runs the compiled kernel unless compiled=False)."""
     Q = EXC.pose(random_states(50, 5))
     batch = EXC.ik(Q)
     for i in range(len(Q)):
-        one = EXC.ik(Q[i])
+        one = solve_pose(EXC, Q[i], compiled=False)
         assert np.array_equal(one.q, batch.q[i], equal_nan=True)
         assert np.array_equal(one.status, batch.status[i]) and int(one.selected) == batch.selected[i]
     free = EXC.position_ik(Q[:5, :3])
     for i in range(5):
-        assert np.array_equal(EXC.position_ik(Q[i, :3]).q, free.q[i], equal_nan=True)
+        assert np.array_equal(solve_position(EXC, Q[i, :3], compiled=False).q, free.q[i], equal_nan=True)
+
+
+def mixed_targets(n: int, seed: int) -> np.ndarray:
+    """Reachable targets, random ones (mostly out of reach or outside a stroke), NaN ones and
+    targets on the swing axis: every status."""
+    rng = np.random.default_rng(seed)
+    Q = np.concatenate((EXC.pose(random_states(n // 2, seed)),
+                        np.column_stack((rng.uniform(-9, 9, (n - n // 2, 2)), rng.uniform(-5, 7, n - n // 2),
+                                         rng.uniform(-np.pi, np.pi, n - n // 2)))))
+    Q[::997] = np.nan
+    Q[5::1999, :2] = 0.0
+    return Q
+
+
+def test_the_compiled_kernel_is_the_numpy_path_for_one_target() -> None:
+    """ik_kernel (one target) against the vectorised numpy path over 10^4 targets, seeded and not
+    and with a branch asked for: the same statuses and selections, D within 1e-12 (the kernel
+    takes cos and sin from libm, the numpy path by the half-angle tangent)."""
+    assert compiled_kernel(EXC, wait=True) is not None
+    Q = mixed_targets(10_000, 31)
+    seeds = random_states(len(Q), 32)
+    for seed, branch in ((None, None), (seeds, None), (seeds, "front_elbow_down")):
+        batch = EXC.ik(Q, seed=seed, branch=branch)
+        assert {SUCCESS, LIMITS, UNREACHABLE, IKStatus.INVALID} <= set(np.unique(batch.status))
+        for i in range(len(Q)):
+            one = EXC.ik(Q[i], seed=None if seed is None else seed[i], branch=branch)
+            np.testing.assert_allclose(one.q, batch.q[i], rtol=0.0, atol=1e-12)  # NaN where NaN
+            assert np.array_equal(one.status, batch.status[i]), (i, one.status, batch.status[i])
+            assert int(one.selected) == batch.selected[i] and bool(one.tie) == batch.tie[i], i
+            if i % 50 == 0:  # the texts too (every status among them)
+                assert one.note() == batch.note(i), (i, one.note(), batch.note(i))
+
+
+def test_the_compiled_position_search_is_the_numpy_one() -> None:
+    """Position only, one position through the kernel against the numpy search: the same statuses,
+    the widest margins equal within 1e-9 and D within 1e-6 (the search resolves alpha to 2e-8 rad;
+    near-equal margins may stop a refinement step apart)."""
+    assert compiled_kernel(EXC, wait=True) is not None
+    P = mixed_targets(300, 33)[:, :3]
+    batch = EXC.position_ik(P)
+    for i in range(len(P)):
+        one = EXC.position_ik(P[i])
+        assert np.array_equal(one.status, batch.status[i]), (i, one.status, batch.status[i])
+        assert int(one.selected) == batch.selected[i]
+        np.testing.assert_allclose(one.q, batch.q[i], rtol=0.0, atol=1e-6)
+        np.testing.assert_allclose(stroke_margins(EXC, one.q), stroke_margins(EXC, batch.q[i]), atol=1e-9)
 
 
 def numerical_solutions(Q: np.ndarray, starts: np.ndarray) -> np.ndarray:

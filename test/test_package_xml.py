@@ -25,6 +25,7 @@ ROSDEP = {
     "yaml": "python3-yaml",
     "matplotlib": "python3-matplotlib",
     "scipy": "python3-scipy",
+    "numba": "python3-numba",
     "rosbags": "python3-rosbags-pip",
     "mcap": "mcap-ros2-support",
     "mcap_ros2": "mcap-ros2-support",
