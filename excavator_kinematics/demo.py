@@ -87,7 +87,7 @@ TRANSPORT = 0.02  # s
 # A pose older than this is not acted on: feedback on stale measurements makes the loop overshoot;
 # without new targets the IK stops the machine after its command timeout instead.
 MAX_POSE_AGE = 0.1  # s
-# Demo-only settings on top of config/excavator_nodes.yaml: a 50 Hz loop (five Python processes
+# Demo-only settings on top of config/excavator_nodes.yaml: a 50 Hz loop (six Python processes
 # and the recorder share two cores), actuators with a 20 ms lag (a real valve-cylinder does not
 # jump to speed), lightly filtered accelerations for readable plots, and command timeouts of
 # 0.1 s (5 periods): if a process stalls, the machine stops on its path instead of coasting on an
