@@ -621,8 +621,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     with isolated() as network:  # never join a ROS graph around (manipulator_kinematics.ros_domain)
         print(f"excavator_demo: {network}", flush=True)
-        failure, driver = run_cycle(args.output, path, args.timeout, exc.limits.reference[1:])
-    failure, driver, mover = run_cycle(args.output, path, args.timeout, exc.limits.reference[1:], exc)
+        failure, driver, mover = run_cycle(args.output, path, args.timeout, exc.limits.reference[1:], exc)
     if failure is not None:
         print(f"excavator_demo: FAILED: {failure}", file=sys.stderr)
         return 1
