@@ -22,8 +22,8 @@ nowhere else:
   ``SystemError: null argument to internal routine`` from the executor. :func:`spin` refuses such
   a node up front under ``events``.
 
-A node whose callbacks must run concurrently (the pump boom's ``plan_path`` in a callback group
-of its own, beside ``solve_ik``) says so with a class attribute ``THREADS = k`` (k >= 2): it is
+A node whose callbacks must run concurrently (every ``plan_path`` server's plan in a callback
+group of its own, beside ``solve_ik``) says so with a class attribute ``THREADS = k`` (k >= 2): it is
 served by rclpy's ``MultiThreadedExecutor`` with k threads, whatever the executor's name.
 """
 

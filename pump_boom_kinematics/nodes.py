@@ -48,8 +48,6 @@ class PumpBoomServer(PlanPathServer):
     """The shared IK/FK/PlanPath server of the pump boom: pours by the region IK."""
 
     SETTINGS = SERVER_SETTINGS
-    # plan_path (a group of its own) served beside solve_ik/solve_fk (the default group).
-    THREADS = 2
     PLAN_MODES = MODES
     MAX_WAYPOINTS = MAX_WAYPOINTS
 

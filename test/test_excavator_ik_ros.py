@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import math
+import time
 from collections.abc import Iterator
 
 import numpy as np
@@ -206,3 +207,29 @@ def test_plan_path_is_the_librarys_plan_and_stops_at_the_workspace(probe: Probe,
         assert not response.success and response.error_code.val == code, (name, response.message)
         assert text in response.message, (name, response.message)
     assert process.alive()
+
+
+def test_solve_ik_is_answered_while_a_long_plan_runs(probe: Probe, server) -> None:
+    # plan_path runs in a callback group of its own on two threads (PlanPathServer.THREADS): a
+    # plan of ~80,000 points (seconds) does not hold up solve_ik. One callback at a time would
+    # answer no solve_ik until the plan is done.
+    _, ik, _, planner = server
+    start = EXC.pose(REFERENCE)[:3]
+    waypoints = [start + [0.5 * (k % 2), 0.0, 0.0] for k in range(401)]
+    pose = EXC.fkine(REFERENCE)
+    sent = time.monotonic()
+    future = planner.call_async(path_request(waypoints, step=0.0025, seed=REFERENCE))
+    answered = []
+    while not future.done():
+        response = call(probe, ik, ik_request(pose))
+        assert response.success, response.message
+        if not future.done():
+            answered.append(time.monotonic())
+    finished = time.monotonic()
+    plan = future.result()
+    assert plan.success, plan.message
+    assert len(plan.trajectory.points) == 400 * 200 + 1
+    took = finished - sent
+    gaps = np.diff([sent, *answered, finished])
+    assert took > 0.3 and len(answered) >= 3, (took, len(answered))
+    assert gaps.max() < 0.5 * took, (took, gaps.max(), len(answered))

@@ -227,9 +227,12 @@ class PlanPathServer(IKServerNode):
     beyond 1000 x the reach (INVALID_GOAL_CONSTRAINTS); a seed as in solve_ik
     (INVALID_ROBOT_STATE); a request the planner refuses, ValueError (INVALID_GOAL_CONSTRAINTS).
     A plan that ends short answers NO_IK_SOLUTION with the reason, ``last_reachable_waypoint``
-    and the trajectory up to there. plan_path runs in a callback group of its own: with
-    ``THREADS`` > 1, solve_ik and solve_fk are answered while a plan is computed."""
+    and the trajectory up to there. plan_path runs in a callback group of its own on two threads
+    (``THREADS``), so solve_ik and solve_fk are answered while a plan is computed."""
 
+    # plan_path (a group of its own) served beside solve_ik/solve_fk (the default group): the
+    # largest plans take seconds (the pump boom's 20,000 points 2-3 s; the excavator allows more).
+    THREADS = 2
     #: Modes plan_path takes ("" is always the default).
     PLAN_MODES: ClassVar[tuple[str, ...]] = ()
     #: Most waypoints of one request (None: only the planner's bounds).
