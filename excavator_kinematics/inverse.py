@@ -38,13 +38,14 @@ folded once (:class:`Constants`); one target runs the same steps compiled
 from __future__ import annotations
 
 import math
-import threading
 from collections.abc import Callable
+from types import ModuleType
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.model import (
     TIE_TOLERANCE,
     IKSolutions,
@@ -390,42 +391,25 @@ def _seed(seed: ArrayLike | None) -> np.ndarray | None:
     return None if seed is None else np.asarray(seed, dtype=float)
 
 
-_compiled: list = []  # the kernel module, once its functions are ready
-_loading = threading.Lock()
-_loader: list[threading.Thread] = []
-
-
-def _load_kernel(packed: np.ndarray) -> None:
-    """Import the kernel and run each function once: numba loads it from its on-disk cache (about
-    a second with numba's import) or compiles it (several seconds, the first time)."""
-    from excavator_kinematics import ik_kernel
-
+def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
+    """Run each kernel function once (numba loads or compiles it)."""
     D, reach, judged = np.empty((4, 4)), np.empty(4, dtype=np.int8), np.empty(4, dtype=np.int8)
     alpha = np.zeros(4)
     ik_kernel.candidates(packed, 5.0, 0.0, 0.0, alpha, 0.0, D, reach)
     ik_kernel.judge(packed, 5.0, 0.0, True, SWING_AXIS, D, judged)
     ik_kernel.pick(packed, D, judged, alpha, False, -1, TIE_TOLERANCE)
     ik_kernel.widest_margin_angles(packed, 5.0, 0.0, 0.0, _GRID, _PEAKS, _GOLDEN, _GOLDEN_STEPS)
-    _compiled.append(ik_kernel)
 
 
-def compiled_kernel(model: Excavator, wait: bool = False):
-    """The compiled kernel module (:mod:`excavator_kinematics.ik_kernel`) if ready, else None.
+#: The single-target kernel (:mod:`excavator_kinematics.ik_kernel`), see manipulator_kinematics.compiled.
+KERNEL = Kernel("excavator_kinematics.ik_kernel", _warm)
 
-    The first single-target call starts loading it in a background thread and, like every call
-    until it is ready, takes the numpy path (the same results within 1e-12): a node's first
-    request never waits seconds for numba, and a process that only runs batches never imports
-    it. ``wait``: load it now (tests, benchmarks).
-    """
-    if not _compiled:
-        with _loading:
-            if not _loader:
-                _loader.append(threading.Thread(target=_load_kernel, args=(model._ik.packed,), daemon=True,
-                                                name="excavator_ik_kernel"))
-                _loader[0].start()
-        if wait:
-            _loader[0].join()
-    return _compiled[0] if _compiled else None
+
+def compiled_kernel(model: Excavator, wait: bool = False) -> ModuleType | None:
+    """The compiled kernel module if ready, else None (:class:`manipulator_kinematics.compiled.Kernel`:
+    the first single-target call starts loading it, calls take the numpy path meanwhile, the same
+    results within 1e-12). ``wait``: load it now (tests, benchmarks)."""
+    return KERNEL.get(model._ik.packed, wait=wait)
 
 
 def _solve_one(kernel, model: Excavator, position: np.ndarray, alpha: np.ndarray, finite: bool,
