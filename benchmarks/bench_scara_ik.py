@@ -1,19 +1,21 @@
 """Benchmark (not a test): SCARA closed-form IK against a numerical IK on the same model.
 
-Prints one table: microseconds per IK in the library (one target per call, and per target in
-one batched call), per SolveIK service call across processes (p50 / p99), and a numerical
-baseline on the same D-H model: Robotics Toolbox for Python's ``ikine_LM`` (and its C++
+Prints one table: microseconds per IK in the library (one target per call: the compiled kernel
+of modes phi and fixed_phi and the numpy path beside it, and ``solve_ik`` on a 4x4 pose; and per
+target in one batched call), per SolveIK service call across processes (p50 / p99), and a
+numerical baseline on the same D-H model: Robotics Toolbox for Python's ``ikine_LM`` (and its C++
 ``ik_LM``), or, when the toolbox cannot be had, a damped-least-squares Newton IK of our own on the
-same chain. Speed-ups are
-against the library's one-target call in the same mode (``phi``: the numerical solvers get the
-full planar pose x, y, yaw).
+same chain. Speed-ups are against the library's one-target call in the same mode (``phi``: the
+numerical solvers get the full planar pose x, y, yaw); the last line gives the library's one call
+as a fraction of ``ik_LM`` (target: <= 0.5). One-target timings: ``--rounds`` rounds, the median
+of each round's median.
 
 The Robotics Toolbox is not a dependency of the project: it is installed for this benchmark only,
 into its own venv (``$MK_RTB_PYTHON`` names an interpreter that has it; otherwise
 ``~/.cache/manipulator_kinematics/bench-rtb-venv`` is created with pip on first use). If that
 fails, the table says so and the damped-least-squares fallback is measured instead.
 
-Run: .venv/bin/python benchmarks/bench_scara_ik.py [--calls 1000] [--targets 2000] [--no-rtb]
+Run: .venv/bin/python benchmarks/bench_scara_ik.py [--calls 1000] [--targets 2000] [--rounds 3] [--no-rtb]
 """
 from __future__ import annotations
 
@@ -80,6 +82,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--calls", type=int, default=1000, help="service calls")
     parser.add_argument("--targets", type=int, default=2000, help="one-target library calls per mode")
+    parser.add_argument("--rounds", type=int, default=3, help="rounds of the one-target calls")
     parser.add_argument("--baseline-targets", type=int, default=300, help="targets for the numerical IKs")
     parser.add_argument("--no-rtb", action="store_true", help="skip the Robotics Toolbox (no install)")
     parser.add_argument("--no-service", action="store_true", help="skip the cross-process service calls")
@@ -88,9 +91,10 @@ def main() -> None:
     import numpy as np
 
     sys.path.insert(0, str(REPO))
-    from scara_kinematics.kinematics import MODES, Scara
+    from scara_kinematics.kinematics import MODES, Scara, compiled_kernel
 
     scara = Scara.default()
+    compiled_kernel(scara, wait=True)  # loaded (or compiled once) before any timing
     rng = np.random.default_rng(2019)
     q = rng.uniform(scara.limits.lower, scara.limits.upper, (400_000, 3))
     q = q[scara.within_limits(q) & ~scara.singular(q)]
@@ -103,24 +107,40 @@ def main() -> None:
         x = scara.fk((fixed if mode == "fixed_phi" else q)[:n])
         return x[:, :2], x[:, 2]
 
-    def solve(mode: str, p: np.ndarray, phi: np.ndarray, seed: np.ndarray | None = None):
-        return scara.ik(p, mode=mode, phi=phi if mode == "phi" else None, seed=seed)
+    def solve(mode: str, p: np.ndarray, phi: np.ndarray, seed: np.ndarray | None = None,
+              compiled: bool = True):
+        return scara.ik(p, mode=mode, phi=phi if mode == "phi" else None, seed=seed, compiled=compiled)
+
+    def one_call(call, n: int) -> tuple[float, float]:
+        """(median of the rounds' medians, p99 over every call) in microseconds."""
+        for i in range(50):  # warm-up
+            call(i)
+        medians, timings = [], np.empty((args.rounds, n))
+        for r in range(args.rounds):
+            for i in range(n):
+                start = time.perf_counter_ns()
+                result = call(i)
+                timings[r, i] = (time.perf_counter_ns() - start) / 1e3
+                assert bool(result.ok), result.note() if hasattr(result, "note") else result.reason()
+            medians.append(np.median(timings[r]))
+        return float(np.median(medians)), float(np.percentile(timings, 99))
 
     scalar: dict[str, float] = {}
-    for mode in MODES:
+    for mode, compiled in (("fixed_phi", True), ("phi", True), ("position", True), ("fixed_phi", False),
+                           ("phi", False)):
         p, phi = targets_for(mode, args.targets)
         seeds = q[-args.targets:]
-        for i in range(50):  # warm-up
-            solve(mode, p[i], phi[i], seeds[i])
-        timings = np.empty(len(p))
-        for i in range(len(p)):
-            start = time.perf_counter_ns()
-            result = solve(mode, p[i], phi[i], seeds[i])
-            timings[i] = (time.perf_counter_ns() - start) / 1e3
-            assert result.ok, result.reason()
-        scalar[mode] = float(np.median(timings))
-        rows.append((f"library, one target per call, mode {mode}", f"{scalar[mode]:.1f}",
-                     f"p99 {np.percentile(timings, 99):.1f}", ""))
+        median, p99 = one_call(lambda i, p=p, phi=phi, s=seeds, m=mode, c=compiled:
+                               solve(m, p[i], phi[i], s[i], c), len(p))
+        path = "compiled kernel" if compiled and mode != "position" else "numpy path"
+        scalar.setdefault(mode, median)
+        rows.append((f"library, one target per call, mode {mode} ({path})", f"{median:.1f}",
+                     f"p99 {p99:.1f}", ""))
+    poses = scara.fkine(q[:args.targets])
+    median, p99 = one_call(lambda i: scara.solve_ik(poses[i], seed=q[-1 - i]), len(poses))
+    scalar["solve_ik"] = median
+    rows.append(("library, solve_ik(4x4 pose), one target per call, mode phi", f"{median:.1f}",
+                 f"p99 {p99:.1f}", ""))
     batch: dict[str, float] = {}
     for mode in MODES:
         p, phi = targets_for(mode, 100_000)
@@ -141,6 +161,7 @@ def main() -> None:
     seeds = rng.uniform(scara.limits.lower, scara.limits.upper, (n, 3))
     reference, batched = scalar["phi"], batch["phi"]
     chain = scara.chain
+    ratio = ""
     if not args.no_rtb:
         job = {
             "rows": [{"a": r.a, "alpha": r.alpha, "d": r.d, "theta": r.theta, "offset": r.offset,
@@ -162,6 +183,9 @@ def main() -> None:
                                  f"{median:.1f}",
                                  f"solved {m['success']:.0%}, max error {m['max_error']:.1e} m",
                                  f"{median / reference:.0f}x / {median / batched:.0f}x"))
+                    if name == "ik_LM":
+                        ratio = (f"library one call / ik_LM: ik {reference / median:.2f}, "
+                                 f"solve_ik {scalar['solve_ik'] / median:.2f} (target <= 0.5)")
     if not any(row[0].startswith("Robotics Toolbox") and row[1] != "-" for row in rows):
         # Fallback baseline: a plain numerical IK of our own on the same D-H chain.
         dls = [dls_ik(chain, scara, np.array([p[i, 0], p[i, 1], phi[i]]), seeds[i]) for i in range(n)]
@@ -183,6 +207,8 @@ def main() -> None:
     print("|" + "|".join("-" * (w + 2) for w in widths) + "|")
     for row in rows:
         print("| " + " | ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) + " |")
+    if ratio:
+        print(f"\n{ratio}")
 
 
 def service_rows(scara, targets, calls: int) -> list[tuple[str, str, str, str]]:

@@ -43,15 +43,25 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property
+from types import ModuleType
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.config import Names, Number, Numbers, Text, require, validate
-from manipulator_kinematics.model import IKSolutions, IKStatus, RequestError
+from manipulator_kinematics.model import (
+    TIE_TOLERANCE,
+    IKSolutions,
+    IKStatus,
+    RequestError,
+    describe_limits,
+    limit_status,
+    select,
+)
 from manipulator_kinematics.params import config_path, load_parameters
 from manipulator_kinematics.planar import two_link_ik, wrap_angle
 from manipulator_kinematics.serial_chain import JointLimits, SerialChain, prismatic, revolute, troty
@@ -92,67 +102,52 @@ class VelocityIK:
 
 
 @dataclass(frozen=True)
-class IKResult:
-    """Solutions of a batch of targets (leading shape ``...`` of the targets).
-
-    ``q`` (..., 3) is the selected solution (NaN unless ``status`` is SUCCESS); ``branch`` (...,)
-    its index into ``BRANCHES`` (-1 if none); ``phi`` (...,) the tool heading solved for (position
-    mode: the one chosen) and ``preferred_phi`` the one the rule started from. ``candidates``
-    (..., 2, 3) holds both branches at ``phi`` (NaN when not reachable) and ``branch_status``
-    (..., 2) their status, so both are available when both are valid.
+class HeadingIK:
+    """:meth:`Scara.ik`'s answer for a batch of targets (leading shape ``...``): the shared
+    :class:`~manipulator_kinematics.model.IKSolutions` of both branches at the heading solved for
+    (``solutions``: candidates, statuses, the shared rule's selection and the text), with what the
+    heading modes add: ``status`` (...,) the target's outcome (mode ``position``: the best over
+    every heading tried), ``phi`` (...,) the heading solved for (mode ``position``: the one chosen)
+    and ``preferred_phi`` the one the rule started from.
     """
 
-    mode: str
-    q: np.ndarray
+    solutions: IKSolutions
     status: np.ndarray
-    branch: np.ndarray
     phi: np.ndarray
     preferred_phi: np.ndarray
-    candidates: np.ndarray
-    branch_status: np.ndarray
-    requested_branch: int | None
-    seeded: bool
-    scara: Scara = field(repr=False, compare=False)
 
     @property
-    def ok(self) -> np.ndarray:
-        return self.status == IKStatus.SUCCESS
+    def q(self) -> np.ndarray:
+        """(..., 3) the selected solution, NaN where there is none."""
+        return self.solutions.solution
+
+    @property
+    def branch(self) -> np.ndarray:
+        """(...,) the selected branch's index into ``BRANCHES``, -1 if none."""
+        return self.solutions.selected
+
+    @property
+    def candidates(self) -> np.ndarray:
+        """(..., 2, 3) both branches at ``phi`` (NaN where a branch does not reach)."""
+        return self.solutions.q
+
+    @property
+    def branch_status(self) -> np.ndarray:
+        """(..., 2) the IKStatus of each branch."""
+        return self.solutions.status
 
     @property
     def valid(self) -> np.ndarray:
         """(..., 2) True for each branch that is a solution (inside limits, not singular)."""
-        return self.branch_status == IKStatus.SUCCESS
+        return self.solutions.valid
+
+    @property
+    def ok(self) -> np.ndarray:
+        return self.status == _SUCCESS
 
     def reason(self, index: tuple[int, ...] | int = ()) -> str:
         """Human-readable outcome of one target: the branch and rule used, or why it failed."""
-        scara, status = self.scara, IKStatus(int(self.status[index]))
-        phi, preferred = float(self.phi[index]), float(self.preferred_phi[index])
-        if status is IKStatus.SUCCESS:
-            name = BRANCHES[int(self.branch[index])]
-            text = f"{self.mode} mode: branch {name}, phi = {math.degrees(phi):.6g} deg"
-            if self.mode == "position":
-                source = "the seed's" if self.seeded else "the paper's (no seed)"
-                if abs(wrap_angle(phi - preferred)) < 1e-12:
-                    text += f" (kept {source} heading)"
-                else:
-                    text += (f" (moved from {source} heading {math.degrees(preferred):.6g} deg: the nearest"
-                             " one with a solution inside the joint limits, away from the singularity)")
-            return text
-        if status is IKStatus.INVALID:
-            return "target is not finite"
-        candidates, branch_status = self.candidates[index], self.branch_status[index]
-        if self.mode == "position":
-            head = "no tool heading phi gives a solution inside the joint limits away from the singularity"
-            if status is IKStatus.UNREACHABLE:
-                reach = scara.l2 + scara.l3
-                return f"{head}: the target is farther than l2 + l3 = {reach:.6g} m from the rail"
-            head += f"; at phi = {math.degrees(phi):.6g} deg"
-        else:
-            head = f"{self.mode} mode, phi = {math.degrees(phi):.6g} deg"
-        branches = range(2) if self.requested_branch is None else (self.requested_branch,)
-        parts = [f"{BRANCHES[b]}: {scara.describe(candidates[b], IKStatus(int(branch_status[b])), phi)}"
-                 for b in branches]
-        return f"{head}: " + "; ".join(parts)
+        return self.solutions.note(index)
 
 
 class Scara:
@@ -336,13 +331,15 @@ class Scara:
         off_plane = finite & (np.abs(position[..., 2]) > PLANE_TOL)
         tilted = finite & (tilt > PLANE_TOL) if use_orientation else np.zeros_like(off_plane)
         refused = off_plane | tilted
-        status = result.branch_status.copy()
+        solved = result.solutions
+        status = solved.status.copy()
         status[refused] = _UNREACHABLE
         status[~finite] = _INVALID
         if branch is not None:  # the other branch is no solution of this request
             status[..., 1 - BRANCHES.index(branch)] = np.maximum(status[..., 1 - BRANCHES.index(branch)],
                                                                  _JOINT_LIMITS)
-        selected = np.where(refused | ~finite, -1, result.branch).astype(np.int8)
+        answered = ~refused & finite
+        selected = np.where(answered, solved.selected, -1).astype(np.int8)
 
         def explain(solutions: IKSolutions, index: tuple[int, ...]) -> str:
             if off_plane[index]:
@@ -351,10 +348,10 @@ class Scara:
             if tilted[index]:
                 return (f"target orientation tilts the tool z axis by {math.degrees(tilt[index]):.6g} deg: "
                         "the arm only turns about base z")
-            return result.reason(index)
+            return solved.note(index)
 
-        return IKSolutions(q=result.candidates, status=status, branches=BRANCHES, selected=selected,
-                           tie=np.zeros(selected.shape, dtype=bool), explain=explain)
+        return IKSolutions(q=solved.q, status=status, branches=BRANCHES, selected=selected,
+                           tie=answered & solved.tie, explain=explain)
 
     def state_note(self, q: ArrayLike) -> str:
         """A remark on one joint state for FK answers: near the singularity, or nothing."""
@@ -363,13 +360,14 @@ class Scara:
 
     # ---- inverse kinematics -------------------------------------------------------------------
     def ik(self, position: ArrayLike, *, mode: str = "phi", phi: ArrayLike | None = None,
-           seed: ArrayLike | None = None, branch: str | None = None) -> IKResult:
+           seed: ArrayLike | None = None, branch: str | None = None, compiled: bool = True) -> HeadingIK:
         """Joint solutions for tool positions (..., 2) = [px, py] (module docstring: modes, rule).
 
         ``phi`` (...,) is required in mode ``phi`` and refused otherwise; ``seed`` (3,) or (..., 3)
         a current joint state; ``branch`` None (closest to the seed) or a name of ``BRANCHES``.
         Raises ValueError for an unknown mode or branch, a bad shape or a non-finite seed; a
-        non-finite target gives status INVALID.
+        non-finite target gives status INVALID. One target in mode ``phi`` or ``fixed_phi``
+        runs the compiled kernel (:func:`compiled_kernel`) unless not ``compiled``.
         """
         if mode not in MODES:
             raise ValueError(f"unknown IK mode {mode!r}; known: {', '.join(MODES)}")
@@ -393,18 +391,33 @@ class Scara:
         if mode == "position":
             preferred = (np.full(px.shape, PAPER_PHI) if seed is None
                          else wrap_angle(np.broadcast_to(seed[..., 1] + seed[..., 2], px.shape)))
-            phi_used, candidates, branch_status, status = self._position_ik(px, py, preferred, requested)
+            phi_used, q, status, outcome = self._position_ik(px, py, preferred, requested)
+            selected, tie = select(q, status, seed=seed, branch=requested, weights=self._weights)
         else:
-            phi_used = np.full(px.shape, PAPER_PHI) if phi is None else wrap_angle(phi)
-            preferred = phi_used
-            candidates, branch_status = self._solve_phi(px, py, phi_used)
-            status = _best(branch_status, requested)
-        status = np.asarray(status, dtype=np.int8)
-        status[~(np.isfinite(px) & np.isfinite(py) & np.isfinite(phi_used))] = _INVALID
-        q, chosen = self._select(candidates, branch_status, seed, requested)
-        return IKResult(mode=mode, q=q, status=status, branch=chosen, phi=phi_used, preferred_phi=preferred,
-                        candidates=candidates, branch_status=branch_status, requested_branch=requested,
-                        seeded=seed is not None, scara=self)
+            phi_used = preferred = np.full(px.shape, PAPER_PHI) if phi is None else wrap_angle(phi)
+            kernel = compiled_kernel(self) if px.ndim == 0 and compiled else None
+            if kernel is not None and (seed is None or seed.shape == (3,)):
+                q, status, selected, tie = self._solve_one(kernel, float(px), float(py), float(phi_used),
+                                                           seed, requested)
+            else:
+                q, status = self._solve_phi(px, py, phi_used)
+                selected, tie = select(q, status, seed=seed, branch=requested, weights=self._weights)
+            # The best status of the branches that may answer (np.minimum: a reduction over an axis of
+            # two costs several times more on a batch).
+            outcome = (np.minimum(status[..., 0], status[..., 1]) if requested is None
+                       else status[..., requested])
+        finite = np.isfinite(px) & np.isfinite(py) & np.isfinite(phi_used)
+        outcome = np.where(finite, outcome, _INVALID).astype(np.int8)
+        if not finite.all():
+            status = np.where(finite[..., None], status, _INVALID).astype(np.int8)
+
+        def explain(solutions: IKSolutions, index: tuple[int, ...]) -> str:
+            return self._explain(solutions, index, mode, float(phi_used[index]), float(preferred[index]),
+                                 int(outcome[index]), seed is not None, requested)
+
+        solutions = IKSolutions(q=q, status=status, branches=BRANCHES, selected=selected, tie=tie,
+                                explain=explain)
+        return HeadingIK(solutions=solutions, status=outcome, phi=phi_used, preferred_phi=preferred)
 
     def describe(self, q: np.ndarray, status: IKStatus, phi: float) -> str:
         """Why one branch's joint values ``q`` (3,) have ``status`` (for messages)."""
@@ -412,44 +425,94 @@ class Scara:
             return (f"wrist point out of the upper arm's reach (|wy| > l2 = {self.l2:.6g} m with "
                     f"phi = {math.degrees(phi):.6g} deg)")
         if status is IKStatus.JOINT_LIMITS:
-            violation = self.limit_violation(q)
-            return ", ".join(
-                f"{self.joint_names[i]} = {_show(i, q[i])} "
-                + (f"below its limit {_show(i, self.limits.lower[i])}" if violation[i] < 0
-                   else f"above its limit {_show(i, self.limits.upper[i])}")
-                for i in range(3) if violation[i]
-            )
+            return describe_limits(q, self.limits)
         if status is IKStatus.SINGULAR:
             return (f"singular: |cos theta1| = {abs(math.cos(q[1])):.3g} < {self.singularity_threshold:g} "
                     "(upper arm perpendicular to the rail)")
         return f"solution {', '.join(f'{n} = {_show(i, q[i])}' for i, n in enumerate(self.joint_names))}"
 
+    def _explain(self, solutions: IKSolutions, index: tuple[int, ...], mode: str, phi: float,
+                 preferred: float, outcome: int, seeded: bool, requested: int | None) -> str:
+        """The text of one target: the branch and rule used, or why it failed."""
+        status = IKStatus(outcome)
+        if status is IKStatus.SUCCESS:
+            name = BRANCHES[int(solutions.selected[index])]
+            text = f"{mode} mode: branch {name}, phi = {math.degrees(phi):.6g} deg"
+            if mode == "position":
+                source = "the seed's" if seeded else "the paper's (no seed)"
+                if abs(wrap_angle(phi - preferred)) < 1e-12:
+                    text += f" (kept {source} heading)"
+                else:
+                    text += (f" (moved from {source} heading {math.degrees(preferred):.6g} deg: the nearest"
+                             " one with a solution inside the joint limits, away from the singularity)")
+            return text
+        if status is IKStatus.INVALID:
+            return "target is not finite"
+        if mode == "position":
+            head = "no tool heading phi gives a solution inside the joint limits away from the singularity"
+            if status is IKStatus.UNREACHABLE:
+                return f"{head}: the target is farther than l2 + l3 = {self.l2 + self.l3:.6g} m from the rail"
+            head += f"; at phi = {math.degrees(phi):.6g} deg"
+        else:
+            head = f"{mode} mode, phi = {math.degrees(phi):.6g} deg"
+        q, branch_status = solutions.q[index], solutions.status[index]
+        branches = range(2) if requested is None else (requested,)
+        parts = [f"{BRANCHES[b]}: {self.describe(q[b], IKStatus(int(branch_status[b])), phi)}"
+                 for b in branches]
+        return f"{head}: " + "; ".join(parts)
+
+    @cached_property
+    def _weights(self) -> np.ndarray:
+        """Seed distance weights (1 / l2, 1, 1): (dx_l / l2)^2 + dtheta1^2 + dtheta2^2."""
+        return np.array([1.0 / self.l2, 1.0, 1.0])
+
     def _solve_phi(self, px: np.ndarray, py: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Both branches (..., 2, 3) and their status (..., 2) for heading phi, eqs. (11)-(12) generalised."""
-        s = (py - self.l3 * np.sin(phi)) / self.l2
-        reachable = np.abs(s) <= 1.0 + 1e-12
-        s = np.minimum(np.maximum(s, -1.0), 1.0)
-        # Written into one preallocated array: np.stack costs more than the arithmetic for one target.
-        q = np.empty(s.shape + (2, 3))
-        asin = np.arcsin(s, out=q[..., 0, 1])
-        # Branch b: pi - asin(s), kept in (-pi, pi]; cos theta1 = +-sqrt(1 - s^2) on the two branches.
-        np.subtract(np.copysign(np.pi, asin), asin, out=q[..., 1, 1])
-        c1 = np.sqrt(1.0 - s * s)
-        shoulder = px - self.l3 * np.cos(phi) - self.l1
-        np.subtract(shoulder, self.l2 * c1, out=q[..., 0, 0])
-        np.add(shoulder, self.l2 * c1, out=q[..., 1, 0])
-        q[..., 2] = wrap_angle(phi[..., None] - q[..., 1])
+        """Both branches (..., 2, 3) and their statuses (..., 2) for heading phi: eqs. (11)-(12)
+        generalised from the wrist point w = p - l3 (cos phi, sin phi)."""
+        wx = px - self.l3 * np.cos(phi)
+        wy = py - self.l3 * np.sin(phi)
+        sin1 = wy / self.l2  # eq. (12): sin theta1 = wy / l2
+        reachable = np.abs(sin1) <= 1.0 + 1e-12
+        sin1 = np.minimum(np.maximum(sin1, -1.0), 1.0)
+        cos1 = np.sqrt(1.0 - sin1 * sin1)  # branch a; -cos1 on branch b
+        # q[..., b, :] = (x_l, theta1, theta2) of branch b, written in place (np.stack costs more
+        # than the arithmetic for one target). Branch b: theta1 = pi - asin, kept in (-pi, pi].
+        q = np.empty(sin1.shape + (2, 3))
+        theta1_a = np.arcsin(sin1, out=q[..., 0, 1])
+        np.subtract(np.copysign(np.pi, theta1_a), theta1_a, out=q[..., 1, 1])
+        np.subtract(wx - self.l1, self.l2 * cos1, out=q[..., 0, 0])  # eq. (11): x_l = wx - l1 - l2 cos theta1
+        np.add(wx - self.l1, self.l2 * cos1, out=q[..., 1, 0])
+        q[..., 2] = wrap_angle(phi[..., None] - q[..., 1])  # theta1 + theta2 = phi
         q[~reachable] = np.nan
-        in_limits = self.within_limits(q)
-        q = np.where(in_limits[..., None], self.limits.clip(q), q)
-        singular = (c1 < self.singularity_threshold * (1.0 - 1e-9))[..., None]
-        status = np.where(in_limits, np.where(singular, _SINGULAR, _SUCCESS), _JOINT_LIMITS).astype(np.int8)
-        status[~reachable] = _UNREACHABLE
+        status = limit_status(q, self.limits, LIMIT_TOL)
+        inside = status == _SUCCESS
+        q = np.where(inside[..., None], self.limits.clip(q), q)
+        singular = cos1 < self.singularity_threshold * (1.0 - 1e-9)
+        status[inside & singular[..., None]] = _SINGULAR
         return q, status
+
+    def _solve_one(self, kernel: ModuleType, px: float, py: float, phi: float, seed: np.ndarray | None,
+                   requested: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`_solve_phi` and :func:`select` for one target through the compiled kernel."""
+        q, status = np.empty((2, 3)), np.empty(2, dtype=np.int8)
+        seeded = seed is not None
+        selected, tie = kernel.solve_phi(self._packed, px, py, phi, seed if seeded else self._packed[:3],
+                                         seeded, -1 if requested is None else requested, TIE_TOLERANCE, q,
+                                         status)
+        return q, status, np.array(selected), np.array(tie)
+
+    @cached_property
+    def _packed(self) -> np.ndarray:
+        """The kernel's constants (scara_kinematics.ik_kernel): l1, l2, l3, the limits widened by
+        LIMIT_TOL (6), the limits (6), the singularity threshold, the seed weights (3)."""
+        lower, upper = self.limits.lower, self.limits.upper
+        return np.concatenate([[self.l1, self.l2, self.l3], lower - LIMIT_TOL, upper + LIMIT_TOL, lower,
+                               upper, [self.singularity_threshold * (1.0 - 1e-9)], self._weights])
 
     def _position_ik(self, px: np.ndarray, py: np.ndarray, preferred: np.ndarray,
                      requested: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Position mode: the admissible heading nearest ``preferred`` (module docstring)."""
+        """Position mode: the admissible heading nearest ``preferred`` (module docstring); the
+        heading, both branches there and their statuses, and the target's outcome over every heading."""
         headings = self._candidate_headings(px, py, preferred)
         candidates, branch_status = self._solve_phi(px[..., None], py[..., None], headings)
         allowed = _allowed(requested)
@@ -460,12 +523,12 @@ class Scara:
         phi = np.take_along_axis(headings, k[..., None], axis=-1)[..., 0]
         picked = np.take_along_axis(candidates, k[..., None, None, None], axis=-3)[..., 0, :, :]
         picked_status = np.take_along_axis(branch_status, k[..., None, None], axis=-2)[..., 0, :]
-        status = np.min(np.where(allowed, branch_status, _INVALID), axis=(-2, -1))
+        outcome = np.min(np.where(allowed, branch_status, _INVALID), axis=(-2, -1))
         # With the rail unbounded every |py| <= l2 + l3 is reachable: if no candidate reached it,
         # the rail's stroke (a joint limit) is what stops it.
         in_band = np.abs(py) <= self.l2 + self.l3 + LIMIT_TOL
-        status = np.where(in_band & (status == _UNREACHABLE), _JOINT_LIMITS, status)
-        return phi, picked, picked_status, status.astype(np.int8)
+        outcome = np.where(in_band & (outcome == _UNREACHABLE), _JOINT_LIMITS, outcome)
+        return phi, picked, picked_status, outcome.astype(np.int8)
 
     def _candidate_headings(self, px: np.ndarray, py: np.ndarray, preferred: np.ndarray) -> np.ndarray:
         """(..., 17) headings: the preferred one, then every heading where a constraint is active."""
@@ -496,29 +559,26 @@ class Scara:
         turn = t2 - np.arctan2(self.l3 * np.sin(t2), self.l2 + self.l3 * np.cos(t2))
         return wrist, r2, np.concatenate([turn, turn]), np.array([lower[0], upper[0]])
 
-    def _select(self, candidates: np.ndarray, branch_status: np.ndarray, seed: np.ndarray | None,
-                requested: int | None) -> tuple[np.ndarray, np.ndarray]:
-        ok = (branch_status == _SUCCESS) & _allowed(requested)
-        ok_a, ok_b = ok[..., 0], ok[..., 1]
-        if seed is None:
-            take_a = ok_a
-        else:
-            difference = candidates - seed[..., None, :]
-            difference[..., 0] /= self.l2
-            cost = np.sum(difference * difference, axis=-1)
-            take_a = ok_a & (~ok_b | (cost[..., 0] <= cost[..., 1]))
-        q = np.where(take_a[..., None], candidates[..., 0, :], candidates[..., 1, :])
-        any_ok = ok_a | ok_b
-        q[~any_ok] = np.nan
-        return q, np.where(any_ok, np.where(take_a, 0, 1), -1).astype(np.int8)
+
+def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
+    """Run the kernel once (numba loads or compiles it)."""
+    q, status = np.empty((2, 3)), np.empty(2, dtype=np.int8)
+    ik_kernel.solve_phi(packed, 0.5, 0.3, PAPER_PHI, packed[:3], True, -1, TIE_TOLERANCE, q, status)
+
+
+#: The single-target kernel (:mod:`scara_kinematics.ik_kernel`), see manipulator_kinematics.compiled.
+KERNEL = Kernel("scara_kinematics.ik_kernel", _warm)
+
+
+def compiled_kernel(scara: Scara, wait: bool = False) -> ModuleType | None:
+    """The compiled kernel module if ready, else None (:class:`manipulator_kinematics.compiled.Kernel`:
+    the first single-target call starts loading it, calls take the numpy path meanwhile, the same
+    results within 1e-12). ``wait``: load it now (tests, benchmarks)."""
+    return KERNEL.get(scara._packed, wait=wait)
 
 
 def _allowed(requested: int | None) -> np.ndarray:
     return np.array([True, True]) if requested is None else np.arange(2) == requested
-
-
-def _best(branch_status: np.ndarray, requested: int | None) -> np.ndarray:
-    return np.min(np.where(_allowed(requested), branch_status, _INVALID), axis=-1)
 
 
 def _columns(values: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

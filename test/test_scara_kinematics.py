@@ -11,7 +11,7 @@ import yaml
 
 from manipulator_kinematics.params import ConfigError, config_path, load_parameters
 from manipulator_kinematics.planar import wrap_angle
-from scara_kinematics.kinematics import BRANCHES, MODES, PAPER_PHI, IKStatus, Scara
+from scara_kinematics.kinematics import BRANCHES, MODES, PAPER_PHI, IKStatus, Scara, compiled_kernel
 
 DEG = math.pi / 180
 N = 10_000
@@ -157,6 +157,45 @@ def test_ik_round_trip_over_random_reachable_targets(scara: Scara, mode: str, se
     if mode != "position":
         found = np.abs(result.candidates - q[:, None, :]).max(axis=-1) < 1e-9
         assert np.all(found.any(axis=1))
+
+
+def test_the_compiled_kernel_is_the_numpy_path_for_one_target(scara: Scara) -> None:
+    """ik_kernel (one target, modes phi and fixed_phi) against the vectorised numpy path over 10^4
+    targets, seeded and not and with a branch asked for: the same statuses, selections and ties,
+    candidates within 1e-12, the same texts; reachable, singular, off-limits, unreachable and
+    non-finite targets among them, and seeds halfway between two solutions (ties)."""
+    assert compiled_kernel(scara, wait=True) is not None
+    rng = np.random.default_rng(22)
+    n = N
+    x = scara.fk(random_states(scara, rng, n // 2))
+    wide = np.column_stack([rng.uniform(-0.6, 1.4, n - n // 2), rng.uniform(-0.9, 0.9, n - n // 2),
+                            rng.uniform(-math.pi, math.pi, n - n // 2)])
+    x = np.concatenate([x, wide])
+    near_vertical = scara.l2 * rng.uniform(0.99995, 1.0, len(x[3::50]))  # sin theta1 ~ 1: singular
+    x[3::50, 1] = scara.l3 * np.sin(x[3::50, 2]) + near_vertical
+    x[4::50, 1] = scara.l3 + near_vertical  # singular at phi = 90 deg (mode fixed_phi)
+    x[::997, 0] = np.nan
+    seeds = rng.uniform(scara.limits.lower, scara.limits.upper, (n, 3))
+    both = scara.ik(x[:, :2], mode="phi", phi=x[:, 2])
+    ties = np.flatnonzero(both.valid.all(axis=1))[::10]  # seeded halfway between two solutions
+    seeds[ties] = both.candidates[ties].mean(axis=1)
+    for mode, seed, branch in (("phi", None, None), ("phi", seeds, None), ("phi", seeds, "elbow_b"),
+                               ("fixed_phi", seeds, None)):
+        phi = x[:, 2] if mode == "phi" else None
+        batch = scara.ik(x[:, :2], mode=mode, phi=phi, seed=seed, branch=branch)
+        seen = set(np.unique(batch.branch_status).tolist()) | set(np.unique(batch.status).tolist())
+        assert seen == set(range(5)), seen
+        for i in range(n):
+            one = scara.ik(x[i, :2], mode=mode, phi=None if phi is None else phi[i],
+                           seed=None if seed is None else seed[i], branch=branch)
+            np.testing.assert_allclose(one.candidates, batch.candidates[i], rtol=0.0, atol=1e-12)
+            assert np.array_equal(one.branch_status, batch.branch_status[i]), i
+            assert one.status == batch.status[i] and one.solutions.tie == batch.solutions.tie[i], i
+            # A tie is decided by the last bits of two equal distances: either tied branch is right.
+            assert one.branch == batch.branch[i] or (one.solutions.tie and one.valid.all()), i
+            if i % 50 == 0:
+                assert one.reason() == batch.reason(i), (i, one.reason(), batch.reason(i))
+        assert batch.solutions.tie.any() == (mode == "phi" and seed is not None and branch is None)
 
 
 def test_both_branches_when_both_are_valid(scara: Scara) -> None:
