@@ -2,12 +2,18 @@
 
 A parameters file looks like ``{node_or_/**: {ros__parameters: {...}}}``; nested keys become
 dotted parameter names in ROS (``excavator.boom.length``). Cores take the nested dict.
+
+Each file is parsed once per process (:func:`read_document`, kept while the file is unchanged): the
+start-up check of the command line (:func:`check_ros_arguments`), the node's values
+(:func:`given_parameters`, :func:`load_parameters`), the machine and settings readers and the bag
+tools all read that one document. Dicts are merged by one function, :func:`merge`.
 """
 
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -76,35 +82,66 @@ def load_parameters(path: str | Path, node_name: str = "/**") -> dict[str, Any]:
     """Merge the ``ros__parameters`` that apply to ``node_name`` (plain or fully qualified), the
     more specific section winning: ``/**``, then ``/**/<name>``, then ``<name>`` / ``/<ns>/<name>``.
     """
-    with open(path, encoding="utf-8") as stream:
-        document = yaml.load(stream, Loader=RosLoader) or {}
+    document = read_document(path) or {}
     if not isinstance(document, dict):
         raise ConfigError(f"{path}: not a ROS parameters file (top level is not a mapping)")
     base = node_name.rsplit("/", 1)[-1]
     keys = ["/**"] if base in ("**", "") else ["/**", f"/**/{base}", base, f"/{base}", node_name]
-    merged: dict[str, Any] = {}
+    layers = []
     for key in dict.fromkeys(keys):
         section = document.get(key)
         if isinstance(section, dict):
             parameters = section.get("ros__parameters") or {}
             if not isinstance(parameters, dict):
                 raise ConfigError(f"{path}: {key}: ros__parameters is not a mapping")
-            _deep_update(merged, parameters)
-    return merged
+            layers.append(parameters)
+    return merge(*layers)
 
 
-def check_ros_arguments(argv: Sequence[str]) -> None:
-    """Refuse, with one line naming the argument, what rcl would refuse with a traceback: a
-    ``--params-file`` that is missing, is not YAML, is not shaped ``{node: {ros__parameters: {...}}}``
-    or holds a value no ROS parameter can take (null, an empty mapping, a mixed or nested list);
-    a ``-p``/``-r`` rule without ``:=``. Only arguments inside ``--ros-args`` sections count."""
+def given_parameters(argv: Sequence[str], node_name: str = "/**") -> dict[str, Any]:
+    """The nested values the ``--params-file`` files of ``argv`` give the node ``node_name`` (fully
+    qualified), a later file winning (:func:`load_parameters` within each file). Files that do not
+    exist are left out: :func:`check_ros_arguments` refuses them before a node is built."""
+    return merge(*(load_parameters(path, node_name) for path in params_files(argv) if path.is_file()))
+
+
+def merge(*layers: Mapping[str, Any]) -> dict[str, Any]:
+    """The nested dict of ``layers`` laid over each other in order, a later one winning: a key that
+    is a mapping in both is merged key by key, any other value replaced. A new dict: no layer is
+    changed and none of their mappings or lists is shared with it (documents are parsed once and
+    kept, callers may change what they get)."""
+    out: dict[str, Any] = {}
+    for layer in layers:
+        for key, value in layer.items():
+            if isinstance(value, Mapping):
+                below = out.get(key)
+                out[key] = merge(below, value) if isinstance(below, dict) else merge(value)
+            else:
+                out[key] = list(value) if isinstance(value, list) else value
+    return out
+
+
+def read_document(path: str | Path) -> Any:
+    """The parsed YAML of ``path`` (RosLoader), parsed once per process while the file keeps its size
+    and modification time. Shared by every caller: read it, do not change it (:func:`merge` copies)."""
+    status = Path(path).stat()
+    return _parse(str(Path(path).resolve()), status.st_mtime_ns, status.st_size)
+
+
+@lru_cache(maxsize=64)
+def _parse(path: str, mtime_ns: int, size: int) -> Any:
+    with open(path, encoding="utf-8") as stream:
+        return yaml.load(stream, Loader=RosLoader)
+
+
+def ros_arguments(argv: Sequence[str]) -> list[tuple[str, str | None]]:
+    """(flag, value) of every ``--params-file``, ``-p``/``--param`` and ``-r``/``--remap`` inside
+    ``--ros-args`` sections, in order, the flag as given; value None for a flag that ends the line."""
+    found: list[tuple[str, str | None]] = []
     in_ros_args, expect = False, None
     for arg in argv:
         if expect is not None:
-            if expect == "--params-file":
-                _check_params_file(Path(arg))
-            elif ":=" not in arg or arg.startswith(":="):
-                raise ConfigError(f"{expect} {shown(arg)}: expected NAME:=VALUE")
+            found.append((expect, arg))
             expect = None
         elif arg == "--ros-args":
             in_ros_args = True
@@ -112,8 +149,26 @@ def check_ros_arguments(argv: Sequence[str]) -> None:
             in_ros_args = False
         elif in_ros_args and arg in ("--params-file", "-p", "--param", "-r", "--remap"):
             expect = arg
-    if expect is not None:
-        raise ConfigError(f"{expect}: a value must follow it")
+    return found if expect is None else [*found, (expect, None)]
+
+
+def params_files(argv: Sequence[str]) -> list[Path]:
+    """The ``--params-file`` arguments inside ``--ros-args`` sections of a command line."""
+    return [Path(value) for flag, value in ros_arguments(argv) if flag == "--params-file" and value]
+
+
+def check_ros_arguments(argv: Sequence[str]) -> None:
+    """Refuse, with one line naming the argument, what rcl would refuse with a traceback: a
+    ``--params-file`` that is missing, is not YAML, is not shaped ``{node: {ros__parameters: {...}}}``
+    or holds a value no ROS parameter can take (null, an empty mapping, a mixed or nested list);
+    a ``-p``/``-r`` rule without ``:=``. Only arguments inside ``--ros-args`` sections count."""
+    for flag, value in ros_arguments(argv):
+        if value is None:
+            raise ConfigError(f"{flag}: a value must follow it")
+        if flag == "--params-file":
+            _check_params_file(Path(value))
+        elif ":=" not in value or value.startswith(":="):
+            raise ConfigError(f"{flag} {shown(value)}: expected NAME:=VALUE")
 
 
 def _check_params_file(path: Path) -> None:
@@ -124,8 +179,7 @@ def _check_params_file(path: Path) -> None:
                               f"{MAX_FILE_BYTES >> 20} MiB a parameters file may have")
         with open(path, encoding="utf-8") as stream:
             _refuse_long_lists(path, stream)
-            stream.seek(0)
-            document = yaml.load(stream, Loader=RosLoader)
+        document = read_document(path)  # the one parse every later reader of the file shares
     except OSError as error:
         raise ConfigError(f"--params-file {path}: {error.strerror}") from None
     except yaml.YAMLError as error:
@@ -210,11 +264,3 @@ def flatten(nested: dict[str, Any], prefix: str = "") -> dict[str, Any]:
         else:
             flat[name] = value
     return flat
-
-
-def _deep_update(target: dict[str, Any], source: dict[str, Any]) -> None:
-    for key, value in source.items():
-        if isinstance(value, dict) and isinstance(target.get(key), dict):
-            _deep_update(target[key], value)
-        else:
-            target[key] = value

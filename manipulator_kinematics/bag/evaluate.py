@@ -35,13 +35,12 @@ from manipulator_kinematics.bag.cli import guarded
 from manipulator_kinematics.bag.reader import BagReader, TopicArrays
 from manipulator_kinematics.bag.topics import (
     JOINT_STATE,
-    merged,
     node_sections,
     node_settings,
     package_topics,
 )
 from manipulator_kinematics.bag.types import BagError
-from manipulator_kinematics.params import flatten, load_parameters, unflatten
+from manipulator_kinematics.params import flatten, load_parameters, merge, unflatten
 from manipulator_kinematics.registry import Machine, by_section, machines
 
 NAME = "mk_evaluate"
@@ -108,7 +107,7 @@ def load_setup(files: Sequence[Path]) -> Setup:
                 raise BagError(f"--params {path}: no such file")
             params.update(flatten(load_parameters(path)))
             for node, settings in node_sections(path).items():
-                nodes[node] = merged(nodes.get(node, {}), settings)
+                nodes[node] = merge(nodes.get(node, {}), settings)
         models = {}
         for key, section in unflatten(params).items():
             machine = by_section(key)
@@ -121,7 +120,7 @@ def load_setup(files: Sequence[Path]) -> Setup:
                 raise BagError(f"--params: {key!r} is not the section of a registered machine{hint}; "
                                f"known: {', '.join(known)}")
         defaults = node_settings()
-        settings = {name: merged(defaults.get(name, {}), nodes.get(name, {})) for name in defaults | nodes}
+        settings = {name: merge(defaults.get(name, {}), nodes.get(name, {})) for name in defaults | nodes}
         return Setup(models, settings)
     except (ValueError, yaml.YAMLError) as error:  # ConfigError (a key named) or a model's refusal
         raise BagError(f"--params: {error}") from None

@@ -11,9 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import yaml
-
-from manipulator_kinematics.params import CONFIG_DIR, ConfigError, config_path, flatten, unflatten
+from manipulator_kinematics.params import CONFIG_DIR, ConfigError, config_path, merge, read_document
 from manipulator_kinematics.registry import machines
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
@@ -43,8 +41,7 @@ def package_topics() -> dict[str, str]:
 def node_sections(path: Path) -> dict[str, dict[str, Any]]:
     """Node name -> its own ``ros__parameters`` (nested) of every node section of a parameters
     file (``name``, ``/**/name`` or ``/ns/name``; ``/**`` holds machines, not nodes)."""
-    with open(path, encoding="utf-8") as stream:
-        document = yaml.safe_load(stream) or {}
+    document = read_document(path) or {}
     if not isinstance(document, dict):
         raise ConfigError(f"{path}: not a ROS parameters file (top level is not a mapping)")
     out: dict[str, dict[str, Any]] = {}
@@ -54,13 +51,8 @@ def node_sections(path: Path) -> dict[str, dict[str, Any]]:
             if not isinstance(parameters, dict):
                 raise ConfigError(f"{path}: {key}: ros__parameters is not a mapping")
             node = str(key).rsplit("/", 1)[-1]
-            out[node] = merged(out.get(node, {}), parameters)
+            out[node] = merge(out.get(node, {}), parameters)
     return out
-
-
-def merged(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
-    """Nested parameters ``base`` with ``override``'s values, key by key (a later file wins)."""
-    return unflatten({**flatten(base), **flatten(override)})
 
 
 def config_files() -> list[Path]:
@@ -75,5 +67,5 @@ def node_settings() -> dict[str, dict[str, Any]]:
     out: dict[str, dict[str, Any]] = {}
     for path in config_files():
         for node, parameters in node_sections(path).items():
-            out[node] = merged(out.get(node, {}), parameters)
+            out[node] = merge(out.get(node, {}), parameters)
     return out

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 from typing import Any, ClassVar
 
 import yaml
@@ -39,7 +38,11 @@ from manipulator_kinematics.params import (
     RosLoader,
     config_path,
     flatten,
+    given_parameters,
     load_parameters,
+    merge,
+    params_files,
+    ros_arguments,
     unflatten,
 )
 from manipulator_kinematics.registry import Machine
@@ -48,38 +51,14 @@ from manipulator_kinematics.registry import Machine
 _RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
 
 
-def ros_arguments(argv: Sequence[str]) -> list[tuple[str, str]]:
-    """(flag, value) of every ``--params-file`` and ``-p``/``--param`` inside ``--ros-args``, in order."""
-    found, in_ros_args, expect = [], False, None
-    for arg in argv:
-        if expect is not None:
-            found.append((expect, arg))
-            expect = None
-        elif arg == "--ros-args":
-            in_ros_args = True
-        elif arg == "--":
-            in_ros_args = False
-        elif in_ros_args and arg in ("--params-file", "-p", "--param"):
-            expect = "-p" if arg == "--param" else arg
-    return found
-
-
-def params_files(argv: Sequence[str]) -> list[Path]:
-    """The ``--params-file`` arguments inside ``--ros-args`` sections of a command line."""
-    return [Path(value) for flag, value in ros_arguments(argv) if flag == "--params-file"]
-
-
 def command_line_values(node_name: str, argv: Sequence[str]) -> dict[str, Any]:
     """The parameter values the command line gives the node ``node_name`` (fully qualified), flat,
     by the one precedence rule (module docstring): params files in order, then ``-p``. A ``-p``
     value is YAML, as rcl reads it; ``-p other_node:name:=v`` applies to that node only."""
-    files: dict[str, Any] = {}
     assigned: dict[str, Any] = {}
     base = node_name.rsplit("/", 1)[-1]
     for flag, value in ros_arguments(argv):
-        if flag == "--params-file":
-            if Path(value).is_file():
-                files.update(flatten(load_parameters(value, node_name)))
+        if flag not in ("-p", "--param") or value is None:
             continue
         name, _, text = value.partition(":=")
         target, _, name = name.rpartition(":")
@@ -88,7 +67,7 @@ def command_line_values(node_name: str, argv: Sequence[str]) -> dict[str, Any]:
                 assigned[name] = yaml.load(text, Loader=RosLoader) if text else ""
             except yaml.YAMLError:  # rcl takes such a value as a string
                 assigned[name] = text
-    return {**files, **assigned}
+    return {**flatten(given_parameters(argv, node_name)), **assigned}
 
 
 def apply_precedence(node: Node, argv: Sequence[str]) -> None:
@@ -110,12 +89,10 @@ def _plain(value: Any) -> Any:
 def machine_section(node: Node, machine: Machine, argv: Sequence[str]) -> dict[str, Any]:
     """The machine description this node runs, validated (module docstring: the rules)."""
     given = unflatten(_values(node, machine.section))
-    from_file = any(machine.section in load_parameters(path, node.get_fully_qualified_name())
-                    for path in params_files(argv) if path.is_file())
-    if from_file:
+    if machine.section in given_parameters(argv, node.get_fully_qualified_name()):
         return validate(given, machine.schema, machine.section)
     default = load_parameters(config_path(machine.config_file))[machine.section]
-    return validate(_merge(default, given), machine.schema, machine.section)
+    return validate(merge(default, given), machine.schema, machine.section)
 
 
 def node_settings(
@@ -132,7 +109,7 @@ def node_settings(
         name: value for name, value in _values(node, "").items()
         if name not in _RCLPY_PARAMETERS and name.split(".", 1)[0] not in ignore
     }
-    settings = validate(_merge(defaults, unflatten(given)), schema)
+    settings = validate(merge(defaults, unflatten(given)), schema)
     declare(node, settings, schema)
     return settings
 
@@ -226,14 +203,6 @@ def _field(schema: Schema, path: list[str]) -> Any:
             return None
         spec = spec[part]
     return spec
-
-
-def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
-    out = dict(base)
-    for key, value in over.items():
-        both_sections = isinstance(value, dict) and isinstance(out.get(key), dict)
-        out[key] = _merge(out[key], value) if both_sections else value
-    return out
 
 
 __all__ = [

@@ -42,10 +42,9 @@ from manipulator_kinematics.nodes.base import (
     MachineNode,
     input_qos,
     input_reliability,
-    params_files,
 )
 from manipulator_kinematics.nodes.help import help_text, wants_help
-from manipulator_kinematics.params import ConfigError, load_parameters
+from manipulator_kinematics.params import ConfigError, given_parameters
 from manipulator_kinematics.registry import Machine, by_section, machines
 from manipulator_kinematics.scene import Solids, solids
 
@@ -143,10 +142,7 @@ class MarkersNode(MachineNode):
 
 def machine_of(argv: Sequence[str]) -> Machine:
     """The one registered machine whose section the ``--params-file`` files of ``argv`` hold."""
-    found = {
-        m.name: m for path in params_files(argv) if path.is_file()
-        for key in load_parameters(path) if (m := by_section(key)) is not None
-    }
+    found = {m.name: m for key in given_parameters(argv) if (m := by_section(key)) is not None}
     if len(found) == 1:
         return next(iter(found.values()))
     if found:
