@@ -571,9 +571,7 @@ KERNEL = Kernel("scara_kinematics.ik_kernel", _warm)
 
 
 def compiled_kernel(scara: Scara, wait: bool = False) -> ModuleType | None:
-    """The compiled kernel module if ready, else None (:class:`manipulator_kinematics.compiled.Kernel`:
-    the first single-target call starts loading it, calls take the numpy path meanwhile, the same
-    results within 1e-12). ``wait``: load it now (tests, benchmarks)."""
+    """:data:`KERNEL` once loaded, else None and its load started; ``wait``: load it first."""
     return KERNEL.get(scara._packed, wait=wait)
 
 
