@@ -12,7 +12,8 @@ anything else raises :class:`ConfigError` naming the dotted key:
 Consistency between keys (a reference angle inside its limits, lower below upper) is checked by
 the model that reads them, with :func:`require`, so the message still names the key.
 
-Each field's ``doc`` becomes the description of the ROS parameter a node declares for it.
+Each field's ``doc`` becomes the description of the ROS parameter a node declares for it, and its
+``describe()`` (what it takes: kind, range, unit) the parameter's constraints.
 
 Ranges are sanity bounds, not the machine's limits: ``Number(min=0, max=100, unit="m")`` refuses a
 link length of 1e300 m that no machine of this package can have.
@@ -71,6 +72,12 @@ class Number:
             raise ConfigError(f"{key} = {shown(value)} is outside {interval}{_unit(self.unit)}")
         return int(value) if self.integer else float(value)
 
+    def describe(self) -> str:
+        """What the field takes, for ``ros2 param describe`` and ``--help``: kind, range and unit."""
+        low = "(" if self.exclusive_min else "["
+        kind = f"{'whole ' if self.integer else ''}number in {low}{self.min:g}, {self.max:g}]"
+        return kind + (f" {self.unit}" if self.unit else "")
+
 
 @dataclass(frozen=True)
 class Numbers:
@@ -91,6 +98,10 @@ class Numbers:
     def _what(self) -> str:
         return f"{self.count} numbers" if self.count is not None else "numbers"
 
+    def describe(self) -> str:
+        count = "" if self.count is None else f"{self.count} "
+        return f"list of {count}numbers, each a {self.item.describe()}"
+
 
 @dataclass(frozen=True)
 class Names:
@@ -108,6 +119,9 @@ class Names:
         if not all(isinstance(v, str) and v for v in value) or len(set(value)) != len(value):
             raise ConfigError(f"{key}: names must be distinct non-empty strings, got {shown(value)}")
         return list(value)
+
+    def describe(self) -> str:
+        return f"list of {'' if self.count is None else f'{self.count} '}distinct names"
 
 
 @dataclass(frozen=True)
@@ -128,6 +142,11 @@ class Text:
             raise ConfigError(f"{key}: must not be empty")
         return value
 
+    def describe(self) -> str:
+        if self.choices:
+            return "one of " + ", ".join(self.choices)
+        return "text" if self.empty else "text, not empty"
+
 
 @dataclass(frozen=True)
 class Flag:
@@ -140,6 +159,9 @@ class Flag:
         if not isinstance(value, bool):
             raise ConfigError(f"{key}: expected true or false, got {shown(value)}")
         return value
+
+    def describe(self) -> str:
+        return "true or false"
 
 
 Field = Number | Numbers | Names | Text | Flag

@@ -31,7 +31,7 @@ import yaml
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from manipulator_kinematics.config import Flag, Names, Number, Numbers, Schema, Text, validate
+from manipulator_kinematics.config import Number, Schema, Text, validate
 from manipulator_kinematics.node_util import param
 from manipulator_kinematics.params import (
     ConfigError,
@@ -116,36 +116,15 @@ def node_settings(
 
 def declare(node: Node, values: Mapping[str, Any], schema: Schema, prefix: str = "") -> None:
     """Declare every value (nested) read-only: its schema field's ``doc`` (else what it takes) as
-    description, what it takes (:func:`describe`) as constraints, a single number's range."""
+    description, what it takes (the field's ``describe()``) as constraints, a single number's range."""
     for name, value in flatten(dict(values)).items():
         if value is not None:  # an optional setting left out: nothing to declare
             spec = _field(schema, name.split("."))
             bounds = None
             if isinstance(spec, Number) and math.isfinite(spec.min) and math.isfinite(spec.max):
                 bounds = (spec.min, spec.max)
-            kind = describe(spec)
-            param(node, f"{prefix}.{name}" if prefix else name, value, getattr(spec, "doc", "") or kind,
-                  bounds, kind)
-
-
-def describe(spec: Any) -> str:
-    """What a schema field takes, for ``ros2 param describe``: kind, range and unit."""
-    if isinstance(spec, Number):
-        low = "(" if spec.exclusive_min else "["
-        kind = f"{'whole ' if spec.integer else ''}number in {low}{spec.min:g}, {spec.max:g}]"
-        return kind + (f" {spec.unit}" if spec.unit else "")
-    if isinstance(spec, Numbers):
-        count = "" if spec.count is None else f"{spec.count} "
-        return f"list of {count}numbers, each a {describe(spec.item)}"
-    if isinstance(spec, Names):
-        return f"list of {'' if spec.count is None else f'{spec.count} '}distinct names"
-    if isinstance(spec, Text):
-        if spec.choices:
-            return "one of " + ", ".join(spec.choices)
-        return "text" if spec.empty else "text, not empty"
-    if isinstance(spec, Flag):
-        return "true or false"
-    return ""
+            kind = spec.describe()
+            param(node, f"{prefix}.{name}" if prefix else name, value, spec.doc or kind, bounds, kind)
 
 
 #: Reliability of a node's input subscriptions (setting ``input_reliability``). A best-effort
@@ -213,7 +192,6 @@ __all__ = [
     "apply_precedence",
     "command_line_values",
     "declare",
-    "describe",
     "input_qos",
     "input_reliability",
     "machine_section",

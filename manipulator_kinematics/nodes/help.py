@@ -12,7 +12,6 @@ from collections.abc import Mapping
 from typing import Any
 
 from manipulator_kinematics.config import REQUIRED, Schema
-from manipulator_kinematics.nodes.base import describe
 from manipulator_kinematics.params import config_path, flatten, load_parameters
 from manipulator_kinematics.plain import plain
 from manipulator_kinematics.registry import Machine, machines
@@ -72,7 +71,7 @@ def _rows(schema: Schema, defaults: Mapping[str, Any], prefix: str = "") -> list
         full = f"{prefix}.{name}" if prefix else name
         value = defaults.get(name, spec.default)
         shown = "(required)" if value is REQUIRED else ("(none)" if value is None else repr(value))
-        what = spec.doc or describe(spec)  # a machine key without a doc: its kind, range and unit
+        what = spec.doc or spec.describe()  # a machine key without a doc: its kind, range and unit
         rows.append(f"  {full} = {shown}" + (f"  # {what}" if what else ""))
     return rows
 
