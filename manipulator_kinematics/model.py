@@ -75,6 +75,8 @@ class IKStatus(IntEnum):
 
 
 _SUCCESS = int(IKStatus.SUCCESS)  # a plain int: an enum member lookup costs microseconds per call
+#: Each status as an int8 scalar: np.where of two gives int8 at once (no int64 array to convert).
+_STATUS8 = tuple(np.int8(s) for s in IKStatus)
 
 
 class RequestError(ValueError):
@@ -183,12 +185,14 @@ def select(
         return np.where(valid.any(axis=-1), first, -1), np.zeros(valid.shape[:-1], dtype=bool)
     difference = q - np.asarray(seed, dtype=float)[..., None, :]
     if weights is not None:
-        difference = difference * np.asarray(weights, dtype=float)
+        difference *= np.asarray(weights, dtype=float)
     # einsum: a fraction of the memory passes of np.sum(d * d, axis=-1) on large batches.
     cost = np.where(valid, np.einsum("...i,...i->...", difference, difference), np.inf)
-    lowest = cost.min(axis=-1, keepdims=True)
+    # The lowest cost through argmin: a min reduction over the short candidate axis costs 3x more.
+    best = np.argmin(cost, axis=-1)[..., None]
+    lowest = np.take_along_axis(cost, best, axis=-1)
     near = valid & (cost <= lowest * (1.0 + TIE_TOLERANCE) + TIE_TOLERANCE)
-    return np.where(valid.any(axis=-1), np.argmin(cost, axis=-1), -1), near.sum(axis=-1) > 1
+    return np.where(np.take_along_axis(valid, best, axis=-1)[..., 0], best[..., 0], -1), near.sum(axis=-1) > 1
 
 
 def select_parts(
@@ -229,10 +233,13 @@ def select_parts(
 def limit_status(q: np.ndarray, limits: JointLimits, tol: float = 1e-10) -> np.ndarray:
     """(..., m) SUCCESS where candidate q (..., m, n) is inside the limits, JOINT_LIMITS outside,
     UNREACHABLE where it is NaN (no solution on that branch)."""
-    exists = np.all(np.isfinite(q), axis=-1)
+    finite = np.isfinite(q)
+    exists = finite[..., 0]
+    for joint in range(1, q.shape[-1]):  # joint by joint: np.all over the short last axis costs 6x more
+        exists = exists & finite[..., joint]
     inside = limits.within(q, tol)
-    return np.where(exists, np.where(inside, IKStatus.SUCCESS, IKStatus.JOINT_LIMITS),
-                    IKStatus.UNREACHABLE).astype(np.int8)
+    return np.where(exists, np.where(inside, _STATUS8[IKStatus.SUCCESS], _STATUS8[IKStatus.JOINT_LIMITS]),
+                    _STATUS8[IKStatus.UNREACHABLE])
 
 
 def describe_limits(q: np.ndarray, limits: JointLimits) -> str:
