@@ -480,13 +480,14 @@ class Scara:
         q = np.empty(sin1.shape + (2, 3))
         theta1_a = np.arcsin(sin1, out=q[..., 0, 1])
         np.subtract(np.copysign(np.pi, theta1_a), theta1_a, out=q[..., 1, 1])
-        np.subtract(wx - self.l1, self.l2 * cos1, out=q[..., 0, 0])  # eq. (11): x_l = wx - l1 - l2 cos theta1
-        np.add(wx - self.l1, self.l2 * cos1, out=q[..., 1, 0])
+        shoulder, reach = wx - self.l1, self.l2 * cos1
+        np.subtract(shoulder, reach, out=q[..., 0, 0])  # eq. (11): x_l = wx - l1 - l2 cos theta1
+        np.add(shoulder, reach, out=q[..., 1, 0])
         q[..., 2] = wrap_angle(phi[..., None] - q[..., 1])  # theta1 + theta2 = phi
         q[~reachable] = np.nan
         status = limit_status(q, self.limits, LIMIT_TOL)
         inside = status == _SUCCESS
-        q = np.where(inside[..., None], self.limits.clip(q), q)
+        q = np.where(inside[..., None], self.limits.clip(q), q)  # within LIMIT_TOL outside: put on the limit
         singular = cos1 < self.singularity_threshold * (1.0 - 1e-9)
         status[inside & singular[..., None]] = _SINGULAR
         return q, status
