@@ -438,8 +438,8 @@ class ToolChanger:
         s5, reach = np.empty(8), np.empty(8)
         seeded = seed is not None
         selected, tie, invalid, rho = kernel.solve(
-            self._packed, self._flange(target), np.ascontiguousarray(seed) if seeded else self._packed[:6], seeded,
-            -1 if branch is None else branch, q, status, s5, reach)
+            self._packed, self._flange(target), np.ascontiguousarray(seed) if seeded else self._packed[:6],
+            seeded, -1 if branch is None else branch, q, status, s5, reach)
         diag = {"invalid": np.array(invalid), "rho": np.array(rho), "s5": s5, "reach": reach}
         return q, status, np.array(selected, dtype=np.intp), np.array(tie), diag
 
