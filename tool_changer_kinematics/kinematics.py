@@ -348,8 +348,9 @@ class ToolChanger:
             invalid = ~rigid_transform(flange)
             theta, rho, s5, reach = self._closed_form(flange, np.broadcast_to(rule, (len(flange), 2)))
             # q = theta - offset as its representative inside the limits (__init__).
-            q = theta - self._wrap_offset
-            q = np.where(q <= self._wrap_bottom, q + 2 * math.pi, q)
+            q = theta
+            q -= self._wrap_offset
+            np.add(q, 2 * math.pi, out=q, where=q <= self._wrap_bottom)
             status = limit_status(q, self._limits, LIMIT_TOL)
             singular = (s5 < self.wrist_singularity) | (rho < self.axis_singularity)[:, None]
         status[(status == _SUCCESS) & singular] = _SINGULAR
@@ -419,10 +420,12 @@ class ToolChanger:
         k1, k2 = a2 + a3 * c3, a3 * s3
         y2, x2 = o3y * k1 - o3x * k2, o3x * k1 + o3y * k2
         y23, x23 = y2 * c3 + x2 * s3, x2 * c3 - y2 * s3
-        y = np.stack([shoulder * s1, y2, s3, sphi * x23 - cphi * y23, sin5, y6], axis=-1)
-        x = np.stack([shoulder * c1, x2, c3, cphi * x23 + sphi * y23, az1_k, x6], axis=-1)
-        theta = np.where(exists[..., None], np.arctan2(y, x), np.nan)
-        return (np.ascontiguousarray(theta.transpose(1, 0, 2)), rho, np.where(exists, s5, np.nan).T, r.T)
+        y = np.stack([shoulder * s1, y2, s3, sphi * x23 - cphi * y23, sin5, y6])
+        x = np.stack([shoulder * c1, x2, c3, cphi * x23 + sphi * y23, az1_k, x6])
+        theta = np.empty(exists.shape[::-1] + (6,))
+        np.arctan2(y, x, out=theta.transpose(2, 1, 0))  # (6, 8, N) -> (N, 8, 6)
+        theta[~exists.T] = np.nan
+        return theta, rho, np.where(exists, s5, np.nan).T, r.T
 
     # ---- the compiled single call ------------------------------------------------------------------
     def compiled_kernel(self, wait: bool = False) -> ModuleType | None:
