@@ -420,10 +420,11 @@ class ToolChanger:
         k1, k2 = a2 + a3 * c3, a3 * s3
         y2, x2 = o3y * k1 - o3x * k2, o3x * k1 + o3y * k2
         y23, x23 = y2 * c3 + x2 * s3, x2 * c3 - y2 * s3
-        y = np.stack([shoulder * s1, y2, s3, sphi * x23 - cphi * y23, sin5, y6])
-        x = np.stack([shoulder * c1, x2, c3, cphi * x23 + sphi * y23, az1_k, x6])
+        pairs = ((shoulder * s1, shoulder * c1), (y2, x2), (s3, c3),
+                 (sphi * x23 - cphi * y23, cphi * x23 + sphi * y23), (sin5, az1_k), (y6, x6))
         theta = np.empty(exists.shape[::-1] + (6,))
-        np.arctan2(y, x, out=theta.transpose(2, 1, 0))  # (6, 8, N) -> (N, 8, 6)
+        for j, (y, x) in enumerate(pairs):  # theta1 ... theta6, straight into the (N, 8, 6) result
+            np.arctan2(y, x, out=theta[..., j].T)
         theta[~exists.T] = np.nan
         return theta, rho, np.where(exists, s5, np.nan).T, r.T
 
