@@ -29,13 +29,15 @@ That gives 2 x 2 x 2 = 8 candidates, in the order of :data:`BRANCHES` (index = 4
 2 elbow + wrist). Each angle is returned as the representative modulo 2 pi inside its joint's
 limits when there is one (J5's limits [0, 270] deg span more than a half turn).
 
-The steps are plain numpy on (..., 8, 6) candidate arrays, one target being a batch of one
-(:meth:`ToolChanger.candidates`); a batch runs in blocks of rows (the shared
-:func:`manipulator_kinematics.blocks.in_blocks`). One target (4, 4) runs the same steps as scalar
-loops compiled by numba (:mod:`tool_changer_kinematics.ik_kernel`, loaded by the shared
-:class:`manipulator_kinematics.compiled.Kernel`; the numpy path answers until it is ready and stays
-the reference a test compares it with): numpy's fixed cost per call, about a microsecond per
-operation, would otherwise be most of a single call.
+The steps are plain numpy on candidate arrays (``ToolChanger._closed_form``: the 8 candidates
+side by side, each angle as a (sine, cosine) pair until one arctan2 per joint into the (N, 8, 6)
+result; ``_solve``: the joint values, statuses and selection), one target being a batch of one; a
+batch runs in blocks of rows (the shared :func:`manipulator_kinematics.blocks.in_blocks`).
+One target (4, 4) runs the same steps as scalar loops compiled by numba
+(:mod:`tool_changer_kinematics.ik_kernel`, loaded by the shared
+:class:`manipulator_kinematics.compiled.Kernel`; the numpy path answers until it is ready and
+stays the reference a test compares it with): numpy's fixed cost per call, about a microsecond
+per operation, would otherwise be most of a single call.
 
 Degenerate targets, handled by a stated rule and never NaN for a solution that exists:
 
@@ -347,8 +349,7 @@ class ToolChanger:
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             invalid = ~rigid_transform(flange)
             theta, rho, s5, reach = self._closed_form(flange, np.broadcast_to(rule, (len(flange), 2)))
-            # q = theta - offset as its representative inside the limits (__init__).
-            q = theta
+            q = theta  # in place: q = theta - offset as its representative inside the limits (__init__)
             q -= self._wrap_offset
             np.add(q, 2 * math.pi, out=q, where=q <= self._wrap_bottom)
             status = limit_status(q, self._limits, LIMIT_TOL)
