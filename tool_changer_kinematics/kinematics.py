@@ -118,6 +118,10 @@ BOTTOM_TOL = 1e-12
 SHOULDER = np.repeat([1.0, -1.0], 4)
 ELBOW = np.tile(np.repeat([-1.0, 1.0], 2), 2)
 WRIST = np.tile([1.0, -1.0], 4)
+#: The elbow-up candidates (front/back shoulder x noflip/flip wrist), and each candidate's one among
+#: them: what does not depend on the elbow is computed once for these four.
+ELBOW_UP = np.flatnonzero(ELBOW < 0.0)
+ELBOW_UP_ROW = np.array([0, 1, 0, 1, 2, 3, 2, 3])
 
 _SUCCESS, _SINGULAR, _JOINT_LIMITS, _UNREACHABLE, _INVALID = (int(s) for s in IKStatus)
 _SIX = Numbers(6)
@@ -366,12 +370,13 @@ class ToolChanger:
 
         Returns theta (N, 8, 6), NaN in every joint of a candidate without a solution; rho (N,), the
         wrist centre's distance from the J1 axis; |sin theta5| (N, 8), NaN where no solution; the J3
-        origin's distance from J2 (N, 8). Inside, the candidates are rows (8, N) (the signs
-        :data:`SHOULDER`, :data:`ELBOW`, :data:`WRIST` as columns), so that every operation runs
-        along the N targets (a last axis of 8 costs numpy several times more per element).
+        origin's distance from J2 (N, 8). Inside, the candidates are rows (k, N), the signs
+        :data:`SHOULDER`, :data:`ELBOW`, :data:`WRIST` columns, so that every operation runs along
+        the N targets (a last axis of 8 costs numpy several times more per element); steps 1-3 and
+        the J3 origin run on the four rows :data:`ELBOW_UP`, the elbow's part of step 4 on all 8.
         """
         a1, a2, a3, a4, d1, d5, d6 = self._lengths
-        shoulder, elbow, wrist = SHOULDER[:, None], ELBOW[:, None], WRIST[:, None]
+        shoulder, wrist = SHOULDER[ELBOW_UP, None], WRIST[ELBOW_UP, None]
         nx, _, ax, px, ny, _, ay, py, nz, _, az, pz = np.ascontiguousarray(flange.reshape(-1, 16)[:, :12].T)
         # 1. Wrist centre and theta1 (front shoulder), element (3,4); on the J1 axis the seed's theta1.
         wx, wy, wz = px - d6 * ax, py - d6 * ay, pz - d6 * az
@@ -417,15 +422,19 @@ class ToolChanger:
         r = np.sqrt(o3x * o3x + o3y * o3y)
         exists &= (r >= self._reach[0]) & (r <= self._reach[1])
         c3 = np.clip((r * r - a2 * a2 - a3 * a3) / (2.0 * a2 * a3), -1.0, 1.0)
-        s3 = elbow * np.sqrt(1.0 - c3 * c3)
+        theta = np.empty((len(rho), 8, 6))
+        for j, (y, x) in ((0, (shoulder * s1, shoulder * c1)), (4, (sin5, az1_k)), (5, (y6, x6))):
+            theta[..., j] = np.arctan2(y, x)[ELBOW_UP_ROW].T  # theta1, theta5, theta6: as the elbow-up twin's
+        # The elbow: all 8 candidates, each from its elbow-up twin.
+        cphi, sphi, o3x, o3y, c3, exists, r = (
+            v[ELBOW_UP_ROW] for v in (cphi, sphi, o3x, o3y, c3, exists, r))
+        s3 = ELBOW[:, None] * np.sqrt(1.0 - c3 * c3)
         k1, k2 = a2 + a3 * c3, a3 * s3
         y2, x2 = o3y * k1 - o3x * k2, o3x * k1 + o3y * k2
         y23, x23 = y2 * c3 + x2 * s3, x2 * c3 - y2 * s3
-        pairs = ((shoulder * s1, shoulder * c1), (y2, x2), (s3, c3),
-                 (sphi * x23 - cphi * y23, cphi * x23 + sphi * y23), (sin5, az1_k), (y6, x6))
-        theta = np.empty(exists.shape[::-1] + (6,))
-        for j, (y, x) in enumerate(pairs):  # theta1 ... theta6, straight into the (N, 8, 6) result
-            np.arctan2(y, x, out=theta[..., j].T)
+        theta4 = (sphi * x23 - cphi * y23, cphi * x23 + sphi * y23)  # phi - theta2 - theta3
+        for j, (y, x) in ((1, (y2, x2)), (2, (s3, c3)), (3, theta4)):
+            np.arctan2(y, x, out=theta[..., j].T)  # straight into the (N, 8, 6) result
         theta[~exists.T] = np.nan
         return theta, rho, np.where(exists, s5, np.nan).T, r.T
 
