@@ -366,7 +366,7 @@ class ToolChanger:
 
     def _closed_form(self, flange: np.ndarray, rule: np.ndarray) -> tuple[np.ndarray, ...]:
         """The module docstring's steps 1-4 (eqs. 3-7) on flange poses (N, 4, 4), each angle as a pair
-        (y, x) for one arctan2 at the end. ``rule`` (N, 2) the degenerate rules' theta1 and theta6.
+        (y, x) for one arctan2 per joint at the end. ``rule`` (N, 2) the degenerate rules' theta1 and theta6.
 
         Returns theta (N, 8, 6), NaN in every joint of a candidate without a solution; rho (N,), the
         wrist centre's distance from the J1 axis; |sin theta5| (N, 8), NaN where no solution; the J3
