@@ -188,7 +188,12 @@ def select(
     cost = np.where(valid, np.einsum("...i,...i->...", difference, difference), np.inf)
     lowest = cost.min(axis=-1, keepdims=True)
     near = valid & (cost <= lowest * (1.0 + TIE_TOLERANCE) + TIE_TOLERANCE)
-    return np.where(valid.any(axis=-1), np.argmin(cost, axis=-1), -1), near.sum(axis=-1) > 1
+    chosen = np.argmin(cost, axis=-1)
+    # A seed at infinity makes every cost inf: argmin's 0 may be an invalid candidate, the first
+    # valid one is the rule's answer then.
+    chosen = np.where(np.take_along_axis(valid, chosen[..., None], axis=-1)[..., 0], chosen,
+                      np.argmax(valid, axis=-1))
+    return np.where(valid.any(axis=-1), chosen, -1), near.sum(axis=-1) > 1
 
 
 def select_parts(
