@@ -131,7 +131,7 @@ def solve(k: np.ndarray, pose: np.ndarray, seed: np.ndarray, seeded: bool, allow
             s3 = sin3 if elbow == 0 else -sin3
             theta3 = math.atan2(s3, cos3)  # eq. (6)
             a, b = a3 * s3, a3 * cos3 + a2  # eqs. (7)-(8)
-            theta2 = _principal(math.atan2(b, a) + math.atan2(-X, l2))
+            theta2 = math.atan2(b * l2 - a * X, a * l2 + b * X)  # atan2(b, a) + atan2(-X, l2)
             # Step 3, eqs. (9)-(11): A = M (theta - theta_home).
             A2 = theta2 + 0.5 * math.pi
             A3 = A2 + (theta3 - 0.5 * math.pi) if double else theta3 - 0.5 * math.pi

@@ -173,9 +173,14 @@ class Geometry:
 def axis_from_dh(theta: ArrayLike, variant: str) -> np.ndarray:
     """Axis angles [A1, A2, A3, A6] (..., 4) of D-H angles [theta1, theta2, theta3, theta5], eqs. (9)-(11).
 
-    Not wrapped: A is affine in theta.
+    Not wrapped: A is affine in theta. A = M (theta - theta_home) (:data:`AXIS_MATRIX`) written
+    out: a matrix product goes through BLAS, whose threads cost milliseconds per call on a loaded
+    machine (measured in the IK's batches).
     """
-    return (np.asarray(theta, dtype=float) - HOME_DH) @ AXIS_MATRIX[_variant(variant)].T
+    axis = np.asarray(theta, dtype=float) - HOME_DH  # eq. (9)
+    if _variant(variant) == "double":
+        axis[..., 2] += axis[..., 1]  # eqs. (10)-(11): A3 = theta2 + theta3, against the base
+    return axis
 
 
 def dh_from_axis(axis: ArrayLike, variant: str) -> np.ndarray:
@@ -194,15 +199,28 @@ def _principal(angle: np.ndarray) -> np.ndarray:
     return -wrap_angle(-angle)
 
 
+def _flange_turns(angles: np.ndarray) -> np.ndarray:
+    """The 8 candidates (..., 8, 4) of the 4 arm configurations (..., 4, 4): each on its inner
+    flange turn and, next, on the one 360 deg away (``_outer``; the flange range exceeds 360 deg)."""
+    candidates = np.repeat(angles, 2, axis=-2)
+    inner = candidates[..., 1::2, 3]
+    candidates[..., 1::2, 3] = np.where(inner < 0.0, inner + math.tau, inner - math.tau)
+    return candidates
+
+
 def _is_pose(target: np.ndarray) -> np.ndarray:
-    """(...,) True where the rotation part of poses (..., 4, 4) is a rotation (R^T R = I to
-    ROTATION_TOL entry by entry, det R > 0) and the bottom row is [0, 0, 0, 1] (to BOTTOM_TOL,
-    the sum of the deviations)."""
-    rotation = target[..., :3, :3]
-    gram = np.einsum("...ki,...kj->...ij", rotation, rotation) - np.eye(3)
+    """(...,) True where the rotation part of poses (..., 4, 4) is a rotation (its columns n, o, a
+    orthonormal: R^T R = I to ROTATION_TOL entry by entry; det R = n . (o x a) > 0) and the bottom
+    row is [0, 0, 0, 1] (to BOTTOM_TOL, the sum of the deviations)."""
+    n, o, a = target[..., :3, 0], target[..., :3, 1], target[..., :3, 2]
+
+    def dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return np.einsum("...i,...i->...", u, v)
+
+    gram = np.stack([dot(n, n) - 1.0, dot(o, o) - 1.0, dot(a, a) - 1.0, dot(n, o), dot(n, a), dot(o, a)],
+                    axis=-1)
     bottom = np.abs(target[..., 3, :] - _BOTTOM_ROW).sum(axis=-1)
-    return ((np.abs(gram) < ROTATION_TOL).all(axis=(-2, -1)) & (np.linalg.det(rotation) > 0.0)
-            & (bottom < BOTTOM_TOL))
+    return (np.abs(gram) < ROTATION_TOL).all(axis=-1) & (dot(n, np.cross(o, a)) > 0.0) & (bottom < BOTTOM_TOL)
 
 
 def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
@@ -412,12 +430,14 @@ class Palletizer:
         shape = np.broadcast_shapes(p.shape[:-1], yaw.shape)
         with np.errstate(invalid="ignore", over="ignore"):  # junk (non-finite inputs) gives NaN
             theta, c3, _, _ = self._closed_form(np.broadcast_to(p, shape + (3,)), np.broadcast_to(yaw, shape))
-        return theta, c3
+        return _flange_turns(theta), c3
 
     def _closed_form(self, p: np.ndarray, yaw: np.ndarray) -> tuple[np.ndarray, ...]:
-        """Eqs. (3)-(8) for TCP positions p (..., 3) and flange yaws (...,): theta (..., 8, 4) in
-        :data:`BRANCHES` order (NaN where the arm cannot reach), c3 (..., 2) of eq. (5) and
-        |sin theta3| (..., 2) for the front and back arm, and r (...,) the TCP's distance from axis 1.
+        """Eqs. (3)-(8) for TCP positions p (..., 3) and flange yaws (...,): theta (..., 4, 4) of
+        the arm configurations (front/back x elbow up/down) on the inner flange turn (NaN where
+        the arm cannot reach; :func:`_flange_turns` gives the 8 candidates), c3 (..., 2) of eq. (5)
+        and |sin theta3| (..., 2) for the front and back arm, and r (...,) the TCP's distance from
+        axis 1.
         """
         g = self.geometry
         px, py, pz = p[..., 0], p[..., 1], p[..., 2]
@@ -437,20 +457,20 @@ class Palletizer:
         s3 = sin3[..., None] * _ELBOW
         theta3 = np.arctan2(s3, cos3[..., None])
         # eqs. (7)-(8): (a3 s3) c2 + (a3 c3 + a2) s2 = l2 as a c2 + b s2 = l2, whose root with
-        # the horizontal equation b c2 - a s2 = X is theta2 = atan2(b, a) + atan2(-X, l2).
+        # the horizontal equation b c2 - a s2 = X is theta2 = atan2(b, a) + atan2(-X, l2): one
+        # atan2 of the product (a + i b)(l2 - i X), in (-pi, pi].
         a, b = g.a3 * s3, g.a3 * cos3[..., None] + g.a2
-        theta2 = _principal(np.arctan2(b, a) + np.arctan2(-X, l2)[..., None])
-        # eq. (4): theta5 = theta1 - yaw, on the inner turn and the one 360 deg away (per arm).
-        inner = _principal(theta1 - yaw[..., None])
-        theta5 = np.stack([inner, np.where(inner < 0.0, inner + math.tau, inner - math.tau)], axis=-1)
-        theta = np.empty(c3.shape + (2, 2, 4))  # (..., arm, elbow, flange turn, angle)
-        theta[..., 0] = theta1[..., None, None]
-        theta[..., 1] = theta2[..., None]
-        theta[..., 2] = theta3[..., None]
-        theta[..., 3] = theta5[..., None, :]
-        theta = theta.reshape(c3.shape[:-1] + (8, 4))
-        theta[~np.repeat(np.abs(c3) <= 1.0 + REACH_TOL, 4, axis=-1)] = np.nan
-        return theta, c3, sin3, r
+        X, l2 = X[..., None], l2[..., None]
+        theta2 = np.arctan2(b * l2 - a * X, a * l2 + b * X)
+        # eq. (4): theta5 = theta1 - yaw (the inner turn, in (-pi, pi]).
+        theta5 = _principal(theta1 - yaw[..., None])
+        theta = np.empty(c3.shape + (2, 4))  # (..., arm, elbow, angle)
+        theta[..., 0] = theta1[..., None]
+        theta[..., 1] = theta2
+        theta[..., 2] = theta3
+        theta[..., 3] = theta5[..., None]
+        theta[~(np.abs(c3) <= 1.0 + REACH_TOL)] = np.nan
+        return theta.reshape(c3.shape[:-1] + (4, 4)), c3, sin3, r
 
     def solve_ik(
         self,
@@ -532,6 +552,7 @@ class Palletizer:
             theta, c3, sin3, r = self._closed_form(p, yaw)
         axis = axis_from_dh(theta, self.variant)
         axis[..., 1:3] = _principal(axis[..., 1:3])  # A1 = theta1 is one already
+        axis = _flange_turns(axis)  # A6 = theta5
         # Statuses: the shared limit rule on the axis angles; SINGULAR inside the limits within
         # the thresholds (module docstring); UNREACHABLE for a tilted target; INVALID for junk.
         status = limit_status(axis, self._limits, LIMIT_TOL)
@@ -539,14 +560,13 @@ class Palletizer:
         status[(status == IKStatus.SUCCESS) & singular] = IKStatus.SINGULAR
         status[blocked] = IKStatus.UNREACHABLE
         status[invalid] = IKStatus.INVALID
-        q = axis if mode == "axis" else theta
+        q = axis if mode == "axis" else _flange_turns(theta)
         q[status >= IKStatus.UNREACHABLE] = np.nan
-        # The shared selection rule, first over the home elbow branch, then over every candidate.
-        home_choice, home_tie = select(q, np.where(allowed & _HOME, status, IKStatus.UNREACHABLE), seed=seed)
-        other_choice, other_tie = select(q, np.where(allowed, status, IKStatus.UNREACHABLE), seed=seed)
-        home = home_choice >= 0
-        selected = np.where(home, home_choice, other_choice)
-        tie = np.where(home, home_tie, other_tie)
+        # The shared selection rule over the home elbow branch if it has a valid candidate the
+        # request allows, else over every allowed candidate.
+        home = ((status == IKStatus.SUCCESS) & allowed & _HOME).any(axis=-1)
+        choice = allowed & (_HOME | ~home[:, None])
+        selected, tie = select(q, np.where(choice, status, IKStatus.UNREACHABLE), seed=seed)
         return q, status, selected, tie, home, lean, c3
 
     def _solve_one(self, kernel: ModuleType, target: np.ndarray, seed: np.ndarray | None,
