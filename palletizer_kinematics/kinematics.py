@@ -576,7 +576,7 @@ class Palletizer:
         selected, tie, home = kernel.solve(
             self._packed, np.ascontiguousarray(target).reshape(16),
             _NO_SEED if seed is None else np.ascontiguousarray(seed), seed is not None, allowed,
-            use_orientation, mode == "axis", q, status, extra,
+            bool(use_orientation), mode == "axis", q, status, extra,
         )
         selection = np.array(selected, dtype=np.intp), np.array(tie), np.array(home)
         return q, status, *selection, extra[0], extra[1:]
