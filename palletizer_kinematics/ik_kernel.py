@@ -43,7 +43,7 @@ _HOME_COUNT = 2  # the home elbow branch's candidates (either flange turn) lead 
 @njit(cache=True, error_model="numpy")
 def _principal(angle: float) -> float:
     """kinematics._principal: wrapped to (-pi, pi], the range of atan2."""
-    return -((math.pi - angle) % (2.0 * math.pi) - math.pi)
+    return math.pi - (math.pi - angle) % (2.0 * math.pi)
 
 
 @njit(cache=True, error_model="numpy")

@@ -195,8 +195,8 @@ def _variant(variant: str) -> str:
 
 
 def _principal(angle: np.ndarray) -> np.ndarray:
-    """Angles wrapped to (-pi, pi], the range of atan2 (wrap_angle's [-pi, pi) mirrored)."""
-    return -wrap_angle(-angle)
+    """Angles wrapped to (-pi, pi], the range of atan2 (planar.wrap_angle's [-pi, pi) mirrored)."""
+    return math.pi - (math.pi - angle) % math.tau
 
 
 def _flange_turns(angles: np.ndarray) -> np.ndarray:
