@@ -35,6 +35,7 @@ import time
 from pathlib import Path
 
 from peer_venv import run_worker
+from tables import print_table
 
 REPO = Path(__file__).resolve().parent.parent
 CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
@@ -202,12 +203,7 @@ def main() -> None:
     print(f"\nPalletizer IK benchmark: {os.cpu_count()} cores (load {load}), "
           f"Python {sys.version.split()[0]}, numpy {np.__version__}, variant {model.variant}; "
           f"medians over {args.rounds} rounds.\n")
-    widths = [max(len(row[i]) for row in rows + [("what", "time", "notes")]) for i in range(3)]
-    for row in [("what", "time", "notes"), None, *rows]:
-        if row is None:
-            print("|" + "|".join("-" * (w + 2) for w in widths) + "|")
-            continue
-        print("| " + " | ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) + " |")
+    print_table(("what", "time", "notes"), rows)
 
 
 if __name__ == "__main__":
