@@ -178,25 +178,18 @@ class SerialChain:
         theta = self._theta + np.where(self._prismatic, 0.0, variable)
         d = self._d + np.where(self._prismatic, variable, 0.0)
         ct, st = np.cos(theta), np.sin(theta)
-        ca = np.broadcast_to(np.cos(self._alpha), theta.shape)
-        sa = np.broadcast_to(np.sin(self._alpha), theta.shape)
-        a = np.broadcast_to(self._a, theta.shape)
-        zero, one = np.zeros_like(theta), np.ones_like(theta)
-        if self.modified:
-            rows = (
-                (ct, -st, zero, a),
-                (st * ca, ct * ca, -sa, -sa * d),
-                (st * sa, ct * sa, ca, ca * d),
-                (zero, zero, zero, one),
-            )
-        else:
-            rows = (
-                (ct, -st * ca, st * sa, a * ct),
-                (st, ct * ca, -ct * sa, a * st),
-                (zero, sa, ca, d),
-                (zero, zero, zero, one),
-            )
-        return np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)
+        ca, sa, a = np.cos(self._alpha), np.sin(self._alpha), self._a
+        A = np.zeros(theta.shape + (4, 4))
+        if self.modified:  # Rx(alpha) Tx(a) Rz(theta) Tz(d)
+            A[..., 0, 0], A[..., 0, 1], A[..., 0, 3] = ct, -st, a
+            A[..., 1, 0], A[..., 1, 1], A[..., 1, 2], A[..., 1, 3] = st * ca, ct * ca, -sa, -sa * d
+            A[..., 2, 0], A[..., 2, 1], A[..., 2, 2], A[..., 2, 3] = st * sa, ct * sa, ca, ca * d
+        else:  # Rz(theta) Tz(d) Tx(a) Rx(alpha)
+            A[..., 0, 0], A[..., 0, 1], A[..., 0, 2], A[..., 0, 3] = ct, -st * ca, st * sa, a * ct
+            A[..., 1, 0], A[..., 1, 1], A[..., 1, 2], A[..., 1, 3] = st, ct * ca, -ct * sa, a * st
+            A[..., 2, 1], A[..., 2, 2], A[..., 2, 3] = sa, ca, d
+        A[..., 3, 3] = 1.0
+        return A
 
     def fkine(self, q: ArrayLike, all_frames: bool = False, compiled: bool = True) -> np.ndarray:
         """Tool pose base A_1 ... A_n tool, shape (..., 4, 4).
@@ -257,11 +250,10 @@ class SerialChain:
     def _frames(self, q: np.ndarray) -> np.ndarray:
         """(N, n_rows + 1, 4, 4): base, base A_1, base A_1 A_2, ... (the cumulative product)."""
         links = self.link_transforms(q)
-        frames = np.empty((len(q), self.n_rows + 1, 4, 4))
-        frames[:, 0] = self.base
+        frames = [np.broadcast_to(self.base, (len(q), 4, 4))]
         for i in range(self.n_rows):
-            np.matmul(frames[:, i], links[:, i], out=frames[:, i + 1])
-        return frames
+            frames.append(frames[-1] @ links[:, i])
+        return np.stack(frames, axis=1)
 
     def _pose(self, q: np.ndarray) -> np.ndarray:
         return self._frames(q)[:, -1] @ self.tool
