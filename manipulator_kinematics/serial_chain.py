@@ -226,13 +226,14 @@ class SerialChain:
         Column i of the rows' Jacobian is (z x (p_tool - o), z) for a revolute and (z, 0) for a
         prismatic row, where z and o are the joint's axis direction and a point on it: frame i-1
         in standard D-H, frame i in modified D-H (after Rz(theta_i) Tz(d_i), which leave z_i in
-        place); coupled joints multiply it by C.
+        place); coupled joints multiply it by C. ``compiled=False``: the numpy path.
         """
         return self.fkine_jacob0(q, compiled)[1]
 
     def fkine_jacob0(self, q: ArrayLike, compiled: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """``(fkine(q), jacob0(q))`` from one walk along the chain: tool pose (..., 4, 4) and
-        Jacobian (..., 6, n), for callers that need both (velocity FK, an IK iteration)."""
+        Jacobian (..., 6, n), for callers that need both (velocity FK, an IK iteration).
+        ``compiled=False``: the numpy path."""
         q = self._joint_array(q)
         kernel = KERNEL.get() if compiled else None
         if kernel is None:
@@ -277,7 +278,7 @@ class SerialChain:
         return tuple(out.reshape(q.shape[:-1] + shape) for out, shape in zip(outputs, shapes, strict=True))
 
     def _pack(self) -> np.ndarray:
-        """The chain's constants as one float array, laid out as chain_kernel reads them (LAYOUT)."""
+        """The chain's constants as one float array, laid out as chain_kernel reads them (BASE below)."""
         rows = np.column_stack([self._a, np.cos(self._alpha), np.sin(self._alpha), self._d, self._theta,
                                 self._offset, self._prismatic])
         identity = np.eye(4)
@@ -323,6 +324,7 @@ def compiled_kernel(wait: bool = False) -> ModuleType | None:
     take the numpy path meanwhile, the same results within 1e-12). ``wait``: load it now (tests,
     benchmarks)."""
     return KERNEL.get(wait=wait)
+
 
 def evaluate_parts(function: Callable[..., Sequence[Sequence]], args: Sequence[np.ndarray],
                    dims: Sequence[tuple[int, ...]]) -> list[np.ndarray]:
