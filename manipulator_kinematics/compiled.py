@@ -13,7 +13,8 @@ cache, about half a second with numba's import; or compiles it, several seconds 
 in a daemon thread started by the first call that can use it (a machine's IK: the first single
 target; the serial chain, whose kernel also loops over batches 3-4 times faster than numpy: the
 first call). Until it is ready every call takes the numpy path: a node's first output never
-waits for numba, and an IK process that only runs batches never imports it. ``MK_COMPILED=0`` in the environment keeps every call on the numpy path.
+waits for numba, and an IK process that only runs batches never imports it. ``MK_COMPILED=0``
+in the environment keeps every call on the numpy path.
 """
 
 from __future__ import annotations
