@@ -189,10 +189,14 @@ def select(
     # einsum: a fraction of the memory passes of np.sum(d * d, axis=-1) on large batches.
     cost = np.where(valid, np.einsum("...i,...i->...", difference, difference), np.inf)
     # The lowest cost through argmin: a min reduction over the short candidate axis costs 3x more.
-    best = np.argmin(cost, axis=-1)[..., None]
-    lowest = np.take_along_axis(cost, best, axis=-1)
+    chosen = np.argmin(cost, axis=-1)
+    lowest = np.take_along_axis(cost, chosen[..., None], axis=-1)
     near = valid & (cost <= lowest * (1.0 + TIE_TOLERANCE) + TIE_TOLERANCE)
-    return np.where(np.take_along_axis(valid, best, axis=-1)[..., 0], best[..., 0], -1), near.sum(axis=-1) > 1
+    # A seed at infinity makes every cost inf: argmin's 0 may be an invalid candidate, the first
+    # valid one is the rule's answer then.
+    chosen = np.where(np.take_along_axis(valid, chosen[..., None], axis=-1)[..., 0], chosen,
+                      np.argmax(valid, axis=-1))
+    return np.where(valid.any(axis=-1), chosen, -1), near.sum(axis=-1) > 1
 
 
 def select_parts(

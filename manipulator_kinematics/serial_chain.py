@@ -8,7 +8,8 @@ given in), like Robotics Toolbox for Python's ``fkine``/``jacob0``.
 
 Every function takes joint values of shape (..., n): one configuration (n,) or any batch
 (N, n), (N, M, n); outputs carry the same leading shape. There is no Python loop over
-configurations: a batch runs the chain's straight-line code (:class:`SerialChain`) on arrays.
+configurations: a batch is one numpy computation on (N, n) arrays, or one call of the compiled
+kernel (:mod:`manipulator_kinematics.chain_kernel`, the same steps as scalar loops).
 
 Row semantics (the Robotics Toolbox's ``RevoluteDH``/``PrismaticDH`` and ``...MDH``):
 
@@ -34,10 +35,14 @@ import struct
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from itertools import chain
+from types import ModuleType
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
+
+from manipulator_kinematics.blocks import in_blocks
+from manipulator_kinematics.compiled import Kernel
 
 
 @dataclass(frozen=True)
@@ -103,15 +108,18 @@ def trotz(angle: float) -> np.ndarray:
 class SerialChain:
     """Forward kinematics and geometric Jacobian of a D-H chain, vectorised over configurations.
 
-    No 4x4 products at run time: when a chain is built, its walk (Rz(theta) Tz(d) turns the x and
-    y axes and moves the origin along z, Tx(a) Rx(alpha) moves it along x and turns y and z, then
-    the tool and the Jacobian's cross products) is traced once on symbolic parts (:class:`_Tracer`)
-    into straight-line Python with the constants folded: terms multiplied by an exact 0 vanish
-    (alpha and constant angles that are multiples of 90 deg are snapped), so a 90 deg twist is a
-    swap of axes. That one function runs on Python floats for one configuration (numpy's per-call
-    overhead would dominate 6x6 work) and on (N,) arrays for a batch, with cos and sin taken once
-    for the whole (n_rows, N) array: the same arithmetic in both, so without coupling (whose
-    matrix product may sum in another order) one configuration and a batch agree to the bit.
+    The math is the textbook's (Robotics Toolbox's ``fkine``/``jacob0``) in plain numpy on
+    (N, n) arrays: the link transforms A_i (:meth:`link_transforms`), the frames
+    base A_1 ... A_i by a cumulative product, the tool pose = the last frame times the tool, and
+    the Jacobian's columns from the frames' z axes and origins. One configuration (n,) is a
+    batch of one through the same code, so it gives the same bits as that row of a batch.
+
+    That numpy path is the reference. A call costs numpy's fixed price per ufunc (tens of them,
+    about 100 us for FK + Jacobian of one configuration), so the same steps also run as scalar
+    loops compiled by numba (:mod:`manipulator_kinematics.chain_kernel`, loaded in the background
+    by the first call, :class:`manipulator_kinematics.compiled.Kernel`): once it is ready every
+    call, one configuration or a batch, goes through it (benchmarks/bench_serial_chain.py: one call
+    ~1-2 us; batches several times faster than numpy's). ``compiled=False`` asks for the numpy path.
     """
 
     def __init__(
@@ -141,7 +149,8 @@ class SerialChain:
         self._theta = np.array([r.theta for r in rows], dtype=float)
         self._offset = np.array([r.offset for r in rows], dtype=float)
         self._prismatic = np.array([r.prismatic for r in rows], dtype=bool)
-        self._programs: dict[int, tuple[Callable, list[tuple[int, ...]]]] = {}  # traced on first use
+        self._jacobian_shape = (6, self.n)
+        self._packed = self._pack()
 
     @property
     def n(self) -> int:
@@ -169,116 +178,152 @@ class SerialChain:
         theta = self._theta + np.where(self._prismatic, 0.0, variable)
         d = self._d + np.where(self._prismatic, variable, 0.0)
         ct, st = np.cos(theta), np.sin(theta)
-        ca = np.broadcast_to(np.cos(self._alpha), theta.shape)
-        sa = np.broadcast_to(np.sin(self._alpha), theta.shape)
-        a = np.broadcast_to(self._a, theta.shape)
-        zero, one = np.zeros_like(theta), np.ones_like(theta)
-        if self.modified:
-            rows = (
-                (ct, -st, zero, a),
-                (st * ca, ct * ca, -sa, -sa * d),
-                (st * sa, ct * sa, ca, ca * d),
-                (zero, zero, zero, one),
-            )
-        else:
-            rows = (
-                (ct, -st * ca, st * sa, a * ct),
-                (st, ct * ca, -ct * sa, a * st),
-                (zero, sa, ca, d),
-                (zero, zero, zero, one),
-            )
-        return np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)
+        ca, sa, a = np.cos(self._alpha), np.sin(self._alpha), self._a
+        A = np.zeros(theta.shape + (4, 4))
+        if self.modified:  # Rx(alpha) Tx(a) Rz(theta) Tz(d)
+            A[..., 0, 0], A[..., 0, 1], A[..., 0, 3] = ct, -st, a
+            A[..., 1, 0], A[..., 1, 1], A[..., 1, 2], A[..., 1, 3] = st * ca, ct * ca, -sa, -sa * d
+            A[..., 2, 0], A[..., 2, 1], A[..., 2, 2], A[..., 2, 3] = st * sa, ct * sa, ca, ca * d
+        else:  # Rz(theta) Tz(d) Tx(a) Rx(alpha)
+            A[..., 0, 0], A[..., 0, 1], A[..., 0, 2], A[..., 0, 3] = ct, -st * ca, st * sa, a * ct
+            A[..., 1, 0], A[..., 1, 1], A[..., 1, 2], A[..., 1, 3] = st, ct * ca, -ct * sa, a * st
+            A[..., 2, 1], A[..., 2, 2], A[..., 2, 3] = sa, ca, d
+        A[..., 3, 3] = 1.0
+        return A
 
-    def fkine(self, q: ArrayLike, all_frames: bool = False) -> np.ndarray:
+    def fkine(self, q: ArrayLike, all_frames: bool = False, compiled: bool = True) -> np.ndarray:
         """Tool pose base A_1 ... A_n tool, shape (..., 4, 4).
 
         With ``all_frames`` the link frames instead, shape (..., n_rows + 1, 4, 4): index 0 is the base
         frame, index i the frame of link i (base A_1 ... A_i; the tool transform not applied).
+        ``compiled=False``: the numpy path (the reference), not the compiled kernel.
         """
+        q = self._joint_array(q)
+        kernel = KERNEL.get() if compiled else None
         if all_frames:
-            return self._run(q, _FRAMES)[0]
-        return self._run(q, _POSE)[0]
+            shape = (self.n_rows + 1, 4, 4)
+            if kernel is None:
+                return self._numpy(q, self._frames, shape)
+            frames = np.empty(q.shape[:-1] + shape)
+            if q.ndim == 1:
+                kernel.frames(self._packed, q, frames)
+            else:
+                kernel.frames_batch(self._packed, q.reshape(-1, self.n), frames.reshape(-1, *shape))
+            return frames
+        if kernel is None:
+            return self._numpy(q, self._pose, (4, 4))
+        if q.ndim == 1:
+            pose = np.empty((4, 4))
+            kernel.fkine(self._packed, q, pose)
+            return pose
+        pose = np.empty(q.shape[:-1] + (4, 4))
+        kernel.fkine_batch(self._packed, q.reshape(-1, self.n), pose.reshape(-1, 4, 4))
+        return pose
 
-    def jacob0(self, q: ArrayLike) -> np.ndarray:
+    def jacob0(self, q: ArrayLike, compiled: bool = True) -> np.ndarray:
         """Geometric Jacobian in the world frame, shape (..., 6, n): rows vx, vy, vz, wx, wy, wz.
 
         Column i of the rows' Jacobian is (z x (p_tool - o), z) for a revolute and (z, 0) for a
         prismatic row, where z and o are the joint's axis direction and a point on it: frame i-1
         in standard D-H, frame i in modified D-H (after Rz(theta_i) Tz(d_i), which leave z_i in
-        place); coupled joints multiply it by C.
+        place); coupled joints multiply it by C. ``compiled=False``: the numpy path.
         """
-        return self._coupled(self._run(q, _JACOBIAN)[0])
+        return self.fkine_jacob0(q, compiled)[1]
 
-    def fkine_jacob0(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    def fkine_jacob0(self, q: ArrayLike, compiled: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """``(fkine(q), jacob0(q))`` from one walk along the chain: tool pose (..., 4, 4) and
-        Jacobian (..., 6, n), for callers that need both (velocity FK, an IK iteration)."""
-        pose, jacobian = self._run(q, _POSE | _JACOBIAN)
-        return pose, self._coupled(jacobian)
-
-    def _run(self, q: ArrayLike, what: int) -> list[np.ndarray]:
-        """The traced program ``what`` on q (..., n); its outputs as arrays of shape (..., *dims)."""
+        Jacobian (..., 6, n), for callers that need both (velocity FK, an IK iteration).
+        ``compiled=False``: the numpy path."""
         q = self._joint_array(q)
-        traced = self._programs.get(what)
-        if traced is None:
-            traced = self._programs[what] = self._trace(what)
-        program, dims = traced
+        kernel = KERNEL.get() if compiled else None
+        if kernel is None:
+            return self._numpy(q, self._pose_jacobian, (4, 4), self._jacobian_shape)
         if q.ndim == 1:
-            v = (q if self._identity else self.coupling @ q) + self._offset
-            return evaluate_parts(program, (np.cos(v), np.sin(v), v), dims)
-        flat = q.reshape(-1, self.n).T
-        # (n_rows, N) in C order: each row's values one contiguous array for the program.
-        v = np.add(flat if self._identity else self.coupling @ flat, self._offset[:, None], order="C")
-        out = evaluate_parts(program, (np.cos(v), np.sin(v), v), dims)
-        return [result.reshape(q.shape[:-1] + shape) for result, shape in zip(out, dims, strict=True)]
+            pose, jacobian = np.empty((4, 4)), np.empty(self._jacobian_shape)
+            kernel.fkine_jacob0(self._packed, q, pose, jacobian)
+            return pose, jacobian
+        pose, jacobian = np.empty(q.shape[:-1] + (4, 4)), np.empty(q.shape[:-1] + self._jacobian_shape)
+        kernel.fkine_jacob0_batch(self._packed, q.reshape(-1, self.n), pose.reshape(-1, 4, 4),
+                                  jacobian.reshape(-1, *self._jacobian_shape))
+        return pose, jacobian
 
-    def _trace(self, what: int) -> tuple[Callable, list[tuple[int, ...]]]:
-        """Straight-line function (cos, sin, v) -> lists of parts of the outputs ``what`` (for
-        :func:`evaluate_parts`), and their shapes; cos, sin, v are indexed by row: theta_i = v_i of
-        a revolute, d_i = v_i of a prismatic row (offsets included)."""
-        tracer = _Tracer()
-        const = tracer.constant
-        frame = [[const(x) for x in self.base[:3, j]] for j in range(4)]
-        frames = [frame]
-        for i, row in enumerate(self.rows):
-            if row.prismatic:
-                cos, sin = const(_snap(math.cos(row.theta))), const(_snap(math.sin(row.theta)))
-                d = tracer.variable(f"v[{i}]")
-            else:
-                cos, sin, d = tracer.variable(f"cos[{i}]"), tracer.variable(f"sin[{i}]"), const(row.d)
-            shift = const(row.a), const(_snap(math.cos(row.alpha))), const(_snap(math.sin(row.alpha)))
-            if self.modified:
-                frame = _turn(_shift(frame, *shift), cos, sin, d)
-            else:
-                frame = _shift(_turn(frame, cos, sin, d), *shift)
-            frames.append(frame)
-        tool = _times(frames[-1], [[const(x) for x in self.tool[:3, j]] for j in range(4)])
-        outputs, dims = [], []
-        if what & _POSE:
-            outputs.append(_entries(tool))
-            dims.append((4, 4))
-        if what & _FRAMES:
-            outputs.append([x for f in frames for x in _entries(f)])
-            dims.append((len(frames), 4, 4))
-        if what & _JACOBIAN:
-            columns = []
-            axes = frames[1:] if self.modified else frames[:-1]
-            for row, (_, _, z, o) in zip(self.rows, axes, strict=True):
-                if row.prismatic:
-                    columns.append(z + [const(0.0)] * 3)
-                else:
-                    columns.append(_cross(z, [t - x for t, x in zip(tool[3], o, strict=True)]) + z)
-            outputs.append([column[k] for k in range(6) for column in columns])
-            dims.append((6, len(self.rows)))
-        return tracer.compile(outputs, f"serial_chain_{what}"), dims
+    # ---- the numpy path, on (N, n) arrays ---------------------------------------------------------
+    def _frames(self, q: np.ndarray) -> np.ndarray:
+        """(N, n_rows + 1, 4, 4): base, base A_1, base A_1 A_2, ... (the cumulative product)."""
+        links = self.link_transforms(q)
+        frames = [np.broadcast_to(self.base, (len(q), 4, 4))]
+        for i in range(self.n_rows):
+            frames.append(frames[-1] @ links[:, i])
+        return np.stack(frames, axis=1)
 
-    def _coupled(self, jacobian: np.ndarray) -> np.ndarray:
-        return jacobian if self._identity else jacobian @ self.coupling
+    def _pose(self, q: np.ndarray) -> np.ndarray:
+        return self._frames(q)[:, -1] @ self.tool
+
+    def _pose_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        frames = self._frames(q)
+        pose = frames[:, -1] @ self.tool
+        axes = frames[:, 1:] if self.modified else frames[:, :-1]
+        z, origin = axes[..., :3, 2], axes[..., :3, 3]  # (N, n_rows, 3) each
+        prismatic = self._prismatic[:, None]
+        linear = np.where(prismatic, z, np.cross(z, pose[:, None, :3, 3] - origin))
+        angular = np.where(prismatic, 0.0, z)
+        jacobian = np.concatenate([linear, angular], axis=-1).swapaxes(-1, -2)  # (N, 6, n_rows)
+        return pose, jacobian if self._identity else jacobian @ self.coupling
+
+    def _numpy(self, q: np.ndarray, function: Callable, *shapes: tuple[int, ...]) -> Any:
+        """``function`` on q (..., n) as rows (N, n), in blocks (in_blocks); outputs (..., *shape)."""
+        outputs = in_blocks(function, q.reshape(-1, self.n))
+        if len(shapes) == 1:
+            return outputs.reshape(q.shape[:-1] + shapes[0])
+        return tuple(out.reshape(q.shape[:-1] + shape) for out, shape in zip(outputs, shapes, strict=True))
+
+    def _pack(self) -> np.ndarray:
+        """The chain's constants as one float array, laid out as chain_kernel reads them (BASE below)."""
+        rows = np.column_stack([self._a, np.cos(self._alpha), np.sin(self._alpha), self._d, self._theta,
+                                self._offset, self._prismatic])
+        identity = np.eye(4)
+        head = [self.n_rows, self.n, self.modified, self._identity, np.array_equal(self.base, identity),
+                np.array_equal(self.tool, identity)]
+        constants = (head, self.base.ravel(), self.tool.ravel(), rows.ravel(), self.coupling.ravel())
+        return np.concatenate(constants)
 
     def _joint_array(self, q: ArrayLike) -> np.ndarray:
-        q = np.asarray(q, dtype=float)
+        q = np.ascontiguousarray(q, dtype=float)  # the layout the kernel is compiled for
         if q.ndim == 0 or q.shape[-1] != self.n:
             raise ValueError(f"joint values must have shape (..., {self.n}), got {q.shape}")
         return q
+
+
+#: Layout of SerialChain._packed, the chain's constants for chain_kernel: n_rows, n, and 1.0 or
+#: 0.0 for modified D-H, identity coupling, identity base, identity tool; then base and tool
+#: (16 each, row-major); then per row a, cos alpha, sin alpha, d, theta, offset, prismatic (ROW
+#: floats); then the coupling C (n_rows x n, row-major).
+BASE, TOOL, ROWS, ROW = 6, 22, 38, 7
+
+
+def _warm(kernel: ModuleType) -> None:
+    """Run each kernel function once (numba loads or compiles it) for one configuration and a batch."""
+    packed = SerialChain([revolute(a=0.5), prismatic(alpha=1.0)], coupling=[[1.0], [2.0]])._packed
+    q, pose, frames, jacobian = np.zeros(1), np.empty((4, 4)), np.empty((3, 4, 4)), np.empty((6, 1))
+    kernel.fkine(packed, q, pose)
+    kernel.frames(packed, q, frames)
+    kernel.fkine_jacob0(packed, q, pose, jacobian)
+    q, pose = np.zeros((2, 1)), np.empty((2, 4, 4))
+    frames, jacobian = np.empty((2, 3, 4, 4)), np.empty((2, 6, 1))
+    kernel.fkine_batch(packed, q, pose)
+    kernel.frames_batch(packed, q, frames)
+    kernel.fkine_jacob0_batch(packed, q, pose, jacobian)
+
+
+#: The compiled chain (:mod:`manipulator_kinematics.chain_kernel`), see manipulator_kinematics.compiled.
+KERNEL = Kernel("manipulator_kinematics.chain_kernel", _warm)
+
+
+def compiled_kernel(wait: bool = False) -> ModuleType | None:
+    """The compiled kernel module if ready, else None (the first call starts loading it; calls
+    take the numpy path meanwhile, the same results within 1e-12). ``wait``: load it now (tests,
+    benchmarks)."""
+    return KERNEL.get(wait=wait)
 
 
 def evaluate_parts(function: Callable[..., Sequence[Sequence]], args: Sequence[np.ndarray],
@@ -466,143 +511,3 @@ def _homogeneous(matrix: ArrayLike | None, what: str) -> np.ndarray:
 
 #: Cases per chunk of a batch in evaluate_parts (the temporaries then fit in the cache).
 _CHUNK = 4096
-# What a traced program returns (bit flags).
-_POSE, _FRAMES, _JACOBIAN = 1, 2, 4
-
-
-class _Part:
-    """One scalar of the traced walk: a constant (``name`` None) or ``sign`` times a variable."""
-
-    __slots__ = ("name", "sign", "tracer", "value")
-
-    def __init__(self, tracer: _Tracer, name: int | None, sign: float = 1.0, value: float = 0.0) -> None:
-        self.tracer, self.name, self.sign, self.value = tracer, name, sign, value
-
-    def __neg__(self) -> _Part:
-        if self.name is None:
-            return self.tracer.constant(-self.value)
-        return _Part(self.tracer, self.name, -self.sign)
-
-    def __add__(self, other: _Part) -> _Part:
-        emit = self.tracer.emit
-        if other.name is None:
-            if self.name is None:
-                return self.tracer.constant(self.value + other.value)
-            self, other = other, self
-        if self.name is None:  # constant + sign * variable
-            if self.value == 0.0:
-                return other
-            if other.sign > 0:
-                return emit("{} + " + repr(self.value), other.name)
-            return emit("{} - " + repr(self.value), other.name, sign=-1.0)
-        if self.sign == other.sign:
-            return emit("{} + {}", self.name, other.name, sign=self.sign)
-        first, second = (self, other) if self.sign > 0 else (other, self)
-        return emit("{} - {}", first.name, second.name)
-
-    def __sub__(self, other: _Part) -> _Part:
-        return self + -other
-
-    def __mul__(self, other: _Part) -> _Part:
-        if other.name is None:
-            self, other = other, self
-        if self.name is None:  # constant * (sign * variable or constant)
-            if self.value == 0.0:
-                return self
-            if other.name is None:
-                return self.tracer.constant(self.value * other.value)
-            sign = other.sign * math.copysign(1.0, self.value)
-            if abs(self.value) == 1.0:
-                return _Part(self.tracer, other.name, sign)
-            return self.tracer.emit(repr(abs(self.value)) + " * {}", other.name, sign=sign)
-        return self.tracer.emit("{} * {}", self.name, other.name, sign=self.sign * other.sign)
-
-
-class _Tracer:
-    """Records +, -, * on :class:`_Part` as straight-line code, folding constants, then compiles
-    what the outputs need of it into a Python function of (cos, sin, v)."""
-
-    def __init__(self) -> None:
-        self.lines: list[tuple[str, tuple[int, ...]]] = []  # line i: (template, operand lines)
-
-    def constant(self, value: float) -> _Part:
-        return _Part(self, None, value=float(value))
-
-    def variable(self, expression: str) -> _Part:
-        return self.emit(expression)
-
-    def emit(self, template: str, *operands: int, sign: float = 1.0) -> _Part:
-        self.lines.append((template, operands))
-        return _Part(self, len(self.lines) - 1, sign)
-
-    def compile(self, outputs: list[list[_Part]], name: str) -> Callable:
-        """The function; its lines are the ones the outputs need, and a local is reused once its
-        value is dead, so a batch holds few (N,) temporaries at a time."""
-        needed = {part.name for parts in outputs for part in parts} - {None}
-        for line in range(len(self.lines) - 1, -1, -1):
-            if line in needed:
-                needed.update(self.lines[line][1])
-        kept = sorted(needed)
-        last_use = {operand: line for line in kept for operand in self.lines[line][1]}
-        last_use.update((part.name, math.inf) for parts in outputs for part in parts)
-        local: dict[int, str] = {}
-        free: list[str] = []
-        body = [f"def {name}(cos, sin, v):"]
-        for line in kept:
-            template, operands = self.lines[line]
-            arguments = [local[operand] for operand in operands]
-            free += [local[operand] for operand in set(operands) if last_use[operand] == line]
-            local[line] = free.pop() if free else f"t{len(set(local.values()))}"
-            body.append(f"    {local[line]} = {template.format(*arguments)}")
-
-        def text(part: _Part) -> str:
-            if part.name is None:
-                return repr(part.value)
-            return local[part.name] if part.sign > 0 else f"-{local[part.name]}"
-
-        lists = ("[" + ", ".join(map(text, parts)) + "]" for parts in outputs)
-        body.append(f"    return ({', '.join(lists)},)")
-        source = "\n".join(body)
-        namespace: dict[str, Any] = {}
-        exec(compile(source, f"<{name}>", "exec"), namespace)  # generated above from the D-H table alone
-        function = namespace[name]
-        function.source = source  # to read what a chain runs: chain._programs[...][0].source
-        return function
-
-
-def _turn(frame: list[list[_Part]], cos: _Part, sin: _Part, d: _Part) -> list[list[_Part]]:
-    """frame Rz(theta) Tz(d), frame as [x, y, z, p] (columns of three parts)."""
-    x, y, z, p = frame
-    return [[cos * a + sin * b for a, b in zip(x, y)], [cos * b - sin * a for a, b in zip(x, y)], z,
-            [pi + d * zi for pi, zi in zip(p, z)]]
-
-
-def _shift(frame: list[list[_Part]], a: _Part, ca: _Part, sa: _Part) -> list[list[_Part]]:
-    """frame Tx(a) Rx(alpha)."""
-    x, y, z, p = frame
-    return [x, [ca * b + sa * c for b, c in zip(y, z)], [ca * c - sa * b for b, c in zip(y, z)],
-            [pi + a * xi for pi, xi in zip(p, x)]]
-
-
-def _times(frame: list[list[_Part]], other: list[list[_Part]]) -> list[list[_Part]]:
-    """frame @ other, both as [x, y, z, p]."""
-    x, y, z, p = frame
-    columns = [[u[k] * col[0] + v[k] * col[1] + w[k] * col[2] for k in range(3)]
-               for col, (u, v, w) in zip(other, [(x, y, z)] * 4)]
-    columns[3] = [c + pk for c, pk in zip(columns[3], p)]
-    return columns
-
-
-def _cross(u: list[_Part], v: list[_Part]) -> list[_Part]:
-    return [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
-
-
-def _entries(frame: list[list[_Part]]) -> list[_Part]:
-    """The 16 entries, row-major, of the 4x4 transform [x, y, z, p]."""
-    zero, one = frame[0][0].tracer.constant(0.0), frame[0][0].tracer.constant(1.0)
-    return [frame[j][k] for k in range(3) for j in range(4)] + [zero, zero, zero, one]
-
-
-def _snap(value: float) -> float:
-    """cos/sin of a constant angle, exactly 0 or +-1 at multiples of 90 deg (so those terms vanish)."""
-    return float(round(value)) if abs(value - round(value)) < 1e-12 else value

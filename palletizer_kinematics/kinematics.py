@@ -55,49 +55,46 @@ singular when |sin theta3| is below ``singular_elbow`` (arm stretched or folded)
 within ``singular_radius`` of axis 1 (theta1 undetermined): the 4x4 Jacobian of (x, y, z, yaw)
 has det = -r a2 a3 sin(theta3).
 
-Speed (benchmarks/bench_palletizer_ik.py): the IK runs on scalar parts, Python floats for one
-target and (N,) arrays for a batch (:func:`evaluate_angle_parts`, one code path), every angle kept as a
-(sine, cosine)-like pair until one numpy arctan2 over all of them, so one target and a batch give
-the same bits (the math and numpy arctan2 differ in the last bit). numpy on the (8, 4) candidate
-arrays of one target would cost several times the arithmetic in per-call overhead. Returned
-angles A1..A3 and theta1..theta3 lie in [-pi, pi], the flange in [-2 pi, 2 pi].
+The IK is plain numpy on (..., 8, 4) candidate arrays (:meth:`Palletizer._closed_form`: eqs.
+(3)-(8) on every branch at once; statuses by the shared
+:func:`~manipulator_kinematics.model.limit_status` on the axis angles plus this machine's
+SINGULAR/UNREACHABLE/INVALID rules; the shared :func:`~manipulator_kinematics.model.select`), one
+target being a batch of one, large batches in blocks (:func:`manipulator_kinematics.blocks.in_blocks`).
+A single target runs the same steps compiled (:mod:`palletizer_kinematics.ik_kernel`, numba, loaded
+in the background by the first single call: :func:`compiled_kernel`); numpy is the reference, a test
+compares the two. Returned angles A2, A3 and theta2, theta3 lie in (-pi, pi] (as atan2's), A1 =
+theta1 in [-pi, pi], the flange in [-2 pi, 2 pi]. Speed: benchmarks/bench_palletizer_ik.py and
+docs/palletizer.md.
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cached_property
+from types import ModuleType
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from manipulator_kinematics.blocks import in_blocks
+from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.config import Names, Number, Numbers, Text, require, validate
 from manipulator_kinematics.model import (
+    TIE_TOLERANCE,
     IKSolutions,
     IKStatus,
     RequestError,
     describe_limits,
-    select_parts,
+    limit_status,
+    select,
 )
 from manipulator_kinematics.params import config_path, load_parameters
 from manipulator_kinematics.planar import wrap_angle
-from manipulator_kinematics.serial_chain import (
-    JointLimits,
-    SerialChain,
-    evaluate_angle_parts,
-    evaluate_parts,
-    parts_clip,
-    parts_pose_checks,
-    parts_rows,
-    parts_sqrt,
-    parts_where,
-    revolute,
-    transl,
-)
+from manipulator_kinematics.serial_chain import JointLimits, SerialChain, revolute, transl
 from palletizer_kinematics.statics import MASS_SCHEMA, MassModel
 
 SECTION = "palletizer"
@@ -127,11 +124,13 @@ ROTATION_TOL = 1e-6
 BOTTOM_TOL = 1e-12
 #: |c3| of eq. (5) up to 1 + this is reachable (the stretched or folded arm, to round-off).
 REACH_TOL = 1e-12
-# Plain ints for the scalar parts (an IntEnum member costs a lookup and a conversion per use).
-_SUCCESS, _SINGULAR, _JOINT_LIMITS, _UNREACHABLE, _INVALID = (int(s) for s in IKStatus)
-_ALL_BRANCHES = (True,) * len(BRANCHES)
-# The home elbow branch's candidates (either flange turn) lead BRANCHES.
-_HOME_COUNT = sum(b.startswith(HOME_BRANCH) for b in BRANCHES)
+_ALL_BRANCHES = np.ones(len(BRANCHES), dtype=bool)
+#: The home elbow branch's candidates (either flange turn).
+_HOME = np.array([b.startswith(HOME_BRANCH) for b in BRANCHES])
+#: Eq. (6)'s sign of sin theta3: elbow up, elbow down.
+_ELBOW = np.array([1.0, -1.0])
+_NO_SEED = np.zeros(4)
+_BOTTOM_ROW = np.array([0.0, 0.0, 0.0, 1.0])
 _ANGLE = Number(min=-2 * math.tau, max=2 * math.tau, unit="rad")
 
 #: The ``palletizer:`` section of a parameters file (manipulator_kinematics.config).
@@ -174,9 +173,14 @@ class Geometry:
 def axis_from_dh(theta: ArrayLike, variant: str) -> np.ndarray:
     """Axis angles [A1, A2, A3, A6] (..., 4) of D-H angles [theta1, theta2, theta3, theta5], eqs. (9)-(11).
 
-    Not wrapped: A is affine in theta.
+    Not wrapped: A is affine in theta. A = M (theta - theta_home) (:data:`AXIS_MATRIX`) written
+    out: a matrix product goes through BLAS, whose threads cost milliseconds per call on a loaded
+    machine (measured in the IK's batches).
     """
-    return (np.asarray(theta, dtype=float) - HOME_DH) @ AXIS_MATRIX[_variant(variant)].T
+    axis = np.asarray(theta, dtype=float) - HOME_DH  # eq. (9)
+    if _variant(variant) == "double":
+        axis[..., 2] += axis[..., 1]  # eqs. (10)-(11): A3 = theta2 + theta3, against the base
+    return axis
 
 
 def dh_from_axis(axis: ArrayLike, variant: str) -> np.ndarray:
@@ -188,6 +192,55 @@ def _variant(variant: str) -> str:
     if variant not in AXIS_MATRIX:
         raise ValueError(f"unknown variant {variant!r}; known: {', '.join(VARIANTS)}")
     return variant
+
+
+def _principal(angle: np.ndarray) -> np.ndarray:
+    """Angles wrapped to (-pi, pi], the range of atan2 (planar.wrap_angle's [-pi, pi) mirrored)."""
+    return math.pi - (math.pi - angle) % math.tau
+
+
+def _flange_turns(angles: np.ndarray) -> np.ndarray:
+    """The 8 candidates (..., 8, 4) of the 4 arm configurations (..., 4, 4): each on its inner
+    flange turn and, next, on the one 360 deg away (``_outer``; the flange range exceeds 360 deg)."""
+    candidates = np.repeat(angles, 2, axis=-2)
+    inner = candidates[..., 1::2, 3]
+    candidates[..., 1::2, 3] = np.where(inner < 0.0, inner + math.tau, inner - math.tau)
+    return candidates
+
+
+def _is_pose(target: np.ndarray) -> np.ndarray:
+    """(...,) True where the rotation part of poses (..., 4, 4) is a rotation (its columns n, o, a
+    orthonormal: R^T R = I to ROTATION_TOL entry by entry; det R = n . (o x a) > 0) and the bottom
+    row is [0, 0, 0, 1] (to BOTTOM_TOL, the sum of the deviations)."""
+    n, o, a = target[..., :3, 0], target[..., :3, 1], target[..., :3, 2]
+
+    def dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return np.einsum("...i,...i->...", u, v)
+
+    gram = np.stack([dot(n, n) - 1.0, dot(o, o) - 1.0, dot(a, a) - 1.0, dot(n, o), dot(n, a), dot(o, a)],
+                    axis=-1)
+    bottom = np.abs(target[..., 3, :] - _BOTTOM_ROW).sum(axis=-1)
+    return (np.abs(gram) < ROTATION_TOL).all(axis=-1) & (dot(n, np.cross(o, a)) > 0.0) & (bottom < BOTTOM_TOL)
+
+
+def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
+    """Run the kernel once (numba loads it from its cache or compiles it)."""
+    q, status, extra = np.empty((8, 4)), np.empty(8, dtype=np.int8), np.empty(3)
+    home = np.eye(4)
+    home[:3, 3] = 1.5, 0.0, 1.4
+    home[1:3, 1:3] = -home[1:3, 1:3]  # z down
+    ik_kernel.solve(packed, home.reshape(16), _NO_SEED, False, _ALL_BRANCHES, True, True, q, status, extra)
+
+
+#: The single-target kernel (:mod:`palletizer_kinematics.ik_kernel`), see manipulator_kinematics.compiled.
+KERNEL = Kernel("palletizer_kinematics.ik_kernel", _warm)
+
+
+def compiled_kernel(model: Palletizer, wait: bool = False) -> ModuleType | None:
+    """The compiled kernel module if ready, else None (:class:`manipulator_kinematics.compiled.Kernel`:
+    the first single-target call starts loading it, calls take the numpy path meanwhile, the same
+    results within 1e-12). ``wait``: load it now (tests, benchmarks)."""
+    return KERNEL.get(model._packed, wait=wait)
 
 
 class Palletizer:
@@ -226,11 +279,14 @@ class Palletizer:
         self.singular_radius = float(singular_radius)
         self.tilt_tolerance = float(tilt_tolerance)
         self._to_dh = np.linalg.inv(AXIS_MATRIX[self.variant])
-        # Plain floats for the scalar parts of the IK (numpy scalars cost more than the arithmetic).
-        self._lengths = tuple(float(v) for v in (geometry.a1, geometry.a2, geometry.a3, geometry.a4,
-                                                 geometry.d1, geometry.d6))
-        self._bounds = limits.bounds(LIMIT_TOL)
         self._lean_min = math.cos(self.tilt_tolerance)  # cos of the largest tilt taken
+        # The compiled kernel's constants (palletizer_kinematics.ik_kernel), in its order.
+        self._packed = np.array([
+            geometry.a1, geometry.a2, geometry.a3, geometry.a4, geometry.d1, geometry.d6,
+            *(limits.lower - LIMIT_TOL), *(limits.upper + LIMIT_TOL),
+            self.singular_elbow, self.singular_radius, self._lean_min, float(self.variant == "double"),
+            ROTATION_TOL, BOTTOM_TOL, REACH_TOL, TIE_TOLERANCE,
+        ], dtype=float)
 
     # ---- construction -------------------------------------------------------------------------
     @classmethod
@@ -372,19 +428,49 @@ class Palletizer:
         p = np.asarray(position, dtype=float)
         yaw = np.asarray(yaw, dtype=float)
         shape = np.broadcast_shapes(p.shape[:-1], yaw.shape)
-        pose = np.zeros(shape + (16,))
-        pose[..., 3:12:4] = p
-        pose[..., 15] = 1.0
-        turn = parts_rows(np.stack([np.cos(yaw), np.sin(yaw)], axis=-1))
-        # Junk (non-finite inputs) gives NaN, not warnings.
-        with np.errstate(invalid="ignore", over="ignore"):
-            y, x, extra = evaluate_parts(self._closed_form, [parts_rows(pose), turn], ((4, 6), (4, 6), (8,)))
-            angles = np.arctan2(y, x).reshape(shape + (4, 6))
-        extra = extra.reshape(shape + (8,))
-        theta = np.repeat(angles[..., :4], 2, axis=-2)
-        theta[..., 1::2, 3] -= np.copysign(math.tau, theta[..., 1::2, 3])
-        theta[~np.repeat(np.abs(extra[..., 4:6]) <= 1.0 + REACH_TOL, 4, axis=-1)] = np.nan
-        return theta, extra[..., 4:6]
+        with np.errstate(invalid="ignore", over="ignore"):  # junk (non-finite inputs) gives NaN
+            theta, c3, _, _ = self._closed_form(np.broadcast_to(p, shape + (3,)), np.broadcast_to(yaw, shape))
+        return _flange_turns(theta), c3
+
+    def _closed_form(self, p: np.ndarray, yaw: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Eqs. (3)-(8) for TCP positions p (..., 3) and flange yaws (...,): theta (..., 4, 4) of
+        the arm configurations (front/back x elbow up/down) on the inner flange turn (NaN where
+        the arm cannot reach; :func:`_flange_turns` gives the 8 candidates), c3 (..., 2) of eq. (5)
+        and |sin theta3| (..., 2) for the front and back arm, and r (...,) the TCP's distance from
+        axis 1.
+        """
+        g = self.geometry
+        px, py, pz = p[..., 0], p[..., 1], p[..., 2]
+        # eq. (3): theta1 = atan2(py, px), the back arm 180 deg further; on axis 1 (r = 0) theta1
+        # is free: 0 by rule.
+        r = np.hypot(px, py)
+        front = np.where(r == 0.0, 0.0, np.arctan2(py, px))
+        theta1 = np.stack([front, front - np.copysign(math.pi, front)], axis=-1)
+        # eq. (5): the wrist point (frame {4}) at X = rho - a1 - a4, Z = pz + d6 - d1 from axis 2,
+        # rho = +-r the signed radius along the arm's plane.
+        X = np.stack([r, -r], axis=-1) - g.a1 - g.a4
+        l2 = (g.d1 - g.d6 - pz)[..., None]  # eq. (7)'s right-hand side, = -Z
+        c3 = (X * X + l2 * l2 - g.a2 * g.a2 - g.a3 * g.a3) / (2.0 * g.a2 * g.a3)
+        cos3 = np.clip(c3, -1.0, 1.0)
+        sin3 = np.sqrt(1.0 - cos3 * cos3)
+        # eq. (6): theta3 = atan2(+-sqrt(1 - c3^2), c3), elbow up then down: (..., arm, elbow)
+        s3 = sin3[..., None] * _ELBOW
+        theta3 = np.arctan2(s3, cos3[..., None])
+        # eqs. (7)-(8): (a3 s3) c2 + (a3 c3 + a2) s2 = l2 as a c2 + b s2 = l2, whose root with
+        # the horizontal equation b c2 - a s2 = X is theta2 = atan2(b, a) + atan2(-X, l2): one
+        # atan2 of the product (a + i b)(l2 - i X), in (-pi, pi].
+        a, b = g.a3 * s3, g.a3 * cos3[..., None] + g.a2
+        X, l2 = X[..., None], l2[..., None]
+        theta2 = np.arctan2(b * l2 - a * X, a * l2 + b * X)
+        # eq. (4): theta5 = theta1 - yaw (the inner turn, in (-pi, pi]).
+        theta5 = _principal(theta1 - yaw[..., None])
+        theta = np.empty(c3.shape + (2, 4))  # (..., arm, elbow, angle)
+        theta[..., 0] = theta1[..., None]
+        theta[..., 1] = theta2
+        theta[..., 2] = theta3
+        theta[..., 3] = theta5[..., None]
+        theta[~(np.abs(c3) <= 1.0 + REACH_TOL)] = np.nan
+        return theta.reshape(c3.shape[:-1] + (4, 4)), c3, sin3, r
 
     def solve_ik(
         self,
@@ -394,6 +480,7 @@ class Palletizer:
         mode: str | None = None,
         seed: ArrayLike | None = None,
         branch: str | None = None,
+        compiled: bool = True,
     ) -> IKSolutions:
         """Every candidate for TCP target poses (..., 4, 4) (module docstring: solutions, rule).
 
@@ -401,7 +488,9 @@ class Palletizer:
         within ``tilt_tolerance``); otherwise the seed's flange yaw A1 - A6 is kept, or the home
         yaw 0 without a seed. ``mode`` ``axis`` (default: the configured variant's axis angles)
         or ``dh``; ``seed`` (4,) or (..., 4) in the mode's angles; ``branch`` one of
-        :data:`BRANCHES` or of :data:`ARM_BRANCHES` (either flange turn).
+        :data:`BRANCHES` or of :data:`ARM_BRANCHES` (either flange turn). One target (4, 4) runs
+        the compiled kernel (:func:`compiled_kernel`) unless not ``compiled``; a batch, and one
+        target until the kernel is loaded, the numpy code (:meth:`_solve_block`), the reference.
         """
         mode = self._mode(mode)
         allowed = self._allowed(branch)
@@ -409,131 +498,88 @@ class Palletizer:
         if target.ndim < 2 or target.shape[-2:] != (4, 4):
             raise RequestError(f"targets must have shape (..., 4, 4), got {target.shape}", IKStatus.INVALID)
         shape = target.shape[:-2]
-        pose = target.reshape(shape + (16,))
         if seed is not None:
             seed = np.asarray(seed, dtype=float)
             if seed.ndim == 0 or seed.shape[-1] != 4 or not np.all(np.isfinite(seed)):
                 raise RequestError(f"seed must be 4 finite angles, got {seed.tolist()}", IKStatus.INVALID)
             if seed.shape != shape + (4,):
                 seed = np.broadcast_to(seed, shape + (4,))
-        if use_orientation:
-            turn = pose[..., 0:5:4]  # (R00, R10): the TCP x axis, eq. (2)'s flange yaw
+        kernel = compiled_kernel(self) if shape == () and compiled else None
+        if kernel is not None:
+            q, status, selected, tie, home, lean, c3 = self._solve_one(kernel, target, seed, allowed,
+                                                                      use_orientation, mode)
         else:
-            yaw = np.zeros(shape) if seed is None else seed[..., 0] - seed[..., 3]
-            turn = np.stack([np.cos(yaw), np.sin(yaw)], axis=-1)
-        judge = functools.partial(self._judge, allowed=allowed, use_orientation=use_orientation, mode=mode)
-        extra, q, status, choice = evaluate_angle_parts(
-            self._closed_form, [parts_rows(pose), parts_rows(turn)], ((4, 6), (4, 6), (8,)),
-            judge, [] if seed is None else [parts_rows(seed)], ((8, 4), (8,), (3,)),
-        )
-        if len(shape) > 1:  # evaluate_angle_parts' batches are flat
-            extra, q, status, choice = (out.reshape(shape + out.shape[1:])
-                                        for out in (extra, q, status, choice))
-        q[status >= _UNREACHABLE] = np.nan
+            block = functools.partial(self._solve_block, allowed=allowed, use_orientation=use_orientation,
+                                      mode=mode)
+            flat = in_blocks(block, target.reshape(-1, 4, 4), None if seed is None else seed.reshape(-1, 4))
+            q, status, selected, tie, home, lean, c3 = (out.reshape(shape + out.shape[1:]) for out in flat)
         context = {
-            "lean": extra[..., 2],
-            "c3": extra[..., 4:6],
+            "lean": lean,
+            "c3": c3,
             "oriented": use_orientation,
             "mode": mode,
             "seeded": seed is not None,
             "branch": branch,
-            "home": choice[..., 2] != 0.0,
+            "home": home,
         }
         return IKSolutions(
             q=q,
-            status=status.astype(np.int8),
+            status=status,
             branches=BRANCHES,
-            selected=choice[..., 0].astype(np.intp),
-            tie=choice[..., 1] != 0.0,
+            selected=selected,
+            tie=tie,
             explain=lambda solutions, index: self._explain(solutions, index, context),
         )
 
-    def _closed_form(self, pose: Sequence, turn: Sequence) -> tuple[list, list, list]:
-        """Eqs. (3)-(8) on scalar parts (floats for one target, (N,) arrays for a batch:
-        :func:`evaluate_angle_parts`), every angle as a pair (y, x) for one arctan2 afterwards: sums of
-        angles are products of pairs, so no trigonometry runs here and one target and a batch give
-        the same bits.
-
-        ``pose`` the 16 entries of the TCP pose, row-major; ``turn`` (cos, sin) of the flange yaw
-        times any positive number. Returns y (24) and x (24): per configuration (front/back arm x
-        elbow up/down) [theta1, theta2, theta3, theta5, A2, A3] (A3 of the configured variant;
-        A1 = theta1, A6 = theta5); and [finite, rigid, cos(tilt), r, c3 front, c3 back, |sin theta3|
-        front, back] with r the TCP's distance from axis 1.
+    def _solve_block(self, target: np.ndarray, seed: np.ndarray | None, *, allowed: np.ndarray,
+                     use_orientation: bool, mode: str) -> tuple[np.ndarray, ...]:
+        """Targets (N, 4, 4), seeds (N, 4) or None: eqs. (3)-(8), the statuses and the selection
+        rule (module docstring). Returns q (N, 8, 4) in the ``mode``'s angles (NaN where
+        UNREACHABLE or INVALID), status (N, 8), selected (N,), tie (N,), whether the home elbow
+        branch was selected (N,), cos(tilt) (N,) and c3 (N, 2) of eq. (5).
         """
-        px, py, az, pz = pose[3], pose[7], pose[10], pose[11]
-        cy, sy = turn
-        a1, a2, a3, a4, d1, d6 = self._lengths
-        finite, rigid = parts_pose_checks(pose, ROTATION_TOL, BOTTOM_TOL)
-        # eq. (3): theta1 = atan2(py, px); on axis 1 (r = 0) theta1 is free: 0 by rule.
-        r = parts_sqrt(px * px + py * py)
-        on_axis = r == 0.0
-        c1, s1 = parts_where(on_axis, 1.0, px), parts_where(on_axis, 0.0, py)
-        l2 = d1 - d6 - pz  # eq. (7)'s right-hand side
-        y, x, c3s, s3s = [], [], [], []
-        for arm in (1.0, -1.0):  # front, back (theta1 + pi: the signed radius rho = -r)
-            c1k, s1k = arm * c1, arm * s1
-            wrist = arm * r - a1 - a4  # X of the wrist point from axis 2
-            c3 = (wrist * wrist + l2 * l2 - a2 * a2 - a3 * a3) / (2.0 * a2 * a3)  # eq. (5)
-            c3e = parts_clip(c3)
-            s3 = parts_sqrt(1.0 - c3e * c3e)
-            c3s.append(c3)
-            s3s.append(s3)
-            # eq. (4): theta5 = theta1 - yaw
-            y5, x5 = s1k * cy - c1k * sy, c1k * cy + s1k * sy
-            for elbow in (1.0, -1.0):  # up (the home pose's branch), down
-                s = elbow * s3  # eq. (6)
-                # eqs. (7)-(8): theta2 = atan2(b, a) + atan2(-X, l2), a = a3 s3, b = a3 c3 + a2
-                a, b = a3 * s, a3 * c3e + a2
-                y2, x2 = b * l2 - a * wrist, a * l2 + b * wrist
-                # A2 = theta2 + 90 deg; A3 = theta3 - 90 deg (single) or theta2 + theta3 (double).
-                if self.variant == "double":
-                    y3, x3 = y2 * c3e + x2 * s, x2 * c3e - y2 * s
-                else:
-                    y3, x3 = -c3e, s
-                y += [s1k, y2, s, y5, x2, y3]
-                x += [c1k, x2, c3e, x5, -y2, x3]
-        return y, x, [finite, rigid, -az, r, *c3s, *s3s]
+        rotation, p = target[:, :3, :3], target[:, :3, 3]
+        finite = np.isfinite(target).all(axis=(-2, -1))
+        lean = -rotation[:, 2, 2]  # cos of the tool z axis' tilt from straight down
+        with np.errstate(invalid="ignore", over="ignore"):  # junk (non-finite targets) gives NaN
+            if use_orientation:
+                invalid = ~(finite & _is_pose(target))
+                blocked = invalid | (lean < self._lean_min)
+                yaw = np.arctan2(rotation[:, 1, 0], rotation[:, 0, 0])  # eq. (4)'s atan2(ny, nx)
+            else:
+                invalid = blocked = ~finite
+                yaw = np.zeros(len(target)) if seed is None else seed[:, 0] - seed[:, 3]
+            theta, c3, sin3, r = self._closed_form(p, yaw)
+        axis = axis_from_dh(theta, self.variant)
+        axis[..., 1:3] = _principal(axis[..., 1:3])  # A1 = theta1 is one already
+        axis = _flange_turns(axis)  # A6 = theta5
+        # Statuses: the shared limit rule on the axis angles; SINGULAR inside the limits within
+        # the thresholds (module docstring); UNREACHABLE for a tilted target; INVALID for junk.
+        status = limit_status(axis, self._limits, LIMIT_TOL)
+        singular = (np.repeat(sin3, 4, axis=-1) < self.singular_elbow) | (r < self.singular_radius)[:, None]
+        status[(status == IKStatus.SUCCESS) & singular] = IKStatus.SINGULAR
+        status[blocked] = IKStatus.UNREACHABLE
+        status[invalid] = IKStatus.INVALID
+        q = axis if mode == "axis" else _flange_turns(theta)
+        q[status >= IKStatus.UNREACHABLE] = np.nan
+        # The shared selection rule over the home elbow branch if it has a valid candidate the
+        # request allows, else over every allowed candidate.
+        home = ((status == IKStatus.SUCCESS) & allowed & _HOME).any(axis=-1)
+        choice = allowed & (_HOME | ~home[:, None])
+        selected, tie = select(q, np.where(choice, status, IKStatus.UNREACHABLE), seed=seed)
+        return q, status, selected, tie, home, lean, c3
 
-    def _judge(self, angles: Sequence, extra: Sequence, seed: Sequence | None = None, *,
-               allowed: tuple[bool, ...], use_orientation: bool, mode: str) -> tuple[list, list, list]:
-        """Statuses and the selection rule (module docstring) on scalar parts, like
-        :meth:`_closed_form`: one target in floats, a batch in arrays, the same bits.
-
-        ``angles`` and ``extra`` from :meth:`_closed_form` (after the arctan2); ``seed`` 4 of the
-        ``mode``'s angles or None; ``allowed`` the 8 candidates a requested branch leaves.
-        Returns the 8 candidates' angles, their statuses and [selected, tie, the home elbow branch
-        was selected].
-        """
-        finite, rigid, lean, r, *arms = extra
-        invalid = (finite == 0.0) | ((rigid == 0.0) if use_orientation else False)
-        blocked = invalid | ((lean < self._lean_min) if use_orientation else False)
-        failure = _UNREACHABLE + invalid * (_INVALID - _UNREACHABLE)
-        bounds = self._bounds
-        candidates, status = [], []
-        # Statuses by arithmetic on booleans (kind = JOINT_LIMITS - inside (JOINT_LIMITS - singular)
-        # is SUCCESS, SINGULAR or JOINT_LIMITS): parts_where per candidate would cost more than the
-        # rest of the IK for one target.
-        for config in range(4):
-            arm = config // 2
-            reach = (abs(arms[arm]) <= 1.0 + REACH_TOL) & (blocked == 0)
-            singular = (arms[2 + arm] < self.singular_elbow) | (r < self.singular_radius)
-            theta1, theta2, theta3, a6, a2, a3 = angles[6 * config : 6 * config + 6]
-            a1 = theta1
-            base = ((a1 >= bounds[0]) & (a1 <= bounds[1]) & (a2 >= bounds[2]) & (a2 <= bounds[3])
-                    & (a3 >= bounds[4]) & (a3 <= bounds[5]))
-            # The other flange turn, 360 deg away (A6 = theta5 in every mode and variant).
-            outer = a6 - (1.0 - 2.0 * (a6 < 0.0)) * math.tau
-            q1, q2, q3 = (a1, a2, a3) if mode == "axis" else (theta1, theta2, theta3)
-            for flange in (a6, outer):
-                inside = base & (flange >= bounds[6]) & (flange <= bounds[7])
-                kind = _JOINT_LIMITS - inside * (_JOINT_LIMITS - singular)
-                candidates += [q1, q2, q3, flange]
-                status.append(failure + reach * (kind - failure))
-        home_choice, home_tie = select_parts(candidates, status, seed=seed, allowed=allowed[:_HOME_COUNT])
-        other_choice, other_tie = select_parts(candidates, status, seed=seed, allowed=allowed)
-        home = home_choice >= 0
-        choice = [parts_where(home, home_choice, other_choice), parts_where(home, home_tie, other_tie), home]
-        return candidates, status, choice
+    def _solve_one(self, kernel: ModuleType, target: np.ndarray, seed: np.ndarray | None,
+                   allowed: np.ndarray, use_orientation: bool, mode: str) -> tuple[np.ndarray, ...]:
+        """:meth:`_solve_block`'s outputs for one target (4, 4) through the compiled kernel."""
+        q, status, extra = np.empty((8, 4)), np.empty(8, dtype=np.int8), np.empty(3)
+        selected, tie, home = kernel.solve(
+            self._packed, np.ascontiguousarray(target).reshape(16),
+            _NO_SEED if seed is None else np.ascontiguousarray(seed), seed is not None, allowed,
+            bool(use_orientation), mode == "axis", q, status, extra,
+        )
+        selection = np.array(selected, dtype=np.intp), np.array(tie), np.array(home)
+        return q, status, *selection, extra[0], extra[1:]
 
     def _mode(self, mode: str | None) -> str:
         if mode is None:
@@ -543,13 +589,14 @@ class Palletizer:
         return mode
 
     @staticmethod
-    def _allowed(branch: str | None) -> tuple[bool, ...]:
+    def _allowed(branch: str | None) -> np.ndarray:
+        """(8,) the candidates a requested branch leaves to the selection."""
         if branch is None:
             return _ALL_BRANCHES
         if branch in BRANCHES:
-            return tuple(b == branch for b in BRANCHES)
+            return np.array([b == branch for b in BRANCHES])
         if branch in ARM_BRANCHES:
-            return tuple(b.startswith(branch) and b[len(branch) :] in ("", "_outer") for b in BRANCHES)
+            return np.array([b in (branch, f"{branch}_outer") for b in BRANCHES])
         raise RequestError(f"unknown branch {branch!r}; known: {', '.join(ARM_BRANCHES + BRANCHES[1::2])}")
 
     def _explain(self, solutions: IKSolutions, index: tuple[int, ...], context: dict[str, Any]) -> str:

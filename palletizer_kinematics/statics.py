@@ -40,15 +40,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from manipulator_kinematics.config import Number
-
-if TYPE_CHECKING:
-    from palletizer_kinematics.kinematics import Palletizer
 
 _KG = Number(min=0.0, max=10_000.0, unit="kg")
 _M = Number(min=-10.0, max=10.0, unit="m")
@@ -118,7 +115,21 @@ class MassModel:
         return MassModel(**{**values, "payload": float(payload)})
 
 
-def moments(model: Palletizer, variant: str) -> tuple[float, float]:
+class _Arms(Protocol):
+    a2: float
+    a3: float
+
+
+class Arm(Protocol):
+    """What the statics read of a robot (a ``kinematics.Palletizer``): the arm lengths, the mass
+    model and the variant. A protocol, so that kinematics imports this module and not the reverse."""
+
+    geometry: _Arms
+    masses: MassModel
+    variant: str
+
+
+def moments(model: Arm, variant: str) -> tuple[float, float]:
     """(P, Q) in N m of the module docstring for ``variant`` (the crank and main rod only in ``double``)."""
     m, g = model.masses, model.geometry
     double = variant == "double"
@@ -133,7 +144,7 @@ def moments(model: Palletizer, variant: str) -> tuple[float, float]:
     return m.gravity * p, m.gravity * q
 
 
-def holding_torques(model: Palletizer, axis: ArrayLike, variant: str | None = None) -> np.ndarray:
+def holding_torques(model: Arm, axis: ArrayLike, variant: str | None = None) -> np.ndarray:
     """[T2, T3] (..., 2) N m holding axis angles (..., 4) of ``variant`` (default: the model's): eqs. 12-15.
 
     Axis angles are [A1, A2, A3, A6] in that variant's convention; A1 and A6 turn about vertical

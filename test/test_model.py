@@ -100,3 +100,14 @@ def test_one_failure_rule_on_every_machine(name: str, target: tuple[float, float
     assert not result.ok and result.failure(branch=branch) is expected, result.note()
     geometric = result.status[[result.branches.index(branch)]] if branch else result.status
     assert (expected is IKStatus.UNREACHABLE) == bool(np.all(geometric >= IKStatus.UNREACHABLE))
+
+
+def test_a_seed_at_infinity_selects_a_valid_candidate() -> None:
+    """Every distance to an infinite seed is inf: the rule still picks a valid candidate."""
+    q = np.array([[[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]]])
+    status = np.array([[int(IKStatus.JOINT_LIMITS), int(IKStatus.SUCCESS), int(IKStatus.SUCCESS)]])
+    for seed in ([np.inf, 0.0], [-np.inf, np.inf], [np.nan, 0.0]):
+        selected, _ = select(q, status, seed=np.array(seed))
+        assert selected[0] in (1, 2), seed
+    selected, _ = select(q[0], status[0], seed=np.array([np.inf, np.inf]))
+    assert int(selected) == 1

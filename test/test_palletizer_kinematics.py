@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from manipulator_kinematics.compiled import enabled
 from manipulator_kinematics.config import ConfigError
 from manipulator_kinematics.model import (
     IKStatus,
@@ -26,6 +27,7 @@ from palletizer_kinematics.kinematics import (
     HOME_DH,
     Palletizer,
     axis_from_dh,
+    compiled_kernel,
     dh_from_axis,
 )
 
@@ -229,7 +231,8 @@ def mixed_targets(model: Palletizer, n: int) -> np.ndarray:
 
 @pytest.mark.parametrize("variant", ["single", "double"])
 def test_batch_equals_one_by_one(variant: str) -> None:
-    # One target runs on Python floats, a batch on arrays: the same steps and the same bits.
+    # One target runs through the compiled kernel (numpy until it is loaded), a batch through the
+    # numpy code: the same steps, so the same results to the last bits (1e-12).
     model = Palletizer.default(variant)
     targets = mixed_targets(model, 300).reshape(3, 100, 4, 4)
     seeds = RNG.uniform(model.limits.lower, model.limits.upper, size=(3, 100, 4))
@@ -251,10 +254,47 @@ def test_batch_equals_one_by_one(variant: str) -> None:
             if seed is not None and seed.ndim > 1:
                 options["seed"] = seed[index]
             one = model.solve_ik(targets[index], **options)
-            np.testing.assert_array_equal(one.q, batch.q[index])
+            np.testing.assert_allclose(one.q, batch.q[index], rtol=0, atol=1e-12)
             np.testing.assert_array_equal(one.status, batch.status[index])
             assert (int(one.selected), bool(one.tie)) == (int(batch.selected[index]), bool(batch.tie[index]))
             assert one.note() == batch.note(index)
+
+
+@pytest.mark.skipif(not enabled(), reason="MK_COMPILED=0: the kernel is off")
+@pytest.mark.parametrize("variant", ["single", "double"])
+def test_compiled_kernel_equals_the_numpy_path(variant: str) -> None:
+    # The single call's kernel against the numpy code (the reference) on one batch: 6 x 2000
+    # targets per variant, every status among them (singular: arm near stretched), seeded or not,
+    # a requested branch, both modes.
+    model = Palletizer.default(variant)
+    assert compiled_kernel(model, wait=True) is not None
+    n = 2000
+    targets = mixed_targets(model, n)
+    stretched = model.dh_angles(random_axes(model, n // 10))
+    stretched[:, 2] = RNG.uniform(-0.02, 0.02, n // 10)
+    targets[7::10] = model.fkine_dh(stretched)
+    targets[8::10][::2, 2, 3] = np.inf
+    seeds = RNG.uniform(model.limits.lower, model.limits.upper, size=(n, 4))
+    for options in (
+        {},
+        {"seed": seeds},
+        {"mode": "dh", "seed": model.dh_angles(seeds)},
+        {"use_orientation": False, "seed": seeds},
+        {"branch": "back_elbow_up"},
+        {"branch": "front_elbow_down_outer", "seed": seeds, "mode": "dh"},
+    ):
+        numpy = model.solve_ik(targets, **options)
+        assert set(numpy.status.ravel().tolist()) == set(range(5))  # every status occurs
+        seed = options.get("seed")
+        for i in range(n):
+            if seed is not None:
+                options["seed"] = seed[i]
+            one = model.solve_ik(targets[i], **options)
+            np.testing.assert_allclose(one.q, numpy.q[i], rtol=0, atol=1e-12)
+            np.testing.assert_array_equal(one.status, numpy.status[i])
+            assert (int(one.selected), bool(one.tie)) == (int(numpy.selected[i]), bool(numpy.tie[i]))
+            assert one.status.dtype == numpy.status.dtype and one.selected.shape == ()
+        assert one.note() == numpy.note(n - 1)
 
 
 def test_selection_is_the_shared_rule(model: Palletizer) -> None:

@@ -11,6 +11,7 @@ from manipulator_kinematics.serial_chain import (
     DHRow,
     JointLimits,
     SerialChain,
+    compiled_kernel,
     evaluate_parts,
     parts_sqrt,
     parts_where,
@@ -169,7 +170,7 @@ def test_joint_limits_report_the_side_of_a_violation() -> None:
 
 
 def product_of_links(chain: SerialChain, q: np.ndarray) -> np.ndarray:
-    """base A_1 ... A_n tool from link_transforms: plain 4x4 products, independent of the traced walk."""
+    """base A_1 ... A_n tool from link_transforms: plain 4x4 products, apart from the chain's own."""
     links = chain.link_transforms(q)
     pose = np.broadcast_to(chain.base, links.shape[:-3] + (4, 4))
     for i in range(chain.n_rows):
@@ -177,19 +178,21 @@ def product_of_links(chain: SerialChain, q: np.ndarray) -> np.ndarray:
     return pose @ chain.tool
 
 
+@pytest.mark.parametrize("compiled", [False, True])
 @pytest.mark.parametrize("modified", [False, True])
-def test_fkine_jacob0_equals_link_products_and_central_differences(modified: bool) -> None:
+def test_fkine_jacob0_equals_link_products_and_central_differences(modified: bool, compiled: bool) -> None:
+    assert not compiled or compiled_kernel(wait=True) is not None
     rng = np.random.default_rng(11 + modified)
     for _ in range(20):
         chain = random_chain(rng, modified)
         q = rng.uniform(-PI, PI, (7, chain.n))
-        pose, jacobian = chain.fkine_jacob0(q)
+        pose, jacobian = chain.fkine_jacob0(q, compiled=compiled)
         assert pose.shape == (7, 4, 4) and jacobian.shape == (7, 6, chain.n)
         np.testing.assert_allclose(pose, product_of_links(chain, q), atol=1e-13)
         for k in (0, 6):
             np.testing.assert_allclose(jacobian[k], numeric_jacobian(chain, q[k]), atol=1e-8)
-            one_pose, one_jacobian = chain.fkine_jacob0(q[k])
-            np.testing.assert_array_equal(one_pose, pose[k])  # floats and arrays: the same arithmetic
+            one_pose, one_jacobian = chain.fkine_jacob0(q[k], compiled=compiled)
+            np.testing.assert_array_equal(one_pose, pose[k])  # one state = a batch of one: the same steps
             np.testing.assert_array_equal(one_jacobian, jacobian[k])
 
 

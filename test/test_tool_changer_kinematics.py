@@ -229,10 +229,60 @@ def test_batches_equal_single_targets_and_keep_their_shape(arm: ToolChanger) -> 
     batch = arm.solve_ik(arm.fkine(q), seed=seeds)
     assert batch.q.shape == (3, 4, 8, 6) and batch.selected.shape == (3, 4)
     for index in [(0, 0), (2, 3), (1, 2)]:
-        single = arm.solve_ik(arm.fkine(q[index]), seed=seeds[index])
+        single = arm.solve_ik(arm.fkine(q[index]), seed=seeds[index], compiled=False)  # the numpy path
         np.testing.assert_array_equal(single.q, batch.q[index])
         assert int(single.selected) == int(batch.selected[index])
     assert arm.twist(q, np.ones(6)).shape == (3, 4, 6) and arm.pose(q)[1].shape == (3, 4, 4)
+
+
+def mixed_targets(arm: ToolChanger, n: int, seed: int) -> np.ndarray:
+    """Tool poses with every status: reachable ones (in the limits and out of them), at the wrist
+    singularity, with the wrist centre on the J1 axis, random ones (mostly out of reach), and ones
+    that are not poses (NaN, inf, not rigid)."""
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(arm.limits.lower - 0.5, arm.limits.upper + 0.5, (n, 6))
+    q[1::7, 4] = rng.choice([0.0, PI], len(q[1::7]))  # sin q5 = 0
+    q[2::7, 4] = rng.normal(0.0, 0.01, len(q[2::7]))  # near it
+    T = arm.fkine(q)
+    random = slice(3, None, 7)
+    T[random, :3, :3] = quaternion_matrix(rng.normal(size=(len(T[random]), 4)))
+    T[random, :3, 3] = rng.uniform(-2.0, 2.0, (len(T[random]), 3))
+    axis = slice(4, None, 7)  # the wrist centre on the J1 axis, exactly or nearly
+    offset = rng.normal(0.0, 1e-3, (len(T[axis]), 2)) * rng.integers(0, 2, (len(T[axis]), 1))
+    T[axis, :2, 3] = T[axis, :2, 2] * arm.d[5] + offset
+    T[5::97, 0, 3] = np.nan
+    T[6::97, 1, 1] = np.inf
+    T[12::97, :3, :3] *= 1.01
+    return T
+
+
+@pytest.mark.parametrize("tooled", [False, True])
+def test_the_compiled_kernel_is_the_numpy_path_for_one_target(arm: ToolChanger, tooled: bool) -> None:
+    """ik_kernel (one target) against the vectorised numpy path over 10^4 targets, seeded and not
+    and with a branch asked for: the same statuses, selections, ties and texts, q within 1e-12."""
+    model = arm
+    if tooled:
+        params = section()
+        params["tool_xyz"], params["tool_rpy"] = [0.05, -0.02, 0.3], [0.3, -0.2, 1.1]
+        model = ToolChanger.from_parameters(params)
+    assert model.compiled_kernel(wait=True) is not None
+    T = mixed_targets(model, 10_000 if not tooled else 2_000, 41 + tooled)
+    seeds = in_limits(model, len(T), 42)
+    seen = set()
+    for seed, branch in ((None, None), (seeds, None), (seeds, "back_down_flip")):
+        batch = model.solve_ik(T, seed=seed, branch=branch)
+        seen |= set(np.unique(batch.status).tolist())
+        for i in range(len(T)):
+            one = model.solve_ik(T[i], seed=None if seed is None else seed[i], branch=branch)
+            np.testing.assert_allclose(one.q, batch.q[i], rtol=0.0, atol=1e-12)  # NaN where NaN
+            assert np.array_equal(one.status, batch.status[i]), (i, one.status, batch.status[i])
+            assert int(one.selected) == batch.selected[i] and bool(one.tie) == batch.tie[i], i
+            if i % 20 == 0:  # the texts too (every status among them)
+                assert one.note() == batch.note(i), (i, one.note(), batch.note(i))
+    assert seen == {int(s) for s in IKStatus}
+    # A seed halfway between two solutions: the tie, through the kernel too.
+    tie = arm.solve_ik(arm.fkine(PAIR[0]), seed=arm.solve_ik(arm.fkine(PAIR[0])).q[[0, 4]].mean(axis=0))
+    assert tie.tie and "tie" in tie.note()
 
 
 def test_position_only_keeps_the_seed_orientation(arm: ToolChanger) -> None:

@@ -29,11 +29,15 @@ That gives 2 x 2 x 2 = 8 candidates, in the order of :data:`BRANCHES` (index = 4
 2 elbow + wrist). Each angle is returned as the representative modulo 2 pi inside its joint's
 limits when there is one (J5's limits [0, 270] deg span more than a half turn).
 
-Speed (benchmarks/bench_tool_changer_ik.py): the steps run on scalar parts, Python floats for one
-target and (M,) arrays for chunks of a batch (the shared :func:`evaluate_angle_parts`, one code path),
-with every angle kept as a (sine, cosine)-like pair (sums and differences of angles are products
-of pairs) until one arctan2 over all 48; then the joint values, statuses and the selection on
-parts again. numpy on (8, 6) arrays would cost more in per-call overhead than the arithmetic.
+The steps are plain numpy on candidate arrays (``ToolChanger._closed_form``: the 8 candidates
+side by side, each angle as a (sine, cosine) pair until one arctan2 per joint into the (N, 8, 6)
+result; ``_solve``: the joint values, statuses and selection), one target being a batch of one; a
+batch runs in blocks of rows (the shared :func:`manipulator_kinematics.blocks.in_blocks`).
+One target (4, 4) runs the same steps as scalar loops compiled by numba
+(:mod:`tool_changer_kinematics.ik_kernel`, loaded by the shared
+:class:`manipulator_kinematics.compiled.Kernel`; the numpy path answers until it is ready and
+stays the reference a test compares it with): numpy's fixed cost per call, about a microsecond
+per operation, would otherwise be most of a single call.
 
 Degenerate targets, handled by a stated rule and never NaN for a solution that exists:
 
@@ -48,7 +52,7 @@ Candidates with |sin theta5| < ``wrist_singularity`` or the wrist centre within
 ``axis_singularity`` of the J1 axis get status SINGULAR (exact, but joint rates blow up there):
 the selection rule skips them, the explanation names them.
 
-Selection rule (the shared one, :func:`manipulator_kinematics.model.select_parts`): only candidates inside
+Selection rule (the shared one, :func:`manipulator_kinematics.model.select`): only candidates inside
 every joint limit (J4's [20, 65] deg stop included) and away from singularities count; of those
 the requested branch, else the one closest to the seed (sum of squared joint differences), else
 the first in branch order. Ties and "no valid solution" are reported. The paper's claim that J4's
@@ -59,33 +63,30 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
+from types import ModuleType
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from manipulator_kinematics.blocks import in_blocks
+from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.config import Names, Number, Numbers, Text, require, validate
 from manipulator_kinematics.model import (
+    TIE_TOLERANCE,
     IKSolutions,
     IKStatus,
     RequestError,
     describe_limits,
+    limit_status,
     matrix_quaternion,
-    select_parts,
+    select,
 )
 from manipulator_kinematics.params import config_path, load_parameters
 from manipulator_kinematics.serial_chain import (
     JointLimits,
     SerialChain,
-    evaluate_angle_parts,
-    parts_all,
-    parts_any,
-    parts_clip,
-    parts_pose_checks,
-    parts_rows,
-    parts_sqrt,
-    parts_where,
     revolute,
     transl,
     trotx,
@@ -106,12 +107,21 @@ LIMIT_TOL = 1e-10
 WRIST_RULE = 1e-8
 #: Wrist centre distance (m) from the J1 axis below which theta1 is taken from the seed.
 AXIS_RULE = 1e-9
-#: Targets per chunk of a batch in solve_ik.
-IK_CHUNK = 2048
 #: Distance (m) by which the J3 origin may lie outside the J2-J3 annulus and count as on it (round-off).
 TWO_LINK_TOL = 1e-12
 #: Largest |R^T R - I| entry of a target rotation that is still a rotation.
 ROTATION_TOL = 1e-6
+#: Largest sum of |deviations| of a target's bottom row from [0, 0, 0, 1].
+BOTTOM_TOL = 1e-12
+#: Each candidate's sign (index = 4 shoulder + 2 elbow + wrist, :data:`BRANCHES`) of the front /
+#: back shoulder (x1, z1 flipped), the elbow up (theta3 <= 0) / down and the wrist noflip / flip.
+SHOULDER = np.repeat([1.0, -1.0], 4)
+ELBOW = np.tile(np.repeat([-1.0, 1.0], 2), 2)
+WRIST = np.tile([1.0, -1.0], 4)
+#: The elbow-up candidates (front/back shoulder x noflip/flip wrist), and each candidate's one among
+#: them: what does not depend on the elbow is computed once for these four.
+ELBOW_UP = np.flatnonzero(ELBOW < 0.0)
+ELBOW_UP_ROW = np.array([0, 1, 0, 1, 2, 3, 2, 3])
 
 _SUCCESS, _SINGULAR, _JOINT_LIMITS, _UNREACHABLE, _INVALID = (int(s) for s in IKStatus)
 _SIX = Numbers(6)
@@ -133,6 +143,28 @@ SCHEMA = {
     "wrist_singularity": Number(min=0.0, max=1.0, exclusive_min=False),
     "axis_singularity": Number(min=0.0, max=100.0, unit="m"),
 }
+
+
+def rigid_transform(T: np.ndarray) -> np.ndarray:
+    """(...,) True where T (..., 4, 4) is finite, its rotation part orthonormal (R^T R = I to
+    :data:`ROTATION_TOL` entry by entry) and proper (det > 0) and its bottom row [0, 0, 0, 1] (to
+    :data:`BOTTOM_TOL`, the sum of the deviations)."""
+    R = T[..., :3, :3]
+    gram = np.einsum("...ki,...kj->...ij", R, R)
+    det = np.einsum("...i,...i->...", R[..., 0], np.cross(R[..., 1], R[..., 2]))
+    bottom = np.abs(T[..., 3, :] - (0.0, 0.0, 0.0, 1.0)).sum(axis=-1)
+    return (np.isfinite(T).all(axis=(-2, -1)) & (np.abs(gram - np.eye(3)) < ROTATION_TOL).all(axis=(-2, -1))
+            & (det > 0.0) & (bottom < BOTTOM_TOL))
+
+
+def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
+    """Run the kernel once (numba loads or compiles it)."""
+    q, status, s5, reach = np.empty((8, 6)), np.empty(8, dtype=np.int8), np.empty(8), np.empty(8)
+    ik_kernel.solve(packed, np.eye(4), packed[:6], False, -1, q, status, s5, reach)
+
+
+#: The single-target kernel (:mod:`tool_changer_kinematics.ik_kernel`), see manipulator_kinematics.compiled.
+KERNEL = Kernel("tool_changer_kinematics.ik_kernel", _warm)
 
 
 class ToolChanger:
@@ -170,11 +202,14 @@ class ToolChanger:
         # so one more turn up where an angle is at or below the window's bottom is all that is left.
         top = np.minimum(0.5 * (limits.lower + limits.upper) + math.pi, limits.lower + 2 * math.pi)
         turns = np.floor((top + 2 * LIMIT_TOL - math.pi + offset) / (2 * math.pi))
-        # q = theta - offset as that representative: one more turn up at or below the bottom
-        # (_judge). Plain floats for the scalar parts.
-        self._wrap_offset_parts = (offset - 2 * math.pi * turns).tolist()
-        self._wrap_bottom_parts = (top - 2 * math.pi).tolist()
-        self._bounds = limits.bounds(LIMIT_TOL)
+        # q = theta - offset as that representative: one more turn up at or below the bottom (_solve).
+        self._wrap_offset = offset - 2 * math.pi * turns
+        self._wrap_bottom = top - 2 * math.pi
+        # The constants of the compiled kernel (ik_kernel's order).
+        self._packed = np.array([*self._lengths, *self._reach, self.wrist_singularity, self.axis_singularity,
+                                 *self._wrap_offset, *self._wrap_bottom, *(limits.lower - LIMIT_TOL),
+                                 *(limits.upper + LIMIT_TOL), offset[0], offset[5], AXIS_RULE, WRIST_RULE,
+                                 ROTATION_TOL, BOTTOM_TOL, TIE_TOLERANCE])
 
     # ---- construction -------------------------------------------------------------------------
     @classmethod
@@ -257,12 +292,15 @@ class ToolChanger:
 
     # ---- protocol: inverse kinematics ------------------------------------------------------------
     def solve_ik(self, target: ArrayLike, *, use_orientation: bool = True, mode: str | None = None,
-                 seed: ArrayLike | None = None, branch: str | None = None) -> IKSolutions:
+                 seed: ArrayLike | None = None, branch: str | None = None,
+                 compiled: bool = True) -> IKSolutions:
         """Every closed-form solution of target poses (..., 4, 4), each with a status (module docstring).
 
         ``use_orientation=False``: the arm has six joints for three position constraints, so the
         rule is to keep the seed's tool orientation (without a seed, the target's rotation part is
         used as given). ``seed`` (6,) or (..., 6) joint values; ``branch`` one of :data:`BRANCHES`.
+        One target (4, 4) runs the compiled kernel once it is loaded (:meth:`compiled_kernel`),
+        unless not ``compiled``; the numpy path otherwise (the same results within 1e-12).
         """
         if mode is not None and mode not in MODES:
             raise RequestError(f"unknown mode {mode!r}; known: {', '.join(MODES)}")
@@ -279,161 +317,145 @@ class ToolChanger:
         if not use_orientation and seed_q is not None:
             target[..., :3, :3] = self.fkine(seed_q)[..., :3, :3]
         index = None if branch is None else BRANCHES.index(branch)
-        if not shape:
-            q, status, selected, tie, diag = self._solve(target, seed_q, index)
+        kernel = self.compiled_kernel() if not shape and compiled else None
+        if kernel is not None:
+            q, status, selected, tie, diag = self._solve_one(kernel, target, seed_q, index)
         else:
-            # In chunks of targets, so that every (chunk, 8, 6) array of the pipeline stays in the
-            # cache (the work is a few dozen memory-bound passes over the candidates).
-            target = target.reshape(-1, 4, 4)
+            flange = self._flange(target)
             flat_seed = None if seed_q is None else seed_q.reshape(-1, 6)
-            pieces = [self._solve(target[start:start + IK_CHUNK], None if flat_seed is None
-                                  else flat_seed[start:start + IK_CHUNK], index)
-                      for start in range(0, len(target), IK_CHUNK) or [0]]
-            q, status, selected, tie = (np.concatenate(arrays).reshape(shape + arrays[0].shape[1:])
-                                        for arrays in zip(*(piece[:4] for piece in pieces), strict=True))
-            diag = {key: np.concatenate([piece[4][key] for piece in pieces]).reshape(shape + value.shape[1:])
-                    for key, value in pieces[0][4].items()}
+            judged = in_blocks(functools.partial(self._solve, branch=index), flange.reshape(-1, 4, 4),
+                               flat_seed)
+            q, status, selected, tie, invalid, rho, s5, reach = (
+                value.reshape(shape + value.shape[1:]) for value in judged)
+            diag = {"invalid": invalid, "rho": rho, "s5": s5, "reach": reach}
 
         def explain(solutions: IKSolutions, at: tuple[int, ...]) -> str:
             return self._explain(solutions, at, diag, seeded=seed is not None, requested=branch)
 
         return IKSolutions(q=q, status=status, branches=BRANCHES, selected=selected, tie=tie, explain=explain)
 
-    def _solve(self, target: np.ndarray, seed: np.ndarray | None, branch: int | None) -> tuple:
-        """Candidates, statuses, selection and diagnostics of one target (4, 4) or a chunk (M, 4, 4)."""
-        shape = target.shape[:-2]
-        flange = target if self._tool_inv is None else target @ self._tool_inv
-        rule = self.offset[::5] if seed is None else seed[..., ::5] + self.offset[::5]  # theta1, theta6
-        pose = parts_rows(flange.reshape(shape + (16,)))
-        if shape:
-            rule = parts_rows(np.broadcast_to(rule, shape + (2,)))
-        extra, q, status, choice = evaluate_angle_parts(
-            self._closed_form, [pose, np.cos(rule), np.sin(rule)], ((8, 6), (8, 6), (18,)),
-            functools.partial(self._judge, branch=branch), [] if seed is None else [parts_rows(seed)],
-            ((8, 6), (8,), (2,)),
-        )
-        invalid, rho, s5 = extra[..., 0] == 0.0, extra[..., 1], extra[..., 2:10]
-        if parts_any(invalid):
-            q[invalid] = np.nan
-        diag = {"invalid": invalid, "rho": rho, "s5": s5, "reach": extra[..., 10:]}
-        return q, status.astype(np.int8), choice[..., 0].astype(np.intp), choice[..., 1] != 0.0, diag
+    def _flange(self, target: np.ndarray) -> np.ndarray:
+        """Flange poses (..., 4, 4) of tool poses, by numpy's product on both paths (near the wrist
+        singularity theta4 and theta6 amplify its last bits by 1 / sin theta5)."""
+        if self._tool_inv is None:
+            return target
+        with np.errstate(invalid="ignore", over="ignore"):  # a target that is not a pose: INVALID
+            return target @ self._tool_inv
 
-    def _judge(self, angles: Sequence, extra: Sequence, seed: Sequence | None = None, *,
-               branch: int | None) -> tuple[list, list, list]:
-        """Each candidate's joint values (into the limits: __init__), status and the selection rule on
-        scalar parts, like :meth:`_closed_form` (numpy on (8, 6) arrays would cost more than the
-        arithmetic for one target). ``angles`` the 48 arctan2 results, ``extra`` from
-        :meth:`_closed_form`, ``seed`` 6 joint values or None, ``branch`` the requested candidate.
-        Returns q (48), status (8) and [selected, tie].
+    def _solve(self, flange: np.ndarray, seed: np.ndarray | None,
+               branch: int | None) -> tuple[np.ndarray, ...]:
+        """Flange poses (N, 4, 4) -> candidates q (N, 8, 6), statuses (N, 8), selected and tie (N,),
+        and the diagnostics of the texts: not a pose (N,), rho (N,), |sin theta5| and the J3 origin's
+        distance from J2 (N, 8) (:meth:`_closed_form`)."""
+        # The degenerate rules' theta1 and theta6: the seed's, else q1 = q6 = 0.
+        rule = self.offset[::5] if seed is None else seed[:, ::5] + self.offset[::5]
+        # Junk from targets that are not poses is flagged INVALID; it must not warn.
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            invalid = ~rigid_transform(flange)
+            theta, rho, s5, reach = self._closed_form(flange, np.broadcast_to(rule, (len(flange), 2)))
+            q = theta  # in place: q = theta - offset as its representative inside the limits (__init__)
+            q -= self._wrap_offset
+            np.add(q, 2 * math.pi, out=q, where=q <= self._wrap_bottom)
+            status = limit_status(q, self._limits, LIMIT_TOL)
+            singular = (s5 < self.wrist_singularity) | (rho < self.axis_singularity)[:, None]
+        status[(status == _SUCCESS) & singular] = _SINGULAR
+        status[invalid] = _INVALID
+        selected, tie = select(q, status, seed=seed, branch=branch)
+        q[invalid] = np.nan
+        return q, status, selected, tie, invalid, rho, s5, reach
+
+    def _closed_form(self, flange: np.ndarray, rule: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The module docstring's steps 1-4 (eqs. 3-7) on flange poses (N, 4, 4), each angle as a pair
+        (y, x) for one arctan2 per joint at the end. ``rule`` (N, 2) the degenerate rules' theta1 and theta6.
+
+        Returns theta (N, 8, 6), NaN in every joint of a candidate without a solution; rho (N,), the
+        wrist centre's distance from the J1 axis; |sin theta5| (N, 8), NaN where no solution; the J3
+        origin's distance from J2 (N, 8). Inside, the candidates are rows (k, N), the signs
+        :data:`SHOULDER`, :data:`ELBOW`, :data:`WRIST` columns, so that every operation runs along
+        the N targets (a last axis of 8 costs numpy several times more per element); steps 1-3 and
+        the J3 origin run on the four rows :data:`ELBOW_UP`, the elbow's part of step 4 on all 8.
         """
-        invalid, near_axis = extra[0] == 0.0, extra[1] < self.axis_singularity
-        offset, bottom, bounds = self._wrap_offset_parts, self._wrap_bottom_parts, self._bounds
-        q, status = [], []
-        tau = 2 * math.pi
-        for i in range(8):
-            inside = True
-            for j in range(6):
-                value = angles[6 * i + j] - offset[j]
-                value = value + tau * (value <= bottom[j])
-                inside = inside & (value >= bounds[2 * j]) & (value <= bounds[2 * j + 1])
-                q.append(value)
-            exists = value == value  # not NaN: a branch without a solution is NaN in every joint
-            singular = (extra[2 + i] < self.wrist_singularity) | near_axis
-            # Arithmetic on booleans: SUCCESS, SINGULAR or JOINT_LIMITS, then UNREACHABLE, INVALID.
-            kind = _JOINT_LIMITS - inside * (_JOINT_LIMITS - singular)
-            kind = _UNREACHABLE + exists * (kind - _UNREACHABLE)
-            status.append(kind + invalid * (_INVALID - kind))
-        allowed = None if branch is None else [i == branch for i in range(8)]
-        return q, status, list(select_parts(q, status, seed=seed, allowed=allowed))
-
-    def _closed_form(self, pose: Sequence, rule_cos: Sequence, rule_sin: Sequence) -> tuple[list, list, list]:
-        """The module docstring's steps 1-4 on scalar parts (floats for one target, (M,) arrays for
-        a chunk: :func:`evaluate_parts`), every angle as a pair (y, x) for one arctan2 afterwards, so
-        that no inverse trigonometry (whose math and numpy versions differ in the last bit) runs here.
-
-        ``pose`` the 16 entries of the flange pose, row-major; ``rule_cos``, ``rule_sin`` cos/sin of
-        the seed's theta1 and theta6 (the degenerate rules). Returns y (48) and x (48), candidate by
-        candidate in :data:`BRANCHES` order, NaN in every joint of a branch without a solution, and
-        [valid, rho, |sin theta5| of the 8 candidates (NaN if none), J3 origin distance from J2 of
-        the 8]. Never raises: a target that is not a rigid transform gives junk and valid = 0.
-        """
-        nx, _, ax, px, ny, _, ay, py, nz, _, az, pz = pose[:12]
         a1, a2, a3, a4, d1, d5, d6 = self._lengths
-        finite, rigid = parts_pose_checks(pose, ROTATION_TOL)
-        valid = finite & rigid
-        # 1. Wrist centre and theta1 (front shoulder); on the J1 axis the seed's theta1.
+        shoulder, wrist = SHOULDER[ELBOW_UP, None], WRIST[ELBOW_UP, None]
+        nx, _, ax, px, ny, _, ay, py, nz, _, az, pz = np.ascontiguousarray(flange.reshape(-1, 16)[:, :12].T)
+        # 1. Wrist centre and theta1 (front shoulder), element (3,4); on the J1 axis the seed's theta1.
         wx, wy, wz = px - d6 * ax, py - d6 * ay, pz - d6 * az
-        rho = parts_sqrt(wx * wx + wy * wy)
+        rho = np.sqrt(wx * wx + wy * wy)
         on_axis = rho < AXIS_RULE
-        safe = rho + (rho == 0.0)  # divisors: 0 becomes 1 (floats would raise; the rules take over there)
-        c1, s1 = wx / safe, wy / safe
-        if parts_any(on_axis):
-            c1, s1 = parts_where(on_axis, rule_cos[0], c1), parts_where(on_axis, rule_sin[0], s1)
-        # a, n and the wrist centre in frame 1 of the front shoulder (x1 = (c1, s1, 0), y1 = base z,
-        # z1 = (s1, -c1, 0)); the back shoulder (theta1 + pi) flips x1 and z1.
+        safe = np.where(rho == 0.0, 1.0, rho)
+        c1 = np.where(on_axis, np.cos(rule[:, 0]), wx / safe)
+        s1 = np.where(on_axis, np.sin(rule[:, 0]), wy / safe)
+        # a, n and w in frame 1 of the front shoulder: x1 = (c1, s1, 0), y1 = base z, z1 = (s1, -c1, 0);
+        # the back shoulder (theta1 + pi) flips x1 and z1.
         ax1, az1 = ax * c1 + ay * s1, ax * s1 - ay * c1
         nx1, nz1 = nx * c1 + ny * s1, nx * s1 - ny * c1
         w1, wy1 = wx * c1 + wy * s1, wz - d1
-        # 2. |sin theta5| and the direction of x4 in the arm plane: phi = theta2 + theta3 + theta4.
-        s5 = parts_sqrt(ax1 * ax1 + az * az)
+        ax1_k, az1_k, nx1_k, nz1_k = shoulder * ax1, shoulder * az1, shoulder * nx1, shoulder * nz1
+        # 2. theta5, element (3,3): cos theta5 = a.z1, sin theta5 = +-|a x z1|; the direction of x4
+        # in the arm plane gives phi = theta2 + theta3 + theta4.
+        s5 = np.sqrt(ax1 * ax1 + az * az)
+        sin5 = wrist * s5
+        safe5 = np.where(s5 == 0.0, 1.0, s5)
+        cphi, sphi = -wrist * ax1_k / safe5, -wrist * az / safe5
+        exists = np.ones(sin5.shape, dtype=bool)
         degenerate = s5 < WRIST_RULE
-        safe5 = s5 + (s5 == 0.0)
-        rule = parts_any(degenerate)
-        if rule:  # wrist singularity: phi from psi = atan2(n.y1, n.x1) and the seed's theta6
-            norm = parts_sqrt(nx1 * nx1 + nz * nz)
-            norm = norm + (norm == 0.0)
-            cpsi, spsi = nx1 / norm, nz / norm
-            c6, s6 = rule_cos[1], rule_sin[1]
-        y, x, sin5, reach = [], [], [], []
-        for shoulder in (1.0, -1.0):
-            ax1k, az1k, nx1k, nz1k = shoulder * ax1, shoulder * az1, shoulder * nx1, shoulder * nz1
-            wx1 = shoulder * w1 - a1
-            if rule:  # cos theta5 = +1 fixes phi + theta6 = psi, -1 fixes phi - theta6 = psi + pi
-                up = az1k >= 0.0
-                cpsi_k = shoulder * cpsi
-                cphi_rule = parts_where(up, cpsi_k * c6 + spsi * s6, spsi * s6 - cpsi_k * c6)
-                sphi_rule = parts_where(up, spsi * c6 - cpsi_k * s6, -spsi * c6 - cpsi_k * s6)
-            branches = {}
-            for wrist in (1.0, -1.0):  # noflip, flip
-                sin5_k = wrist * s5
-                cphi, sphi = -wrist * ax1k / safe5, -wrist * az / safe5
-                if rule:  # the flip branch is the noflip configuration there: left empty
-                    cphi = parts_where(degenerate, cphi_rule, cphi)
-                    sphi = parts_where(degenerate, sphi_rule, sphi)
-                    if wrist < 0.0:
-                        sin5_k = parts_where(degenerate, math.nan, sin5_k)
-                # 3. theta6 from n in frame 5.
-                y6 = cphi * nz - sphi * nx1k
-                x6 = az1k * (cphi * nx1k + sphi * nz) + sin5_k * nz1k
-                # 4. The J3 origin relative to J2: the tip of the planar 2R arm (a2, a3), elbow angle
-                # theta3 by the law of cosines, theta2 = atan2(o3) - atan2(a3 s3, a2 + a3 c3).
-                o3x = wx1 - a4 * cphi - d5 * sphi
-                o3y = wy1 - a4 * sphi + d5 * cphi
-                r = parts_sqrt(o3x * o3x + o3y * o3y)
-                c3 = parts_clip((r * r - a2 * a2 - a3 * a3) / (2.0 * a2 * a3))
-                s3_abs = parts_sqrt(1.0 - c3 * c3)
-                reachable = (r >= self._reach[0]) & (r <= self._reach[1])
-                alive = 1.0 + 0.0 * sin5_k  # NaN where this branch has no solution: every joint NaN
-                if not parts_all(reachable):
-                    alive = parts_where(reachable, alive, math.nan)
-                k1 = a2 + a3 * c3
-                for elbow in (-1.0, 1.0):  # up (theta3 <= 0), down
-                    s3 = elbow * s3_abs
-                    k2 = a3 * s3
-                    y2, x2 = o3y * k1 - o3x * k2, o3x * k1 + o3y * k2
-                    y23, x23 = y2 * c3 + x2 * s3, x2 * c3 - y2 * s3
-                    branches[elbow, wrist] = (
-                        [alive * shoulder * s1, alive * y2, alive * s3, alive * (sphi * x23 - cphi * y23),
-                         alive * sin5_k, alive * y6],  # theta4 = phi - theta2 - theta3
-                        [shoulder * c1, x2, c3, cphi * x23 + sphi * y23, az1k, x6], alive * s5, r)
-            for elbow in (-1.0, 1.0):  # BRANCHES order: shoulder, elbow, wrist
-                for wrist in (1.0, -1.0):
-                    yk, xk, s5k, rk = branches[elbow, wrist]
-                    y += yk
-                    x += xk
-                    sin5.append(s5k)
-                    reach.append(rk)
-        return y, x, [valid, rho, *sin5, *reach]
+        if np.any(degenerate):
+            # Wrist singularity: cos theta5 = +1 fixes phi + theta6 = psi, -1 fixes phi - theta6 =
+            # psi + pi, psi = atan2(n.y1, n.x1); theta6 is the seed's. The flip branch is the noflip
+            # configuration there: left empty.
+            norm = np.sqrt(nx1 * nx1 + nz * nz)
+            norm = np.where(norm == 0.0, 1.0, norm)
+            cpsi, spsi = shoulder * nx1 / norm, nz / norm
+            c6, s6 = np.cos(rule[:, 1]), np.sin(rule[:, 1])
+            up = az1_k >= 0.0
+            cphi = np.where(degenerate, np.where(up, cpsi * c6 + spsi * s6, spsi * s6 - cpsi * c6), cphi)
+            sphi = np.where(degenerate, np.where(up, spsi * c6 - cpsi * s6, -spsi * c6 - cpsi * s6), sphi)
+            exists = ~(degenerate & (wrist < 0.0))
+        # 3. theta6 from n in frame 5, element (3,2).
+        y6 = cphi * nz - sphi * nx1_k
+        x6 = az1_k * (cphi * nx1_k + sphi * nz) + sin5 * nz1_k
+        # 4. The J3 origin relative to J2: the tip of the planar 2R arm (a2, a3), elbow angle theta3
+        # by the law of cosines, theta2 = atan2(o3) - atan2(a3 s3, a2 + a3 c3), theta4 = phi -
+        # theta2 - theta3 (eq. 7).
+        o3x = shoulder * w1 - a1 - a4 * cphi - d5 * sphi
+        o3y = wy1 - a4 * sphi + d5 * cphi
+        r = np.sqrt(o3x * o3x + o3y * o3y)
+        exists &= (r >= self._reach[0]) & (r <= self._reach[1])
+        c3 = np.clip((r * r - a2 * a2 - a3 * a3) / (2.0 * a2 * a3), -1.0, 1.0)
+        theta = np.empty((len(rho), 8, 6))
+        for j, (y, x) in ((0, (shoulder * s1, shoulder * c1)), (4, (sin5, az1_k)), (5, (y6, x6))):
+            theta[..., j] = np.arctan2(y, x)[ELBOW_UP_ROW].T  # theta1, theta5, theta6: as the elbow-up twin's
+        # The elbow: all 8 candidates, each from its elbow-up twin.
+        cphi, sphi, o3x, o3y, c3, exists, r = (
+            v[ELBOW_UP_ROW] for v in (cphi, sphi, o3x, o3y, c3, exists, r))
+        s3 = ELBOW[:, None] * np.sqrt(1.0 - c3 * c3)
+        k1, k2 = a2 + a3 * c3, a3 * s3
+        y2, x2 = o3y * k1 - o3x * k2, o3x * k1 + o3y * k2
+        y23, x23 = y2 * c3 + x2 * s3, x2 * c3 - y2 * s3
+        theta4 = (sphi * x23 - cphi * y23, cphi * x23 + sphi * y23)  # phi - theta2 - theta3
+        for j, (y, x) in ((1, (y2, x2)), (2, (s3, c3)), (3, theta4)):
+            np.arctan2(y, x, out=theta[..., j].T)  # straight into the (N, 8, 6) result
+        theta[~exists.T] = np.nan
+        return theta, rho, np.where(exists, s5, np.nan).T, r.T
+
+    # ---- the compiled single call ------------------------------------------------------------------
+    def compiled_kernel(self, wait: bool = False) -> ModuleType | None:
+        """The compiled kernel module if ready, else None (:class:`manipulator_kinematics.compiled.Kernel`:
+        the first single-target call starts loading it, calls take the numpy path meanwhile).
+        ``wait``: load it now (tests, benchmarks)."""
+        return KERNEL.get(self._packed, wait=wait)
+
+    def _solve_one(self, kernel: ModuleType, target: np.ndarray, seed: np.ndarray | None,
+                   branch: int | None) -> tuple:
+        """One target (4, 4) through :func:`tool_changer_kinematics.ik_kernel.solve`."""
+        q, status = np.empty((8, 6)), np.empty(8, dtype=np.int8)
+        s5, reach = np.empty(8), np.empty(8)
+        seeded = seed is not None
+        selected, tie, invalid, rho = kernel.solve(
+            self._packed, self._flange(target), np.ascontiguousarray(seed) if seeded else self._packed[:6],
+            seeded, -1 if branch is None else branch, q, status, s5, reach)
+        diag = {"invalid": np.array(invalid), "rho": np.array(rho), "s5": s5, "reach": reach}
+        return q, status, np.array(selected, dtype=np.intp), np.array(tie), diag
 
     def _explain(self, solutions: IKSolutions, at: tuple[int, ...], diag: dict[str, np.ndarray], *,
                  seeded: bool, requested: str | None) -> str:
