@@ -31,6 +31,7 @@ import numpy as np
 from numba import njit
 
 from manipulator_kinematics.model import IKStatus
+from manipulator_kinematics.select_kernel import select_one
 
 # Globals are compile-time constants to numba.
 _SUCCESS, _LIMITS, _UNREACHABLE = int(IKStatus.SUCCESS), int(IKStatus.JOINT_LIMITS), int(IKStatus.UNREACHABLE)
@@ -136,27 +137,11 @@ def judge(k: np.ndarray, x: float, y: float, finite: bool, swing_axis: float, D:
 @njit(cache=True, error_model="numpy")
 def pick(k: np.ndarray, D: np.ndarray, status: np.ndarray, seed: np.ndarray, seeded: bool, branch: int,
          tie_tolerance: float) -> tuple[int, bool]:
-    """manipulator_kinematics.model.select for one target: (selected, tie)."""
-    weights = k[38:42]
-    chosen, best = -1, math.inf
-    costs = np.full(4, math.inf)
-    for b in range(4):
-        if status[b] != _SUCCESS or (branch >= 0 and b != branch):
-            continue
-        if not seeded:
-            return b, False
-        cost = 0.0
-        for j in range(4):
-            d = (D[b, j] - seed[j]) * weights[j]
-            cost += d * d
-        costs[b] = cost
-        if cost < best:
-            chosen, best = b, cost
-    near = 0
-    for b in range(4):
-        if costs[b] < math.inf and costs[b] <= best * (1.0 + tie_tolerance) + tie_tolerance:
-            near += 1
-    return chosen, near > 1
+    """manipulator_kinematics.model.select for one target (the shared select_one): (selected, tie)."""
+    allowed = np.full(4, branch < 0)
+    if branch >= 0:
+        allowed[branch] = True
+    return select_one(D, status, seed, seeded, allowed, k[38:42], tie_tolerance)
 
 
 @njit(cache=True, error_model="numpy")

@@ -33,6 +33,7 @@ import numpy as np
 from numba import njit
 
 from manipulator_kinematics.model import IKStatus
+from manipulator_kinematics.select_kernel import select_one
 
 # Globals are compile-time constants to numba.
 _SUCCESS, _SINGULAR, _LIMITS = int(IKStatus.SUCCESS), int(IKStatus.SINGULAR), int(IKStatus.JOINT_LIMITS)
@@ -59,32 +60,6 @@ def _is_pose(k: np.ndarray, pose: np.ndarray) -> bool:
            + pose[2] * (pose[4] * pose[9] - pose[5] * pose[8]))
     bottom = abs(pose[12]) + abs(pose[13]) + abs(pose[14]) + abs(pose[15] - 1.0)
     return det > 0.0 and bottom < k[19]
-
-
-@njit(cache=True, error_model="numpy")
-def _select(q: np.ndarray, status: np.ndarray, seed: np.ndarray, seeded: bool, allowed: np.ndarray,
-            count: int, tie_tolerance: float) -> tuple[int, bool]:
-    """manipulator_kinematics.model.select over the first ``count`` candidates that ``allowed``
-    leaves: (selected, tie)."""
-    chosen, best = -1, math.inf
-    costs = np.full(count, math.inf)
-    for b in range(count):
-        if status[b] != _SUCCESS or not allowed[b]:
-            continue
-        if not seeded:
-            return b, False
-        cost = 0.0
-        for j in range(4):
-            d = q[b, j] - seed[j]
-            cost += d * d
-        costs[b] = cost
-        if cost < best:
-            chosen, best = b, cost
-    near = 0
-    for b in range(count):
-        if costs[b] < math.inf and costs[b] <= best * (1.0 + tie_tolerance) + tie_tolerance:
-            near += 1
-    return chosen, near > 1
 
 
 @njit(cache=True, error_model="numpy")
@@ -157,8 +132,10 @@ def solve(k: np.ndarray, pose: np.ndarray, seed: np.ndarray, seeded: bool, allow
                     q[c, 0], q[c, 1], q[c, 2], q[c, 3] = axis1, axis2, axis3, theta5
                 else:
                     q[c, 0], q[c, 1], q[c, 2], q[c, 3] = theta1, theta2, theta3, theta5
-    selected, tie = _select(q, status, seed, seeded, allowed, _HOME_COUNT, tie_tolerance)
+    weights, home = np.ones(4), allowed.copy()
+    home[_HOME_COUNT:] = False
+    selected, tie = select_one(q, status, seed, seeded, home, weights, tie_tolerance)
     if selected >= 0:
         return selected, tie, True
-    selected, tie = _select(q, status, seed, seeded, allowed, 8, tie_tolerance)
+    selected, tie = select_one(q, status, seed, seeded, allowed, weights, tie_tolerance)
     return selected, tie, False

@@ -30,6 +30,7 @@ import numpy as np
 from numba import njit
 
 from manipulator_kinematics.model import IKStatus
+from manipulator_kinematics.select_kernel import select_one
 
 # Globals are compile-time constants to numba.
 _SUCCESS, _SINGULAR, _LIMITS = int(IKStatus.SUCCESS), int(IKStatus.SINGULAR), int(IKStatus.JOINT_LIMITS)
@@ -78,20 +79,7 @@ def solve_phi(k: np.ndarray, px: float, py: float, phi: float, seed: np.ndarray,
         else:
             status[b] = _LIMITS
     # The shared rule (model.select): a requested branch alone, else the nearest to the seed, else the first.
-    cost = np.full(2, np.inf)
-    selected, any_valid = -1, False
-    for b in range(2):
-        if status[b] == _SUCCESS and (branch < 0 or branch == b):
-            any_valid = True
-            total = 0.0
-            if seeded:
-                for j in range(3):
-                    d = (q[b, j] - seed[j]) * k[16 + j]
-                    total += d * d
-            cost[b] = total
-            if selected < 0 or total < cost[selected]:
-                selected = b
-    if not seeded or not any_valid:
-        return selected, False
-    near = cost[selected] * (1.0 + tie_tolerance) + tie_tolerance
-    return selected, cost[0] <= near and cost[1] <= near
+    allowed = np.full(2, branch < 0)
+    if branch >= 0:
+        allowed[branch] = True
+    return select_one(q, status, seed, seeded, allowed, k[16:19], tie_tolerance)

@@ -38,3 +38,29 @@ def test_a_kernel_warms_with_the_first_sample() -> None:
     kernel = Kernel("math", lambda module, x: seen.append(module.sqrt(x)))
     assert kernel.get(4.0, wait=True).sqrt(9.0) == 3.0
     assert seen == [2.0]
+
+
+def test_the_compiled_selection_is_the_numpy_rule() -> None:
+    """select_kernel.select_one against model.select over random candidate sets, with ties,
+    requested branches, weights and seeds that are NaN or infinite."""
+    from manipulator_kinematics.model import IKStatus, TIE_TOLERANCE, select
+    from manipulator_kinematics.select_kernel import select_one
+
+    rng = np.random.default_rng(22)
+    for trial in range(4000):
+        m, n = int(rng.integers(1, 9)), int(rng.integers(1, 7))
+        q = rng.integers(-2, 3, size=(m, n)).astype(float)  # small integers: exact ties happen
+        status = rng.choice([int(IKStatus.SUCCESS), int(IKStatus.JOINT_LIMITS), int(IKStatus.SINGULAR)],
+                            size=m, p=[0.6, 0.3, 0.1]).astype(np.int8)
+        seed = rng.integers(-2, 3, size=n).astype(float)
+        if trial % 10 == 0:
+            seed[rng.integers(n)] = rng.choice([np.nan, np.inf, -np.inf])
+        weights = rng.choice([1.0, 0.5, 2.0], size=n)
+        seeded = trial % 7 != 0
+        branch = int(rng.integers(m)) if trial % 5 == 0 else None
+        expected, expected_tie = select(q, status, seed=seed if seeded else None, branch=branch, weights=weights)
+        allowed = np.full(m, branch is None)
+        if branch is not None:
+            allowed[branch] = True
+        got, tie = select_one(q, status, seed, seeded, allowed, weights, TIE_TOLERANCE)
+        assert (got, tie) == (int(expected), bool(expected_tie)), (trial, q, status, seed, branch)

@@ -29,6 +29,7 @@ import numpy as np
 from numba import njit
 
 from manipulator_kinematics.model import IKStatus
+from manipulator_kinematics.select_kernel import select_one
 
 # Globals are compile-time constants to numba.
 _SUCCESS, _SINGULAR, _LIMITS = int(IKStatus.SUCCESS), int(IKStatus.SINGULAR), int(IKStatus.JOINT_LIMITS)
@@ -143,36 +144,10 @@ def solve(k: np.ndarray, T: np.ndarray, seed: np.ndarray, seeded: bool, branch: 
             status[b] = _SINGULAR
         else:
             status[b] = _SUCCESS
-    selected, tie = _select(q, status, seed, seeded, branch, tie_tolerance)
+    allowed = np.full(8, branch < 0)
+    if branch >= 0:
+        allowed[branch] = True
+    selected, tie = select_one(q, status, seed, seeded, allowed, np.ones(6), tie_tolerance)
     if invalid:
         q[:, :] = math.nan
     return selected, tie, invalid, rho
-
-
-@njit(cache=True, error_model="numpy")
-def _select(q: np.ndarray, status: np.ndarray, seed: np.ndarray, seeded: bool, branch: int,
-            tie_tolerance: float) -> tuple[int, bool]:
-    """manipulator_kinematics.model.select for one target: (selected, tie)."""
-    chosen, best, first_nan = -1, math.inf, -1
-    costs = np.full(8, math.inf)
-    for b in range(8):
-        if status[b] != _SUCCESS or (branch >= 0 and b != branch):
-            continue
-        if not seeded:
-            return b, False
-        cost = 0.0
-        for j in range(6):
-            d = q[b, j] - seed[j]
-            cost += d * d
-        costs[b] = cost
-        if cost < best:
-            chosen, best = b, cost
-        elif math.isnan(cost) and first_nan < 0:
-            first_nan = b
-    if first_nan >= 0:  # a NaN seed: np.argmin's first NaN, no tie
-        return first_nan, False
-    near = 0
-    for b in range(8):
-        if costs[b] < math.inf and costs[b] <= best * (1.0 + tie_tolerance) + tie_tolerance:
-            near += 1
-    return chosen, near > 1
