@@ -1,7 +1,8 @@
 """Excavator core speed, printed as tables (a benchmark, not a test).
 
-Measures, in one run and over several rounds (the machine is shared: read the ratios, which
-compare numbers of the same round; absolute times vary by machine and load):
+Measures, in one run and over several rounds, the CPU time of this thread (time.thread_time:
+what a call costs, not counting the time other processes on a shared machine take the core; read
+the ratios, which compare numbers of the same round; absolute times vary by machine and load):
 
 * one call (one state) of pose, the full state (pose + twist + JC0 + acceleration, eqs. 1-11),
   JC0 and the inverse rates (eq. 9), beside the peer of the single call: a plain numba function
@@ -45,10 +46,10 @@ def per_call_us(fn: Callable[[], object], repeat: int, runs: int = 20) -> float:
     them: on a loaded machine the best run is the one nobody preempted)."""
     best = float("inf")
     for _ in range(runs):
-        start = time.perf_counter()
+        start = time.thread_time()
         for _ in range(repeat):
             fn()
-        best = min(best, (time.perf_counter() - start) / repeat)
+        best = min(best, (time.thread_time() - start) / repeat)
     return best * 1e6
 
 
@@ -56,9 +57,9 @@ def best_seconds(fn: Callable[[], object], rounds: int = 7) -> float:
     """Best of a few timed calls (the first also pays for warming the allocator)."""
     best = float("inf")
     for _ in range(rounds):
-        start = time.perf_counter()
+        start = time.thread_time()
         fn()
-        best = min(best, time.perf_counter() - start)
+        best = min(best, time.thread_time() - start)
     return best
 
 

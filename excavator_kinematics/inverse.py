@@ -153,12 +153,14 @@ class Constants(NamedTuple):
                                                  k.stroke_min, k.stroke_max)))
 
 
-def _cos_sin(angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """cos and sin by the tangent half-angle formulas, within 2.3e-16 of np.cos and np.sin.
+def cos_sin(angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """cos and sin by the tangent half-angle formulas, within 2.3e-16 of np.cos and np.sin (the
+    IK's and the forward batches' swing angle; kinematics imports this module, not the reverse).
 
-    numpy runs float64 sin and cos element by element through libm but has a vectorised tan:
-    one tan and a few products cost a fraction of the pair (the IK takes three pairs per
-    candidate). t * t cannot overflow: |tan| of any double stays below 1e19.
+    Why not np.cos and np.sin: numpy runs float64 sin and cos element by element through libm
+    but has a vectorised tan: one tan and a few products cost a quarter of the pair (measured
+    5 vs 19.5 ns per angle), a fifth of a batch pose. t * t cannot overflow: |tan| of any double
+    stays below 1e19.
     """
     t = np.tan(0.5 * angle)
     t2 = t * t
@@ -183,10 +185,10 @@ def open_chain_columns(k: Constants, x: np.ndarray, y: np.ndarray, z: np.ndarray
     With one alpha per target, the arm is solved once per swing (N, 2), both elbows from it.
     """
     per_swing = alpha.shape[-1] == 1
-    ch, sh = _cos_sin(heading)
+    ch, sh = cos_sin(heading)
     rho = (x * ch + y * sh) * (_SWING_SIGN if per_swing else _RADIUS_SIGN)
     # Bucket pin relative to the boom foot pin, in the boom plane of each swing.
-    ca, sa = _cos_sin(alpha)
+    ca, sa = cos_sin(alpha)
     pin_r = rho - k.l4 * ca - k.l1
     pin_z = z - k.l4 * sa - k.l0
     # The planar 2R arm (l2, l3) to the pin, as manipulator_kinematics.planar.two_link_ik.
@@ -231,7 +233,7 @@ def linkage_length_columns(k: Constants, theta2: np.ndarray, theta3: np.ndarray,
     """
     d2 = _triangle_length(theta2, k.boom_o, k.boom_offset, k.boom_aa_bb, k.boom_two_ab)
     d3 = _triangle_length(theta3, k.arm_o, k.arm_offset, k.arm_aa_bb, k.arm_two_ab)
-    cp, sp = _cos_sin(theta4 + k.h_phase)
+    cp, sp = cos_sin(theta4 + k.h_phase)
     hx, hy = k.h_radius * cp, k.h_radius * sp  # H - bucket pin
     tx, ty = k.pin_from_pivot_x + hx, k.pin_from_pivot_y + hy  # H - pivot
     ff = tx * tx + ty * ty
