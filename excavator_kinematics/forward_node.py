@@ -1,6 +1,8 @@
 """excavator_forward: bucket pose, twist and acceleration from cylinder and swing states.
 
-A thin adapter around :meth:`Excavator.state` (paper eqs. 3-11). On each ``cylinder_lengths``
+A thin adapter around :meth:`Excavator.state` (paper eqs. 3-11; one state per message: the
+compiled single call, :mod:`excavator_kinematics.state_kernel`, loaded in the background from
+the first message on, numpy answering until then). On each ``cylinder_lengths``
 message it takes the latest swing state from ``joint_states`` (extrapolated to the cylinder stamp,
 at most ``swing_max_age`` apart) and accelerations as finite differences of successive rates
 (:mod:`excavator_kinematics.state_input`), and publishes with the cylinder message's stamp:
