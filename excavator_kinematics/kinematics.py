@@ -141,15 +141,20 @@ def _angle(v: np.ndarray) -> float:
     return math.atan2(v[1], v[0])
 
 
-def _warm(state_kernel: ModuleType, packed: np.ndarray) -> None:
-    """Run each kernel function once (numba loads or compiles it), then let it take only those
-    types: arguments of other types (a list, a strided or read-only view, integers) raise
-    TypeError, and the caller takes the numpy path, instead of compiling for seconds in a call."""
-    D = np.array([0.0, *np.ones(3)])
+def _warm(state_kernel: ModuleType) -> None:
+    """Run each kernel function once (numba loads or compiles it; the values do not matter, zero
+    limits refuse the state), then let it take only those types: arguments of other types (a
+    list, a strided or read-only view, integers) raise TypeError, and the caller takes the numpy
+    path, instead of compiling for seconds in a call."""
+    packed, D, three = np.zeros(44), np.zeros(4), np.empty(3)
     state_kernel.state(packed, D, D, D, np.empty((10, 4)))
     state_kernel.pose(packed, D, np.empty(4))
     state_kernel.jc0(packed, D, np.empty((4, 4)))
-    for function in (state_kernel.state, state_kernel.pose, state_kernel.jc0):
+    state_kernel.bucket_quaternion(0.0, 0.0, np.empty(4))
+    state_kernel.bucket_angular_velocity(0.0, 0.0, 0.0, three)
+    state_kernel.bucket_angular_acceleration(0.0, 0.0, 0.0, 0.0, 0.0, three)
+    for function in (state_kernel.state, state_kernel.pose, state_kernel.jc0, state_kernel.bucket_quaternion,
+                     state_kernel.bucket_angular_velocity, state_kernel.bucket_angular_acceleration):
         function.disable_compile()
 
 
@@ -159,8 +164,9 @@ KERNEL = Kernel("excavator_kinematics.state_kernel", _warm)
 
 def compiled_kernel(model: Excavator, wait: bool = False) -> ModuleType | None:
     """The compiled kernel module if ready, else None (the first single call starts loading it;
-    calls take the numpy path meanwhile, the same results within 1e-12). ``wait``: load it now."""
-    return KERNEL.get(model._packed, wait=wait)
+    calls take the numpy path meanwhile, the same results within 1e-12). ``wait``: load it now.
+    One kernel serves every machine (``model``: for the call's symmetry with the IK's)."""
+    return KERNEL.get(wait=wait)
 
 
 class Excavator:
@@ -316,7 +322,7 @@ class Excavator:
         """``out`` filled by the kernel's ``function`` (:mod:`excavator_kinematics.state_kernel`)
         for one state, or None: the kernel not loaded yet, arguments of types it does not take
         (:func:`_warm`), or a state it refuses (the numpy path then says why)."""
-        kernel = KERNEL.get(self._packed)
+        kernel = KERNEL.get()
         if kernel is None:
             return None
         try:
@@ -820,9 +826,19 @@ def _last_axis(*components: np.ndarray) -> np.ndarray:
     return np.stack(np.broadcast_arrays(*components), axis=-1)
 
 
+def _floats(*values: Any) -> bool:
+    """All Python (or numpy) floats: one state, which the kernel computes once loaded."""
+    return all(isinstance(value, float) for value in values)
+
+
 def bucket_quaternion(theta1: Any, alpha: Any) -> np.ndarray:
     """Bucket orientation [x, y, z, w] in the REP 103 base frame: yaw theta1 about z, then
-    the bucket angle alpha about the boom-plane normal, i.e. a rotation about +y by -alpha."""
+    the bucket angle alpha about the boom-plane normal, i.e. a rotation about +y by -alpha.
+    One state of floats runs compiled (a node calls this per message), arrays on numpy."""
+    if _floats(theta1, alpha) and (kernel := KERNEL.get()) is not None:
+        out = np.empty(4)
+        kernel.bucket_quaternion(theta1, alpha, out)
+        return out
     theta1, alpha = np.asarray(theta1, dtype=float), np.asarray(alpha, dtype=float)
     cy, sy = np.cos(0.5 * theta1), np.sin(0.5 * theta1)
     cp, sp = np.cos(0.5 * alpha), -np.sin(0.5 * alpha)
@@ -831,7 +847,12 @@ def bucket_quaternion(theta1: Any, alpha: Any) -> np.ndarray:
 
 
 def bucket_angular_velocity(theta1: Any, theta1_dot: Any, alpha_dot: Any) -> np.ndarray:
-    """omega = theta1dot z - alphadot y', y' = (-sin theta1, cos theta1, 0) the boom-plane normal."""
+    """omega = theta1dot z - alphadot y', y' = (-sin theta1, cos theta1, 0) the boom-plane normal
+    (one state of floats compiled, as :func:`bucket_quaternion`)."""
+    if _floats(theta1, theta1_dot, alpha_dot) and (kernel := KERNEL.get()) is not None:
+        out = np.empty(3)
+        kernel.bucket_angular_velocity(theta1, theta1_dot, alpha_dot, out)
+        return out
     theta1, alpha_dot = np.asarray(theta1, dtype=float), np.asarray(alpha_dot, dtype=float)
     return _last_axis(alpha_dot * np.sin(theta1), -alpha_dot * np.cos(theta1),
                       np.asarray(theta1_dot, dtype=float))
@@ -841,6 +862,11 @@ def bucket_angular_acceleration(
     theta1: Any, theta1_dot: Any, theta1_ddot: Any, alpha_dot: Any, alpha_ddot: Any
 ) -> np.ndarray:
     """Time derivative of :func:`bucket_angular_velocity` (y' turns with the swing)."""
+    state = (theta1, theta1_dot, theta1_ddot, alpha_dot, alpha_ddot)
+    if _floats(*state) and (kernel := KERNEL.get()) is not None:
+        out = np.empty(3)
+        kernel.bucket_angular_acceleration(*state, out)
+        return out
     theta1, w, w_dot, a_dot, a_ddot = (np.asarray(v, dtype=float)
                                        for v in (theta1, theta1_dot, theta1_ddot, alpha_dot, alpha_ddot))
     c, s = np.cos(theta1), np.sin(theta1)

@@ -183,3 +183,25 @@ def state(k: np.ndarray, D: np.ndarray, D_dot: np.ndarray, D_ddot: np.ndarray, o
     _put(out, 5, c1 * radial - s1 * tangential, s1 * radial + c1 * tangential, z_ddot, e2 + e3 + e4)
     _jc0(rho, c1, s1, a1, a2, a3, b1, b2, b3, k2, k3, k4, out, 6)
     return True
+
+
+@njit(cache=True, error_model="numpy")
+def bucket_quaternion(theta1: float, alpha: float, out: np.ndarray) -> None:
+    """kinematics.bucket_quaternion of one swing angle and bucket angle into ``out`` (4,)."""
+    cy, sy = math.cos(0.5 * theta1), math.sin(0.5 * theta1)
+    cp, sp = math.cos(0.5 * alpha), -math.sin(0.5 * alpha)
+    out[0], out[1], out[2], out[3] = -sy * sp, cy * sp, sy * cp, cy * cp
+
+
+@njit(cache=True, error_model="numpy")
+def bucket_angular_velocity(theta1: float, theta1_dot: float, alpha_dot: float, out: np.ndarray) -> None:
+    """kinematics.bucket_angular_velocity of one state into ``out`` (3,)."""
+    out[0], out[1], out[2] = alpha_dot * math.sin(theta1), -alpha_dot * math.cos(theta1), theta1_dot
+
+
+@njit(cache=True, error_model="numpy")
+def bucket_angular_acceleration(theta1: float, w: float, w_dot: float, a_dot: float, a_ddot: float,
+                                out: np.ndarray) -> None:
+    """kinematics.bucket_angular_acceleration of one state into ``out`` (3,)."""
+    c, s = math.cos(theta1), math.sin(theta1)
+    out[0], out[1], out[2] = a_ddot * s + a_dot * w * c, -a_ddot * c + a_dot * w * s, w_dot

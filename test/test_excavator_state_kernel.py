@@ -101,3 +101,17 @@ def test_one_state_on_the_numpy_path_is_that_row_of_a_batch_bit_for_bit(monkeypa
             np.testing.assert_array_equal(getattr(one, field), getattr(batch, field)[i], err_msg=field)
         np.testing.assert_array_equal(EXC.pose(D[i]), poses[i])
         np.testing.assert_array_equal(EXC.jc0(D[i]), jc0s[i])
+
+
+def test_bucket_orientation_and_rates_of_one_state_compiled_equal_the_numpy_path():
+    compiled_kernel(EXC, wait=True)
+    rng = np.random.default_rng(11)
+    values = rng.uniform(-7.0, 7.0, size=(N // 10, 5))
+    quaternions = kinematics.bucket_quaternion(values[:, 0], values[:, 1])
+    omegas = kinematics.bucket_angular_velocity(*values[:, :3].T)
+    alphas = kinematics.bucket_angular_acceleration(*values.T)
+    for i, row in enumerate(values.tolist()):  # Python floats: the kernel
+        assert _close(kinematics.bucket_quaternion(row[0], row[1]), quaternions[i])
+        assert _close(kinematics.bucket_angular_velocity(*row[:3]), omegas[i])
+        assert _close(kinematics.bucket_angular_acceleration(*row), alphas[i])
+    assert kinematics.bucket_angular_velocity(0.5, 1, 0.25).shape == (3,)  # an int: the numpy path
