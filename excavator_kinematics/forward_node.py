@@ -1,6 +1,8 @@
 """excavator_forward: bucket pose, twist and acceleration from cylinder and swing states.
 
-A thin adapter around :meth:`Excavator.state` (paper eqs. 3-11). On each ``cylinder_lengths``
+A thin adapter around :meth:`Excavator.state` (paper eqs. 3-11; one state per message: the
+compiled single call, :mod:`excavator_kinematics.state_kernel`, loaded in the background from
+the node's construction on, numpy answering until then). On each ``cylinder_lengths``
 message it takes the latest swing state from ``joint_states`` (extrapolated to the cylinder stamp,
 at most ``swing_max_age`` apart) and accelerations as finite differences of successive rates
 (:mod:`excavator_kinematics.state_input`), and publishes with the cylinder message's stamp:
@@ -46,6 +48,7 @@ from excavator_kinematics.kinematics import (
     StrokeError,
     bucket_angular_acceleration,
     bucket_angular_velocity,
+    compiled_kernel,
 )
 from excavator_kinematics.level_pose import LevelPose
 from excavator_kinematics.node_settings import FORWARD, NODES_CONFIG
@@ -123,6 +126,10 @@ class ForwardKinematics(MachineNode):
         inputs = input_qos(settings["qos_depth"], settings["input_reliability"])
         self.create_subscription(JointState, topic["joint_states"], self.on_swing, inputs, raw=True)
         self.create_subscription(JointState, topic["cylinder_lengths"], self.on_cylinders, inputs, raw=True)
+        # Start loading the compiled single call now (a background thread, numpy answering until
+        # it is ready): numba's import (about a second of CPU) then overlaps discovery; started by
+        # the first message, it stalled a 1 kHz input for over a second (queues overflowed).
+        compiled_kernel(self.exc)
         self.get_logger().info(
             f"{self.exc.name}: {topic['cylinder_lengths']} + {topic['joint_states']} -> "
             f"{topic['bucket_pose']}, {topic['bucket_twist']}, {topic['bucket_accel']}, "

@@ -29,8 +29,8 @@ nearer stroke end as a fraction of the stroke (:func:`widest_margin_angles`: the
 maxima of a 2.5 deg grid, each refined to within 2e-8 rad; a feasible band of alpha narrower
 than the grid step can be missed).
 
-Speed: a batch runs vectorised in blocks of :data:`BATCH_BLOCK` targets, the machine's numbers
-folded once (:class:`Constants`); one target runs the same steps compiled
+Speed: a batch runs vectorised in blocks of rows (:func:`manipulator_kinematics.blocks.in_blocks`),
+the machine's numbers folded once (:class:`Constants`); one target runs the same steps compiled
 (:mod:`excavator_kinematics.ik_kernel`, numba), the numpy path staying the reference
 (``compiled=False``). benchmarks/bench_excavator_ik.py measures both against scipy's least squares.
 """
@@ -38,13 +38,13 @@ folded once (:class:`Constants`); one target runs the same steps compiled
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from types import ModuleType
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from manipulator_kinematics.blocks import BLOCK, in_blocks
 from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.model import (
     TIE_TOLERANCE,
@@ -70,9 +70,6 @@ SWING_AXIS = 1e-9
 LIMIT_TOL = 1e-10
 #: A 6-D target counts as in its boom plane / with a level bucket pin axis within this (m, rad).
 PLANE_TOL = 1e-9
-# Targets per block of a large batch (as kinematics.BATCH_BLOCK): the temporaries of one block
-# stay below malloc's mmap threshold and in cache.
-BATCH_BLOCK = 8192
 _SUCCESS, _SINGULAR, _UNREACHABLE = int(IKStatus.SUCCESS), int(IKStatus.SINGULAR), int(IKStatus.UNREACHABLE)
 _INVALID = int(IKStatus.INVALID)
 _SCALARS = 30  # float fields of Constants, first in Constants.packed
@@ -126,16 +123,12 @@ class Constants(NamedTuple):
     stroke_max: np.ndarray
     stroke_range: np.ndarray
     weights: np.ndarray  # (4,) 1 / range of each actuator: the seed distance of model.select
-    # cos and sin of an array: the forward model's (kinematics._cos_sin_of_array: numpy's float64
-    # sin and cos run element by element, its tan is vectorised).
-    cos_sin: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
     # The float fields above, the limits widened by limit_status' tolerance, the weights and the
     # strokes in one array: the constants of the compiled kernel (ik_kernel).
     packed: np.ndarray
 
     @classmethod
-    def of(cls, model: Excavator, cos_sin: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
-           arm_tol: float = 1e-12) -> Constants:
+    def of(cls, model: Excavator, arm_tol: float = 1e-12) -> Constants:
         boom, arm = model._boom, model._arm
         pivot, pin = model._pivot, model._bucket_pin
         base = model._pins_local["bucket_cylinder_base"]
@@ -153,11 +146,26 @@ class Constants(NamedTuple):
             model._lo[3], model._hi[3],
             model.limits.stroke_min, model.limits.stroke_max,
             model.limits.stroke_max - model.limits.stroke_min,
-            1.0 / (model.joint_limits.upper - model.joint_limits.lower), cos_sin, np.empty(0),
+            1.0 / (model.joint_limits.upper - model.joint_limits.lower), np.empty(0),
         )
         lower, upper = model.joint_limits.lower - LIMIT_TOL, model.joint_limits.upper + LIMIT_TOL
         return k._replace(packed=np.concatenate((np.array(k[:_SCALARS], dtype=float), lower, upper, k.weights,
                                                  k.stroke_min, k.stroke_max)))
+
+
+def cos_sin(angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """cos and sin by the tangent half-angle formulas, within 2.3e-16 of np.cos and np.sin (the
+    IK's and the forward batches' swing angle; kinematics imports this module, not the reverse).
+
+    Why not np.cos and np.sin: numpy runs float64 sin and cos element by element through libm
+    but has a vectorised tan: one tan and a few products cost a quarter of the pair (measured
+    5 vs 19.5 ns per angle), a fifth of a batch pose. t * t cannot overflow: |tan| of any double
+    stays below 1e19.
+    """
+    t = np.tan(0.5 * angle)
+    t2 = t * t
+    scale = 1.0 / (1.0 + t2)
+    return (1.0 - t2) * scale, 2.0 * t * scale
 
 
 # Per candidate in BRANCHES order: the sign of the boom-plane radius (the tip in front of or
@@ -177,10 +185,10 @@ def open_chain_columns(k: Constants, x: np.ndarray, y: np.ndarray, z: np.ndarray
     With one alpha per target, the arm is solved once per swing (N, 2), both elbows from it.
     """
     per_swing = alpha.shape[-1] == 1
-    ch, sh = k.cos_sin(heading)
+    ch, sh = cos_sin(heading)
     rho = (x * ch + y * sh) * (_SWING_SIGN if per_swing else _RADIUS_SIGN)
     # Bucket pin relative to the boom foot pin, in the boom plane of each swing.
-    ca, sa = k.cos_sin(alpha)
+    ca, sa = cos_sin(alpha)
     pin_r = rho - k.l4 * ca - k.l1
     pin_z = z - k.l4 * sa - k.l0
     # The planar 2R arm (l2, l3) to the pin, as manipulator_kinematics.planar.two_link_ik.
@@ -225,7 +233,7 @@ def linkage_length_columns(k: Constants, theta2: np.ndarray, theta3: np.ndarray,
     """
     d2 = _triangle_length(theta2, k.boom_o, k.boom_offset, k.boom_aa_bb, k.boom_two_ab)
     d3 = _triangle_length(theta3, k.arm_o, k.arm_offset, k.arm_aa_bb, k.arm_two_ab)
-    cp, sp = k.cos_sin(theta4 + k.h_phase)
+    cp, sp = cos_sin(theta4 + k.h_phase)
     hx, hy = k.h_radius * cp, k.h_radius * sp  # H - bucket pin
     tx, ty = k.pin_from_pivot_x + hx, k.pin_from_pivot_y + hy  # H - pivot
     ff = tx * tx + ty * ty
@@ -289,28 +297,14 @@ def _block_candidates(model: Excavator, Q: np.ndarray, alpha: np.ndarray,
     return D, reach, status(model, D, Q)
 
 
-def _in_blocks(n: int, columns: int, work) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """D (n, columns, 4), reach and status (n, columns) of ``work(block slice)``, block by block:
-    the temporaries of one block stay in cache (kinematics.BATCH_BLOCK)."""
-    if n <= BATCH_BLOCK:
-        return work(slice(0, n))
-    D = np.empty((n, columns, 4))
-    reach = np.empty((n, columns), dtype=np.int8)
-    judged = np.empty((n, columns), dtype=np.int8)
-    for start in range(0, n, BATCH_BLOCK):
-        block = slice(start, min(start + BATCH_BLOCK, n))
-        D[block], reach[block], judged[block] = work(block)
-    return D, reach, judged
-
-
 def candidates(model: Excavator, Q: np.ndarray, heading: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
     """Every D reaching Q = [x, y, z, alpha] (..., 4): (D (..., 4, 4), reach (..., 4), status
     (..., 4)), the open-chain candidates turned into cylinder lengths; NaN where there is no
     solution."""
     flat = Q.reshape(-1, 4)
     headings = None if heading is None else np.reshape(heading, (-1, 1))
-    D, reach, judged = _in_blocks(len(flat), 4, lambda b: _block_candidates(
-        model, flat[b], flat[b, 3:4], None if headings is None else headings[b]))
+    D, reach, judged = in_blocks(lambda Q, heading: _block_candidates(model, Q, Q[:, 3:4], heading),
+                                 flat, headings)
     shape = Q.shape[:-1] + (4,)
     return D.reshape(shape + (4,)), reach.reshape(shape), judged.reshape(shape)
 
@@ -533,11 +527,9 @@ def solve_position(model: Excavator, position: ArrayLike, seed: ArrayLike | None
     else:
         finite = np.isfinite(flat).all(axis=-1, keepdims=True)
         usable = np.where(finite, flat, 0.0)
-        alpha = np.empty((len(flat), 4))
-        block = max(BATCH_BLOCK // _GRID, 1)  # positions per block of the search
-        for start in range(0, len(flat), block):
-            alpha[start : start + block] = widest_margin_angles(model, usable[start : start + block])
-    D, reach, judged = _in_blocks(len(flat), 4, lambda b: _block_candidates(model, flat[b], alpha[b], None))
+        # The search evaluates _GRID candidates per position: fewer positions per block.
+        alpha = in_blocks(lambda p: widest_margin_angles(model, p), usable, block=max(BLOCK // _GRID, 1))
+    D, reach, judged = in_blocks(lambda P, a: _block_candidates(model, P, a, None), flat, alpha)
     shape = position.shape[:-1] + (4,)
     alpha = np.broadcast_to(alpha, (len(flat), 4))
     Q = np.concatenate((np.broadcast_to(flat[:, None, :], (len(flat), 4, 3)), alpha[..., None]), axis=-1)

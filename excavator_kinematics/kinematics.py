@@ -12,43 +12,49 @@ eq.   relation                                     function
 ====  ===========================================  ==============================================
 1     boom/arm triangle: theta(d), d(theta),       ``_Triangle.closes`` (via ``joint_angles``,
       k21 = dtheta/dd, k22 = d2theta/dd2           ``k_entries``); inverse: ``cylinder_lengths``
-2     bucket six-bar = cylinder four-bar + bucket  ``Excavator._closed_loops`` (via
+2     bucket six-bar = cylinder four-bar + bucket  ``Excavator._linkages`` (via
       four-bar in series: theta4(d4) and rates     ``joint_angles``); inverse: ``cylinder_lengths``
 3     Q(theta), open chain                         ``pose``, ``open_chain_pose`` (``_tip``)
-4     Qdot by columns: coefficients a_i, b_i       ``Excavator._jacobian_terms``
+4     Qdot by columns: coefficients a_i, b_i       ``Excavator._chain_terms``
 5     Qdot = J0 thetadot                           ``j0``
 6     thetadot = J0^-1 Qdot                        ``joint_rates``
 7     thetadot = K Ddot                            ``k_matrix``, ``k_entries``; ``state.theta_dot``
 8     Qdot = JC0 Ddot, JC0 = J0 K                  ``jc0``; ``state.Q_dot``, ``state.jc0``
 9     Ddot = JC0^-1 Qdot                           ``cylinder_rates``
-10    Qddot = J0 thetaddot + Jdot0 thetadot        ``state.Q_ddot`` (``Excavator._state``)
+10    Qddot = J0 thetaddot + Jdot0 thetadot        ``state.Q_ddot`` (``Excavator._states``)
 11    Qddot = JC0 Dddot + JC1_0 Ddot^2 + JC2_0 DD  ``acceleration_matrices`` (same value as eq. 10)
 12    thetaddot = J0^-1 (Qddot - Jdot0 thetadot)   ``joint_accelerations``
 13    Dddot = JC0^-1 (Qddot - JC1_0 .. - JC2_0 ..) ``cylinder_accelerations``
 ====  ===========================================  ==============================================
 
-Everything is closed form. Every entry point takes one state (shape (4,)) or a batch (shape
-(N, 4)); rates and accelerations have D's shape or (4,), broadcast over a batch. One state runs
-on Python floats (math), a batch on numpy arrays, through the same code, so a single call costs
-microseconds and a batch runs at millions of states per second. Errors: a wrong shape is a
-``ValueError`` saying "shape"; a state the machine cannot take (outside a stroke or the swing
-range, not finite, a linkage that cannot close, a singular JC0) is a :class:`StrokeError` (also a
-ValueError). The machine file is read by :mod:`excavator_kinematics.parameters`.
+Everything is closed form, written once as plain vectorised numpy on (..., n) arrays: one state
+(shape (4,)) is a batch of one through the same code (the same bits as that row of a batch); a
+batch (shape (N, 4)) runs in blocks of rows (:func:`manipulator_kinematics.blocks.in_blocks`).
+Rates and accelerations have D's shape or (4,), broadcast over a batch. The single call of
+:meth:`Excavator.state`, :meth:`Excavator.pose` and :meth:`Excavator.jc0` runs the same steps
+compiled (:mod:`excavator_kinematics.state_kernel`, numba) once that kernel has loaded in the
+background (:class:`manipulator_kinematics.compiled.Kernel`; the numpy path answers meanwhile and
+stays the reference, within 1e-12). Errors: a wrong shape is a ``ValueError`` saying "shape"; a
+state the machine cannot take (outside a stroke or the swing range, not finite, a linkage that
+cannot close, a singular JC0) is a :class:`StrokeError` (also a ValueError). The machine file is
+read by :mod:`excavator_kinematics.parameters`.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from types import SimpleNamespace
+from types import ModuleType
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from excavator_kinematics import inverse
 from excavator_kinematics.parameters import CYLINDERS, SECTION, Description, parse
+from manipulator_kinematics.blocks import BLOCK, in_blocks
+from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.model import IKSolutions
 from manipulator_kinematics.params import ConfigError, config_path, load_parameters
 from manipulator_kinematics.serial_chain import JointLimits
@@ -58,73 +64,32 @@ JOINTS = ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")
 ACTUATORS = (JOINTS[0], *CYLINDERS)
 DEFAULT_CONFIG = "excavator_cet200.yaml"
 
-# States per block of a large batch: the temporaries of one block stay below malloc's mmap
-# threshold and in cache; whole-batch temporaries cost more in page faults than in arithmetic.
-BATCH_BLOCK = 8192
-
-# Entries of a BucketState: six vectors of four, then JC0's 16.
-_STATE_SIZE = 40
-_NO_ACCELERATION = (0.0, 0.0, 0.0, 0.0)
-
 # Lengths this close outside a stroke end still count as inside, so that lengths computed from
 # angles at a stroke end (round-off of a few ulp) are accepted.
 STROKE_TOLERANCE = 1e-9
+
+# States per block of pose, jc0 and state. Larger than blocks.BLOCK: in_blocks copies each
+# block's outputs into the batch's (40 per state here), and numpy's fixed cost per call (60-200
+# calls per block) falls with the block; measured on 10^5 states, CPU ns per full state: 4096
+# states per block 300-380, 8192 215-235, 32768 200, the whole batch in one 168 (but then the
+# some 150 temporaries grow with the batch: 1.2 GB at 10^6 states; 40 MB at 32768).
+_BLOCK = 8 * BLOCK
+
+# Dddot of a state without accelerations (the kernel reads it, never writes it).
+_NO_ACCELERATION = np.zeros(4)
 
 
 class StrokeError(ValueError):
     """A state outside the machine's strokes/limits, non-finite, or geometrically impossible."""
 
 
-def _cos_sin(angle: float) -> tuple[float, float]:
-    return math.cos(angle), math.sin(angle)
-
-
-def _cos_sin_of_array(angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """cos and sin by the tangent half-angle formulas, within 2.3e-16 of np.cos and np.sin.
-
-    numpy runs float64 sin and cos element by element through libm but has a vectorised tan:
-    one tan and a few products cost a fraction of the pair. t * t cannot overflow: |tan| of
-    any double stays below 1e19.
-    """
-    t = np.tan(0.5 * angle)
-    t2 = t * t
-    scale = 1.0 / (1.0 + t2)
-    return (1.0 - t2) * scale, 2.0 * t * scale
-
-
-def _closing_sine(c: float, name: str) -> float:
-    """sqrt(1 - c^2), the sine for the cosine c of a linkage angle (one state).
-
-    |c| < 1 or the linkage cannot be assembled at this length. Checked here, in one call with
-    the root, because a separate check per linkage is a measurable share of a one-state call.
-    """
-    if -1.0 < c < 1.0:
-        return math.sqrt(1.0 - c * c)
-    raise _cannot_close(name)
-
-
-def _closing_sine_of_array(c: np.ndarray, name: str) -> np.ndarray:
-    """:func:`_closing_sine` for a batch: every |c| < 1 (in floats as in reals, 1 - c^2 > 0
-    exactly when |c| < 1, which saves a pass) or StrokeError."""
+def _closing_sine(c: np.ndarray, name: str) -> np.ndarray:
+    """sqrt(1 - c^2), the sine for the cosine c of a linkage angle: every |c| < 1 (in floats as in
+    reals, 1 - c^2 > 0 exactly when |c| < 1) or the linkage cannot be assembled: StrokeError."""
     radicand = 1.0 - c * c
     if np.all(radicand > 0.0):
         return np.sqrt(radicand)
-    raise _cannot_close(name)
-
-
-def _cannot_close(name: str) -> StrokeError:
-    return StrokeError(f"{name}: the linkage cannot close (triangle inequality violated)")
-
-
-# The math of the shared code: Python floats for one state, numpy arrays for a batch.
-_SCALAR = SimpleNamespace(
-    sqrt=math.sqrt, acos=math.acos, atan2=math.atan2, sin=math.sin, cos=math.cos,
-    cos_sin=_cos_sin, closing_sine=_closing_sine,
-)
-_ARRAY = SimpleNamespace(
-    sqrt=np.sqrt, acos=np.arccos, atan2=np.arctan2, sin=np.sin, cos=np.cos,
-    cos_sin=_cos_sin_of_array, closing_sine=_closing_sine_of_array,
-)
+    raise StrokeError(f"{name}: the linkage cannot close (triangle inequality violated)")
 
 
 @dataclass(frozen=True)
@@ -143,13 +108,13 @@ class _Triangle:
     orientation: int
     radius: float = 1.0  # scale of the cosine and sine that closes() returns
 
-    def __post_init__(self) -> None:
-        # Eq. 1's constants, folded once: cos(gamma) = (a^2 + b^2 - d^2) / (2ab) = c0 - c1 d^2.
-        # The orientation as a float: Python's float-by-float operations are the fast ones.
+    @property
+    def constants(self) -> tuple[float, ...]:
+        """Eq. 1's constants, folded: cos(gamma) = (a^2 + b^2 - d^2) / (2ab) = c0 - c1 d^2, then
+        ab, the orientation o, radius (cos, sin) offset and the offset (the kernel's order)."""
         ab = self.a * self.b
-        c0, c1 = (self.a * self.a + self.b * self.b) / (2.0 * ab), 0.5 / ab
-        cd, sd = self.radius * math.cos(self.offset), self.radius * math.sin(self.offset)
-        object.__setattr__(self, "_constants", (c0, c1, ab, float(self.orientation), cd, sd))
+        return ((self.a * self.a + self.b * self.b) / (2.0 * ab), 0.5 / ab, ab, float(self.orientation),
+                self.radius * math.cos(self.offset), self.radius * math.sin(self.offset), self.offset)
 
     @classmethod
     def of(cls, name: str, first: np.ndarray, second: np.ndarray, orientation: int) -> _Triangle:
@@ -157,23 +122,51 @@ class _Triangle:
         return cls(name, float(np.hypot(*first)), float(np.hypot(*second)),
                    _angle(first) - _angle(second), orientation)
 
-    def closes(self, d: Any, m: SimpleNamespace, angle: bool = True) -> tuple[Any, ...]:
+    def closes(self, d: np.ndarray, angle: bool = True) -> tuple[np.ndarray | None, ...]:
         """Joint angle (None unless ``angle``), its derivatives w.r.t. d (eq. 1: k21, k22) and
         its cosine and sine times ``radius``.
 
-        cos/sin come from cos(gamma) and sin(gamma) = sqrt(1 - cos^2) by angle addition, so
-        callers need no trigonometry for the open chain (np.sin is the costliest ufunc here).
+        cos/sin come from cos(gamma) and sin(gamma) = sqrt(1 - cos^2) by angle addition: the
+        open chain needs no trigonometry of theta2..theta4.
         """
-        c0, c1, ab, o, cd, sd = self._constants
+        c0, c1, ab, o, cd, sd, offset = self.constants
         c = c0 - c1 * d * d
-        s = o * m.closing_sine(c, self.name)  # sin(o * gamma)
+        s = o * _closing_sine(c, self.name)  # sin(o * gamma)
         k = d / (ab * s)  # o * dgamma/dd
-        theta = self.offset + o * m.acos(c) if angle else None
+        theta = offset + o * np.arccos(c) if angle else None
         return theta, k, k / d - k * k * c / s, cd * c - sd * s, sd * c + cd * s
 
 
 def _angle(v: np.ndarray) -> float:
     return math.atan2(v[1], v[0])
+
+
+def _warm(state_kernel: ModuleType) -> None:
+    """Run each kernel function once (numba loads or compiles it; the values do not matter, zero
+    limits refuse the state), then let it take only those types: arguments of other types (a
+    list, a strided or read-only view, integers) raise TypeError, and the caller takes the numpy
+    path, instead of compiling for seconds in a call."""
+    packed, D, three = np.zeros(44), np.zeros(4), np.empty(3)
+    state_kernel.state(packed, D, D, D, np.empty((10, 4)))
+    state_kernel.pose(packed, D, np.empty(4))
+    state_kernel.jc0(packed, D, np.empty((4, 4)))
+    state_kernel.bucket_quaternion(0.0, 0.0, np.empty(4))
+    state_kernel.bucket_angular_velocity(0.0, 0.0, 0.0, three)
+    state_kernel.bucket_angular_acceleration(0.0, 0.0, 0.0, 0.0, 0.0, three)
+    for function in (state_kernel.state, state_kernel.pose, state_kernel.jc0, state_kernel.bucket_quaternion,
+                     state_kernel.bucket_angular_velocity, state_kernel.bucket_angular_acceleration):
+        function.disable_compile()
+
+
+#: The single-state kernel (:mod:`excavator_kinematics.state_kernel`), see manipulator_kinematics.compiled.
+KERNEL = Kernel("excavator_kinematics.state_kernel", _warm)
+
+
+def compiled_kernel(model: Excavator, wait: bool = False) -> ModuleType | None:
+    """The compiled kernel module if ready, else None (the first single call starts loading it;
+    calls take the numpy path meanwhile, the same results within 1e-12). ``wait``: load it now.
+    One kernel serves every machine (``model``: for the call's symmetry with the IK's)."""
+    return KERNEL.get(wait=wait)
 
 
 class Excavator:
@@ -212,7 +205,6 @@ class Excavator:
         bucket_base = np.array(g.bucket_cylinder_base)
         self._pivot = np.array(g.side_link_pivot)
         self._side = g.side_link_length
-        # Python floats: numpy scalars would make every operation of the one-state path slow.
         self._bucket_pin_xy = tuple(self._bucket_pin.tolist())
         self._pivot_from_bucket_pin = tuple((self._pivot - self._bucket_pin).tolist())
         self._pins_local["bucket_cylinder_base"] = bucket_base
@@ -234,7 +226,8 @@ class Excavator:
         self._h_orientation = h_orientation
         b, a = self._h_radius, self._h_link
         # cos of the H angle = (e^2 + b^2 - a^2) / (2 b e) (law of cosines, e = |R - bucket pin|);
-        # (H - bucket pin) / b turned back by the H phase is the bucket direction (cos, sin theta4).
+        # (H - bucket pin) / b turned back by the H phase is the bucket direction (cos, sin theta4);
+        # then the H phase (the kernel's order).
         self._h_constants = (
             b,
             b * b,
@@ -243,6 +236,7 @@ class Excavator:
             2.0 * b,
             math.cos(self._h_phase) / b,
             math.sin(self._h_phase) / b,
+            self._h_phase,
         )
         self._pins_local["h_link_pin"] = h_pin
 
@@ -250,12 +244,19 @@ class Excavator:
         # The limits of D as the shared IK pieces read them (cylinder values are lengths, m).
         self.joint_limits = JointLimits(ACTUATORS, self.limits.d_min, self.limits.d_max,
                                         prismatic=(False, True, True, True))
-        # Python floats of the limits with the tolerance applied, for the one-state fast path.
-        self._lo = (self.limits.d_min - STROKE_TOLERANCE).tolist()
-        self._hi = (self.limits.d_max + STROKE_TOLERANCE).tolist()
-        self._lo_column, self._hi_column = np.array(self._lo)[:, None], np.array(self._hi)[:, None]
+        # The limits with the stroke tolerance applied (what validate accepts).
+        self._lo = self.limits.d_min - STROKE_TOLERANCE
+        self._hi = self.limits.d_max + STROKE_TOLERANCE
         self._check_whole_stroke()
-        self._ik = inverse.Constants.of(self, _cos_sin_of_array)
+        self._ik = inverse.Constants.of(self)
+        # The constants of the compiled single call (state_kernel): l0..l4, the boom, arm and
+        # side-link triangles (7 each, _Triangle.constants), R's pivot from the bucket pin (2),
+        # the bucket four-bar (8, _h_constants), the limits with the tolerance (4 + 4).
+        self._packed = np.array([
+            self.l0, self.l1, self.l2, self.l3, self.l4,
+            *self._boom.constants, *self._arm.constants, *self._side_triangle.constants,
+            *self._pivot_from_bucket_pin, *self._h_constants, *self._lo, *self._hi,
+        ])
 
     def _check_whole_stroke(self) -> None:
         """Every length in the stroke box must assemble; a bad pin or length fails here, naming it."""
@@ -317,36 +318,30 @@ class Excavator:
         """(..., 6, 4) bucket twist [v; omega] per Ddot (eq. 8 and the bucket frame's turn)."""
         return inverse.jacob0(self, D)
 
+    def _compiled(self, function: str, out: np.ndarray, *arguments: np.ndarray) -> np.ndarray | None:
+        """``out`` filled by the kernel's ``function`` (:mod:`excavator_kinematics.state_kernel`)
+        for one state, or None: the kernel not loaded yet, arguments of types it does not take
+        (:func:`_warm`), or a state it refuses (the numpy path then says why)."""
+        kernel = KERNEL.get()
+        if kernel is None:
+            return None
+        try:
+            return out if getattr(kernel, function)(self._packed, *arguments, out) else None
+        except TypeError:
+            return None
+
     # ------------------------------------------------------------------ validation
     def validate(self, D: Any) -> np.ndarray:
         """D as a float array of shape (4,) or (N, 4); raises StrokeError naming what is wrong."""
-        return self._columns(D)[0]
-
-    def _columns(self, D: Any) -> tuple[np.ndarray, SimpleNamespace, Sequence[Any]]:
-        """D checked as by :meth:`validate`, with the math for it and its columns as _split
-        makes them (the checks read those columns too, which is faster for a batch)."""
         D = np.asarray(D, dtype=float)
-        # Fast path: everything inside the limits (NaN fails every comparison, so it falls
-        # through to the checks below, which name what is wrong).
-        if D.shape == (4,):
-            m, columns = _SCALAR, D.tolist()
-            t1, d2, d3, d4 = columns
-            lo, hi = self._lo, self._hi
-            if (
-                lo[0] <= t1 <= hi[0]
-                and lo[1] <= d2 <= hi[1]
-                and lo[2] <= d3 <= hi[2]
-                and lo[3] <= d4 <= hi[3]
-            ):
-                return D, m, columns
-        elif D.ndim == 2 and D.shape[1] == 4:
-            m, columns = _split(D)
-            if np.all((self._lo_column <= columns) & (columns <= self._hi_column)):
-                return D, m, columns
-        else:
+        if D.shape != (4,) and (D.ndim != 2 or D.shape[1] != 4):
             raise ValueError(
                 f"expected D = [swing, boom, arm, bucket] of shape (4,) or (N, 4), got shape {D.shape}"
             )
+        # Everything inside the limits: done (NaN fails every comparison, so it falls through to
+        # the checks below, which name what is wrong).
+        if np.all((self._lo <= D) & (self._hi >= D)):
+            return D
         self._check_lengths(D[..., 1:])
         swing = D[..., 0]
         if not np.all(np.isfinite(swing)):
@@ -358,7 +353,7 @@ class Excavator:
                 f"swing_joint angle {_first_bad(swing, inside)} rad outside "
                 f"[{self.limits.swing_min:.6g}, {self.limits.swing_max:.6g}] rad"
             )
-        return D, m, columns
+        return D
 
     def _check_lengths(self, lengths: np.ndarray) -> None:
         finite = np.isfinite(lengths)
@@ -377,30 +372,31 @@ class Excavator:
                     f"[{self.limits.stroke_min[i]:.6g}, {self.limits.stroke_max[i]:.6g}] m"
                 )
 
+
     # ------------------------------------------------------------------ closed loops (eqs. 1-2, 7)
-    def _closed_loops(self, d2: Any, d3: Any, d4: Any, m: SimpleNamespace) -> tuple[tuple[Any, ...], ...]:
-        """theta2..4 with their first (K) and second (K1) derivatives w.r.t. d2..d4 and their
-        cosines and sines, plus the bucket linkage's rod pin R and H-link pin H relative to the
-        bucket pin (arm frame): ``(theta, k, dk, trig, (R, H))``, a tuple of tuples."""
-        theta2, k2, dk2, c2, s2 = self._boom.closes(d2, m)
-        theta3, k3, dk3, c3, s3 = self._arm.closes(d3, m)
+    def _linkages(self, d2: np.ndarray, d3: np.ndarray, d4: np.ndarray) -> tuple[tuple[np.ndarray, ...], ...]:
+        """theta2..4 (eqs. 1-2) with their first (K, eq. 7) and second (K1) derivatives w.r.t.
+        d2..d4 and their cosines and sines, plus the bucket linkage's rod pin R and H-link pin H
+        relative to the bucket pin (arm frame): ``(theta, k, dk, trig, (R, H))``."""
+        theta2, k2, dk2, c2, s2 = self._boom.closes(d2)
+        theta3, k3, dk3, c3, s3 = self._arm.closes(d3)
         # Cylinder four-bar (Fig. 7b): side-link angle phi's derivatives, same form; phi itself is
         # never needed, only R - pivot = side length * (cos, sin) phi.
-        _, phi_d, phi_dd, rx, ry = self._side_triangle.closes(d4, m, angle=False)
+        _, phi_d, phi_dd, rx, ry = self._side_triangle.closes(d4, angle=False)
         fx, fy = self._pivot_from_bucket_pin
         ex, ey = fx + rx, fy + ry  # R - bucket pin
         # Bucket four-bar (Fig. 7c, eq. 2): H from the triangle (bucket pin, R, H).
-        b, bb, o, b2_a2, two_b, cp, sp = self._h_constants
+        b, bb, o, b2_a2, two_b, cp, sp, h_phase = self._h_constants
         e2 = ex * ex + ey * ey
-        e = m.sqrt(e2)
+        e = np.sqrt(e2)
         ch = (e2 + b2_a2) / (two_b * e)
-        sh = o * m.closing_sine(ch, "bucket_cylinder (bucket four-bar)")
+        sh = o * _closing_sine(ch, "bucket_cylinder (bucket four-bar)")
         # H - bucket pin = fc (R - bucket pin) + fs perp(R - bucket pin): turned by the H angle
         # and scaled to length b.
         f = b / e
         fc, fs = f * ch, f * sh
         ox, oy = fc * ex - fs * ey, fc * ey + fs * ex
-        theta4 = m.atan2(ey, ex) + o * m.acos(ch) - self._h_phase
+        theta4 = np.arctan2(ey, ex) + o * np.arccos(ch) - h_phase
         c4, s4 = ox * cp + oy * sp, oy * cp - ox * sp
         # Four-bar velocity ratio g1 = dpsi/dphi and g2 = d2psi/dphi2 from the loop constraint
         # (H - R).(vH - vR) = 0 and its time derivative; closed form, no iteration. With the
@@ -422,16 +418,16 @@ class Excavator:
         """Cylinder lengths [d2, d3, d4] (..., 3) -> [theta2, theta3, theta4] (eqs. 1-2)."""
         lengths = _vectors(lengths, 3, "[boom, arm, bucket] lengths")
         self._check_lengths(lengths)
-        m, cols = _split(lengths)
-        return _stack(self._closed_loops(*cols, m)[0], lengths.ndim)
+        flat = lengths.reshape(-1, 3)
+        return _table(self._linkages(*_columns(flat))[0], flat.shape[:-1]).reshape(lengths.shape)
 
     def k_entries(self, lengths: Any) -> tuple[np.ndarray, np.ndarray]:
         """dtheta_i/dd_i (the diagonal of K, eq. 7) and d2theta_i/dd_i2 (of K1), for i = 2..4."""
         lengths = _vectors(lengths, 3, "[boom, arm, bucket] lengths")
         self._check_lengths(lengths)
-        m, cols = _split(lengths)
-        _, k, dk, _, _ = self._closed_loops(*cols, m)
-        return _stack(k, lengths.ndim), _stack(dk, lengths.ndim)
+        flat = lengths.reshape(-1, 3)
+        _, k, dk, _, _ = self._linkages(*_columns(flat))
+        return tuple(_table(entries, flat.shape[:-1]).reshape(lengths.shape) for entries in (k, dk))
 
     def cylinder_lengths(self, angles: Any) -> np.ndarray:
         """Joint angles [theta2, theta3, theta4] (..., 3) -> cylinder lengths (inverse of eqs. 1-2).
@@ -467,30 +463,43 @@ class Excavator:
             columns = inverse.linkage_length_columns(self._ik, angles[..., 0], angles[..., 1], angles[..., 2])
         return np.stack(columns, axis=-1)
 
+
     # ------------------------------------------------------------------ open chain (eqs. 3-5)
     def pose(self, D: Any) -> np.ndarray:
         """Q = [x, y, z, alpha] of the bucket tip for D (eqs. 1-3)."""
-        D, m, (t1, d2, d3, d4) = self._columns(D)
-        (t2, t3, t4), _, _, trig, _ = self._closed_loops(d2, d3, d4, m)
-        return _stack(self._tip(self._jacobian_terms(t1, trig, m), t2 + t3 + t4), D.ndim)
+        D = np.asarray(D, dtype=float)
+        if D.shape == (4,) and (Q := self._compiled("pose", np.empty(4), D)) is not None:
+            return Q
+        D = self.validate(D)
+        entries = in_blocks(self._poses, D.reshape(-1, 4), block=_BLOCK)
+        return _table(entries, (D.size // 4,)).reshape(D.shape)
+
+    def _poses(self, D: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The columns of Q (N, 4) of valid states D (N, 4) (eqs. 1-3)."""
+        t1, d2, d3, d4 = _columns(D)
+        (t2, t3, t4), _, _, trig, _ = self._linkages(d2, d3, d4)
+        a1, _, _, b1, _, _ = self._chain_terms(*trig)
+        return tuple(self._tip(t1, a1, b1, t2 + t3 + t4))
 
     def open_chain_pose(self, theta: Any) -> np.ndarray:
         """Q = [x, y, z, alpha] from the open-chain joints theta1..theta4 (eq. 3), no limits."""
         theta = _vectors(theta, 4, "theta = [theta1, theta2, theta3, theta4]")
-        m, (t1, t2, t3, t4) = _split(theta)
-        terms = self._jacobian_terms(t1, _trig(t2, t3, t4, m), m)
-        return _stack(self._tip(terms, t2 + t3 + t4), theta.ndim)
+        t1, t2, t3, t4 = _columns(theta.reshape(-1, 4))
+        a1, _, _, b1, _, _ = self._chain_terms(np.cos(t2), np.sin(t2), np.cos(t3), np.sin(t3),
+                                               np.cos(t4), np.sin(t4))
+        return _table(self._tip(t1, a1, b1, t2 + t3 + t4), t1.shape).reshape(theta.shape)
 
-    def _tip(self, terms: tuple[Any, ...], alpha: Any) -> tuple[Any, ...]:
-        """Eq. 3 from eq. 4's coefficients: rho = l1 + b1, z = l0 + a1."""
-        a1, _, _, _, _, _, rho, c1, s1 = terms
-        return rho * c1, rho * s1, self.l0 + a1, alpha
+    def _tip(self, t1: np.ndarray, a1: np.ndarray, b1: np.ndarray, alpha: np.ndarray) -> list[np.ndarray]:
+        """Eq. 3 from eq. 4's coefficients: the boom-plane radius rho = l1 + b1 turned by the
+        swing, z = l0 + a1."""
+        rho, (c1, s1) = self.l1 + b1, inverse.cos_sin(t1)
+        return [rho * c1, rho * s1, self.l0 + a1, alpha]
 
     def pins(self, D: Any) -> dict[str, np.ndarray]:
         """Every pin (and the tip) in the base frame, shape (..., 3), for drawing and checking."""
         D = self.validate(D)
-        t1, d2, d3, d4 = (D[..., i] for i in range(4))
-        (t2, t3, t4), _, _, _, ((ex, ey), (ox, oy)) = self._closed_loops(d2, d3, d4, _ARRAY)
+        t1, d2, d3, d4 = _columns(D)
+        (t2, t3, t4), _, _, _, ((ex, ey), (ox, oy)) = self._linkages(d2, d3, d4)
         bx, by = self._bucket_pin_xy
         foot = np.array([self.l1, self.l0])
 
@@ -527,34 +536,31 @@ class Excavator:
             for name, p in side.items()
         }
 
-    def _jacobian_terms(self, t1: Any, trig: tuple[Any, ...], m: SimpleNamespace) -> tuple[Any, ...]:
-        """a1..a3, b1..b3 of eq. 4, rho = l1 + b1, and cos/sin of theta1.
 
-        ``trig`` = cos/sin of theta2, theta3, theta4; the sums by angle addition.
-        """
-        c2, s2, c3, s3, c4, s4 = trig
+    def _chain_terms(self, c2: np.ndarray, s2: np.ndarray, c3: np.ndarray, s3: np.ndarray,
+                     c4: np.ndarray, s4: np.ndarray) -> tuple[np.ndarray, ...]:
+        """a1..a3, b1..b3 of eq. 4 from cos/sin of theta2, theta3, theta4 (the sums by angle
+        addition): a_i = sum of l_j sin(theta2 + .. + theta_j) over j >= i, b_i the cosines."""
         c23, s23 = c2 * c3 - s2 * s3, s2 * c3 + c2 * s3
         c234, s234 = c23 * c4 - s23 * s4, s23 * c4 + c23 * s4
         a3, b3 = self.l4 * s234, self.l4 * c234
         a2, b2 = self.l3 * s23 + a3, self.l3 * c23 + b3
-        a1, b1 = self.l2 * s2 + a2, self.l2 * c2 + b2
-        c1, s1 = m.cos_sin(t1)
-        return a1, a2, a3, b1, b2, b3, self.l1 + b1, c1, s1
+        return self.l2 * s2 + a2, a2, a3, self.l2 * c2 + b2, b2, b3
 
     def j0(self, theta: Any) -> np.ndarray:
         """J0(theta) of eq. 5: Qdot = J0 thetadot, rows x, y, z, alpha; columns theta1..theta4."""
         theta = _vectors(theta, 4, "theta = [theta1, theta2, theta3, theta4]")
-        m, (t1, t2, t3, t4) = _split(theta)
-        a1, a2, a3, b1, b2, b3, rho, c1, s1 = self._jacobian_terms(t1, _trig(t2, t3, t4, m), m)
-        return _matrix(
-            [
-                -rho * s1, -a1 * c1, -a2 * c1, -a3 * c1,
-                rho * c1, -a1 * s1, -a2 * s1, -a3 * s1,
-                0.0, b1, b2, b3,
-                0.0, 1.0, 1.0, 1.0,
-            ],
-            theta.shape[:-1],
-        )
+        t1, t2, t3, t4 = _columns(theta.reshape(-1, 4))
+        a1, a2, a3, b1, b2, b3 = self._chain_terms(np.cos(t2), np.sin(t2), np.cos(t3), np.sin(t3),
+                                                   np.cos(t4), np.sin(t4))
+        rho, c1, s1 = self.l1 + b1, np.cos(t1), np.sin(t1)
+        entries = [
+            -rho * s1, -a1 * c1, -a2 * c1, -a3 * c1,
+            rho * c1, -a1 * s1, -a2 * s1, -a3 * s1,
+            0.0, b1, b2, b3,
+            0.0, 1.0, 1.0, 1.0,
+        ]
+        return _table(entries, t1.shape).reshape(theta.shape[:-1] + (4, 4))
 
     def joint_rates(self, theta: Any, Q_dot: Any) -> np.ndarray:
         """thetadot = J0^-1 Qdot (eq. 6): open-chain joint rates for a tip velocity.
@@ -579,9 +585,20 @@ class Excavator:
 
     def jc0(self, D: Any) -> np.ndarray:
         """JC0 = J0 K (eq. 8): Qdot = JC0 Ddot."""
-        D, m, (t1, d2, d3, d4) = self._columns(D)
-        _, k, _, trig, _ = self._closed_loops(d2, d3, d4, m)
-        return _matrix(_jc0_entries(self._jacobian_terms(t1, trig, m), *k), D.shape[:-1])
+        D = np.asarray(D, dtype=float)
+        if D.shape == (4,) and (jc0 := self._compiled("jc0", np.empty((4, 4)), D)) is not None:
+            return jc0
+        D = self.validate(D)
+        entries = in_blocks(self._jc0s, D.reshape(-1, 4), block=_BLOCK)
+        return _table(entries, (D.size // 4,)).reshape(D.shape[:-1] + (4, 4))
+
+    def _jc0s(self, D: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The 16 entries of JC0 (eq. 8), row by row, of valid states D (N, 4), each (N,)."""
+        t1, d2, d3, d4 = _columns(D)
+        _, (k2, k3, k4), _, trig, _ = self._linkages(d2, d3, d4)
+        a1, a2, a3, b1, b2, b3 = self._chain_terms(*trig)
+        return tuple(_jc0_entries(self.l1 + b1, *inverse.cos_sin(t1), a1, a2, a3, b1, b2, b3, k2, k3, k4,
+                                  np.zeros(t1.shape)))
 
     # ------------------------------------------------------------------ full state (eqs. 3-11)
     def state(self, D: Any, D_dot: Any, D_ddot: Any = None) -> BucketState:
@@ -591,37 +608,33 @@ class Excavator:
         K1 Ddot^2, i.e. JC0 Dddot plus the velocity-product terms of eq. 11 (see
         :meth:`acceleration_matrices` for the paper's JC1_0 / JC2_0 split of those terms).
         """
-        D, m, columns = self._columns(D)
-        if m is _SCALAR:
-            # One state: Python floats end to end (a 1 kHz node calls this per message).
-            rates = _finite_floats(D_dot, "D_dot")
-            accelerations = _NO_ACCELERATION if D_ddot is None else _finite_floats(D_ddot, "D_ddot")
-            table = np.array(self._state(columns, rates, accelerations, m), dtype=float)
-            return _bucket_state(table.reshape(10, 4))
-        rates = _split(_finite(D_dot, D.shape, "D_dot"))[1]
-        if D_ddot is None:
-            accelerations = np.zeros_like(columns)
-        else:
-            accelerations = _split(_finite(D_ddot, D.shape, "D_ddot"))[1]
-        n = len(D)
-        out = np.empty((_STATE_SIZE, n))
-        for start in range(0, n, BATCH_BLOCK):
-            block = slice(start, start + BATCH_BLOCK)
-            values = self._state(columns[:, block], rates[:, block], accelerations[:, block], m)
-            for row, value in zip(out, values, strict=True):
-                row[block] = value
-        return _bucket_state(np.moveaxis(out.reshape(10, 4, n), -1, 1))
+        D = np.asarray(D, dtype=float)
+        if D.shape == (4,):
+            # The single call (a 1 kHz node calls it per message): the kernel checks shapes and
+            # values; the numpy path below raises the error for what it refuses.
+            rates = np.asarray(D_dot, dtype=float)
+            accelerations = _NO_ACCELERATION if D_ddot is None else np.asarray(D_ddot, dtype=float)
+            table = self._compiled("state", np.empty((10, 4)), D, rates, accelerations)
+            if table is not None:
+                return BucketState(table[0], table[1], table[2], table[3], table[4], table[5], table[6:])
+        D = self.validate(D)
+        rates = _finite(D_dot, D.shape, "D_dot").reshape(-1, 4)
+        accelerations = None if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot").reshape(-1, 4)
+        entries = in_blocks(self._states, D.reshape(-1, 4), rates, accelerations, block=_BLOCK)
+        table = _table(entries, (D.size // 4,)).reshape(D.shape[:-1] + (40,))
+        return BucketState(*(table[..., i:i + 4] for i in range(0, 24, 4)),
+                           table[..., 24:].reshape(D.shape[:-1] + (4, 4)))
 
-    def _state(self, D: Any, D_dot: Any, D_ddot: Any, m: SimpleNamespace) -> list[Any]:
-        """The entries of a BucketState (theta, theta_dot, theta_ddot, Q, Q_dot, Q_ddot, then
-        JC0 row by row) from the columns of D, Ddot and Dddot (Python floats with math, or block
-        arrays with numpy)."""
-        t1, d2, d3, d4 = D
-        w1, v2, v3, v4 = D_dot
-        e1, f2, f3, f4 = D_ddot
-        (t2, t3, t4), (k2, k3, k4), (dk2, dk3, dk4), trig, _ = self._closed_loops(d2, d3, d4, m)
-        terms = self._jacobian_terms(t1, trig, m)
-        a1, a2, a3, b1, b2, b3, rho, c1, s1 = terms
+    def _states(self, D: np.ndarray, D_dot: np.ndarray, D_ddot: np.ndarray | None) -> tuple[np.ndarray, ...]:
+        """The 40 entries of BucketStates, each (N,): theta, theta_dot, theta_ddot, Q, Q_dot,
+        Q_ddot, then JC0 row by row, of valid states D (N, 4) with rates D_dot and accelerations
+        D_ddot (None: zero)."""
+        t1, d2, d3, d4 = _columns(D)
+        w1, v2, v3, v4 = _columns(D_dot)
+        e1, f2, f3, f4 = np.zeros((4, len(D))) if D_ddot is None else _columns(D_ddot)
+        (t2, t3, t4), (k2, k3, k4), (dk2, dk3, dk4), trig, _ = self._linkages(d2, d3, d4)
+        a1, a2, a3, b1, b2, b3 = self._chain_terms(*trig)
+        rho, (c1, s1) = self.l1 + b1, inverse.cos_sin(t1)
         # thetadot = K Ddot (eq. 7); thetaddot = K Dddot + K1 Ddot^2 (its time derivative).
         w2, w3, w4 = k2 * v2, k3 * v3, k4 * v4
         e2, e3, e4 = k2 * f2 + dk2 * v2 * v2, k3 * f3 + dk3 * v3 * v3, k4 * f4 + dk4 * v4 * v4
@@ -641,15 +654,16 @@ class Excavator:
         x, y = rho * c1, rho * s1
         radial = rho_ddot - rho * w1 * w1
         tangential = 2.0 * rho_dot * w1 + rho * e1
-        return [
+        entries = [
             t1, t2, t3, t4,
             w1, w2, w3, w4,
             e1, e2, e3, e4,
             x, y, self.l0 + a1, t2 + t3 + t4,
             rho_dot * c1 - y * w1, rho_dot * s1 + x * w1, z_dot, alpha_dot,
             c1 * radial - s1 * tangential, s1 * radial + c1 * tangential, z_ddot, e2 + e3 + e4,
-            *_jc0_entries(terms, k2, k3, k4),
+            *_jc0_entries(rho, c1, s1, a1, a2, a3, b1, b2, b3, k2, k3, k4, np.zeros(t1.shape)),
         ]
+        return tuple(entries)
 
     def acceleration_matrices(self, D: Any) -> tuple[np.ndarray, np.ndarray]:
         """JC1_0 (..., 4, 4) and JC2_0 (..., 4, 6) of eq. 11.
@@ -657,12 +671,13 @@ class Excavator:
         Qddot = JC0 Dddot + JC1_0 Ddot^2 + JC2_0 DDdot with Ddot^2 = the squared rates and
         DDdot = [d1 d2, d1 d3, d1 d4, d2 d3, d2 d4, d3 d4] (products of the rates of D).
         JC1_0 = J0 K1 + J1_0 K^2, JC2_0 = J2_0 K2, where J1_0 / J2_0 hold the pure and mixed
-        second derivatives of eq. 3 and K2 the products k_i k_j. Vectorised numpy path.
+        second derivatives of eq. 3 and K2 the products k_i k_j.
         """
         D = self.validate(D)
         t1, d2, d3, d4 = (D[..., i] for i in range(4))
-        (t2, t3, t4), (k2, k3, k4), (dk2, dk3, dk4), trig, _ = self._closed_loops(d2, d3, d4, _ARRAY)
-        a1, a2, a3, b1, b2, b3, rho, c1, s1 = self._jacobian_terms(t1, trig, _ARRAY)
+        (t2, t3, t4), (k2, k3, k4), (dk2, dk3, dk4), trig, _ = self._linkages(d2, d3, d4)
+        a1, a2, a3, b1, b2, b3 = self._chain_terms(*trig)
+        rho, c1, s1 = self.l1 + b1, np.cos(t1), np.sin(t1)
         k = np.stack((np.ones_like(k2), k2, k3, k4), axis=-1)
         dk = np.stack((np.zeros_like(dk2), dk2, dk3, dk4), axis=-1)
         # Hessian of Q(theta): d2rho/dthj dthk = -b_max(j,k); d2z = -a_max(j,k); rho = l1 + b1.
@@ -686,6 +701,7 @@ class Excavator:
             [2.0 * hess[..., i, j] * (k[..., i] * k[..., j])[..., None] for i, j in pairs], axis=-1
         )
         return jc1, jc2
+
 
     # ------------------------------------------------------------------ inverse (eqs. 9, 12-13)
     def cylinder_rates(self, D: Any, Q_dot: Any) -> RateSolution:
@@ -724,8 +740,6 @@ class Excavator:
         return np.linalg.solve(j0, (Q_ddot - free.Q_ddot)[..., None])[..., 0] + free.theta_ddot
 
 
-def _trig(t2: Any, t3: Any, t4: Any, m: SimpleNamespace) -> tuple[Any, ...]:
-    return (*m.cos_sin(t2), *m.cos_sin(t3), *m.cos_sin(t4))
 
 
 class BucketState(NamedTuple):
@@ -748,60 +762,36 @@ class RateSolution:
     condition: np.ndarray  # (...,) 2-norm condition number of JC0
 
 
-def _jc0_entries(terms: tuple[Any, ...], k2: Any, k3: Any, k4: Any) -> list[Any]:
+def _jc0_entries(rho: np.ndarray, c1: np.ndarray, s1: np.ndarray, a1: np.ndarray, a2: np.ndarray,
+                 a3: np.ndarray, b1: np.ndarray, b2: np.ndarray, b3: np.ndarray, k2: np.ndarray,
+                 k3: np.ndarray, k4: np.ndarray, zero: np.ndarray) -> list[np.ndarray]:
     """JC0 = J0 K (eqs. 5, 7, 8), row by row; column 1 is theta1 itself (k1 = 1).
 
-    The boom-plane columns are -a_i k_i (d rho / d D_i, eq. 4) turned by the swing.
+    The boom-plane columns are -a_i k_i (d rho / d D_i, eq. 4) turned by the swing; ``zero``
+    (zeros of the batch's shape) fills the two entries that are zero by structure.
     """
-    a1, a2, a3, b1, b2, b3, rho, c1, s1 = terms
     r2, r3, r4 = a1 * k2, a2 * k3, a3 * k4
-    nc1, ns1 = -c1, -s1
     return [
-        ns1 * rho, nc1 * r2, nc1 * r3, nc1 * r4,
-        c1 * rho, ns1 * r2, ns1 * r3, ns1 * r4,
-        0.0, b1 * k2, b2 * k3, b3 * k4,
-        0.0, k2, k3, k4,
+        -s1 * rho, -c1 * r2, -c1 * r3, -c1 * r4,
+        c1 * rho, -s1 * r2, -s1 * r3, -s1 * r4,
+        zero, b1 * k2, b2 * k3, b3 * k4,
+        zero, k2, k3, k4,
     ]
 
 
-def _split(values: np.ndarray) -> tuple[SimpleNamespace, Sequence[Any]]:
-    """Columns of a state as Python floats (one state) or arrays (a batch), with matching math.
-
-    Batch columns are copied once into the contiguous rows of one array (k, ...): every later
-    ufunc then streams memory instead of striding through (..., k) rows.
-    """
-    if values.ndim == 1:
-        return _SCALAR, values.tolist()
-    return _ARRAY, np.ascontiguousarray(np.moveaxis(values, -1, 0))
+def _columns(values: np.ndarray) -> np.ndarray:
+    """The columns of values (N, k) as the contiguous rows of one array (k, N): every later
+    ufunc then streams memory instead of striding through rows."""
+    return np.ascontiguousarray(values.T)
 
 
-def _stack(columns: Any, ndim: int) -> np.ndarray:
-    """Columns -> array (..., k); a batch is filled row-contiguously and returned as a view."""
-    if ndim == 1:
-        return np.array(columns, dtype=float)
-    shape = np.broadcast_shapes(*(np.shape(c) for c in columns))
-    out = np.empty((len(columns), *shape))
-    for i, column in enumerate(columns):
-        out[i] = column
-    return np.moveaxis(out, 0, -1)
-
-
-def _matrix(entries: list[Any], batch: tuple[int, ...]) -> np.ndarray:
-    """Entries of a 4 x 4 matrix, row by row -> array (..., 4, 4), filled entry-contiguously for
-    a batch (see _stack)."""
-    if not batch:
-        return np.array(entries, dtype=float).reshape(4, 4)
-    out = np.empty((len(entries), *batch))
+def _table(entries: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """Entries (arrays of ``shape`` (N,) or floats) -> array (N, len(entries)); filled entry by
+    entry into contiguous rows and returned as a view (the layout of the blocks' outputs)."""
+    out = np.empty((len(entries), *shape))
     for row, entry in zip(out, entries, strict=True):
         row[...] = entry
-    return np.moveaxis(out.reshape(4, 4, *batch), (0, 1), (-2, -1))
-
-
-def _bucket_state(table: np.ndarray) -> BucketState:
-    """BucketState as views of a table of _state's entries: (10, 4) for one state, (10, N, 4)
-    for a batch (rows: the six vectors, then JC0's rows)."""
-    jc0 = table[6:] if table.ndim == 2 else np.moveaxis(table[6:], 1, 0)
-    return BucketState(table[0], table[1], table[2], table[3], table[4], table[5], jc0)
+    return out.T
 
 
 def _finite(values: Any, shape: tuple[int, ...], name: str) -> np.ndarray:
@@ -812,22 +802,9 @@ def _finite(values: Any, shape: tuple[int, ...], name: str) -> np.ndarray:
         if array.shape != (4,):
             raise ValueError(f"{name}: expected shape (4,) or {shape} (D's), got shape {array.shape}")
         array = np.broadcast_to(array, shape)
-    finite = all(map(math.isfinite, array.tolist())) if array.ndim == 1 else np.all(np.isfinite(array))
-    if not finite:
+    if not np.all(np.isfinite(array)):
         raise StrokeError(f"{name} is not finite: {array}")
     return array
-
-
-def _finite_floats(values: Any, name: str) -> list[float]:
-    """Four finite Python floats (the one-state path); ValueError (shape) or StrokeError (not
-    finite) naming ``name``."""
-    array = np.asarray(values, dtype=float)
-    if array.shape != (4,):
-        raise ValueError(f"{name}: expected shape (4,) like D's, got shape {array.shape}")
-    floats = array.tolist()
-    if not all(map(math.isfinite, floats)):
-        raise StrokeError(f"{name} is not finite: {floats}")
-    return floats
 
 
 def _vectors(values: Any, k: int, what: str) -> np.ndarray:
@@ -842,40 +819,55 @@ def _first_bad(values: np.ndarray, good: np.ndarray) -> float:
     return float(np.asarray(values)[~np.asarray(good)].flat[0])
 
 
+
+
 # ---------------------------------------------------------------------- ROS-facing geometry
-def _operands(*values: Any) -> tuple[SimpleNamespace, list[Any]]:
-    """Python floats and math for all-scalar arguments (a node's per-message call), else arrays."""
-    if all(isinstance(v, float | int) for v in values):  # np.float64 is a float
-        return _SCALAR, [float(v) for v in values]
-    return _ARRAY, [np.asarray(v, dtype=float) for v in values]
-
-
-def _vector(components: tuple[Any, ...], m: SimpleNamespace) -> np.ndarray:
-    if m is _SCALAR:
-        return np.array(components)
+def _last_axis(*components: np.ndarray) -> np.ndarray:
     return np.stack(np.broadcast_arrays(*components), axis=-1)
+
+
+def _floats(*values: Any) -> bool:
+    """All Python (or numpy) floats: one state, which the kernel computes once loaded."""
+    return all(isinstance(value, float) for value in values)
 
 
 def bucket_quaternion(theta1: Any, alpha: Any) -> np.ndarray:
     """Bucket orientation [x, y, z, w] in the REP 103 base frame: yaw theta1 about z, then
-    the bucket angle alpha about the boom-plane normal, i.e. a rotation about +y by -alpha."""
-    m, (theta1, alpha) = _operands(theta1, alpha)
-    cy, sy = m.cos(0.5 * theta1), m.sin(0.5 * theta1)
-    cp, sp = m.cos(0.5 * alpha), -m.sin(0.5 * alpha)
+    the bucket angle alpha about the boom-plane normal, i.e. a rotation about +y by -alpha.
+    One state of floats runs compiled (a node calls this per message), arrays on numpy."""
+    if _floats(theta1, alpha) and (kernel := KERNEL.get()) is not None:
+        out = np.empty(4)
+        kernel.bucket_quaternion(theta1, alpha, out)
+        return out
+    theta1, alpha = np.asarray(theta1, dtype=float), np.asarray(alpha, dtype=float)
+    cy, sy = np.cos(0.5 * theta1), np.sin(0.5 * theta1)
+    cp, sp = np.cos(0.5 * alpha), -np.sin(0.5 * alpha)
     # q_z(theta1) * q_y(-alpha)
-    return _vector((-sy * sp, cy * sp, sy * cp, cy * cp), m)
+    return _last_axis(-sy * sp, cy * sp, sy * cp, cy * cp)
 
 
 def bucket_angular_velocity(theta1: Any, theta1_dot: Any, alpha_dot: Any) -> np.ndarray:
-    """omega = theta1dot z - alphadot y', y' = (-sin theta1, cos theta1, 0) the boom-plane normal."""
-    m, (theta1, theta1_dot, alpha_dot) = _operands(theta1, theta1_dot, alpha_dot)
-    return _vector((alpha_dot * m.sin(theta1), -alpha_dot * m.cos(theta1), theta1_dot + 0.0 * theta1), m)
+    """omega = theta1dot z - alphadot y', y' = (-sin theta1, cos theta1, 0) the boom-plane normal
+    (one state of floats compiled, as :func:`bucket_quaternion`)."""
+    if _floats(theta1, theta1_dot, alpha_dot) and (kernel := KERNEL.get()) is not None:
+        out = np.empty(3)
+        kernel.bucket_angular_velocity(theta1, theta1_dot, alpha_dot, out)
+        return out
+    theta1, alpha_dot = np.asarray(theta1, dtype=float), np.asarray(alpha_dot, dtype=float)
+    return _last_axis(alpha_dot * np.sin(theta1), -alpha_dot * np.cos(theta1),
+                      np.asarray(theta1_dot, dtype=float))
 
 
 def bucket_angular_acceleration(
     theta1: Any, theta1_dot: Any, theta1_ddot: Any, alpha_dot: Any, alpha_ddot: Any
 ) -> np.ndarray:
     """Time derivative of :func:`bucket_angular_velocity` (y' turns with the swing)."""
-    m, (theta1, w, w_dot, a_dot, a_ddot) = _operands(theta1, theta1_dot, theta1_ddot, alpha_dot, alpha_ddot)
-    c, s = m.cos(theta1), m.sin(theta1)
-    return _vector((a_ddot * s + a_dot * w * c, -a_ddot * c + a_dot * w * s, w_dot + 0.0 * theta1), m)
+    state = (theta1, theta1_dot, theta1_ddot, alpha_dot, alpha_ddot)
+    if _floats(*state) and (kernel := KERNEL.get()) is not None:
+        out = np.empty(3)
+        kernel.bucket_angular_acceleration(*state, out)
+        return out
+    theta1, w, w_dot, a_dot, a_ddot = (np.asarray(v, dtype=float)
+                                       for v in (theta1, theta1_dot, theta1_ddot, alpha_dot, alpha_ddot))
+    c, s = np.cos(theta1), np.sin(theta1)
+    return _last_axis(a_ddot * s + a_dot * w * c, -a_ddot * c + a_dot * w * s, w_dot)

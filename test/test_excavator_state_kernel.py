@@ -1,0 +1,117 @@
+"""The excavator's compiled single call (excavator_kinematics.state_kernel) against the numpy path,
+the reference: 10^4 random states in and out of the limits, with rates and accelerations; and
+one state through the numpy path = that row of a batch, bit for bit (the same code)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from excavator_kinematics import kinematics
+from excavator_kinematics.kinematics import BucketState, Excavator, StrokeError, compiled_kernel
+
+EXC = Excavator.default()
+LIM = EXC.limits
+N = 10_000
+
+
+def _states(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """States over the limits widened by a fifth of each range (about half outside one), a few
+    not finite; rates and accelerations up to twice the speed limits."""
+    lo, hi = LIM.d_min, LIM.d_max
+    span = hi - lo
+    D = rng.uniform(lo - 0.2 * span, hi + 0.2 * span, size=(n, 4))
+    D[rng.choice(n, 20, replace=False), rng.integers(0, 4, 20)] = np.nan
+    rates = rng.uniform(-2.0, 2.0, size=(n, 4)) * LIM.max_rates
+    rates[rng.choice(n, 10, replace=False), rng.integers(0, 4, 10)] = np.inf
+    return D, rates, rng.uniform(-2.0, 2.0, size=(n, 4)) * LIM.max_rates
+
+
+def _close(kernel: np.ndarray, reference: np.ndarray) -> bool:
+    """Within 1e-12 relative to the largest entry of the quantity."""
+    scale = max(float(np.max(np.abs(reference))), 1.0)
+    return bool(np.all(np.abs(kernel - reference) <= 1e-12 * scale))
+
+
+def test_kernel_equals_numpy_over_random_states_in_and_out_of_the_limits():
+    kernel = compiled_kernel(EXC, wait=True)
+    D, rates, accelerations = _states(np.random.default_rng(20261202), N)
+    table, Q, jc0 = np.empty((10, 4)), np.empty(4), np.empty((4, 4))
+    refused = 0
+    for i in range(N):
+        try:  # the numpy path on a batch of one
+            reference = EXC.state(D[i:i + 1], rates[i:i + 1], accelerations[i:i + 1])
+        except StrokeError:
+            reference = None
+        try:
+            pose = EXC.pose(D[i:i + 1])[0]
+        except StrokeError:
+            pose = None
+        assert kernel.state(EXC._packed, D[i], rates[i], accelerations[i], table) == (reference is not None)
+        assert kernel.pose(EXC._packed, D[i], Q) == kernel.jc0(EXC._packed, D[i], jc0) == (pose is not None)
+        if pose is not None:
+            assert _close(Q, pose) and _close(jc0, EXC.jc0(D[i:i + 1])[0]), D[i]
+        if reference is None:
+            refused += 1
+            continue
+        for row, field in enumerate(BucketState._fields[:6]):
+            assert _close(table[row], getattr(reference, field)[0]), (field, D[i])
+        assert _close(table[6:], reference.jc0[0]), D[i]
+    assert 0.3 * N < refused < 0.8 * N  # both kinds well represented
+
+
+def test_the_single_call_returns_the_kernel_result_and_refuses_as_the_numpy_path():
+    kernel = compiled_kernel(EXC, wait=True)
+    D, V, A = LIM.reference, np.array([0.2, 0.05, -0.08, 0.1]), np.array([0.1, 0.02, 0.01, -0.03])
+    table = np.empty((10, 4))
+    assert kernel.state(EXC._packed, D, V, A, table)
+    one = EXC.state(D, V, A)
+    np.testing.assert_array_equal(np.concatenate(one[:6]), table[:6].ravel())
+    np.testing.assert_array_equal(one.jc0, table[6:])
+    np.testing.assert_array_equal(EXC.state(D, V).Q_ddot, EXC.state(D, V, np.zeros(4)).Q_ddot)
+    np.testing.assert_array_equal(EXC.state(list(D), list(V)).Q, one.Q)  # lists are fine
+    bad = D.copy()
+    bad[2] = LIM.stroke_max[1] + 0.5
+    for call in (lambda: EXC.state(bad, V), lambda: EXC.pose(bad), lambda: EXC.jc0(bad)):
+        with pytest.raises(StrokeError, match="arm_cylinder length"):
+            call()
+    with pytest.raises(StrokeError, match="D_ddot"):
+        EXC.state(D, V, [0.0, np.nan, 0.0, 0.0])
+    with pytest.raises(ValueError, match="shape"):
+        EXC.state(D, V, np.zeros(3))
+    # A view that is not contiguous takes the numpy path (numba compiles nothing new in a call).
+    strided = np.tile(D, (2, 1)).T.copy().T[0]
+    assert not strided.flags.c_contiguous
+    np.testing.assert_allclose(EXC.pose(strided), EXC.pose(D), rtol=1e-12)
+    np.testing.assert_allclose(EXC.state(D, np.tile(V, (2, 1)).T.copy().T[0]).Q_dot, EXC.state(D, V).Q_dot,
+                               rtol=1e-12)
+    assert [len(f.signatures) for f in (kernel.state, kernel.pose, kernel.jc0)] == [1, 1, 1]
+
+
+def test_one_state_on_the_numpy_path_is_that_row_of_a_batch_bit_for_bit(monkeypatch: pytest.MonkeyPatch):
+    monkeypatch.setattr(kinematics.KERNEL, "get", lambda *sample, wait=False: None)
+    rng = np.random.default_rng(7)
+    lo, hi = LIM.d_min, LIM.d_max
+    D = rng.uniform(lo, hi, size=(300, 4))
+    V, A = rng.uniform(-1, 1, size=(2, 300, 4)) * LIM.max_rates
+    batch, poses, jc0s = EXC.state(D, V, A), EXC.pose(D), EXC.jc0(D)
+    for i in range(0, 300, 7):
+        one = EXC.state(D[i], V[i], A[i])
+        for field in BucketState._fields:
+            np.testing.assert_array_equal(getattr(one, field), getattr(batch, field)[i], err_msg=field)
+        np.testing.assert_array_equal(EXC.pose(D[i]), poses[i])
+        np.testing.assert_array_equal(EXC.jc0(D[i]), jc0s[i])
+
+
+def test_bucket_orientation_and_rates_of_one_state_compiled_equal_the_numpy_path():
+    compiled_kernel(EXC, wait=True)
+    rng = np.random.default_rng(11)
+    values = rng.uniform(-7.0, 7.0, size=(N // 10, 5))
+    quaternions = kinematics.bucket_quaternion(values[:, 0], values[:, 1])
+    omegas = kinematics.bucket_angular_velocity(*values[:, :3].T)
+    alphas = kinematics.bucket_angular_acceleration(*values.T)
+    for i, row in enumerate(values.tolist()):  # Python floats: the kernel
+        assert _close(kinematics.bucket_quaternion(row[0], row[1]), quaternions[i])
+        assert _close(kinematics.bucket_angular_velocity(*row[:3]), omegas[i])
+        assert _close(kinematics.bucket_angular_acceleration(*row), alphas[i])
+    assert kinematics.bucket_angular_velocity(0.5, 1, 0.25).shape == (3,)  # an int: the numpy path
