@@ -43,7 +43,7 @@ def test_a_kernel_warms_with_the_first_sample() -> None:
 def test_the_compiled_selection_is_the_numpy_rule() -> None:
     """select_kernel.select_one against model.select over random candidate sets, with ties,
     requested branches, weights and seeds that are NaN or infinite."""
-    from manipulator_kinematics.model import IKStatus, TIE_TOLERANCE, select
+    from manipulator_kinematics.model import TIE_TOLERANCE, IKStatus, select
     from manipulator_kinematics.select_kernel import select_one
 
     rng = np.random.default_rng(22)
