@@ -19,22 +19,22 @@ SUCCESS (solution inside every joint limit, away from singularities) count; of t
 the requested branch, else the one closest to the seed (weighted squared joint distance), else the
 first in branch order (each machine orders its branches by preference, e.g. the palletizer's home
 elbow first). Two valid candidates equally close to the seed are reported as a tie.
-:func:`select_parts` is the same rule on scalar parts, for IK written with
-:func:`manipulator_kinematics.serial_chain.evaluate_parts`.
+:func:`manipulator_kinematics.select_kernel.select_one` is the same rule for one target in the
+machines' compiled IK kernels.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import Any, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from manipulator_kinematics.serial_chain import JointLimits, parts_where
+from manipulator_kinematics.serial_chain import JointLimits
 
 #: Quaternion components below this count as zero when the sign of a quaternion is fixed.
 QUATERNION_ZERO = 1e-12
@@ -197,41 +197,6 @@ def select(
     chosen = np.where(np.take_along_axis(valid, chosen[..., None], axis=-1)[..., 0], chosen,
                       np.argmax(valid, axis=-1))
     return np.where(valid.any(axis=-1), chosen, -1), near.sum(axis=-1) > 1
-
-
-def select_parts(
-    q: Sequence, status: Sequence, *, seed: Sequence | None = None, allowed: Sequence[bool] | None = None
-) -> tuple[Any, Any]:
-    """:func:`select` on scalar parts (floats for one target, arrays for a batch: see
-    :func:`manipulator_kinematics.serial_chain.evaluate_parts`): ``selected`` and ``tie``.
-
-    ``q`` the m candidates' n values, candidate by candidate; ``status`` the m statuses; ``seed``
-    n values; ``allowed`` flags of the first candidates that may be selected (a requested branch,
-    or the machine's preferred group; default: all m).
-    """
-    n = len(q) // len(status)
-    allowed = (True,) * len(status) if allowed is None else allowed
-    chosen: Any = -1
-    if seed is None:  # the first valid candidate
-        for i in reversed(range(len(allowed))):
-            if allowed[i]:
-                chosen = chosen + (status[i] == _SUCCESS) * (i - chosen)
-        return chosen, False
-    best: Any = math.inf
-    costs = []
-    for i, keep in enumerate(allowed):
-        if keep:
-            cost: Any = 0.0
-            for k in range(n):
-                d = q[n * i + k] - seed[k]
-                cost = cost + d * d
-            valid = status[i] == _SUCCESS
-            cost = parts_where(valid, cost, math.inf)
-            better = cost < best
-            chosen, best = chosen + better * (i - chosen), parts_where(better, cost, best)
-            costs.append((valid, cost))
-    near = best * (1.0 + TIE_TOLERANCE) + TIE_TOLERANCE
-    return chosen, sum(valid & (cost <= near) for valid, cost in costs) > 1
 
 
 def limit_status(q: np.ndarray, limits: JointLimits, tol: float = 1e-10) -> np.ndarray:

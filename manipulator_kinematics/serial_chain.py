@@ -29,12 +29,8 @@ default). The palletizer's passive flange joint theta4 = -(theta2 + theta3) is t
 
 from __future__ import annotations
 
-import functools
-import math
-import struct
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from itertools import chain
 from types import ModuleType
 from typing import Any
 
@@ -326,130 +322,6 @@ def compiled_kernel(wait: bool = False) -> ModuleType | None:
     return KERNEL.get(wait=wait)
 
 
-def evaluate_parts(function: Callable[..., Sequence[Sequence]], args: Sequence[np.ndarray],
-                   dims: Sequence[tuple[int, ...]]) -> list[np.ndarray]:
-    """Run a function written on scalar parts for one case or a batch; its outputs as arrays.
-
-    ``function(*args)`` indexes each argument by row and returns one list of parts per output
-    (the row-major entries of an array of shape ``dims[j]``), with +, -, * and the like only, so
-    that a part can be a float or an (N,) array alike. ``args``: arrays (k,) for one case, given
-    to the function as lists of floats (numpy's per-call overhead would dominate small work), or
-    (k, N) for a batch, given in chunks of columns so that the temporaries stay in the cache. The
-    arithmetic is the same, so one case and a batch give bit-identical results. Returns arrays of
-    shape ``dims[j]`` for one case, else (N, *dims[j]).
-    """
-    if args[0].ndim == 1:
-        parts = function(*[arg.tolist() for arg in args])
-        # One buffer for every output: the cheapest way from tens of floats to arrays.
-        buffer = bytearray(_packer(sum(map(len, parts))).pack(*chain.from_iterable(parts)))
-        out, start = [], 0
-        for shape in dims:
-            out.append(np.ndarray(shape, buffer=buffer, offset=start))
-            start += 8 * math.prod(shape)
-        return out
-    count = args[0].shape[1]
-    out = [np.empty((count, math.prod(shape))) for shape in dims]
-    stages = [np.empty((math.prod(shape), _CHUNK)) for shape in dims]
-    for start in range(0, count, _CHUNK):
-        stop = min(start + _CHUNK, count)
-        parts = function(*(arg[:, start:stop] for arg in args))
-        # Each part into a contiguous row of a stage, copied into the output transposed: cheaper
-        # than strided column writes.
-        for values, stage, result in zip(parts, stages, out, strict=True):
-            for k, value in enumerate(values):
-                stage[k, :stop - start] = value
-            result[start:stop] = stage[:, :stop - start].T
-    return [result.reshape((count, *shape)) for result, shape in zip(out, dims, strict=True)]
-
-
-def evaluate_angle_parts(closed_form: Callable[..., Sequence[Sequence]], args: Sequence[np.ndarray],
-                         dims: Sequence[tuple[int, ...]], judge: Callable[..., Sequence[Sequence]],
-                         more: Sequence[np.ndarray],
-                         judged_dims: Sequence[tuple[int, ...]]) -> list[np.ndarray]:
-    """A closed-form IK as two stages of scalar parts (see :func:`evaluate_parts`) with one numpy
-    arctan2 between them: ``closed_form(*args)`` gives the candidates' angles as pairs y, x (of
-    ``dims[0]``) and diagnostics ``extra`` (``dims[2]``); ``judge(angles, extra, *more)`` gives
-    outputs of ``judged_dims`` (joint values, statuses, the selection). Returns [extra, *outputs].
-
-    ``args`` and ``more``: arrays (k,) for one target, which then runs on floats straight through
-    (evaluate_parts' packing between the stages would cost a seventh of the call), or (k, N) rows
-    for a batch. The arctan2 is numpy's in both cases (math's differs in the last bit), so one
-    target and a batch give the same bits.
-    """
-    if args[0].ndim == 1:
-        y, x, extra = closed_form(*[arg.tolist() for arg in args])
-        outputs = judge(np.arctan2(y, x).tolist(), extra, *[arg.tolist() for arg in more])
-        arrays = [np.array(out, dtype=float).reshape(shape)
-                  for out, shape in zip(outputs, judged_dims, strict=True)]
-        return [np.array(extra, dtype=float), *arrays]
-    # Junk from targets that are not poses is the judge's to flag; arrays must not warn about it.
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        y, x, extra = evaluate_parts(closed_form, args, dims)
-        angles = np.arctan2(y, x)
-    rows = [parts_rows(angles.reshape(len(angles), -1)), parts_rows(extra), *more]
-    return [extra, *evaluate_parts(judge, rows, judged_dims)]
-
-
-def parts_rows(values: np.ndarray) -> np.ndarray:
-    """An argument for :func:`evaluate_parts`: values (k,) of one case as they are, (..., k) of a
-    batch as contiguous (k, N) rows."""
-    if values.ndim == 1:
-        return values
-    return np.ascontiguousarray(values.reshape(-1, values.shape[-1]).T)
-
-
-def parts_where(condition: Any, a: Any, b: Any) -> Any:
-    """np.where for a batch's parts, a conditional expression for floats (see evaluate_parts)."""
-    if isinstance(condition, np.ndarray):
-        return np.where(condition, a, b)
-    return a if condition else b
-
-
-def parts_any(condition: Any) -> bool:
-    """True if the condition holds anywhere (for work a rare case alone needs)."""
-    return bool(condition.any()) if isinstance(condition, np.ndarray) else bool(condition)
-
-
-def parts_all(condition: Any) -> bool:
-    """True if the condition holds everywhere."""
-    return bool(condition.all()) if isinstance(condition, np.ndarray) else bool(condition)
-
-
-def parts_sqrt(x: Any) -> Any:
-    """Square root of a part (math.sqrt and np.sqrt are both correctly rounded: same bits)."""
-    return np.sqrt(x) if isinstance(x, np.ndarray) else math.sqrt(x)
-
-
-def parts_clip(x: Any, low: float = -1.0, high: float = 1.0) -> Any:
-    """A part clipped to [low, high] (NaN stays NaN)."""
-    return np.clip(x, low, high) if isinstance(x, np.ndarray) else min(max(x, low), high)
-
-
-def parts_pose_checks(pose: Sequence, rotation_tol: float = 1e-6,
-                      bottom_tol: float = 1e-12) -> tuple[Any, Any]:
-    """(finite, rigid) of a pose's 16 row-major parts (see evaluate_parts): every entry finite; the
-    rotation part orthonormal (R^T R = I to ``rotation_tol`` entry by entry) and proper (det > 0)
-    and the bottom row [0, 0, 0, 1] to ``bottom_tol`` (sum of the deviations)."""
-    nx, ox, ax, px, ny, oy, ay, py, nz, oz, az, pz, b0, b1, b2, b3 = pose
-    bottom = abs(b0) + abs(b1) + abs(b2) + abs(b3 - 1.0)
-    finite = (abs(nx) + abs(ox) + abs(ax) + abs(ny) + abs(oy) + abs(ay) + abs(nz) + abs(oz) + abs(az)
-              + abs(px) + abs(py) + abs(pz) + bottom) < math.inf
-    rigid = ((abs(nx * nx + ny * ny + nz * nz - 1.0) < rotation_tol)
-             & (abs(ox * ox + oy * oy + oz * oz - 1.0) < rotation_tol)
-             & (abs(ax * ax + ay * ay + az * az - 1.0) < rotation_tol)
-             & (abs(nx * ox + ny * oy + nz * oz) < rotation_tol)
-             & (abs(nx * ax + ny * ay + nz * az) < rotation_tol)
-             & (abs(ox * ax + oy * ay + oz * az) < rotation_tol)
-             & (nx * (oy * az - oz * ay) + ny * (oz * ax - ox * az) + nz * (ox * ay - oy * ax) > 0.0)
-             & (bottom < bottom_tol))
-    return finite, rigid
-
-
-@functools.cache
-def _packer(count: int) -> struct.Struct:
-    return struct.Struct(f"{count}d")
-
-
 @dataclass(frozen=True)
 class JointLimits:
     """Closed intervals [lower_i, upper_i] per joint (m for prismatic, rad for revolute joints).
@@ -487,11 +359,6 @@ class JointLimits:
         q = np.asarray(q, dtype=float)
         return ((q >= self.lower - tol) & (q <= self.upper + tol)).all(axis=-1)
 
-    def bounds(self, tol: float = 0.0) -> tuple[float, ...]:
-        """[lower_0 - tol, upper_0 + tol, lower_1 - tol, ...] as plain floats (for scalar parts,
-        see :func:`evaluate_parts`)."""
-        return tuple(float(v) for pair in zip(self.lower - tol, self.upper + tol, strict=True) for v in pair)
-
     def clip(self, q: ArrayLike) -> np.ndarray:
         """q moved into the limits (NaN stays NaN)."""
         return np.minimum(np.maximum(q, self.lower), self.upper)
@@ -507,7 +374,3 @@ def _homogeneous(matrix: ArrayLike | None, what: str) -> np.ndarray:
     if not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-9) or np.linalg.det(rotation) < 0:
         raise ValueError(f"{what} transform's rotation part is not a rotation matrix")
     return matrix
-
-
-#: Cases per chunk of a batch in evaluate_parts (the temporaries then fit in the cache).
-_CHUNK = 4096

@@ -58,7 +58,8 @@ def test_the_compiled_selection_is_the_numpy_rule() -> None:
         weights = rng.choice([1.0, 0.5, 2.0], size=n)
         seeded = trial % 7 != 0
         branch = int(rng.integers(m)) if trial % 5 == 0 else None
-        expected, expected_tie = select(q, status, seed=seed if seeded else None, branch=branch, weights=weights)
+        expected, expected_tie = select(q, status, seed=seed if seeded else None, branch=branch,
+                                        weights=weights)
         allowed = np.full(m, branch is None)
         if branch is not None:
             allowed[branch] = True

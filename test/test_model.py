@@ -1,5 +1,5 @@
-"""The shared selection rule: select_parts (scalar parts: floats for one target, arrays for a
-batch) against select (numpy), with and without a seed, over allowed subsets and exact ties; the
+"""The shared selection rule: the compiled one-target rule (select_kernel.select_one) against select
+(numpy), with and without a seed, over allowed subsets and exact ties; the
 one failure rule (IKSolutions.failure) on every machine and the error codes MoveIt shares."""
 
 from __future__ import annotations
@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from manipulator_kinematics.model import IKSolutions, IKStatus, pose_matrix, select, select_parts
+from manipulator_kinematics.model import TIE_TOLERANCE, IKSolutions, IKStatus, pose_matrix, select
 from manipulator_kinematics.registry import machine
-from manipulator_kinematics.serial_chain import parts_rows
+from manipulator_kinematics.select_kernel import select_one
 
 RNG = np.random.default_rng(8)
 
@@ -32,23 +32,18 @@ def candidates(count: int, m: int, n: int) -> tuple[np.ndarray, np.ndarray, np.n
 
 @pytest.mark.parametrize("allowed", [None, (True, True), (False, True, True, False, True, True)])
 @pytest.mark.parametrize("seeded", [False, True])
-def test_select_parts_is_select(allowed: tuple[bool, ...] | None, seeded: bool) -> None:
+def test_the_compiled_rule_is_select(allowed: tuple[bool, ...] | None, seeded: bool) -> None:
     m, n = 6, 4
     q, status, seed = candidates(500, m, n)
-    seed = seed if seeded else None
     mask = np.zeros(m, dtype=bool)
     mask[: m if allowed is None else len(allowed)] = True if allowed is None else allowed
-    expected, expected_tie = select(q, np.where(mask, status, IKStatus.UNREACHABLE), seed=seed)
+    expected, expected_tie = select(q, np.where(mask, status, IKStatus.UNREACHABLE),
+                                    seed=seed if seeded else None)
     assert (expected >= 0).any() and (expected < 0).any()
     assert not seeded or expected_tie.any()
-    rows = parts_rows(q.reshape(-1, m * n)), parts_rows(status.astype(float))
-    chosen, tie = select_parts(*rows, seed=None if seed is None else parts_rows(seed), allowed=allowed)
-    np.testing.assert_array_equal(chosen, expected)
-    np.testing.assert_array_equal(np.broadcast_to(tie, expected.shape), expected_tie)
-    for k in range(0, 500, 7):  # one target: floats
-        one = select_parts(q[k].ravel().tolist(), status[k].tolist(),
-                           seed=None if seed is None else seed[k].tolist(), allowed=allowed)
-        assert one == (int(expected[k]), bool(expected_tie[k]))
+    for k in range(500):
+        one = select_one(q[k], status[k], seed[k], seeded, mask, np.ones(n), TIE_TOLERANCE)
+        assert one == (int(expected[k]), bool(expected_tie[k])), k
 
 
 def test_error_codes_are_moveits_where_the_names_are_shared() -> None:

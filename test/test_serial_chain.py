@@ -12,9 +12,6 @@ from manipulator_kinematics.serial_chain import (
     JointLimits,
     SerialChain,
     compiled_kernel,
-    evaluate_parts,
-    parts_sqrt,
-    parts_where,
     prismatic,
     revolute,
     transl,
@@ -208,21 +205,3 @@ def test_fkine_jacob0_of_a_coupled_chain_differentiates_the_independent_joints()
     np.testing.assert_allclose(jacobian, numeric_jacobian(chain, q), atol=1e-8)
     np.testing.assert_allclose(pose, product_of_links(chain, q), atol=1e-14)
     np.testing.assert_allclose(pose[2, :3], [0.0, 0.0, 1.0], atol=1e-14)  # level flange: z stays vertical
-
-
-def test_evaluate_parts_gives_one_case_and_batches_alike() -> None:
-    def polar(args: list, scale: list) -> tuple[list, list]:
-        r, angle_cos, angle_sin = args
-        return [r * angle_cos, r * angle_sin], [parts_sqrt(r) * scale[0], parts_where(r > 1.0, 1.0, 0.0)]
-
-    rng = np.random.default_rng(12)
-    r, angle = rng.uniform(0.0, 2.0, 5000), rng.uniform(-PI, PI, 5000)
-    args = np.stack([r, np.cos(angle), np.sin(angle)])
-    xy, extra = evaluate_parts(polar, (args, np.array([3.0] * 5000)[None]), [(2,), (2,)])
-    assert xy.shape == (5000, 2) and extra.shape == (5000, 2)
-    np.testing.assert_allclose(xy, np.stack([r * np.cos(angle), r * np.sin(angle)], axis=-1), rtol=1e-15)
-    np.testing.assert_array_equal(extra, np.stack([3 * np.sqrt(r), r > 1.0], axis=-1))
-    for k in (0, 4096, 4999):  # the second chunk starts at 4096
-        one_xy, one_extra = evaluate_parts(polar, (args[:, k], np.array([3.0])), [(2,), (2,)])
-        np.testing.assert_array_equal(one_xy, xy[k])
-        np.testing.assert_array_equal(one_extra, extra[k])
