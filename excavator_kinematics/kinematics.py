@@ -68,12 +68,18 @@ DEFAULT_CONFIG = "excavator_cet200.yaml"
 # angles at a stroke end (round-off of a few ulp) are accepted.
 STROKE_TOLERANCE = 1e-9
 
-# States per block of pose, jc0 and state. Larger than blocks.BLOCK: in_blocks copies each
-# block's outputs into the batch's (40 per state here), and numpy's fixed cost per call (60-200
-# calls per block) falls with the block; measured on 10^5 states, CPU ns per full state: 4096
-# states per block 300-380, 8192 215-235, 32768 200, the whole batch in one 168 (but then the
-# some 150 temporaries grow with the batch: 1.2 GB at 10^6 states; 40 MB at 32768).
-_BLOCK = 8 * BLOCK
+# States per block of pose, jc0 and state: the blocks write their entries into the batch's table
+# where they stay (in_blocks' rows); numpy's fixed cost per call (60-200 calls per block) falls
+# with the block, the cache misses of its some 150 temporaries rise. Measured on 10^5 states, CPU
+# ms per batch (state / pose): 4096 states per block 17.2 / 9.6, 8192 15.2 / 8.3, 16384 15.7 /
+# 10.0, 32768 18.8 / 9.3, the whole batch in one 39.0 / 8.4.
+_BLOCK = 2 * BLOCK
+# Batches up to this many states run the kernel's loops (states, poses, jc0s), larger ones numpy:
+# the scalar kernel takes 180-210 ns per state whatever the batch, numpy's SIMD trigonometry wins
+# from a few thousand on. Measured, M states/s of state / pose, kernel vs numpy: 100 states
+# 3.1 / 5.0 vs 0.6 / 1.0; 1000 5.5 / 7.3 vs 3.4 / 5.9; 2048 5.7 / 7.5 vs 5.2 / 8.5; 32768 4.9 /
+# 5.9 vs 6.5 / 12.0.
+_KERNEL_BATCH = 2048
 
 # Dddot of a state without accelerations (the kernel reads it, never writes it).
 _NO_ACCELERATION = np.zeros(4)
@@ -150,10 +156,15 @@ def _warm(state_kernel: ModuleType) -> None:
     state_kernel.state(packed, D, D, D, np.empty((10, 4)))
     state_kernel.pose(packed, D, np.empty(4))
     state_kernel.jc0(packed, D, np.empty((4, 4)))
+    batch = np.zeros((1, 4))
+    state_kernel.states(packed, batch, batch, batch, np.empty((1, 10, 4)))
+    state_kernel.poses(packed, batch, np.empty((1, 4)))
+    state_kernel.jc0s(packed, batch, np.empty((1, 4, 4)))
     state_kernel.bucket_quaternion(0.0, 0.0, np.empty(4))
     state_kernel.bucket_angular_velocity(0.0, 0.0, 0.0, three)
     state_kernel.bucket_angular_acceleration(0.0, 0.0, 0.0, 0.0, 0.0, three)
-    for function in (state_kernel.state, state_kernel.pose, state_kernel.jc0, state_kernel.bucket_quaternion,
+    for function in (state_kernel.state, state_kernel.pose, state_kernel.jc0, state_kernel.states,
+                     state_kernel.poses, state_kernel.jc0s, state_kernel.bucket_quaternion,
                      state_kernel.bucket_angular_velocity, state_kernel.bucket_angular_acceleration):
         function.disable_compile()
 
@@ -471,8 +482,11 @@ class Excavator:
         if D.shape == (4,) and (Q := self._compiled("pose", np.empty(4), D)) is not None:
             return Q
         D = self.validate(D)
-        entries = in_blocks(self._poses, D.reshape(-1, 4), block=_BLOCK)
-        return _table(entries, (D.size // 4,)).reshape(D.shape)
+        flat = D.reshape(-1, 4)
+        if len(flat) <= _KERNEL_BATCH and (Q := self._compiled("poses", np.empty((len(flat), 4)),
+                                                               np.ascontiguousarray(flat))) is not None:
+            return Q.reshape(D.shape)
+        return in_blocks(self._poses, flat, block=_BLOCK, rows=True).T.reshape(D.shape)
 
     def _poses(self, D: np.ndarray) -> tuple[np.ndarray, ...]:
         """The columns of Q (N, 4) of valid states D (N, 4) (eqs. 1-3)."""
@@ -589,8 +603,12 @@ class Excavator:
         if D.shape == (4,) and (jc0 := self._compiled("jc0", np.empty((4, 4)), D)) is not None:
             return jc0
         D = self.validate(D)
-        entries = in_blocks(self._jc0s, D.reshape(-1, 4), block=_BLOCK)
-        return _table(entries, (D.size // 4,)).reshape(D.shape[:-1] + (4, 4))
+        flat = D.reshape(-1, 4)
+        jc0 = None if len(flat) > _KERNEL_BATCH else self._compiled(
+            "jc0s", np.empty((len(flat), 4, 4)), np.ascontiguousarray(flat))
+        if jc0 is not None:
+            return jc0.reshape(D.shape[:-1] + (4, 4))
+        return in_blocks(self._jc0s, flat, block=_BLOCK, rows=True).T.reshape(D.shape[:-1] + (4, 4))
 
     def _jc0s(self, D: np.ndarray) -> tuple[np.ndarray, ...]:
         """The 16 entries of JC0 (eq. 8), row by row, of valid states D (N, 4), each (N,)."""
@@ -620,8 +638,15 @@ class Excavator:
         D = self.validate(D)
         rates = _finite(D_dot, D.shape, "D_dot").reshape(-1, 4)
         accelerations = None if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot").reshape(-1, 4)
-        entries = in_blocks(self._states, D.reshape(-1, 4), rates, accelerations, block=_BLOCK)
-        table = _table(entries, (D.size // 4,)).reshape(D.shape[:-1] + (40,))
+        flat = np.ascontiguousarray(D.reshape(-1, 4))
+        table = None if len(flat) > _KERNEL_BATCH else self._compiled(
+            "states", np.empty((len(flat), 10, 4)), flat, np.ascontiguousarray(rates),
+            np.zeros((len(flat), 4)) if accelerations is None else np.ascontiguousarray(accelerations))
+        if table is not None:
+            table = table.reshape(D.shape[:-1] + (10, 4))
+            return BucketState(*(table[..., i, :] for i in range(6)), table[..., 6:, :])
+        table = in_blocks(self._states, D.reshape(-1, 4), rates, accelerations, block=_BLOCK, rows=True).T
+        table = table.reshape(D.shape[:-1] + (40,))
         return BucketState(*(table[..., i:i + 4] for i in range(0, 24, 4)),
                            table[..., 24:].reshape(D.shape[:-1] + (4, 4)))
 

@@ -186,6 +186,33 @@ def state(k: np.ndarray, D: np.ndarray, D_dot: np.ndarray, D_ddot: np.ndarray, o
 
 
 @njit(cache=True, error_model="numpy")
+def states(k: np.ndarray, D: np.ndarray, D_dot: np.ndarray, D_ddot: np.ndarray, out: np.ndarray) -> bool:
+    """:func:`state` of every row of a batch D, D_dot, D_ddot (N, 4) into ``out`` (N, 10, 4)."""
+    ok = True
+    for i in range(D.shape[0]):
+        ok = ok and state(k, D[i], D_dot[i], D_ddot[i], out[i])
+    return ok
+
+
+@njit(cache=True, error_model="numpy")
+def poses(k: np.ndarray, D: np.ndarray, out: np.ndarray) -> bool:
+    """:func:`pose` of every row of a batch D (N, 4) into ``out`` (N, 4)."""
+    ok = True
+    for i in range(D.shape[0]):
+        ok = ok and pose(k, D[i], out[i])
+    return ok
+
+
+@njit(cache=True, error_model="numpy")
+def jc0s(k: np.ndarray, D: np.ndarray, out: np.ndarray) -> bool:
+    """:func:`jc0` of every row of a batch D (N, 4) into ``out`` (N, 4, 4)."""
+    ok = True
+    for i in range(D.shape[0]):
+        ok = ok and jc0(k, D[i], out[i])
+    return ok
+
+
+@njit(cache=True, error_model="numpy")
 def bucket_quaternion(theta1: float, alpha: float, out: np.ndarray) -> None:
     """kinematics.bucket_quaternion of one swing angle and bucket angle into ``out`` (4,)."""
     cy, sy = math.cos(0.5 * theta1), math.sin(0.5 * theta1)

@@ -65,3 +65,15 @@ def test_the_compiled_selection_is_the_numpy_rule() -> None:
             allowed[branch] = True
         got, tie = select_one(q, status, seed, seeded, allowed, weights, TIE_TOLERANCE)
         assert (got, tie) == (int(expected), bool(expected_tie)), (trial, q, status, seed, branch)
+
+
+@pytest.mark.parametrize("n", [1, 7, 8, 9, 100])
+def test_in_blocks_rows_is_the_table_of_entries(n: int) -> None:
+    a = np.random.default_rng(n).normal(size=(n, 2))
+
+    def entries(x: np.ndarray) -> tuple:
+        return x[:, 0] * 2.0, 1.5, np.hypot(x[:, 0], x[:, 1])
+
+    table = in_blocks(entries, a, block=8, rows=True)
+    assert table.shape == (3, n)
+    np.testing.assert_array_equal(table, [a[:, 0] * 2.0, np.full(n, 1.5), np.hypot(a[:, 0], a[:, 1])])

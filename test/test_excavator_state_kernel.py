@@ -33,8 +33,9 @@ def _close(kernel: np.ndarray, reference: np.ndarray) -> bool:
     return bool(np.all(np.abs(kernel - reference) <= 1e-12 * scale))
 
 
-def test_kernel_equals_numpy_over_random_states_in_and_out_of_the_limits():
+def test_kernel_equals_numpy_over_random_states_in_and_out_of_the_limits(monkeypatch: pytest.MonkeyPatch):
     kernel = compiled_kernel(EXC, wait=True)
+    monkeypatch.setattr(kinematics.KERNEL, "get", lambda *sample, wait=False: None)  # numpy below
     D, rates, accelerations = _states(np.random.default_rng(20261202), N)
     table, Q, jc0 = np.empty((10, 4)), np.empty(4), np.empty((4, 4))
     refused = 0
@@ -58,6 +59,31 @@ def test_kernel_equals_numpy_over_random_states_in_and_out_of_the_limits():
             assert _close(table[row], getattr(reference, field)[0]), (field, D[i])
         assert _close(table[6:], reference.jc0[0]), D[i]
     assert 0.3 * N < refused < 0.8 * N  # both kinds well represented
+
+
+def test_a_batch_through_the_kernel_equals_the_numpy_batch(monkeypatch: pytest.MonkeyPatch):
+    """Batches of valid states up to _KERNEL_BATCH run the kernel's loops (states, poses, jc0s):
+    the numpy batch's values to 1e-12, and the same refusals."""
+    assert compiled_kernel(EXC, wait=True) is not None
+    rng = np.random.default_rng(7)
+    n = kinematics._KERNEL_BATCH
+    D = rng.uniform(LIM.d_min, LIM.d_max, size=(n, 4))
+    rates = rng.uniform(-1.0, 1.0, size=(n, 4)) * LIM.max_rates
+    accelerations = rng.uniform(-1.0, 1.0, size=(n, 4)) * LIM.max_rates
+    compiled = [EXC.state(D, rates, accelerations), EXC.state(D, rates), EXC.pose(D), EXC.jc0(D),
+                EXC.state(D[:100], rates[0])]
+    with monkeypatch.context() as numpy_only:
+        numpy_only.setattr(kinematics.KERNEL, "get", lambda *sample, wait=False: None)
+        reference = [EXC.state(D, rates, accelerations), EXC.state(D, rates), EXC.pose(D), EXC.jc0(D),
+                     EXC.state(D[:100], rates[0])]
+    for got, expected in zip(compiled, reference, strict=True):
+        for a, b in zip(got if isinstance(got, tuple) else (got,), expected if isinstance(expected, tuple)
+                        else (expected,), strict=True):
+            assert a.shape == b.shape and _close(a, b)
+    outside = D.copy()
+    outside[5, 2] = LIM.d_max[2] + 0.1
+    with pytest.raises(StrokeError):
+        EXC.state(outside, rates)
 
 
 def test_the_single_call_returns_the_kernel_result_and_refuses_as_the_numpy_path():
