@@ -139,3 +139,14 @@ def solve(k: np.ndarray, pose: np.ndarray, seed: np.ndarray, seeded: bool, allow
         return selected, tie, True
     selected, tie = select_one(q, status, seed, seeded, allowed, weights, tie_tolerance)
     return selected, tie, False
+
+
+@njit(cache=True, error_model="numpy")
+def solve_batch(k: np.ndarray, poses: np.ndarray, seeds: np.ndarray, seeded: bool, allowed: np.ndarray,
+                oriented: bool, axis_mode: bool, q: np.ndarray, status: np.ndarray, extra: np.ndarray,
+                selected: np.ndarray, tie: np.ndarray, home: np.ndarray) -> None:
+    """:func:`solve` for every row of poses (N, 16) with seeds (N, 4) (read if ``seeded``): q (N, 8,
+    4), status (N, 8), extra (N, 3), selected, tie and home (N,)."""
+    for i in range(poses.shape[0]):
+        selected[i], tie[i], home[i] = solve(k, poses[i], seeds[i], seeded, allowed, oriented, axis_mode,
+                                             q[i], status[i], extra[i])

@@ -60,9 +60,9 @@ The IK is plain numpy on (..., 8, 4) candidate arrays (:meth:`Palletizer._closed
 :func:`~manipulator_kinematics.model.limit_status` on the axis angles plus this machine's
 SINGULAR/UNREACHABLE/INVALID rules; the shared :func:`~manipulator_kinematics.model.select`), one
 target being a batch of one, large batches in blocks (:func:`manipulator_kinematics.blocks.in_blocks`).
-A single target runs the same steps compiled (:mod:`palletizer_kinematics.ik_kernel`, numba, loaded
-in the background by the first single call: :func:`compiled_kernel`); numpy is the reference, a test
-compares the two. Returned angles A2, A3 and theta2, theta3 lie in (-pi, pi] (as atan2's), A1 =
+The same steps run compiled (:mod:`palletizer_kinematics.ik_kernel`, numba, loaded in the
+background by the first call: :func:`compiled_kernel`), for one target and, as a loop, for a batch;
+numpy is the reference, a test compares the two. Returned angles A2, A3 and theta2, theta3 lie in (-pi, pi] (as atan2's), A1 =
 theta1 in [-pi, pi], the flange in [-2 pi, 2 pi]. Speed: benchmarks/bench_palletizer_ik.py and
 docs/palletizer.md.
 """
@@ -230,6 +230,9 @@ def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
     home[:3, 3] = 1.5, 0.0, 1.4
     home[1:3, 1:3] = -home[1:3, 1:3]  # z down
     ik_kernel.solve(packed, home.reshape(16), _NO_SEED, False, _ALL_BRANCHES, True, True, q, status, extra)
+    one = np.ones(1, dtype=bool)
+    ik_kernel.solve_batch(packed, home.reshape(1, 16), np.zeros((1, 4)), False, _ALL_BRANCHES, True, True,
+                          q[None], status[None], extra[None], np.empty(1, dtype=np.intp), one, one.copy())
 
 
 #: The single-target kernel (:mod:`palletizer_kinematics.ik_kernel`), see manipulator_kinematics.compiled.
@@ -489,8 +492,9 @@ class Palletizer:
         yaw 0 without a seed. ``mode`` ``axis`` (default: the configured variant's axis angles)
         or ``dh``; ``seed`` (4,) or (..., 4) in the mode's angles; ``branch`` one of
         :data:`BRANCHES` or of :data:`ARM_BRANCHES` (either flange turn). One target (4, 4) runs
-        the compiled kernel (:func:`compiled_kernel`) unless not ``compiled``; a batch, and one
-        target until the kernel is loaded, the numpy code (:meth:`_solve_block`), the reference.
+        the compiled kernel (:func:`compiled_kernel`), a batch its loop over the targets (0.45 us
+        per target, 1.6-2x numpy's), unless not ``compiled``; until the kernel is loaded, the
+        numpy code (:meth:`_solve_block`), the reference.
         """
         mode = self._mode(mode)
         allowed = self._allowed(branch)
@@ -504,10 +508,14 @@ class Palletizer:
                 raise RequestError(f"seed must be 4 finite angles, got {seed.tolist()}", IKStatus.INVALID)
             if seed.shape != shape + (4,):
                 seed = np.broadcast_to(seed, shape + (4,))
-        kernel = compiled_kernel(self) if shape == () and compiled else None
-        if kernel is not None:
+        kernel = compiled_kernel(self) if compiled else None
+        if kernel is not None and shape == ():
             q, status, selected, tie, home, lean, c3 = self._solve_one(kernel, target, seed, allowed,
                                                                       use_orientation, mode)
+        elif kernel is not None:
+            seeds = None if seed is None else seed.reshape(-1, 4)
+            flat = self._solve_many(kernel, target.reshape(-1, 16), seeds, allowed, use_orientation, mode)
+            q, status, selected, tie, home, lean, c3 = (out.reshape(shape + out.shape[1:]) for out in flat)
         else:
             block = functools.partial(self._solve_block, allowed=allowed, use_orientation=use_orientation,
                                       mode=mode)
@@ -580,6 +588,18 @@ class Palletizer:
         )
         selection = np.array(selected, dtype=np.intp), np.array(tie), np.array(home)
         return q, status, *selection, extra[0], extra[1:]
+
+    def _solve_many(self, kernel: ModuleType, poses: np.ndarray, seeds: np.ndarray | None,
+                    allowed: np.ndarray, use_orientation: bool, mode: str) -> tuple[np.ndarray, ...]:
+        """:meth:`_solve_block`'s outputs for targets (N, 16) through the kernel's loop."""
+        n = len(poses)
+        q, status, extra = np.empty((n, 8, 4)), np.empty((n, 8), dtype=np.int8), np.empty((n, 3))
+        selected, tie, home = np.empty(n, dtype=np.intp), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
+        seeded = seeds is not None
+        kernel.solve_batch(self._packed, np.ascontiguousarray(poses),
+                           np.ascontiguousarray(seeds) if seeded else np.zeros((n, 4)), seeded, allowed,
+                           bool(use_orientation), mode == "axis", q, status, extra, selected, tie, home)
+        return q, status, selected, tie, home, extra[:, 0], extra[:, 1:]
 
     def _mode(self, mode: str | None) -> str:
         if mode is None:

@@ -231,8 +231,8 @@ def mixed_targets(model: Palletizer, n: int) -> np.ndarray:
 
 @pytest.mark.parametrize("variant", ["single", "double"])
 def test_batch_equals_one_by_one(variant: str) -> None:
-    # One target runs through the compiled kernel (numpy until it is loaded), a batch through the
-    # numpy code: the same steps, so the same results to the last bits (1e-12).
+    # One target and a batch both run the compiled kernel once it is loaded (numpy until then):
+    # the same results to the last bits (1e-12) either way.
     model = Palletizer.default(variant)
     targets = mixed_targets(model, 300).reshape(3, 100, 4, 4)
     seeds = RNG.uniform(model.limits.lower, model.limits.upper, size=(3, 100, 4))
@@ -263,7 +263,8 @@ def test_batch_equals_one_by_one(variant: str) -> None:
 @pytest.mark.skipif(not enabled(), reason="MK_COMPILED=0: the kernel is off")
 @pytest.mark.parametrize("variant", ["single", "double"])
 def test_compiled_kernel_equals_the_numpy_path(variant: str) -> None:
-    # The single call's kernel against the numpy code (the reference) on one batch: 6 x 2000
+    # The kernel (one target per call, and its loop over a batch) against the numpy code (the
+    # reference) on one batch: 6 x 2000
     # targets per variant, every status among them (singular: arm near stretched), seeded or not,
     # a requested branch, both modes.
     model = Palletizer.default(variant)
@@ -283,8 +284,13 @@ def test_compiled_kernel_equals_the_numpy_path(variant: str) -> None:
         {"branch": "back_elbow_up"},
         {"branch": "front_elbow_down_outer", "seed": seeds, "mode": "dh"},
     ):
-        numpy = model.solve_ik(targets, **options)
+        numpy = model.solve_ik(targets, compiled=False, **options)
         assert set(numpy.status.ravel().tolist()) == set(range(5))  # every status occurs
+        batch = model.solve_ik(targets, **options)
+        np.testing.assert_allclose(batch.q, numpy.q, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(batch.status, numpy.status)
+        np.testing.assert_array_equal(batch.selected, numpy.selected)
+        np.testing.assert_array_equal(batch.tie, numpy.tie)
         seed = options.get("seed")
         for i in range(n):
             if seed is not None:
