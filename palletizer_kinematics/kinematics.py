@@ -62,7 +62,8 @@ SINGULAR/UNREACHABLE/INVALID rules; the shared :func:`~manipulator_kinematics.mo
 target being a batch of one, large batches in blocks (:func:`manipulator_kinematics.blocks.in_blocks`).
 The same steps run compiled (:mod:`palletizer_kinematics.ik_kernel`, numba, loaded in the
 background by the first call: :func:`compiled_kernel`), for one target and, as a loop, for a batch;
-numpy is the reference, a test compares the two. Returned angles A2, A3 and theta2, theta3 lie in (-pi, pi] (as atan2's), A1 =
+numpy is the reference, a test compares the two. Returned angles A2, A3 and theta2, theta3 lie in
+(-pi, pi] (as atan2's), A1 =
 theta1 in [-pi, pi], the flange in [-2 pi, 2 pi]. Speed: benchmarks/bench_palletizer_ik.py and
 docs/palletizer.md.
 """

@@ -226,8 +226,9 @@ def test_failures_are_statuses_with_reasons(arm: ToolChanger) -> None:
 def test_batches_equal_single_targets_and_keep_their_shape(arm: ToolChanger) -> None:
     q = in_limits(arm, 12, 9).reshape(3, 4, 6)
     seeds = q + 0.05
-    batch = arm.solve_ik(arm.fkine(q), seed=seeds)
+    batch = arm.solve_ik(arm.fkine(q), seed=seeds, compiled=False)  # one state = a batch of one
     assert batch.q.shape == (3, 4, 8, 6) and batch.selected.shape == (3, 4)
+    assert arm.solve_ik(arm.fkine(q), seed=seeds).q.shape == (3, 4, 8, 6)  # the kernel's loop
     for index in [(0, 0), (2, 3), (1, 2)]:
         single = arm.solve_ik(arm.fkine(q[index]), seed=seeds[index], compiled=False)  # the numpy path
         np.testing.assert_array_equal(single.q, batch.q[index])
@@ -258,8 +259,9 @@ def mixed_targets(arm: ToolChanger, n: int, seed: int) -> np.ndarray:
 
 @pytest.mark.parametrize("tooled", [False, True])
 def test_the_compiled_kernel_is_the_numpy_path_for_one_target(arm: ToolChanger, tooled: bool) -> None:
-    """ik_kernel (one target) against the vectorised numpy path over 10^4 targets, seeded and not
-    and with a branch asked for: the same statuses, selections, ties and texts, q within 1e-12."""
+    """ik_kernel (one target, and its loop over a batch) against the vectorised numpy path over
+    10^4 targets, seeded and not and with a branch asked for: the same statuses, selections, ties
+    and texts, q within 1e-12."""
     model = arm
     if tooled:
         params = section()
@@ -270,8 +272,12 @@ def test_the_compiled_kernel_is_the_numpy_path_for_one_target(arm: ToolChanger, 
     seeds = in_limits(model, len(T), 42)
     seen = set()
     for seed, branch in ((None, None), (seeds, None), (seeds, "back_down_flip")):
-        batch = model.solve_ik(T, seed=seed, branch=branch)
+        batch = model.solve_ik(T, seed=seed, branch=branch, compiled=False)
         seen |= set(np.unique(batch.status).tolist())
+        looped = model.solve_ik(T, seed=seed, branch=branch)
+        np.testing.assert_allclose(looped.q, batch.q, rtol=0.0, atol=1e-12)
+        for field in ("status", "selected", "tie"):
+            np.testing.assert_array_equal(getattr(looped, field), getattr(batch, field))
         for i in range(len(T)):
             one = model.solve_ik(T[i], seed=None if seed is None else seed[i], branch=branch)
             np.testing.assert_allclose(one.q, batch.q[i], rtol=0.0, atol=1e-12)  # NaN where NaN

@@ -151,3 +151,14 @@ def solve(k: np.ndarray, T: np.ndarray, seed: np.ndarray, seeded: bool, branch: 
     if invalid:
         q[:, :] = math.nan
     return selected, tie, invalid, rho
+
+
+@njit(cache=True, error_model="numpy")
+def solve_batch(k: np.ndarray, T: np.ndarray, seeds: np.ndarray, seeded: bool, branch: int, q: np.ndarray,
+                status: np.ndarray, s5_out: np.ndarray, reach: np.ndarray, selected: np.ndarray,
+                tie: np.ndarray, invalid: np.ndarray, rho: np.ndarray) -> None:
+    """:func:`solve` for every flange pose T (N, 4, 4) with seeds (N, 6) (read if ``seeded``): q
+    (N, 8, 6), status, s5_out and reach (N, 8), selected, tie, invalid and rho (N,)."""
+    for i in range(T.shape[0]):
+        selected[i], tie[i], invalid[i], rho[i] = solve(k, T[i], seeds[i], seeded, branch, q[i], status[i],
+                                                        s5_out[i], reach[i])

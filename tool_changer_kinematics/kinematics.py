@@ -161,6 +161,9 @@ def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
     """Run the kernel once (numba loads or compiles it)."""
     q, status, s5, reach = np.empty((8, 6)), np.empty(8, dtype=np.int8), np.empty(8), np.empty(8)
     ik_kernel.solve(packed, np.eye(4), packed[:6], False, -1, q, status, s5, reach)
+    flags = np.empty(1, dtype=bool)
+    ik_kernel.solve_batch(packed, np.eye(4)[None], packed[None, :6].copy(), False, -1, q[None], status[None],
+                          s5[None], reach[None], np.empty(1, dtype=np.intp), flags, flags.copy(), np.empty(1))
 
 
 #: The single-target kernel (:mod:`tool_changer_kinematics.ik_kernel`), see manipulator_kinematics.compiled.
@@ -299,8 +302,9 @@ class ToolChanger:
         ``use_orientation=False``: the arm has six joints for three position constraints, so the
         rule is to keep the seed's tool orientation (without a seed, the target's rotation part is
         used as given). ``seed`` (6,) or (..., 6) joint values; ``branch`` one of :data:`BRANCHES`.
-        One target (4, 4) runs the compiled kernel once it is loaded (:meth:`compiled_kernel`),
-        unless not ``compiled``; the numpy path otherwise (the same results within 1e-12).
+        One target (4, 4) runs the compiled kernel once it is loaded (:meth:`compiled_kernel`), a
+        batch its loop over the targets, unless not ``compiled``; the numpy path otherwise (the
+        reference: the same results within 1e-12).
         """
         if mode is not None and mode not in MODES:
             raise RequestError(f"unknown mode {mode!r}; known: {', '.join(MODES)}")
@@ -317,9 +321,16 @@ class ToolChanger:
         if not use_orientation and seed_q is not None:
             target[..., :3, :3] = self.fkine(seed_q)[..., :3, :3]
         index = None if branch is None else BRANCHES.index(branch)
-        kernel = self.compiled_kernel() if not shape and compiled else None
-        if kernel is not None:
+        kernel = self.compiled_kernel() if compiled else None
+        if kernel is not None and not shape:
             q, status, selected, tie, diag = self._solve_one(kernel, target, seed_q, index)
+        elif kernel is not None:
+            flat_seed = None if seed_q is None else seed_q.reshape(-1, 6)
+            flange = self._flange(target).reshape(-1, 4, 4)
+            q, status, selected, tie, diag = self._solve_many(kernel, flange, flat_seed, index)
+            q, status, selected, tie = (value.reshape(shape + value.shape[1:])
+                                        for value in (q, status, selected, tie))
+            diag = {key: value.reshape(shape + value.shape[1:]) for key, value in diag.items()}
         else:
             flange = self._flange(target)
             flat_seed = None if seed_q is None else seed_q.reshape(-1, 6)
@@ -456,6 +467,20 @@ class ToolChanger:
             seeded, -1 if branch is None else branch, q, status, s5, reach)
         diag = {"invalid": np.array(invalid), "rho": np.array(rho), "s5": s5, "reach": reach}
         return q, status, np.array(selected, dtype=np.intp), np.array(tie), diag
+
+    def _solve_many(self, kernel: ModuleType, flange: np.ndarray, seeds: np.ndarray | None,
+                    branch: int | None) -> tuple:
+        """Flange poses (N, 4, 4) through the kernel's loop (ik_kernel.solve_batch)."""
+        n = len(flange)
+        q, status = np.empty((n, 8, 6)), np.empty((n, 8), dtype=np.int8)
+        s5, reach, rho = np.empty((n, 8)), np.empty((n, 8)), np.empty(n)
+        selected, tie, invalid = np.empty(n, dtype=np.intp), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
+        seeded = seeds is not None
+        kernel.solve_batch(self._packed, np.ascontiguousarray(flange),
+                           np.ascontiguousarray(seeds) if seeded else np.zeros((n, 6)), seeded,
+                           -1 if branch is None else branch, q, status, s5, reach, selected, tie, invalid,
+                           rho)
+        return q, status, selected, tie, {"invalid": invalid, "rho": rho, "s5": s5, "reach": reach}
 
     def _explain(self, solutions: IKSolutions, at: tuple[int, ...], diag: dict[str, np.ndarray], *,
                  seeded: bool, requested: str | None) -> str:
