@@ -74,11 +74,11 @@ STROKE_TOLERANCE = 1e-9
 # ms per batch (state / pose): 4096 states per block 17.2 / 9.6, 8192 15.2 / 8.3, 16384 15.7 /
 # 10.0, 32768 18.8 / 9.3, the whole batch in one 39.0 / 8.4.
 _BLOCK = 2 * BLOCK
-# Batches up to this many states run the kernel's loops (states, poses, jc0s), larger ones numpy:
+# Batches of full states up to this many run the kernel's loop (states), larger ones numpy:
 # the scalar kernel takes 180-210 ns per state whatever the batch, numpy's SIMD trigonometry wins
-# from a few thousand on. Measured, M states/s of state / pose, kernel vs numpy: 100 states
-# 3.1 / 5.0 vs 0.6 / 1.0; 1000 5.5 / 7.3 vs 3.4 / 5.9; 2048 5.7 / 7.5 vs 5.2 / 8.5; 32768 4.9 /
-# 5.9 vs 6.5 / 12.0.
+# from a few thousand on (and for pose and JC0 alone at every size that matters: the kernel's
+# pose is 1.1-1.2x numpy's at 1000 states, 0.9x at 2048). Measured, M full states/s, kernel vs
+# numpy: 100 states 3.1 vs 0.6; 1000 5.5 vs 3.4; 2048 5.7 vs 5.2; 32768 4.9 vs 6.5.
 _KERNEL_BATCH = 2048
 
 # Dddot of a state without accelerations (the kernel reads it, never writes it).
@@ -158,13 +158,11 @@ def _warm(state_kernel: ModuleType) -> None:
     state_kernel.jc0(packed, D, np.empty((4, 4)))
     batch = np.zeros((1, 4))
     state_kernel.states(packed, batch, batch, batch, np.empty((1, 10, 4)))
-    state_kernel.poses(packed, batch, np.empty((1, 4)))
-    state_kernel.jc0s(packed, batch, np.empty((1, 4, 4)))
     state_kernel.bucket_quaternion(0.0, 0.0, np.empty(4))
     state_kernel.bucket_angular_velocity(0.0, 0.0, 0.0, three)
     state_kernel.bucket_angular_acceleration(0.0, 0.0, 0.0, 0.0, 0.0, three)
     for function in (state_kernel.state, state_kernel.pose, state_kernel.jc0, state_kernel.states,
-                     state_kernel.poses, state_kernel.jc0s, state_kernel.bucket_quaternion,
+                     state_kernel.bucket_quaternion,
                      state_kernel.bucket_angular_velocity, state_kernel.bucket_angular_acceleration):
         function.disable_compile()
 
@@ -482,11 +480,7 @@ class Excavator:
         if D.shape == (4,) and (Q := self._compiled("pose", np.empty(4), D)) is not None:
             return Q
         D = self.validate(D)
-        flat = D.reshape(-1, 4)
-        if len(flat) <= _KERNEL_BATCH and (Q := self._compiled("poses", np.empty((len(flat), 4)),
-                                                               np.ascontiguousarray(flat))) is not None:
-            return Q.reshape(D.shape)
-        return in_blocks(self._poses, flat, block=_BLOCK, rows=True).T.reshape(D.shape)
+        return in_blocks(self._poses, D.reshape(-1, 4), block=_BLOCK, rows=True).T.reshape(D.shape)
 
     def _poses(self, D: np.ndarray) -> tuple[np.ndarray, ...]:
         """The columns of Q (N, 4) of valid states D (N, 4) (eqs. 1-3)."""
@@ -603,12 +597,8 @@ class Excavator:
         if D.shape == (4,) and (jc0 := self._compiled("jc0", np.empty((4, 4)), D)) is not None:
             return jc0
         D = self.validate(D)
-        flat = D.reshape(-1, 4)
-        jc0 = None if len(flat) > _KERNEL_BATCH else self._compiled(
-            "jc0s", np.empty((len(flat), 4, 4)), np.ascontiguousarray(flat))
-        if jc0 is not None:
-            return jc0.reshape(D.shape[:-1] + (4, 4))
-        return in_blocks(self._jc0s, flat, block=_BLOCK, rows=True).T.reshape(D.shape[:-1] + (4, 4))
+        table = in_blocks(self._jc0s, D.reshape(-1, 4), block=_BLOCK, rows=True)
+        return table.T.reshape(D.shape[:-1] + (4, 4))
 
     def _jc0s(self, D: np.ndarray) -> tuple[np.ndarray, ...]:
         """The 16 entries of JC0 (eq. 8), row by row, of valid states D (N, 4), each (N,)."""

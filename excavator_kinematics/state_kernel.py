@@ -195,24 +195,6 @@ def states(k: np.ndarray, D: np.ndarray, D_dot: np.ndarray, D_ddot: np.ndarray, 
 
 
 @njit(cache=True, error_model="numpy")
-def poses(k: np.ndarray, D: np.ndarray, out: np.ndarray) -> bool:
-    """:func:`pose` of every row of a batch D (N, 4) into ``out`` (N, 4)."""
-    ok = True
-    for i in range(D.shape[0]):
-        ok = ok and pose(k, D[i], out[i])
-    return ok
-
-
-@njit(cache=True, error_model="numpy")
-def jc0s(k: np.ndarray, D: np.ndarray, out: np.ndarray) -> bool:
-    """:func:`jc0` of every row of a batch D (N, 4) into ``out`` (N, 4, 4)."""
-    ok = True
-    for i in range(D.shape[0]):
-        ok = ok and jc0(k, D[i], out[i])
-    return ok
-
-
-@njit(cache=True, error_model="numpy")
 def bucket_quaternion(theta1: float, alpha: float, out: np.ndarray) -> None:
     """kinematics.bucket_quaternion of one swing angle and bucket angle into ``out`` (4,)."""
     cy, sy = math.cos(0.5 * theta1), math.sin(0.5 * theta1)

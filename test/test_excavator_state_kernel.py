@@ -62,20 +62,18 @@ def test_kernel_equals_numpy_over_random_states_in_and_out_of_the_limits(monkeyp
 
 
 def test_a_batch_through_the_kernel_equals_the_numpy_batch(monkeypatch: pytest.MonkeyPatch):
-    """Batches of valid states up to _KERNEL_BATCH run the kernel's loops (states, poses, jc0s):
-    the numpy batch's values to 1e-12, and the same refusals."""
+    """Batches of valid states up to _KERNEL_BATCH run the kernel's loop (states): the numpy
+    batch's values to 1e-12, and the same refusals."""
     assert compiled_kernel(EXC, wait=True) is not None
     rng = np.random.default_rng(7)
     n = kinematics._KERNEL_BATCH
     D = rng.uniform(LIM.d_min, LIM.d_max, size=(n, 4))
     rates = rng.uniform(-1.0, 1.0, size=(n, 4)) * LIM.max_rates
     accelerations = rng.uniform(-1.0, 1.0, size=(n, 4)) * LIM.max_rates
-    compiled = [EXC.state(D, rates, accelerations), EXC.state(D, rates), EXC.pose(D), EXC.jc0(D),
-                EXC.state(D[:100], rates[0])]
+    compiled = [EXC.state(D, rates, accelerations), EXC.state(D, rates), EXC.state(D[:100], rates[0])]
     with monkeypatch.context() as numpy_only:
         numpy_only.setattr(kinematics.KERNEL, "get", lambda *sample, wait=False: None)
-        reference = [EXC.state(D, rates, accelerations), EXC.state(D, rates), EXC.pose(D), EXC.jc0(D),
-                     EXC.state(D[:100], rates[0])]
+        reference = [EXC.state(D, rates, accelerations), EXC.state(D, rates), EXC.state(D[:100], rates[0])]
     for got, expected in zip(compiled, reference, strict=True):
         for a, b in zip(got if isinstance(got, tuple) else (got,), expected if isinstance(expected, tuple)
                         else (expected,), strict=True):
