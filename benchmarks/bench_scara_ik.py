@@ -1,14 +1,14 @@
 """Benchmark (not a test): SCARA closed-form IK against a numerical IK on the same model.
 
 Prints one table: microseconds per IK in the library (one target per call: the compiled kernel
-of modes phi and fixed_phi and the numpy path beside it, and ``solve_ik`` on a 4x4 pose; and per
-target in one batched call), per SolveIK service call across processes (p50 / p99), and a
-numerical baseline on the same D-H model: Robotics Toolbox for Python's ``ikine_LM`` (and its C++
+of every mode and the numpy path beside it, and ``solve_ik`` on a 4x4 pose; and per target in
+one batched call), per SolveIK service call across processes (p50 / p99), and a numerical
+baseline on the same D-H model: Robotics Toolbox for Python's ``ikine_LM`` (and its C++
 ``ik_LM``), or, when the toolbox cannot be had, a damped-least-squares Newton IK of our own on the
 same chain. Speed-ups are against the library's one-target call in the same mode (``phi``: the
 numerical solvers get the full planar pose x, y, yaw); the last line gives the library's one call
-as a fraction of ``ik_LM`` (target: <= 0.5). ``--rounds`` rounds: one-target timings the median
-of each round's median, batches the median of the rounds.
+(mode phi, ``solve_ik``, mode position) as a fraction of ``ik_LM`` (target: <= 0.5). ``--rounds``
+rounds: one-target timings the median of each round's median, batches the median of the rounds.
 
 The Robotics Toolbox is not a dependency of the project: it is installed for this benchmark only,
 into its own venv (``$MK_RTB_PYTHON`` names an interpreter that has it; otherwise
@@ -127,13 +127,13 @@ def main() -> None:
 
     scalar: dict[str, float] = {}
     for mode, compiled in (("fixed_phi", True), ("phi", True), ("position", True), ("fixed_phi", False),
-                           ("phi", False)):
+                           ("phi", False), ("position", False)):
         p, phi = targets_for(mode, args.targets)
         seeds = q[-args.targets:]
         median, p99 = one_call(lambda i, p=p, phi=phi, s=seeds, m=mode, c=compiled:
                                solve(m, p[i], phi[i], s[i], c), len(p))
-        path = "compiled kernel" if compiled and mode != "position" else "numpy path"
-        scalar.setdefault(mode, median)
+        path = "compiled kernel" if compiled else "numpy path"
+        scalar[mode if compiled else f"{mode}, numpy path"] = median
         rows.append((f"library, one target per call, mode {mode} ({path})", f"{median:.1f}",
                      f"p99 {p99:.1f}", ""))
     poses = scara.fkine(q[:args.targets])
@@ -188,7 +188,9 @@ def main() -> None:
                                  f"{median / reference:.0f}x / {median / batched:.0f}x"))
                     if name == "ik_LM":
                         ratio = (f"library one call / ik_LM: ik {reference / median:.2f}, "
-                                 f"solve_ik {scalar['solve_ik'] / median:.2f} (target <= 0.5)")
+                                 f"solve_ik {scalar['solve_ik'] / median:.2f}, mode position "
+                                 f"{scalar['position'] / median:.2f} (numpy path "
+                                 f"{scalar['position, numpy path'] / median:.2f}) (target <= 0.5)")
     if not any(row[0].startswith("Robotics Toolbox") and row[1] != "-" for row in rows):
         # Fallback baseline: a plain numerical IK of our own on the same D-H chain.
         dls = [dls_ik(chain, scara, np.array([p[i, 0], p[i, 1], phi[i]]), seeds[i]) for i in range(n)]

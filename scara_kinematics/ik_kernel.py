@@ -1,14 +1,17 @@
-"""The SCARA's IK at a given heading for ONE target, compiled (numba): the single-call hot path of
-:meth:`scara_kinematics.kinematics.Scara.ik` (modes ``phi`` and ``fixed_phi``), whose vectorised
-numpy code (``Scara._solve_phi`` and :func:`manipulator_kinematics.model.select`) stays the
-reference; a test compares the two over 10^4 random targets, failing statuses included.
+"""The SCARA's IK for ONE target, compiled (numba): the single-call hot path of
+:meth:`scara_kinematics.kinematics.Scara.ik` in every mode (``solve_phi``: modes ``phi`` and
+``fixed_phi``; ``solve_position``: mode ``position``), whose vectorised numpy code
+(``Scara._solve_phi``, ``Scara._position_ik`` with ``Scara._candidate_headings``, and
+:func:`manipulator_kinematics.model.select`) stays the reference; a test compares the two over
+10^4 random targets per mode, failing statuses included.
 
 Why compiled: one numpy call costs about a microsecond whatever its size, and the closed form with
-its statuses and the selection rule is some sixty of them (about 60-80 us per call on 2 cores),
-against a target of half Robotics Toolbox's C++ ``ik_LM`` on the same arm. Scalar code of the same
-steps, compiled once and kept in numba's on-disk cache, takes about a microsecond.
+its statuses and the selection rule is some sixty of them (about 60-80 us per call on 2 cores;
+mode ``position``, 17 headings, about 200-300 us), against a target of half Robotics Toolbox's C++
+``ik_LM`` on the same arm. Scalar code of the same steps, compiled once and kept in numba's
+on-disk cache, takes a microsecond (a few in mode ``position``).
 
-Same steps as the numpy path, same equation numbers:
+Same steps as the numpy path, same equation numbers. At one heading (``_heading``):
 
 1. the wrist point w = p - l3 (cos phi, sin phi); sin theta1 = wy / l2 (eq. 12), reachable when
    |wy / l2| <= 1 (+ 1e-12); branch a theta1 = asin, branch b pi - asin kept in (-pi, pi];
@@ -17,9 +20,21 @@ Same steps as the numpy path, same equation numbers:
    widened by LIMIT_TOL is clipped to them), SINGULAR where |cos theta1| is below the threshold;
 4. the selection as :func:`manipulator_kinematics.model.select` with weights (1 / l2, 1, 1).
 
+Mode ``position`` (the rule of the kinematics module's docstring): the 17 candidate headings of
+``Scara._candidate_headings`` in its order (the preferred one; wy at the singularity band and the
+shoulder limits, both arcsin solutions; the elbow at a limit, the shoulder on the rail line on
+either side of the tool; the rail at a stroke end, the planar two-link IK
+:func:`manipulator_kinematics.planar.two_link_ik` from that shoulder, both elbows), steps 1-3 at
+each, the admissible one (a SUCCESS branch that may answer) nearest the preferred heading (the
+first of those within HEADING_TIE of the nearest; none: the preferred one), step 4 there, and the
+target's outcome: the best status over every heading, UNREACHABLE read as JOINT_LIMITS within the
+band |py| <= l2 + l3 (+ LIMIT_TOL) that an unbounded rail would reach.
+
 The arm's constants arrive as one float array, ``Scara._packed``: l1, l2, l3, the limits widened
 by LIMIT_TOL (lower 3, upper 3), the limits (lower 3, upper 3), the singularity threshold, the
-seed weights (3).
+seed weights (3), then mode ``position``'s: the wrist heights (4), the shoulder-to-tool distances^2
+(2) and turns (2) at the elbow limits (``Scara._constraint_constants``), the band l2 + l3 + LIMIT_TOL,
+HEADING_TIE.
 """
 
 from __future__ import annotations
@@ -34,7 +49,7 @@ from manipulator_kinematics.select_kernel import select_one
 
 # Globals are compile-time constants to numba.
 _SUCCESS, _SINGULAR, _LIMITS = int(IKStatus.SUCCESS), int(IKStatus.SINGULAR), int(IKStatus.JOINT_LIMITS)
-_UNREACHABLE = int(IKStatus.UNREACHABLE)
+_UNREACHABLE, _INVALID = int(IKStatus.UNREACHABLE), int(IKStatus.INVALID)
 
 
 @njit(cache=True, error_model="numpy")
@@ -44,9 +59,8 @@ def _wrap(angle: float) -> float:
 
 
 @njit(cache=True, error_model="numpy")
-def solve_phi(k: np.ndarray, px: float, py: float, phi: float, seed: np.ndarray, seeded: bool, branch: int,
-              tie_tolerance: float, q: np.ndarray, status: np.ndarray) -> tuple[int, bool]:
-    """Both branches q (2, 3) and their statuses (2,) at heading phi, then (selected, tie)."""
+def _heading(k: np.ndarray, px: float, py: float, phi: float, q: np.ndarray, status: np.ndarray) -> None:
+    """Steps 1-3: both branches q (2, 3) and their statuses (2,) at heading phi."""
     l1, l2, l3 = k[0], k[1], k[2]
     wx = px - l3 * math.cos(phi)
     wy = py - l3 * math.sin(phi)
@@ -78,8 +92,82 @@ def solve_phi(k: np.ndarray, px: float, py: float, phi: float, seed: np.ndarray,
             status[b] = _SINGULAR if singular else _SUCCESS
         else:
             status[b] = _LIMITS
-    # The shared rule (model.select): a requested branch alone, else the nearest to the seed, else the first.
+
+
+@njit(cache=True, error_model="numpy")
+def _allowed(branch: int) -> np.ndarray:
+    """(2,) the branches that may answer: the requested one (branch >= 0), else both."""
     allowed = np.full(2, branch < 0)
     if branch >= 0:
         allowed[branch] = True
-    return select_one(q, status, seed, seeded, allowed, k[16:19], tie_tolerance)
+    return allowed
+
+
+@njit(cache=True, error_model="numpy")
+def solve_phi(k: np.ndarray, px: float, py: float, phi: float, seed: np.ndarray, seeded: bool, branch: int,
+              tie_tolerance: float, q: np.ndarray, status: np.ndarray) -> tuple[int, bool]:
+    """Both branches q (2, 3) and their statuses (2,) at heading phi, then (selected, tie)."""
+    _heading(k, px, py, phi, q, status)
+    # The shared rule (model.select): a requested branch alone, else the nearest to the seed, else the first.
+    return select_one(q, status, seed, seeded, _allowed(branch), k[16:19], tie_tolerance)
+
+
+@njit(cache=True, error_model="numpy")
+def _candidate_headings(k: np.ndarray, px: float, py: float, preferred: float) -> np.ndarray:
+    """(17,) Scara._candidate_headings: the preferred heading, then every heading where a constraint
+    is active (NaN where it cannot be), each wrapped to [-pi, pi)."""
+    l1, l2, l3 = k[0], k[1], k[2]
+    headings = np.empty(17)
+    headings[0] = _wrap(preferred)
+    for i in range(4):  # wy = py - l3 sin phi at the singularity band and the shoulder limits
+        wrist = math.asin((py - k[19 + i]) / l3) if abs((py - k[19 + i]) / l3) <= 1.0 else math.nan
+        headings[1 + i] = _wrap(wrist)
+        headings[5 + i] = _wrap(math.pi - wrist)
+    for i in range(4):  # elbow at a limit: the shoulder at distance r from p on the rail line y = 0
+        side = 1.0 if i < 2 else -1.0
+        dx = math.sqrt(k[23 + i % 2] - py * py) if k[23 + i % 2] - py * py >= 0.0 else math.nan
+        headings[9 + i] = _wrap(math.atan2(py, side * dx) + k[25 + i % 2])
+    for end in range(2):  # rail at a stroke end: planar.two_link_ik (links l2, l3, tol 1e-12) from there
+        x = px - l1 - k[9 + 3 * end]
+        r = math.hypot(x, py)
+        ok = abs(l2 - l3) - 1e-12 <= r <= l2 + l3 + 1e-12  # False for a NaN r
+        cos2 = min(max((r * r - l2 * l2 - l3 * l3) / (2.0 * l2 * l3), -1.0), 1.0)
+        t2 = math.acos(cos2) if ok else math.nan
+        for elbow in range(2):
+            theta2 = t2 if elbow == 0 else -t2
+            theta1 = math.atan2(py, x) - math.atan2(l3 * math.sin(theta2), l2 + l3 * math.cos(theta2))
+            headings[13 + 2 * end + elbow] = _wrap(theta1 + theta2)
+    return headings
+
+
+@njit(cache=True, error_model="numpy")
+def solve_position(k: np.ndarray, px: float, py: float, preferred: float, seed: np.ndarray, seeded: bool,
+                   branch: int, tie_tolerance: float, q: np.ndarray, status: np.ndarray
+                   ) -> tuple[float, int, bool, int]:
+    """Mode position: (phi, selected, tie, outcome), with both branches q (2, 3) and their statuses
+    (2,) at the admissible heading phi nearest ``preferred`` (none admissible: the preferred one)."""
+    allowed = _allowed(branch)
+    headings = _candidate_headings(k, px, py, preferred)
+    q_h, status_h, distance = np.empty((17, 2, 3)), np.empty((17, 2), dtype=np.int8), np.empty(17)
+    nearest, outcome = math.inf, _INVALID
+    for h in range(17):
+        _heading(k, px, py, headings[h], q_h[h], status_h[h])
+        admissible = False
+        for b in range(2):
+            if allowed[b]:
+                outcome = min(outcome, status_h[h, b])
+                admissible = admissible or status_h[h, b] == _SUCCESS
+        distance[h] = abs(_wrap(headings[h] - preferred)) if admissible else math.inf
+        nearest = min(nearest, distance[h])
+    # The first as near as the nearest within Scara's HEADING_TIE; none admissible (all inf): the preferred.
+    h = 0
+    while not distance[h] <= nearest + k[28]:
+        h += 1
+    q[:] = q_h[h]
+    status[:] = status_h[h]
+    # With the rail unbounded every |py| <= l2 + l3 is reachable: if no candidate reached it, the
+    # rail's stroke (a joint limit) is what stops it.
+    if outcome == _UNREACHABLE and abs(py) <= k[27]:
+        outcome = _LIMITS
+    selected, tie = select_one(q, status, seed, seeded, allowed, k[16:19], tie_tolerance)
+    return headings[h], selected, tie, outcome

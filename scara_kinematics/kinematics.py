@@ -25,10 +25,11 @@ and theta2 = phi - theta1. Three modes:
 * ``position``: only (px, py) given; the arm is redundant (3 joints, 2 constraints). Rule: keep
   the seed's tool heading phi = theta1 + theta2 (no seed: 90 deg, the paper's); if no solution at
   that phi is inside the joint limits and away from the singularity, take the nearest phi (least
-  |phi - phi_seed|) that has one. The admissible phi form closed intervals whose ends are where a
-  constraint becomes active, each in closed form (|cos theta1| at the singularity threshold,
-  theta1 or theta2 or x_l at a limit; the last by the planar two-link IK from the rail end), so
-  the nearest admissible phi is exact, not searched.
+  |phi - phi_seed|; of equally near ones, within ``HEADING_TIE``, the first candidate) that has
+  one. The admissible phi form closed intervals whose ends are where a constraint becomes active,
+  each in closed form (|cos theta1| at the singularity threshold, theta1 or theta2 or x_l at a
+  limit; the last by the planar two-link IK from the rail end), so the nearest admissible phi is
+  exact, not searched.
 
 In every mode the branch is the one asked for, else the one closest to the seed (distance
 (dx_l / l2)^2 + dtheta1^2 + dtheta2^2), else ``elbow_a``.
@@ -72,6 +73,10 @@ MODES = ("fixed_phi", "phi", "position")
 PAPER_PHI = math.pi / 2
 #: Values this close (m or rad) outside a limit count as on it and are clipped to it.
 LIMIT_TOL = 1e-10
+#: Mode position: headings whose distances to the preferred one differ by less than this (rad) are
+#: equally near, the first in candidate order is taken (mirror images, e.g. both elbow limits with
+#: symmetric limits and no seed, would otherwise be decided by the last bits of arctan2).
+HEADING_TIE = 1e-12
 #: |z| of a target (m) and tilt / heading mismatch of a target orientation (rad) taken as zero.
 PLANE_TOL = 1e-6
 CONFIG_FILE = "scara.yaml"
@@ -366,8 +371,8 @@ class Scara:
         ``phi`` (...,) is required in mode ``phi`` and refused otherwise; ``seed`` (3,) or (..., 3)
         a current joint state; ``branch`` None (closest to the seed) or a name of ``BRANCHES``.
         Raises ValueError for an unknown mode or branch, a bad shape or a non-finite seed; a
-        non-finite target gives status INVALID. One target in mode ``phi`` or ``fixed_phi``
-        runs the compiled kernel (:func:`compiled_kernel`) unless not ``compiled``.
+        non-finite target gives status INVALID. One target (with one seed or none) runs the
+        compiled kernel (:func:`compiled_kernel`) in every mode unless not ``compiled``.
         """
         if mode not in MODES:
             raise ValueError(f"unknown IK mode {mode!r}; known: {', '.join(MODES)}")
@@ -388,15 +393,20 @@ class Scara:
             if seed.ndim == 0 or seed.shape[-1] != 3 or not np.all(np.isfinite(seed)):
                 raise ValueError(f"seed must be finite joint values of shape (..., 3), got {seed!r}")
         requested = None if branch is None else BRANCHES.index(branch)
+        one = px.ndim == 0 and compiled and (seed is None or seed.shape == (3,))
+        kernel = compiled_kernel(self) if one else None
         if mode == "position":
             preferred = (np.full(px.shape, PAPER_PHI) if seed is None
                          else wrap_angle(np.broadcast_to(seed[..., 1] + seed[..., 2], px.shape)))
-            phi_used, q, status, outcome = self._position_ik(px, py, preferred, requested)
-            selected, tie = select(q, status, seed=seed, branch=requested, weights=self._weights)
+            if kernel is not None:
+                phi_used, q, status, selected, tie, outcome = self._position_one(
+                    kernel, float(px), float(py), float(preferred), seed, requested)
+            else:
+                phi_used, q, status, outcome = self._position_ik(px, py, preferred, requested)
+                selected, tie = select(q, status, seed=seed, branch=requested, weights=self._weights)
         else:
             phi_used = preferred = np.full(px.shape, PAPER_PHI) if phi is None else wrap_angle(phi)
-            kernel = compiled_kernel(self) if px.ndim == 0 and compiled else None
-            if kernel is not None and (seed is None or seed.shape == (3,)):
+            if kernel is not None:
                 q, status, selected, tie = self._solve_one(kernel, float(px), float(py), float(phi_used),
                                                            seed, requested)
             else:
@@ -502,13 +512,30 @@ class Scara:
                                          status)
         return q, status, np.array(selected), np.array(tie)
 
+    def _position_one(self, kernel: ModuleType, px: float, py: float, preferred: float,
+                      seed: np.ndarray | None, requested: int | None) -> tuple[np.ndarray, ...]:
+        """:meth:`_position_ik` and :func:`select` for one target through the compiled kernel: the
+        heading, both branches there, their statuses, the selection, the tie and the outcome."""
+        q, status = np.empty((2, 3)), np.empty(2, dtype=np.int8)
+        seeded = seed is not None
+        phi, selected, tie, outcome = kernel.solve_position(
+            self._packed, px, py, preferred, seed if seeded else self._packed[:3], seeded,
+            -1 if requested is None else requested, TIE_TOLERANCE, q, status)
+        return np.array(phi), q, status, np.array(selected), np.array(tie), np.array(outcome, dtype=np.int8)
+
     @cached_property
     def _packed(self) -> np.ndarray:
         """The kernel's constants (scara_kinematics.ik_kernel): l1, l2, l3, the limits widened by
-        LIMIT_TOL (6), the limits (6), the singularity threshold, the seed weights (3)."""
+        LIMIT_TOL (6), the limits (6), the singularity threshold, the seed weights (3); for mode
+        position the wrist heights (4), the elbow limits' distances^2 (2) and turns (2) of
+        :attr:`_constraint_constants`, the band l2 + l3 + LIMIT_TOL an unbounded rail reaches, and
+        HEADING_TIE."""
         lower, upper = self.limits.lower, self.limits.upper
+        wrist_heights, elbow_r2, elbow_turn, _ = self._constraint_constants
         return np.concatenate([[self.l1, self.l2, self.l3], lower - LIMIT_TOL, upper + LIMIT_TOL, lower,
-                               upper, [self.singularity_threshold * (1.0 - 1e-9)], self._weights])
+                               upper, [self.singularity_threshold * (1.0 - 1e-9)], self._weights,
+                               wrist_heights, elbow_r2, elbow_turn[:2], [self.l2 + self.l3 + LIMIT_TOL,
+                                                                         HEADING_TIE]])
 
     def _position_ik(self, px: np.ndarray, py: np.ndarray, preferred: np.ndarray,
                      requested: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -519,8 +546,10 @@ class Scara:
         allowed = _allowed(requested)
         admissible = np.any((branch_status == _SUCCESS) & allowed, axis=-1)
         distance = np.where(admissible, np.abs(wrap_angle(headings - preferred[..., None])), np.inf)
-        # Column 0 is the preferred heading itself; with no admissible heading report there.
-        k = np.where(np.any(admissible, axis=-1), np.argmin(distance, axis=-1), 0)
+        # The first of the nearest within HEADING_TIE; with none admissible (every distance inf) column
+        # 0, the preferred heading itself.
+        nearest = np.min(distance, axis=-1, keepdims=True)
+        k = np.argmax(distance <= nearest + HEADING_TIE, axis=-1)
         phi = np.take_along_axis(headings, k[..., None], axis=-1)[..., 0]
         picked = np.take_along_axis(candidates, k[..., None, None, None], axis=-3)[..., 0, :, :]
         picked_status = np.take_along_axis(branch_status, k[..., None, None], axis=-2)[..., 0, :]
@@ -565,6 +594,7 @@ def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
     """Run the kernel once (numba loads or compiles it)."""
     q, status = np.empty((2, 3)), np.empty(2, dtype=np.int8)
     ik_kernel.solve_phi(packed, 0.5, 0.3, PAPER_PHI, packed[:3], True, -1, TIE_TOLERANCE, q, status)
+    ik_kernel.solve_position(packed, 0.5, 0.3, PAPER_PHI, packed[:3], True, -1, TIE_TOLERANCE, q, status)
 
 
 #: The single-target kernel (:mod:`scara_kinematics.ik_kernel`), see manipulator_kinematics.compiled.

@@ -160,10 +160,12 @@ def test_ik_round_trip_over_random_reachable_targets(scara: Scara, mode: str, se
 
 
 def test_the_compiled_kernel_is_the_numpy_path_for_one_target(scara: Scara) -> None:
-    """ik_kernel (one target, modes phi and fixed_phi) against the vectorised numpy path over 10^4
-    targets, seeded and not and with a branch asked for: the same statuses, selections and ties,
-    candidates within 1e-12, the same texts; reachable, singular, off-limits, unreachable and
-    non-finite targets among them, and seeds halfway between two solutions (ties)."""
+    """ik_kernel (one target, every mode) against the vectorised numpy path over 10^4 targets,
+    seeded and not and with a branch asked for: the same statuses, selections and ties, headings
+    and candidates within 1e-12, the same texts; reachable, singular, off-limits, unreachable and
+    non-finite targets among them, targets from states with a joint at a limit, around the band
+    |py| = l2 + l3 (singular in mode position, or out of reach), and seeds halfway between two
+    solutions (ties; in mode position their heading is the preferred one)."""
     assert compiled_kernel(scara, wait=True) is not None
     rng = np.random.default_rng(22)
     n = N
@@ -173,14 +175,24 @@ def test_the_compiled_kernel_is_the_numpy_path_for_one_target(scara: Scara) -> N
     x = np.concatenate([x, wide])
     near_vertical = scara.l2 * rng.uniform(0.99995, 1.0, len(x[3::50]))  # sin theta1 ~ 1: singular
     x[3::50, 1] = scara.l3 * np.sin(x[3::50, 2]) + near_vertical
-    x[4::50, 1] = scara.l3 + near_vertical  # singular at phi = 90 deg (mode fixed_phi)
+    x[4::50, 1] = scara.l3 + near_vertical  # singular at phi = 90 deg (mode fixed_phi) and in mode position
+    x[5::50, 1] = -scara.l3 - scara.l2 * rng.uniform(0.9999, 1.00001, len(x[5::50]))  # band edges, position
+    at_limit = random_states(scara, rng, len(x[6::50]))
+    joint = rng.integers(0, 3, len(at_limit))
+    at_limit[np.arange(len(at_limit)), joint] = np.where(rng.random(len(at_limit)) < 0.5,
+                                                         scara.limits.lower[joint], scara.limits.upper[joint])
+    x[6::50] = scara.fk(at_limit)
     x[::997, 0] = np.nan
+    x[500::997, 1] = np.inf
     seeds = rng.uniform(scara.limits.lower, scara.limits.upper, (n, 3))
     both = scara.ik(x[:, :2], mode="phi", phi=x[:, 2])
     ties = np.flatnonzero(both.valid.all(axis=1))[::10]  # seeded halfway between two solutions
     seeds[ties] = both.candidates[ties].mean(axis=1)
+    seeds[4::100, 2] = PAPER_PHI - seeds[4::100, 1]  # mode position in the singular band: stays singular
     for mode, seed, branch in (("phi", None, None), ("phi", seeds, None), ("phi", seeds, "elbow_b"),
-                               ("fixed_phi", seeds, None)):
+                               ("fixed_phi", seeds, None), ("position", None, None),
+                               ("position", None, "elbow_b"), ("position", seeds, None),
+                               ("position", seeds, "elbow_a")):
         phi = x[:, 2] if mode == "phi" else None
         batch = scara.ik(x[:, :2], mode=mode, phi=phi, seed=seed, branch=branch)
         seen = set(np.unique(batch.branch_status).tolist()) | set(np.unique(batch.status).tolist())
@@ -189,13 +201,18 @@ def test_the_compiled_kernel_is_the_numpy_path_for_one_target(scara: Scara) -> N
             one = scara.ik(x[i, :2], mode=mode, phi=None if phi is None else phi[i],
                            seed=None if seed is None else seed[i], branch=branch)
             np.testing.assert_allclose(one.candidates, batch.candidates[i], rtol=0.0, atol=1e-12)
+            np.testing.assert_allclose([one.phi, one.preferred_phi], [batch.phi[i], batch.preferred_phi[i]],
+                                       rtol=0.0, atol=1e-12)
             assert np.array_equal(one.branch_status, batch.branch_status[i]), i
             assert one.status == batch.status[i] and one.solutions.tie == batch.solutions.tie[i], i
             # A tie is decided by the last bits of two equal distances: either tied branch is right.
             assert one.branch == batch.branch[i] or (one.solutions.tie and one.valid.all()), i
             if i % 50 == 0:
                 assert one.reason() == batch.reason(i), (i, one.reason(), batch.reason(i))
-        assert batch.solutions.tie.any() == (mode == "phi" and seed is not None and branch is None)
+        assert batch.solutions.tie.any() == (mode != "fixed_phi" and seed is not None and branch is None)
+        if mode == "position":  # the rule moved the heading for some targets and kept it for others
+            moved = np.abs(wrap_angle(batch.phi - batch.preferred_phi)) > 1e-6
+            assert 0 < np.sum(moved & batch.ok) < np.sum(batch.ok)
 
 
 def test_both_branches_when_both_are_valid(scara: Scara) -> None:
@@ -257,6 +274,22 @@ def test_position_mode_moves_the_heading_as_little_as_possible(scara: Scara) -> 
                 | np.isclose(q_moved, scara.limits.upper, atol=1e-9))
     at_singular = np.isclose(np.abs(np.cos(q_moved[:, 1])), scara.singularity_threshold, atol=1e-9)
     assert np.all(at_limit.any(axis=1) | at_singular)
+
+
+def test_position_mode_takes_the_first_of_two_equally_near_headings(scara: Scara) -> None:
+    """Mirror images: with symmetric shoulder and elbow limits, an unseeded target whose 90 deg heading
+    needs the elbow beyond a limit can have two admissible headings equally near 90 deg, 90 deg -+ d
+    (elbow at +150 deg on branch a, at -150 deg on branch b); which one is nearer is then up to the last
+    bits of arctan2. Both paths take the first candidate (HEADING_TIE): the elbow at its upper limit."""
+    assert compiled_kernel(scara, wait=True) is not None
+    target = np.array([0.4361529, -0.05390288])
+    for compiled in (True, False):
+        result = scara.ik(target, mode="position", compiled=compiled)
+        assert result.ok and int(result.branch) == 0 and result.phi < PAPER_PHI, result.reason()
+        assert result.q[2] == pytest.approx(scara.limits.upper[2], abs=1e-12)
+        mirror = scara.ik(target, mode="phi", phi=math.pi - result.phi)  # the other one, as near
+        assert mirror.ok and int(mirror.branch) == 1, mirror.reason()
+        assert mirror.q[2] == pytest.approx(scara.limits.lower[2], abs=1e-12)
 
 
 def test_failures_say_why(scara: Scara) -> None:
