@@ -13,6 +13,8 @@ from typing import Any
 import yaml
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "config"
+#: libyaml's parser when PyYAML has it: the same safe constructor, about 10 times faster.
+_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
 class ConfigError(ValueError):
@@ -49,7 +51,7 @@ def load_parameters(path: str | Path, node_name: str = "/**") -> dict[str, Any]:
     more specific section winning: ``/**``, then ``/**/<name>``, then ``<name>`` / ``/<ns>/<name>``.
     """
     with open(path, encoding="utf-8") as stream:
-        document = yaml.safe_load(stream) or {}
+        document = yaml.load(stream, Loader=_LOADER) or {}
     if not isinstance(document, dict):
         raise ConfigError(f"{path}: not a ROS parameters file (top level is not a mapping)")
     base = node_name.rsplit("/", 1)[-1]
