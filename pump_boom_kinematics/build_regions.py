@@ -507,6 +507,29 @@ def _certifies(boom: PumpBoom, plane: np.ndarray, triples: np.ndarray, envelope:
     return ok
 
 
+def table_header(table: RegionTable, source: str) -> list[str]:
+    """The comment lines at the top of a table file: what it is, how to rebuild it, its numbers."""
+    c, grid, search = table.coverage, table.grid, table.search
+    spacing = search["check_spacing"]
+    levels, counts = np.unique(table.index[:, 2], return_counts=True)
+    sizes = ", ".join(f"{n} of {float(grid.side(k)):g} m" for k, n in zip(levels.tolist(), counts.tolist()))
+    header = [
+        "Region table of the pump boom (paper 001, section 2.2). GENERATED: do not edit;",
+        f"regenerate with: pump_boom_regions --config <machine file> (built from {source}).",
+        f"Grid: squares of {grid.size:g} m with corners at r = {grid.origin[0]:g} + {grid.size:g} i,"
+        f" z = {grid.origin[1]:g} + {grid.size:g} j (m), split into four down to {search['levels']} levels;"
+        f" transition bands {grid.band:g} m.",
+        f"Squares: {c['squares']} ({sizes}).",
+        f"Coverage: {c['covered_area']:.1f} m^2; of the {c['envelope_area']:.1f} m^2 reachable in"
+        f" positive-envelope shape (lattice points every {c['raster_cell']:g} m)"
+        f" {100 * c['covered_share']:.2f} % covered; {c['reachable_area']:.1f} m^2 reachable in front of the"
+        " slew axis.",
+        f"Check: {c['checked_points']} points every {spacing:g} m, {c['band_failures']} failures;"
+        f" largest joint change {math.degrees(c['largest_step']):.2f} deg per {spacing:g} m step.",
+    ]
+    return header
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="pump_boom_regions",
@@ -551,23 +574,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.levels,
         coverage=area,
     )
-    c, grid = table.coverage, table.grid
-    levels, counts = np.unique(table.index[:, 2], return_counts=True)
-    sizes = ", ".join(f"{n} of {float(grid.side(k)):g} m" for k, n in zip(levels.tolist(), counts.tolist()))
-    header = [
-        "Region table of the pump boom (paper 001, section 2.2). GENERATED: do not edit;",
-        f"regenerate with: pump_boom_regions --config <machine file> (built from {config.name}).",
-        f"Grid: squares of {grid.size:g} m with corners at r = {grid.origin[0]:g} + {grid.size:g} i,"
-        f" z = {grid.origin[1]:g} + {grid.size:g} j (m), split into four down to {args.levels} levels;"
-        f" transition bands {grid.band:g} m.",
-        f"Squares: {c['squares']} ({sizes}).",
-        f"Coverage: {c['covered_area']:.1f} m^2; of the {c['envelope_area']:.1f} m^2 reachable in"
-        f" positive-envelope shape (lattice points every {c['raster_cell']:g} m)"
-        f" {100 * c['covered_share']:.2f} % covered; {c['reachable_area']:.1f} m^2 reachable in front of the"
-        " slew axis.",
-        f"Check: {c['checked_points']} points every {args.check_spacing:g} m, {c['band_failures']} failures;"
-        f" largest joint change {math.degrees(c['largest_step']):.2f} deg per {args.check_spacing:g} m step.",
-    ]
+    header = table_header(table, config.name)
     table.dump(output, header)
     for line in header[2:]:
         print(line)
