@@ -14,6 +14,7 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
         (f"share/{PACKAGE}/urdf", glob("urdf/*.urdf")),
+        (f"share/{PACKAGE}/launch", glob("launch/*.launch.xml")),
     ],
     install_requires=["setuptools"],
     zip_safe=True,
@@ -28,6 +29,9 @@ setup(
             "excavator_forward = excavator_kinematics.forward_node:main",
             "excavator_velocity_ik = excavator_kinematics.velocity_ik_node:main",
             "excavator_sim = excavator_kinematics.sim_node:main",
+            "excavator_ik_server = excavator_kinematics.ik_server_node:main",
+            "excavator_imu_state = excavator_kinematics.imu_state_node:main",
+            "excavator_slope_example = excavator_kinematics.slope_example:main",
             # SCARA-type arm (paper 002)
             "scara_ik_server = scara_kinematics.nodes:ik_server",
             "scara_forward = scara_kinematics.nodes:forward",

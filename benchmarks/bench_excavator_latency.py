@@ -1,8 +1,11 @@
-"""End-to-end latency, drops and CPU of excavator_forward across processes, beside a bare echo
-node, on each executor a node can spin (manipulator_kinematics.executor.EXECUTORS).
+"""End-to-end latency, drops and CPU of excavator_forward (and the serial machines' forward nodes)
+across processes, beside a bare echo node, on each executor a node can spin
+(manipulator_kinematics.executor.EXECUTORS).
 
     python benchmarks/bench_excavator_latency.py [--duration 30] [--rates 100 1000] [--depth 100]
                                                  [--rounds 3] [--executors events single]
+                                                 [--nodes excavator_forward scara_forward ...]
+                                                 [--node-depth N]
 
 For each input rate and executor two nodes run in turn, each as its own process started the way
 the console scripts run (``node_util.run``, executor chosen with ``MK_EXECUTOR``): the echo node
@@ -18,6 +21,12 @@ survives a stall). Each node is stopped with SIGINT after its row; its exit stat
 table. This machine's speed drifts over minutes, so all of it runs in ``--rounds`` rounds and
 each p99 is compared with the echo's of its own round and executor; the result is the median
 ratio. Prints a table.
+
+``--nodes`` adds the forward nodes of the serial machines (``scara_forward``, ...; default: only
+excavator_forward): each gets ``joint_states`` (its joints at mid-range, with rates) remapped
+from ``cylinder_lengths`` and its ``tool_twist`` remapped to ``bucket_twist``, so the publisher
+and this process stay the same. Nodes run with their configured ``qos_depth`` unless
+``--node-depth`` is given (the table says which).
 """
 
 from __future__ import annotations
@@ -46,10 +55,13 @@ from excavator_kinematics import messages
 from excavator_kinematics.demo import node_command
 from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator
 from manipulator_kinematics.executor import ENVIRONMENT, EXECUTORS
-from manipulator_kinematics.node_util import make_node, run
+from manipulator_kinematics.node_util import console_script, make_node, run
 
 ECHO = "echo"
 FORWARD = "excavator_forward"
+# The serial machines' forward nodes (manipulator_kinematics.nodes.forward), by machine.
+SERIAL = {"scara_forward": "scara", "tool_changer_forward": "tool_changer",
+          "palletizer_forward": "palletizer", "pump_boom_forward": "pump_boom"}
 
 
 def echo(depth: int) -> int:
@@ -71,9 +83,23 @@ def echo(depth: int) -> int:
     return run(build, [sys.argv[0]])
 
 
-def publish(rate: float, duration: float, depth: int, sent_file: Path, swing_listened: bool) -> None:
+def serial_state(machine_name: str) -> JointState:
+    """A joint state of a serial machine: every joint at mid-range, moving."""
+    from manipulator_kinematics.registry import machine
+
+    spec = machine(machine_name)
+    model = spec.model()
+    limits = spec.limits(model)
+    middle = (0.5 * (limits.lower + limits.upper)).tolist()
+    names = list(spec.joint_names(model))
+    return JointState(name=names, position=middle, velocity=[0.01 * (i + 1) for i in range(len(names))])
+
+
+def publish(rate: float, duration: float, depth: int, sent_file: Path, kind: str) -> None:
     """Publish cylinder_lengths at ``rate`` (joint_states at 100 Hz) for ``duration`` s after a 1 s
-    warm-up, paced by the clock; the stamps of the measured messages go to ``sent_file``."""
+    warm-up, paced by the clock; the stamps of the measured messages go to ``sent_file``. For a
+    serial forward node (``kind`` in SERIAL) the cylinder_lengths messages are its joint states."""
+    swing_listened = kind == FORWARD
     rclpy.init()
     node = Node("bench_publisher")
     qos = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
@@ -88,7 +114,13 @@ def publish(rate: float, duration: float, depth: int, sent_file: Path, swing_lis
         time.sleep(0.01)
     clock = node.get_clock()
     reference = Excavator.default().limits.reference
-    cylinder_msg = messages.joint_state(clock.now().to_msg(), CYLINDERS, reference[1:], [0.01, -0.02, 0.015])
+    if kind in SERIAL:
+        cylinder_msg = serial_state(SERIAL[kind])
+        first = cylinder_msg.position[0]
+    else:
+        cylinder_msg = messages.joint_state(
+            clock.now().to_msg(), CYLINDERS, reference[1:], [0.01, -0.02, 0.015])
+        first = reference[1]
     swing_msg = messages.joint_state(clock.now().to_msg(), JOINTS[:1], [0.0], [0.0])
     swing_every = max(1, round(rate / 100.0))
     sent = []
@@ -103,7 +135,7 @@ def publish(rate: float, duration: float, depth: int, sent_file: Path, swing_lis
             swing_msg.header.stamp = stamp
             swing.publish(swing_msg)
         cylinder_msg.header.stamp = stamp
-        cylinder_msg.position[0] = reference[1] + 1e-6 * (n % 1000)
+        cylinder_msg.position[0] = first + 1e-6 * (n % 1000)
         cylinders.publish(cylinder_msg)
         if n >= warm_up:
             sent.append(messages.stamp_ns(stamp))
@@ -115,14 +147,18 @@ def publish(rate: float, duration: float, depth: int, sent_file: Path, swing_lis
     rclpy.shutdown()
 
 
-def start_node(kind: str, executor: str, depth: int, work: Path) -> subprocess.Popen:
+def start_node(kind: str, executor: str, depth: int, node_depth: int | None, work: Path) -> subprocess.Popen:
+    """The node under test; a forward node keeps its configured qos_depth when ``node_depth`` is None."""
+    overrides = work / "bench_params.yaml"
+    # reliable like the echo's queue (the nodes' default input_reliability is best_effort)
+    settings = {"input_reliability": "reliable", **({} if node_depth is None else {"qos_depth": node_depth})}
+    overrides.write_text(yaml.safe_dump({f"/**/{kind}": {"ros__parameters": settings}}))
     if kind == ECHO:
         command = [sys.executable, __file__, "--echo", "--depth", str(depth)]
+    elif kind in SERIAL:
+        command = [console_script(kind), "--ros-args", "-r", "joint_states:=cylinder_lengths",
+                   "-r", "tool_twist:=bucket_twist", "--params-file", str(overrides)]
     else:
-        overrides = work / "bench_params.yaml"
-        overrides.write_text(
-            yaml.safe_dump({"/**/excavator_forward": {"ros__parameters": {"qos_depth": depth}}})
-        )
         command = node_command(FORWARD, overrides)
     log = (work / "node.log").open("w")
     return subprocess.Popen(
@@ -137,7 +173,8 @@ def cpu_seconds(pid: int) -> float:
 
 
 def measure(
-    node: Node, kind: str, executor_name: str, rate: float, duration: float, depth: int, work: Path
+    node: Node, kind: str, executor_name: str, rate: float, duration: float, depth: int,
+    node_depth: int | None, work: Path,
 ) -> dict[str, float]:
     """Start the node under test and a publisher process; receive bucket_twist here."""
     qos = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
@@ -153,7 +190,7 @@ def measure(
     # hundred microseconds per message here, EventsExecutor (spun in this, the main thread) far less.
     executor = EventsExecutor()
     executor.add_node(node)
-    under_test = start_node(kind, executor_name, depth, work)
+    under_test = start_node(kind, executor_name, depth, node_depth, work)
     sent_file = work / "bench_sent.npy"
     try:
         deadline = time.monotonic() + 20.0
@@ -172,7 +209,8 @@ def measure(
                 str(sent_file),
                 "--depth",
                 str(depth),
-                *(["--swing-listened"] if kind == FORWARD else []),
+                "--kind",
+                kind,
             ]
         )
         while publisher.poll() is None:
@@ -212,13 +250,16 @@ def main() -> int:
     parser.add_argument("--executors", nargs="+", choices=sorted(EXECUTORS), default=list(EXECUTORS))
     parser.add_argument("--echo", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--publish", nargs=3, metavar=("RATE", "DURATION", "FILE"), help=argparse.SUPPRESS)
-    parser.add_argument("--swing-listened", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--nodes", nargs="+", choices=[FORWARD, *SERIAL], default=[FORWARD],
+                        help="forward nodes to measure, each beside the echo")
+    parser.add_argument("--node-depth", type=int, help="qos_depth of the nodes (default: as configured)")
+    parser.add_argument("--kind", default=FORWARD, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.echo:
         return echo(args.depth)
     if args.publish:
         rate, duration, sent_file = args.publish
-        publish(float(rate), float(duration), args.depth, Path(sent_file), args.swing_listened)
+        publish(float(rate), float(duration), args.depth, Path(sent_file), args.kind)
         return 0
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     work = Path(tempfile.mkdtemp(prefix="bench_excavator_"))
@@ -231,25 +272,28 @@ def main() -> int:
         for round_ in range(args.rounds):
             for rate in args.rates:
                 for name in args.executors:
-                    for kind in (ECHO, FORWARD):
-                        result = measure(node, kind, name, rate, args.duration, args.depth, work)
+                    for kind in (ECHO, *args.nodes):
+                        result = measure(
+                            node, kind, name, rate, args.duration, args.depth, args.node_depth, work)
                         rows.append((round_, kind, name, rate, result))
-                        done = f"round {round_ + 1}: {kind:<17} {name:<6} {rate:6.0f} Hz  done"
+                        done = f"round {round_ + 1}: {kind:<20} {name:<6} {rate:6.0f} Hz  done"
                         print(done, file=sys.stderr, flush=True)
     finally:
         node.destroy_node()
         rclpy.shutdown()
+    depths = "as configured" if args.node_depth is None else str(args.node_depth)
     print(
-        f"\nend-to-end latency, input stamp -> bucket_twist received, {args.duration:g} s per row, "
-        f"reliable depth {args.depth}, {args.rounds} round(s); CPU of the node per input message"
+        f"\nend-to-end latency, input stamp -> bucket_twist (tool_twist) received, {args.duration:g} s "
+        f"per row, reliable depth {args.depth} (nodes: {depths}), {args.rounds} round(s); CPU of the node "
+        "per input message"
     )
     print(
-        f"{'round':<6} {'node':<17} {'executor':<9} {'rate':>7} {'sent':>7} {'dropped':>8} {'p50 ms':>8} "
+        f"{'round':<6} {'node':<20} {'executor':<9} {'rate':>7} {'sent':>7} {'dropped':>8} {'p50 ms':>8} "
         f"{'p99 ms':>8} {'max ms':>8} {'CPU ms':>7} {'exit':>5}"
     )
     for round_, kind, name, rate, r in rows:
         print(
-            f"{round_ + 1:<6} {kind:<17} {name:<9} {rate:5.0f}Hz {r['sent']:7d} {r['dropped']:8d} "
+            f"{round_ + 1:<6} {kind:<20} {name:<9} {rate:5.0f}Hz {r['sent']:7d} {r['dropped']:8d} "
             f"{r['p50']:8.3f} {r['p99']:8.3f} {r['max']:8.2f} {r['cpu_ms']:7.3f} {r['exit']:5d}"
         )
         for line in r["complaints"][:3]:
@@ -258,17 +302,18 @@ def main() -> int:
     print()
     for rate in args.rates:
         for name in args.executors:
-            forward = [results[i, FORWARD, name, rate] for i in range(args.rounds)]
             echoes = [results[i, ECHO, name, rate] for i in range(args.rounds)]
-            ratios = [f["p99"] / e["p99"] for f, e in zip(forward, echoes)]
-            drops = [f["dropped"] for f in forward]
-            print(
-                f"{rate:5.0f} Hz {name:<6}: forward p99 / echo p99 = {statistics.median(ratios):.2f} "
-                f"median of [{', '.join(f'{x:.2f}' for x in ratios)}]; forward drops "
-                f"{statistics.median(drops):g} median of {drops}; CPU ms/msg forward "
-                f"{statistics.median(f['cpu_ms'] for f in forward):.3f}, "
-                f"echo {statistics.median(e['cpu_ms'] for e in echoes):.3f}"
-            )
+            for kind in args.nodes:
+                forward = [results[i, kind, name, rate] for i in range(args.rounds)]
+                ratios = [f["p99"] / e["p99"] for f, e in zip(forward, echoes)]
+                drops = [f["dropped"] for f in forward]
+                print(
+                    f"{rate:5.0f} Hz {name:<6} {kind:<20}: p99 / echo p99 = {statistics.median(ratios):.2f} "
+                    f"median of [{', '.join(f'{x:.2f}' for x in ratios)}]; drops "
+                    f"{statistics.median(drops):g} median of {drops}; CPU ms/msg "
+                    f"{statistics.median(f['cpu_ms'] for f in forward):.3f}, "
+                    f"echo {statistics.median(e['cpu_ms'] for e in echoes):.3f}"
+                )
     print("targets: forward p99 <= 1.5 x echo p99 on the same executor; 0 drops at 1 kHz (median of rounds)")
     return 0
 

@@ -15,20 +15,17 @@ only if every run passed. Not part of the test suite (about 70 s a run).
 from __future__ import annotations
 
 import argparse
-import fcntl
 import os
 import re
 import signal
 import subprocess
 import sys
-import tempfile
 import time
-from contextlib import contextmanager
 from pathlib import Path
 
 from manipulator_kinematics.node_util import console_script
+from manipulator_kinematics.ros_domain import reserved_domain
 
-LOCK_DIR = Path(tempfile.gettempdir()) / "manipulator_kinematics_ros_domains"  # as test/conftest.py
 PATTERNS = {
     "rms": r"distance from the reference path: RMS ([\d.]+) mm",
     "max": r"distance from the reference path: RMS [\d.]+ mm, max ([\d.]+) mm",
@@ -36,21 +33,6 @@ PATTERNS = {
     "skipped": r"; (\d+) of \d+ older than",
     "held": r"cycle clock held ([\d.]+) s",
 }
-
-
-@contextmanager
-def reserved_domain():
-    """A ROS_DOMAIN_ID in 1..101 nobody else on this machine holds, for the block's duration."""
-    LOCK_DIR.mkdir(exist_ok=True)
-    for domain in range(1, 102):
-        with open(LOCK_DIR / f"{domain}.lock", "w") as handle:
-            try:
-                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                continue
-            yield domain
-            return
-    raise RuntimeError("no free ROS_DOMAIN_ID in 1..101")
 
 
 def start_hog(core: int) -> subprocess.Popen:

@@ -38,6 +38,15 @@ def _vector(arrays: TopicArrays, prefix: str) -> np.ndarray:
     return np.stack([arrays[f"{prefix}.{axis}"] for axis in "xyz"], axis=-1)
 
 
+def _until(arrays: TopicArrays, end_ns: int | None) -> TopicArrays:
+    """The messages stamped up to ``end_ns`` (all for None or a topic without a header)."""
+    if end_ns is None or "header.stamp.sec" not in arrays.fields:
+        return arrays
+    keep = arrays.stamp_ns() <= end_ns
+    return TopicArrays(arrays.topic, arrays.msgtype, arrays.log_time[keep],
+                       {path: values[keep] for path, values in arrays.fields.items()})
+
+
 def _matched(a: TopicArrays, b: TopicArrays) -> tuple[np.ndarray, np.ndarray]:
     """Row indices of ``a`` and ``b`` with equal header stamps."""
     _, ia, ib = np.intersect1d(a.stamp_ns(), b.stamp_ns(), return_indices=True)
@@ -95,8 +104,9 @@ def report(
 ) -> Summary:
     """Read ``bag``, write fig11_bucket.png and fig12_cylinders.png to ``output``, return the summary.
     The path deviation counts the bucket poses stamped from ``start_ns`` to ``end_ns`` (the cycle;
-    default: to the end of the bag), not the hold before it or the stop after it."""
-    a = BagReader(bag).arrays()
+    default: to the end of the bag), not the hold before it or the stop after it; every topic is
+    cut at ``end_ns`` (what the demo does after the cycle, the planned move, is not the cycle's)."""
+    a = {topic: _until(arrays, end_ns) for topic, arrays in BagReader(bag).arrays().items()}
     pose, ref_pose = a["/bucket_pose"], a["/reference_bucket_pose"]
     twist, ref_twist = a["/bucket_twist"], a["/reference_bucket_twist"]
     accel, joints = a["/bucket_accel"], a["/open_chain_joint_states"]

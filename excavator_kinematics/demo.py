@@ -2,8 +2,9 @@
 
     excavator_demo [--output out/demo] [--max-error 0.05] [--timeout 90]
 
-Starts ``excavator_sim``, ``excavator_forward``, ``excavator_velocity_ik`` and the bag recorder
-(``record``) as processes with the package's config, then runs a driver node in this process.
+Starts ``excavator_sim``, ``excavator_forward``, ``excavator_velocity_ik``,
+``excavator_ik_server`` and the bag recorder (``record``) as processes with the package's config,
+then runs a driver node in this process.
 
 Start-up handshake (each step with a timeout and an error naming what is missing): every node's
 publishers and subscriptions are in the graph and the driver's own are matched with theirs
@@ -20,12 +21,20 @@ timeouts) and publishes ``target_bucket_twist`` = reference rate + gain x (refer
 (closed loop on the bucket position, :func:`excavator_kinematics.bucket_path.follow`), plus the
 reference itself on ``reference_bucket_pose`` / ``reference_bucket_twist`` so the bag holds what
 was asked. Every 5 s of cycle it prints a progress line (time, phase, distance from the path).
+The cycle here ends over the truck with the bucket turned back to its start angle (``level``,
+instead of the scripted ``return``); then the way back is planned: the driver calls the
+``excavator_ik_server``'s ``plan_path`` from the measured state to the start (a straight tip
+line at the start's bucket angle, timed within every actuator's speed limit) and streams the
+trajectory to the simulator as rate commands (:mod:`excavator_kinematics.planned_move`: the
+planned velocities plus position feedback, on the stamps of the simulator's states), publishing
+the planned D on ``planned_joint_states``; on arrival the measured D must be within
+:data:`~excavator_kinematics.planned_move.TOLERANCE` of the start.
 Afterwards the bag is read back for the summary and the Fig. 11 / Fig. 12 style plots
 (:mod:`excavator_kinematics.cycle_report`), and an animated side view of the whole linkage
 (``excavator_digging.gif``). The recorder adds the topics Foxglove's 3-D panel needs
 (``record --visuals``: /robot_description, /tf, /tf_static, machine_markers). Exit status 1 if
 a process died, the cycle did not run, or the bucket left the reference path by more than
-``--max-error`` metres.
+``--max-error`` metres, or the planned move did not arrive at the start.
 """
 
 from __future__ import annotations
@@ -42,27 +51,30 @@ from pathlib import Path
 import numpy as np
 import rclpy
 import yaml
-from geometry_msgs.msg import PoseStamped, TwistStamped
+from geometry_msgs.msg import Point, PoseStamped, TwistStamped
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from excavator_kinematics import messages
+from excavator_kinematics import messages, planned_move
 from excavator_kinematics.bucket_path import (
     BucketPath,
     CycleClock,
+    Segment,
     digging_cycle,
     follow,
     natural_coordinates,
     path_deviation,
     to_task,
 )
-from excavator_kinematics.kinematics import Excavator
+from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
 from excavator_kinematics.twist import bucket_angles, twist_from_q_dot
 from manipulator_kinematics import registry
 from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.node_util import console_script
 from manipulator_kinematics.params import config_path
+from manipulator_kinematics.ros_domain import isolated
+from manipulator_kinematics_interfaces.srv import PlanPath
 
 FRAME = "base_link"
 GAIN = 2.0  # 1/s, bucket position and angle
@@ -75,7 +87,7 @@ TRANSPORT = 0.02  # s
 # A pose older than this is not acted on: feedback on stale measurements makes the loop overshoot;
 # without new targets the IK stops the machine after its command timeout instead.
 MAX_POSE_AGE = 0.1  # s
-# Demo-only settings on top of config/excavator_nodes.yaml: a 50 Hz loop (five Python processes
+# Demo-only settings on top of config/excavator_nodes.yaml: a 50 Hz loop (six Python processes
 # and the recorder share two cores), actuators with a 20 ms lag (a real valve-cylinder does not
 # jump to speed), lightly filtered accelerations for readable plots, and command timeouts of
 # 0.1 s (5 periods): if a process stalls, the machine stops on its path instead of coasting on an
@@ -103,6 +115,14 @@ PROGRESS_PERIOD = 5.0  # s of cycle between progress lines
 RECORDER = "bag_recorder"
 # The recorder's stop includes adding the visual topics (record --visuals).
 RECORD_STOP_TIMEOUT = 120.0  # s
+# The bucket back to its start angle over the truck, before the planned move (the bucket cylinder
+# at about 70 % of its speed limit on the reference).
+LEVEL_TIME = 5.0  # s
+# The planned move's tip speed limit: high enough that an actuator's speed limit (the arm's) sets
+# the pace on part of the way, so the plan shows the time scaling at work.
+PLAN_TIP_SPEED = 2.0  # m/s
+PLAN_TIMEOUT = 30.0  # s for the plan_path answer (imports and a plan on a loaded machine)
+PLANNED_MOVE = "excavator_planned_move.png"
 ANIMATION = "excavator_digging.gif"
 ANIMATION_SPEED = 2.0  # x real time: a 40 s cycle in 20 s (200 frames at 10 fps)
 RECORDED = {
@@ -116,6 +136,7 @@ RECORDED = {
     "target_bucket_twist": "geometry_msgs/msg/TwistStamped",
     "reference_bucket_pose": "geometry_msgs/msg/PoseStamped",
     "reference_bucket_twist": "geometry_msgs/msg/TwistStamped",
+    "planned_joint_states": "sensor_msgs/msg/JointState",
 }
 
 
@@ -245,6 +266,72 @@ class Driver:
         )
 
 
+class Mover:
+    """Runs the planned move: asks ``plan_path`` for the way from the measured D to ``start`` and
+    streams the trajectory as rate commands on the simulator's states (planned_move)."""
+
+    def __init__(self, node: Node, exc: Excavator, start: np.ndarray) -> None:
+        self.node, self.exc, self.start = node, exc, start
+        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self.commands = node.create_publisher(JointState, "cylinder_rate_commands", qos)
+        self.planned = node.create_publisher(JointState, "planned_joint_states", qos)
+        self.client = node.create_client(PlanPath, "plan_path")
+        self.swing: float | None = None
+        self.d: np.ndarray | None = None  # the latest measured D
+        self.watching = False  # for the velocity IK's stop (zero rates once) after the cycle
+        self.ik_stopped = False
+        self.trajectory: planned_move.Trajectory | None = None
+        self.clock = CycleClock(MAX_CLOCK_STEP)
+        self.max_error = np.zeros(4)  # |planned - measured| D during the move
+        self.arrived: planned_move.Arrival | None = None
+        node.create_subscription(JointState, "joint_states", self.on_swing, 1)
+        node.create_subscription(JointState, "cylinder_lengths", self.on_cylinders, 1)
+        node.create_subscription(JointState, "cylinder_rate_commands", self.on_command, 10)
+
+    def on_swing(self, msg: JointState) -> None:
+        if list(msg.name) == list(JOINTS[:1]) and len(msg.position) == 1:
+            self.swing = float(msg.position[0])
+
+    def on_command(self, msg: JointState) -> None:
+        # Before the move only the velocity IK publishes here; its stop is an all-zero command.
+        if self.watching and self.trajectory is None and len(msg.velocity) and not any(msg.velocity):
+            self.ik_stopped = True
+
+    def request(self) -> PlanPath.Request:
+        """From the measured D's tip to the start's, seeded with the measured D (its bucket angle)."""
+        request = PlanPath.Request()
+        request.waypoints = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2]))
+                             for p in (self.exc.pose(self.d)[:3], self.exc.pose(self.start)[:3])]
+        request.seed = messages.joint_state(self.node.get_clock().now().to_msg(), ACTUATORS, self.d)
+        request.tip_speed = PLAN_TIP_SPEED
+        return request
+
+    def on_cylinders(self, msg: JointState) -> None:
+        if self.swing is None or list(msg.name) != list(CYLINDERS) or len(msg.position) != 3:
+            return
+        self.d = np.r_[self.swing, msg.position]
+        if self.trajectory is None or self.arrived is not None:
+            return
+        t = self.clock.tick(messages.stamp_ns(msg.header.stamp))
+        if t > self.trajectory.duration + planned_move.SETTLE:
+            self.commands.publish(messages.joint_state(msg.header.stamp, ACTUATORS, velocities=np.zeros(4)))
+            self.arrived = planned_move.arrival(self.exc, self.d, self.start)
+            return
+        rates, q = self.trajectory.command(t, self.d)
+        self.max_error = np.maximum(self.max_error, np.abs(q - self.d))
+        self.commands.publish(messages.joint_state(msg.header.stamp, ACTUATORS, velocities=rates))
+        self.planned.publish(messages.joint_state(msg.header.stamp, ACTUATORS, q, self.trajectory.at(t)[1]))
+
+
+def demo_cycle(start: np.ndarray) -> BucketPath:
+    """The digging cycle from ``start`` (C) up to the dump, then the bucket back to its start
+    angle over the truck (``level``): the way back to the start is the planned move."""
+    cycle = digging_cycle(start)
+    dump = cycle.segments[-2].end
+    level = Segment("level", np.r_[dump[:3], start[3]], LEVEL_TIME)
+    return BucketPath(cycle.start, [*cycle.segments[:-1], level])
+
+
 def node_command(name: str, overrides: Path) -> list[str]:
     """Command line of an excavator node on the default machine and node settings, then the
     settings in the params file ``overrides`` (a later file wins)."""
@@ -257,7 +344,7 @@ def start_processes(output: Path) -> list[tuple[str, subprocess.Popen]]:
     overrides.write_text(yaml.safe_dump(OVERRIDES), encoding="utf-8")
     commands = {
         name: node_command(name, overrides)
-        for name in ("excavator_sim", "excavator_forward", "excavator_velocity_ik")
+        for name in ("excavator_sim", "excavator_forward", "excavator_velocity_ik", "excavator_ik_server")
     }
     commands["record"] = [
         console_script("mk_record"),
@@ -311,10 +398,11 @@ def expected_graph() -> list[tuple[str, str, str]]:
 
 
 def run_cycle(
-    output: Path, path: BucketPath, timeout: float, at_rest: np.ndarray
-) -> tuple[str | None, Driver | None]:
-    """Start everything, wait until the chain answers, drive ``path`` once; (None or what went
-    wrong, the driver). ``at_rest``: the cylinder lengths the simulator starts at (m)."""
+    output: Path, path: BucketPath, timeout: float, at_rest: np.ndarray, exc: Excavator
+) -> tuple[str | None, Driver | None, Mover | None]:
+    """Start everything, wait until the chain answers, drive ``path`` once, then the planned move
+    back to the start; (None or what went wrong, the driver, the mover). ``at_rest``: the
+    cylinder lengths the simulator starts at (m)."""
     started = time.monotonic()
     processes = start_processes(output)
     context = rclpy.Context()
@@ -322,7 +410,7 @@ def run_cycle(
     node = Node("excavator_demo_driver", context=context)
     executor = rclpy.executors.SingleThreadedExecutor(context=context)
     executor.add_node(node)
-    driver = None
+    driver = mover = None
 
     def say(line: str) -> None:
         print(f"excavator_demo: {line} ({time.monotonic() - started:.1f} s)", flush=True)
@@ -347,6 +435,7 @@ def run_cycle(
 
     try:
         driver = Driver(node, path)
+        mover = Mover(node, exc, exc.limits.reference)
         seen = {"command": False, "motion": False}
 
         def answered(msg: JointState) -> None:
@@ -372,6 +461,9 @@ def run_cycle(
             ("excavator_forward", "bucket_pose", driver.poses.get_publisher_count, 1),
             ("excavator_velocity_ik", "cylinder_rate_commands", commands.get_publisher_count, 1),
             ("excavator_sim", "cylinder_lengths", states.get_publisher_count, 1),
+            ("the simulator and the recorder", "cylinder_rate_commands",
+             mover.commands.get_subscription_count, 2),
+            ("the recorder", "planned_joint_states", mover.planned.get_subscription_count, 1),
         ]
 
         def graph_missing() -> list[str]:
@@ -387,7 +479,7 @@ def run_cycle(
                 f"{who} matching the driver on /{topic}"
                 for who, topic, count, least in matches
                 if count() < least
-            ]
+            ] + ([] if mover.client.service_is_ready() else ["excavator_ik_server serving /plan_path"])
 
         failure = spin_until(lambda: not graph_missing(), CONNECT_TIMEOUT, lambda: "; ".join(graph_missing()))
         if failure is None:
@@ -431,12 +523,76 @@ def run_cycle(
                 lambda: f"the cycle to finish (at {driver.elapsed():.1f} of {path.duration:.1f} s)",
                 show,
             )
-        return failure, driver
+        if failure is None:
+            # No more targets: the velocity IK stops the machine (zero rates once) after its timeout
+            # and then stays silent, leaving cylinder_rate_commands to the planned move.
+            driver.active = driver.running = False
+            mover.watching = True
+            failure = spin_until(lambda: mover.ik_stopped, ROUND_TRIP_TIMEOUT,
+                                 lambda: "excavator_velocity_ik to stop after the last target")
+        if failure is None:
+            future = mover.client.call_async(mover.request())
+            failure = spin_until(future.done, PLAN_TIMEOUT,
+                                 lambda: "the plan_path answer of excavator_ik_server")
+        if failure is None:
+            answer = future.result()
+            if not answer.success:
+                failure = f"plan_path refused the way back: {answer.message}"
+            else:
+                points = answer.trajectory.points
+                mover.trajectory = planned_move.Trajectory.from_points(
+                    list(answer.trajectory.joint_names),
+                    [p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in points],
+                    [list(p.positions) for p in points], [list(p.velocities) for p in points])
+                say(f"plan_path back to the start: {answer.message}")
+                failure = spin_until(
+                    lambda: mover.arrived is not None,
+                    timeout,
+                    lambda: (f"the planned move to finish (at {mover.clock.t:.1f} of "
+                             f"{mover.trajectory.duration:.1f} s)"),
+                )
+        return failure, driver, mover
     finally:
         executor.shutdown()
         node.destroy_node()
         rclpy.shutdown(context=context)
         stop_processes(processes)
+
+
+def move_report(output: Path, exc: Excavator, mover: Mover) -> str:
+    """The planned move from the bag (the simulator's states while it ran, the plan): its plot
+    (PLANNED_MOVE), peak speeds against the limits, tracking and arrival errors, as lines."""
+    arrays = BagReader(output / "bag").arrays(["/cylinder_lengths", "/joint_states"])
+    cylinders, swing = arrays["/cylinder_lengths"], arrays["/joint_states"]
+    start_ns, end_ns = mover.clock.start_ns, mover.clock.last_ns
+    stamps = cylinders.stamp_ns()
+    stamps = stamps[(stamps >= start_ns) & (stamps <= end_ns)]
+    stamps = np.intersect1d(stamps, swing.stamp_ns())  # the simulator stamps both alike
+    ic = np.searchsorted(cylinders.stamp_ns(), stamps)
+    js = np.searchsorted(swing.stamp_ns(), stamps)
+    d = np.column_stack((swing.by_name("position", JOINTS[:1])[js],
+                         cylinders.by_name("position", CYLINDERS)[ic]))
+    d_dot = np.column_stack((swing.by_name("velocity", JOINTS[:1])[js],
+                             cylinders.by_name("velocity", CYLINDERS)[ic]))
+    plan, arrived, lim = mover.trajectory, mover.arrived, exc.limits
+    png = planned_move.plot(output / PLANNED_MOVE, exc, (stamps - start_ns) * 1e-9, d, d_dot, plan)
+    units = ["rad/s", "m/s", "m/s", "m/s"]
+    lines = [f"planned move back to the start (plan_path, {len(plan.t)} points, {plan.duration:.2f} s; "
+             f"executed in {(end_ns - start_ns) * 1e-9:.2f} s of simulator time incl. "
+             f"{planned_move.SETTLE:g} s to settle):",
+             "  actuator         planned peak / limit    simulated peak   max |planned - simulated|"]
+    for i, name in enumerate(ACTUATORS):
+        lines.append(f"  {name:<15}  {np.max(np.abs(plan.qd[:, i])):.3f} / {lim.max_rates[i]:.2f} "
+                     f"{units[i]:<6}  {np.max(np.abs(d_dot[:, i])):.3f} {units[i]:<6}  "
+                     f"{mover.max_error[i]:.2e}")
+    lines.append(f"  plot: {png}")
+    tolerance = planned_move.TOLERANCE
+    errors = ", ".join(f"{e:.1e}" for e in arrived.error)
+    verdict = "reached" if arrived.ok else "NOT reached"
+    lines.append(f"  arrival: |D - start| = {errors} (swing rad, cylinders m; tolerance "
+                 f"{tolerance[0]:g} rad, {tolerance[1]:g} m), tip {1e3 * arrived.tip_error:.2f} mm "
+                 f"(tolerance {1e3 * planned_move.TIP_TOLERANCE:g} mm): {verdict}")
+    return "\n".join(lines)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -460,10 +616,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     args.output.mkdir(parents=True, exist_ok=True)
     exc = Excavator.default()
     start_q = exc.pose(exc.limits.reference)  # the simulator starts at the reference lengths
-    path = digging_cycle(
+    path = demo_cycle(
         np.r_[np.hypot(start_q[0], start_q[1]), np.arctan2(start_q[1], start_q[0]), start_q[2:]]
     )
-    failure, driver = run_cycle(args.output, path, args.timeout, exc.limits.reference[1:])
+    with isolated() as network:  # never join a ROS graph around (manipulator_kinematics.ros_domain)
+        print(f"excavator_demo: {network}", flush=True)
+        failure, driver, mover = run_cycle(args.output, path, args.timeout, exc.limits.reference[1:], exc)
     if failure is not None:
         print(f"excavator_demo: FAILED: {failure}", file=sys.stderr)
         return 1
@@ -479,6 +637,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"{driver.skipped} of {len(driver.delays)} older than {MAX_POSE_AGE:g} s not acted on; "
         f"cycle clock held {driver.clock.held:.2f} s over gaps longer than {MAX_CLOCK_STEP:g} s"
     )
+    moved = move_report(args.output, exc, mover)
+    print(moved)
+    if not mover.arrived.ok:
+        print(f"excavator_demo: FAILED: the planned move did not arrive at the start "
+              f"({moved.splitlines()[-1].strip()})", file=sys.stderr)
+        return 1
     if summary.max_path_deviation > args.max_error:
         print(
             f"excavator_demo: FAILED: the bucket left the path by {summary.max_path_deviation:.3f} m "

@@ -12,7 +12,9 @@ The recomputation is what the forward node should have published for the recorde
   ``acceleration_max_gap``;
 * ``urdf_joint_states`` (every URDF joint and its rate) and, when the node's ``grade`` is
   enabled, ``grade_height`` (the tip's height above the design plane) from the same state
-  (:mod:`excavator_kinematics.display`).
+  (:mod:`excavator_kinematics.display`);
+* ``bucket_pose_level`` (the tip in the gravity-aligned level frame) from the latest
+  ``machine_tilt`` at or before the cylinder stamp (:func:`excavator_kinematics.imu.level_rotation`).
 
 The node settings come from the evaluation context (the package's config/excavator_nodes.yaml,
 overridden by ``evaluate --params`` files).
@@ -26,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from excavator_kinematics.display import DesignPlane, urdf_joint_states
+from excavator_kinematics.imu import base_up, level_rotation
 from excavator_kinematics.kinematics import (
     CYLINDERS,
     JOINTS,
@@ -212,6 +215,16 @@ def _consistency(
         height = np.abs(arrays["point.z"][rows] - m.grade.height(s.Q[k, :3]))
         entry.update(height_m=error_stats(height))
         curves["grade_height (m)"] = (since(arrays.stamp_ns()[rows], t0), height)
+    if (found := matched("bucket_pose_level")) and "machine_tilt" in data:
+        arrays, rows, k, entry = found
+        tilt = data["machine_tilt"]
+        t = match_latest(inputs.stamp[k], tilt.stamp_ns())
+        rows, k, t = rows[t >= 0], k[t >= 0], t[t >= 0]
+        rotation = level_rotation(base_up(vectors(tilt, "vector")[t], inputs.theta1[k]))
+        tip = np.einsum("nij,nj->ni", rotation, s.Q[k, :3])
+        position = np.linalg.norm(vectors(arrays, "pose.position")[rows] - tip, axis=1)
+        entry.update(position_m=error_stats(position))
+        curves["bucket_pose_level position (m)"] = (since(arrays.stamp_ns()[rows], t0), position)
     consistency_plot(plots, f"{prefix}consistency", curves)
     return out
 

@@ -12,7 +12,12 @@ at most ``swing_max_age`` apart) and accelerations as finite differences of succ
   the cut loops included, with rates; :func:`excavator_kinematics.display.urdf_joint_states`) for
   robot_state_publisher, at most ``urdf_joint_states_rate`` per second of input stamps;
 * ``grade_height`` (PointStamped, if ``grade.enabled``): the bucket tip in the design surface's
-  frame, z = its height above the design plane (:class:`excavator_kinematics.display.DesignPlane`).
+  frame, z = its height above the design plane (:class:`excavator_kinematics.display.DesignPlane`);
+* ``grade/tip``, ``grade/left``, ``grade/right`` (PointStamped) and ``grade/status`` (if
+  ``design_surface.file``): the cutting edge's heights above a LandXML TIN in the site frame
+  (:mod:`excavator_kinematics.surface_grade`);
+* ``bucket_pose_level`` (PoseStamped, if ``level.enabled``): the bucket pose in the
+  gravity-aligned level frame, from the machine's tilt (:mod:`excavator_kinematics.level_pose`).
 
 Bad input is rejected with a logged reason; nothing is published for it. That includes finite
 values no machine can have: rates beyond 1000 x the speed limits and accelerations beyond that in
@@ -42,13 +47,16 @@ from excavator_kinematics.kinematics import (
     bucket_angular_acceleration,
     bucket_angular_velocity,
 )
+from excavator_kinematics.level_pose import LevelPose
 from excavator_kinematics.node_settings import FORWARD, NODES_CONFIG
 from excavator_kinematics.state_input import Plausible, RateDifferentiator, SwingHold
+from excavator_kinematics.surface_grade import SurfaceGrade
 from excavator_kinematics.urdf_joints import URDF_JOINTS
 from manipulator_kinematics.codec.packed import PackedMessage
 from manipulator_kinematics.joint_state import InputError, decode_joint_state
 from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes import MachineNode, run_node
+from manipulator_kinematics.nodes.base import input_qos
 from manipulator_kinematics.registry import Machine
 
 NODE = "excavator_forward"
@@ -68,7 +76,7 @@ class ForwardKinematics(MachineNode):
         super().__init__(node_name, machine, argv)
         settings = self.settings
         self.exc: Excavator = self.model
-        self.frame = settings["base_frame"]
+        self.frame = settings["frame_prefix"] + settings["base_frame"]
         self.swing = SwingHold(settings["swing_max_age"])
         tau, gap = settings["acceleration_time_constant"], settings["acceleration_max_gap"]
         self.cylinder_acceleration = RateDifferentiator(tau, gap)
@@ -97,7 +105,8 @@ class ForwardKinematics(MachineNode):
         self.urdf_last_ns: int | None = None
         grade = settings["grade"]
         self.plane = DesignPlane.from_settings(grade) if grade["enabled"] else None
-        self.grade = PackedMessage(PointStamped(header=Header(frame_id=grade["frame"])), STAMPED)
+        grade_frame = settings["frame_prefix"] + grade["frame"]
+        self.grade = PackedMessage(PointStamped(header=Header(frame_id=grade_frame)), STAMPED)
         self.pose_pub = self.create_publisher(PoseStamped, topic["bucket_pose"], qos)
         self.twist_pub = self.create_publisher(TwistStamped, topic["bucket_twist"], qos)
         self.accel_pub = self.create_publisher(AccelStamped, topic["bucket_accel"], qos)
@@ -105,9 +114,15 @@ class ForwardKinematics(MachineNode):
         self.urdf_pub = self.create_publisher(JointState, topic["urdf_joint_states"], qos)
         self.grade_pub = (self.create_publisher(PointStamped, topic["grade_height"], qos)
                           if self.plane is not None else None)
+        surface = settings["design_surface"]
+        self.surface = (SurfaceGrade(self, surface, topic, self.exc.bucket_width, qos, self.log)
+                        if surface["file"] else None)
+        level = settings["level"]
+        self.level = LevelPose(self, level, topic, qos, self.log) if level["enabled"] else None
         # raw: the callbacks decode the bytes themselves (decode_joint_state), at a third of the cost.
-        self.create_subscription(JointState, topic["joint_states"], self.on_swing, qos, raw=True)
-        self.create_subscription(JointState, topic["cylinder_lengths"], self.on_cylinders, qos, raw=True)
+        inputs = input_qos(settings["qos_depth"], settings["input_reliability"])
+        self.create_subscription(JointState, topic["joint_states"], self.on_swing, inputs, raw=True)
+        self.create_subscription(JointState, topic["cylinder_lengths"], self.on_cylinders, inputs, raw=True)
         self.get_logger().info(
             f"{self.exc.name}: {topic['cylinder_lengths']} + {topic['joint_states']} -> "
             f"{topic['bucket_pose']}, {topic['bucket_twist']}, {topic['bucket_accel']}, "
@@ -158,8 +173,11 @@ class ForwardKinematics(MachineNode):
             accel = [*Q_ddot[:3], *angular_acc.tolist()]
         grade = self.plane.local(Q[:3]).tolist() if self.plane is not None else []
         urdf = self.urdf_values(stamp_ns, D, [theta1_dot, *rates.tolist()])
+        surface = self.surface.values(stamp_ns, theta1, Q[:3]) if self.surface is not None else []
         # The input checks keep the arithmetic far from overflow; this is the promise itself.
-        if not all(map(math.isfinite, (*pose, *twist, *joints, *accel, *grade, *urdf))):
+        edge = [v for point in surface if point is not None for v in point]
+        level = self.level.values(stamp_ns, theta1, pose) if self.level is not None else []
+        if not all(map(math.isfinite, (*pose, *twist, *joints, *accel, *grade, *urdf, *edge, *level))):
             self.log("error", f"dropped the outputs of cylinder_lengths D = {D.tolist()}, "
                      f"D_dot = {[theta1_dot, *rates.tolist()]}: not finite")
             return
@@ -174,6 +192,10 @@ class ForwardKinematics(MachineNode):
             self.urdf_pub.publish(self.urdf_joints.pack((*sec_nanosec, *urdf)))
         if grade:
             self.grade_pub.publish(self.grade.pack((*sec_nanosec, *grade)))
+        if surface:
+            self.surface.publish(sec_nanosec, surface)
+        if level:
+            self.level.publish(sec_nanosec, level)
 
     def urdf_values(self, stamp_ns: int, D: np.ndarray, D_dot: list[float]) -> list[float]:
         """Positions then rates of every URDF joint when urdf_joint_states is due, else []."""

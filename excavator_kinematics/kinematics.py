@@ -47,8 +47,11 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from excavator_kinematics import inverse
 from excavator_kinematics.parameters import CYLINDERS, SECTION, Description, parse
+from manipulator_kinematics.model import IKSolutions
 from manipulator_kinematics.params import ConfigError, config_path, load_parameters
+from manipulator_kinematics.serial_chain import JointLimits
 
 JOINTS = ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")
 # Names of D's components in D's order: the actuators (swing drive and the three cylinders).
@@ -185,9 +188,11 @@ class Excavator:
         one from a parameters file's section); raises ConfigError unless the linkage assembles
         over the whole stroke box."""
         g = description
+        self.description = g
         self.name = g.name
         self.l1, self.l0 = g.foot
         self.l2, self.l3, self.l4 = g.boom_length, g.arm_length, g.bucket_length
+        self.bucket_width = g.bucket_width
         foot = np.array(g.foot)
         arm_pin = np.array([self.l2, 0.0])  # boom frame
         self._bucket_pin = np.array([self.l3, 0.0])  # arm frame
@@ -242,11 +247,15 @@ class Excavator:
         self._pins_local["h_link_pin"] = h_pin
 
         self.limits = g.limits
+        # The limits of D as the shared IK pieces read them (cylinder values are lengths, m).
+        self.joint_limits = JointLimits(ACTUATORS, self.limits.d_min, self.limits.d_max,
+                                        prismatic=(False, True, True, True))
         # Python floats of the limits with the tolerance applied, for the one-state fast path.
         self._lo = (self.limits.d_min - STROKE_TOLERANCE).tolist()
         self._hi = (self.limits.d_max + STROKE_TOLERANCE).tolist()
         self._lo_column, self._hi_column = np.array(self._lo)[:, None], np.array(self._hi)[:, None]
         self._check_whole_stroke()
+        self._ik = inverse.Constants.of(self, _cos_sin_of_array)
 
     def _check_whole_stroke(self) -> None:
         """Every length in the stroke box must assemble; a bad pin or length fails here, naming it."""
@@ -278,6 +287,35 @@ class Excavator:
     def default(cls) -> Excavator:
         """The package's default machine (CET200)."""
         return cls.from_file(config_path(DEFAULT_CONFIG))
+
+    # ------------------------------------------------------------------ pose IK (inverse of eqs. 1-3)
+    #: The SerialModel names of the IK (excavator_kinematics.inverse).
+    ik_branches = inverse.BRANCHES
+    ik_modes = inverse.MODES
+    joint_names = ACTUATORS
+
+    def ik(self, Q: Any, seed: Any = None, branch: str | None = None) -> IKSolutions:
+        """Every D reaching Q = [x, y, z, alpha] (..., 4), each with a status, and the selected one
+        (closed form, :mod:`excavator_kinematics.inverse`)."""
+        return inverse.solve_pose(self, Q, seed, branch)
+
+    def position_ik(self, position: Any, seed: Any = None, branch: str | None = None) -> IKSolutions:
+        """:meth:`ik` for tip positions (..., 3): alpha the seed's, else the widest stroke margin."""
+        return inverse.solve_position(self, position, seed, branch)
+
+    def solve_ik(self, target: Any, *, use_orientation: bool = True, mode: str | None = None,
+                 seed: Any = None, branch: str | None = None) -> IKSolutions:
+        """The SerialModel entry for bucket poses (..., 4, 4) (:func:`inverse.solve_ik`)."""
+        return inverse.solve_ik(self, target, use_orientation=use_orientation, mode=mode, seed=seed,
+                                branch=branch)
+
+    def fkine(self, D: Any) -> np.ndarray:
+        """Bucket pose (..., 4, 4): the tip, yaw theta1, then -alpha about y (eq. 3)."""
+        return inverse.fkine(self, D)
+
+    def jacob0(self, D: Any) -> np.ndarray:
+        """(..., 6, 4) bucket twist [v; omega] per Ddot (eq. 8 and the bucket frame's turn)."""
+        return inverse.jacob0(self, D)
 
     # ------------------------------------------------------------------ validation
     def validate(self, D: Any) -> np.ndarray:
@@ -398,46 +436,36 @@ class Excavator:
     def cylinder_lengths(self, angles: Any) -> np.ndarray:
         """Joint angles [theta2, theta3, theta4] (..., 3) -> cylinder lengths (inverse of eqs. 1-2).
 
-        Closed form: eq. 1's second line for boom and arm; for the bucket, H from theta4, then the
-        rod pin R as the intersection of the side-link and H-link circles on the assembly branch.
-        Raises StrokeError when an angle needs a length outside the stroke or cannot be assembled.
+        Closed form (:meth:`linkage_lengths`). Raises StrokeError when an angle needs a length
+        outside the stroke or cannot be assembled.
         """
         angles = _vectors(angles, 3, "[theta2, theta3, theta4]")
         if not np.all(np.isfinite(angles)):
             raise StrokeError("joint angles are not finite")
-        lengths = np.empty_like(angles)
+        lengths = self.linkage_lengths(angles)
         for i, tri in enumerate((self._boom, self._arm)):
-            gamma = tri.orientation * (angles[..., i] - tri.offset)
-            gamma = (gamma + np.pi) % (2.0 * np.pi) - np.pi
-            if np.any(gamma <= 0.0):
+            if np.any(np.isnan(lengths[..., i])):
                 raise StrokeError(f"{JOINTS[i + 1]} angle cannot be reached by {tri.name} on this assembly")
-            lengths[..., i] = np.sqrt(tri.a**2 + tri.b**2 - 2.0 * tri.a * tri.b * np.cos(gamma))
-        psi = angles[..., 2] + self._h_phase
-        H = self._bucket_pin + self._h_radius * np.stack((np.cos(psi), np.sin(psi)), axis=-1)
-        to_h = H - self._pivot
-        f = np.hypot(to_h[..., 0], to_h[..., 1])
-        c = (f * f + self._side**2 - self._h_link**2) / (2.0 * f * self._side)
-        if np.any(np.abs(c) > 1.0):
+        if np.any(np.isnan(lengths[..., 2])):
             raise StrokeError("bucket_joint angle cannot be reached: side link and H-link cannot meet")
-        base = np.arctan2(to_h[..., 1], to_h[..., 0])
-        spread = np.arccos(c)
-        candidates = [
-            self._pivot
-            + self._side * np.stack((np.cos(base + s * spread), np.sin(base + s * spread)), axis=-1)
-            for s in (1.0, -1.0)
-        ]
-        # Keep the rod pin on the bucket four-bar's assembly branch (same orientation as forward).
-        rel_h = H - self._bucket_pin
-        rel_r = candidates[0] - self._bucket_pin
-        branch = np.sign(rel_r[..., 0] * rel_h[..., 1] - rel_r[..., 1] * rel_h[..., 0]) == self._h_orientation
-        R = np.where(branch[..., None], candidates[0], candidates[1])
-        base_pin = self._pins_local["bucket_cylinder_base"]
-        lengths[..., 2] = np.hypot(R[..., 0] - base_pin[0], R[..., 1] - base_pin[1])
         try:
             self._check_lengths(lengths)
         except StrokeError as error:
             raise StrokeError(f"joint angles out of reach: {error}") from None
         return lengths
+
+    def linkage_lengths(self, angles: np.ndarray) -> np.ndarray:
+        """The cylinder lengths (..., 3) of joint angles (..., 3), NaN where a linkage cannot close
+        (or an angle is NaN); no stroke check: what the pose IK judges candidate by candidate.
+
+        Eq. 1's second line for boom and arm (the triangle closes for gamma in (0, pi] on its
+        assembly); for the bucket, H from theta4, then the rod pin R as the intersection of the
+        side-link and H-link circles on the assembly branch (eq. 2 backwards).
+        """
+        angles = np.asarray(angles, dtype=float)
+        with np.errstate(invalid="ignore"):
+            columns = inverse.linkage_length_columns(self._ik, angles[..., 0], angles[..., 1], angles[..., 2])
+        return np.stack(columns, axis=-1)
 
     # ------------------------------------------------------------------ open chain (eqs. 3-5)
     def pose(self, D: Any) -> np.ndarray:

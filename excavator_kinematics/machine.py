@@ -23,8 +23,7 @@ def _model(params: dict[str, Any]) -> Excavator:
 
 
 def _limits(model: Excavator) -> JointLimits:
-    # The cylinders' values are lengths (m), the swing an angle (rad).
-    return JointLimits(ACTUATORS, model.limits.d_min, model.limits.d_max, prismatic=(False, True, True, True))
+    return model.joint_limits
 
 
 MACHINE = Machine(
@@ -42,8 +41,20 @@ MACHINE = Machine(
         "open_chain_joint_states": _JOINT_STATE,
         "urdf_joint_states": _JOINT_STATE,
         "grade_height": "geometry_msgs/msg/PointStamped",
+        "site_pose": "geometry_msgs/msg/PoseStamped",
+        "machine_tilt": "geometry_msgs/msg/Vector3Stamped",
+        "bucket_pose_level": "geometry_msgs/msg/PoseStamped",
+        "imu/cab": "sensor_msgs/msg/Imu",
+        "imu/boom": "sensor_msgs/msg/Imu",
+        "imu/arm": "sensor_msgs/msg/Imu",
+        "imu/bucket_linkage": "sensor_msgs/msg/Imu",
+        "grade/tip": "geometry_msgs/msg/PointStamped",
+        "grade/left": "geometry_msgs/msg/PointStamped",
+        "grade/right": "geometry_msgs/msg/PointStamped",
+        "grade/status": "diagnostic_msgs/msg/DiagnosticArray",
         "cylinder_rate_commands": _JOINT_STATE,
         "velocity_controller/commands": "std_msgs/msg/Float64MultiArray",
+        "velocity_ik_status": "diagnostic_msgs/msg/DiagnosticArray",
         "bucket_pose": "geometry_msgs/msg/PoseStamped",
         "bucket_twist": _TWIST,
         "bucket_accel": "geometry_msgs/msg/AccelStamped",

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from manipulator_kinematics.config import Flag, Number, Numbers, Text
+from manipulator_kinematics.nodes.base import FRAME_PREFIX, input_reliability
 
 NODES_CONFIG = "excavator_nodes.yaml"
 
@@ -21,6 +22,7 @@ _SWING_MAX_AGE = Number(**_SECONDS, doc="max |stamp(cylinder_lengths) - stamp(jo
 
 FORWARD = {
     "base_frame": Text(empty=False, doc="frame_id of bucket_pose, bucket_twist and bucket_accel"),
+    "frame_prefix": FRAME_PREFIX,
     "swing_max_age": _SWING_MAX_AGE,
     "acceleration_time_constant": Number(**_SECONDS, doc="low-pass on the accelerations; 0 = raw"),
     "acceleration_max_gap": Number(**_SECONDS, doc="a longer gap between messages restarts the differencing"),
@@ -29,6 +31,7 @@ FORWARD = {
                         doc="reliable keep-last depth of every topic (400: 0.4 s of 1 kHz input; "
                             "Fast DDS caps a keep-last depth at 400 unless a profile raises "
                             "max_samples_per_instance)"),
+    "input_reliability": input_reliability("cylinder_lengths and joint_states"),
     "urdf_joint_states_rate": Number(
         min=0.0, max=10_000.0, unit="Hz",
         doc="most urdf_joint_states per second of input stamps; 0 = every input",
@@ -45,6 +48,24 @@ FORWARD = {
                               doc="rise of the plane per run along base y, percent (default 0)"),
         "frame": Text(empty=False, doc="frame_id of grade_height: the design surface's frame"),
     },
+    "level": {
+        "enabled": Flag(doc="publish bucket_pose_level from the machine tilt (topics.machine_tilt)"),
+        "frame": Text(empty=False, doc="frame_id of bucket_pose_level: base_link levelled by gravity"),
+        "tilt_max_age": Number(**_SECONDS, doc="max |stamp(cylinder_lengths) - stamp(machine_tilt)|"),
+    },
+    "design_surface": {
+        "file": Text(doc="LandXML 1.2 file of the design TIN (read at start-up); empty: none"),
+        "surface": Text(doc="name of the Surface in the file; empty: the file's only surface"),
+        "site_frame": Text(empty=False, doc="frame_id of the site (x easting, y northing, z up)"),
+        "site_pose_source": Text(choices=("fixed", "topic"),
+                                 doc="base_link in the site frame: fixed (site_position, site_rpy) "
+                                     "or from topics.site_pose"),
+        "site_position": Numbers(3, Number(min=-1e8, max=1e8, unit="m"),
+                                 doc="fixed position of base_link in the site frame (m)"),
+        "site_rpy": Numbers(3, Number(min=-7.0, max=7.0, unit="rad"),
+                            doc="fixed roll, pitch, yaw of base_link in the site frame (rad, fixed axes)"),
+        "site_pose_max_age": Number(**_SECONDS, doc="max |stamp(cylinder_lengths) - stamp(site pose)|"),
+    },
     "topics": {
         "cylinder_lengths": _topic("input: sensor_msgs/JointState, boom/arm/bucket cylinder length and rate"),
         "joint_states": _topic("input: sensor_msgs/JointState, swing_joint angle and rate"),
@@ -54,29 +75,71 @@ FORWARD = {
         "open_chain_joint_states": _topic("output: sensor_msgs/JointState of the open chain"),
         "urdf_joint_states": _topic("output: sensor_msgs/JointState of every joint of urdf/excavator.urdf"),
         "grade_height": _topic("output: geometry_msgs/PointStamped, the tip in the design surface's frame"),
+        "site_pose": _topic("input: geometry_msgs/PoseStamped, base_link in the site frame (GNSS)"),
+        "machine_tilt": _topic("input: geometry_msgs/Vector3Stamped, up in the upper structure's frame"),
+        "bucket_pose_level": _topic("output: geometry_msgs/PoseStamped in the level frame"),
+        "grade_tip": _topic("output: geometry_msgs/PointStamped, tip x, y and height above the TIN"),
+        "grade_left": _topic("output: geometry_msgs/PointStamped, left end of the cutting edge"),
+        "grade_right": _topic("output: geometry_msgs/PointStamped, right end of the cutting edge"),
+        "grade_status": _topic("output: diagnostic_msgs/DiagnosticArray, inside/outside the TIN"),
     },
 }
 
 VELOCITY_IK = {
-    "base_frame": Text(empty=False, doc="the only frame_id accepted on target_bucket_twist"),
+    "base_frame": Text(empty=False, doc="the frame_id of target_bucket_twist (empty frame_id: this one)"),
+    "frame_prefix": FRAME_PREFIX,
     "command_timeout": Number(**_SECONDS, doc="no accepted target for this long: zero rates once, then hold"),
     "state_timeout": Number(**_SECONDS, doc="a cylinder/swing state older than this is refused"),
     "swing_max_age": _SWING_MAX_AGE,
     "condition_threshold": Number(min=1.0, max=1e12,
                                   doc="cond(JC0) above which damped least squares starts"),
-    "stroke_horizon": Number(**_SECONDS, doc="slow down to reach a stroke end no sooner than this"),
+    "stroke_horizon": Number(**_SECONDS, exclusive_min=True,
+                             doc="the whole command slows: no actuator reaches its end sooner than this"),
+    "bucket_angle_gives_way": Flag(doc="at a stroke end keep the tip's linear direction and let the bucket "
+                                       "angle rate give way; false: the whole twist's direction is kept"),
+    "line_gain": Number(min=0.0, max=100.0, unit="1/s",
+                        doc="a constant target's drift from its line is corrected at this rate; 0 = off"),
+    "status_period": Number(**_SECONDS, doc="an unchanged status is published again after this long"),
     "twist_residual_tolerance": Number(min=0.0, max=1e3, unit="rad/s",
                                        doc="unachievable angular velocity before a (throttled) warning"),
     "warning_period": _WARNING_PERIOD,
     "publish_array": Flag(doc="also publish Float64MultiArray for a ros2_control forward command controller"),
     "qos_depth": _QOS_DEPTH,
     "input_queue_depth": _INPUT_DEPTH,
+    "input_reliability": input_reliability("target_bucket_twist, cylinder_lengths and joint_states"),
     "topics": {
         "target_bucket_twist": _topic("input: geometry_msgs/TwistStamped in base_frame"),
         "cylinder_lengths": _topic("input: sensor_msgs/JointState, cylinder lengths"),
         "joint_states": _topic("input: sensor_msgs/JointState, swing_joint"),
         "rate_commands": _topic("output: sensor_msgs/JointState velocities of swing_joint and the cylinders"),
         "rate_command_array": _topic("output: std_msgs/Float64MultiArray in that order (publish_array)"),
+        "status": _topic("output: diagnostic_msgs/DiagnosticArray: tracking / slowed (by what) / stopped"),
+    },
+}
+
+IMU_STATE = {
+    "max_skew": Number(**_SECONDS, doc="largest spread of the four sensors' latest stamps in one set"),
+    "max_age": Number(**_SECONDS, exclusive_min=True,
+                      doc="a sensor whose newest message arrived longer ago (node clock) is stale: no "
+                          "output, a reason; also the grace after start-up; checked every max_age / 4"),
+    "gravity_time_constant": Number(**_SECONDS, doc="complementary filter of the gravity direction "
+                                    "(sensors without orientation); 0 = the accelerometer as it is"),
+    "max_angular_rate": Number(min=0.0, max=1e3, unit="rad/s", exclusive_min=True,
+                               doc="a gyro reading beyond this is implausible"),
+    "max_dynamic_acceleration": Number(min=0.0, max=1e3, unit="m/s^2", exclusive_min=True,
+                                       doc="| |linear_acceleration| - g | beyond this: no gravity direction"),
+    "upper_structure_frame": Text(empty=False, doc="frame_id of machine_tilt"),
+    "frame_prefix": FRAME_PREFIX,
+    "warning_period": _WARNING_PERIOD,
+    "qos_depth": _QOS_DEPTH,
+    "input_reliability": input_reliability("the four Imu topics"),
+    "topics": {
+        "imu_cab": _topic("input: sensor_msgs/Imu on the upper structure"),
+        "imu_boom": _topic("input: sensor_msgs/Imu on the boom"),
+        "imu_arm": _topic("input: sensor_msgs/Imu on the arm"),
+        "imu_bucket_linkage": _topic("input: sensor_msgs/Imu on the H-link or the bucket (machine file)"),
+        "cylinder_lengths": _topic("output: sensor_msgs/JointState, cylinder lengths and rates"),
+        "machine_tilt": _topic("output: geometry_msgs/Vector3Stamped, up in the upper structure's frame"),
     },
 }
 
@@ -92,6 +155,7 @@ SIM = {
                                             "default: the machine's reference lengths"),
     "qos_depth": _QOS_DEPTH,
     "input_queue_depth": _INPUT_DEPTH,
+    "input_reliability": input_reliability("rate_commands"),
     "topics": {
         "rate_commands": _topic("input: sensor_msgs/JointState velocities (rate commands)"),
         "cylinder_lengths": _topic("output: sensor_msgs/JointState, cylinder lengths and rates"),

@@ -32,6 +32,7 @@ _POINT = Numbers(2, item=_COORDINATE)
 # The sign of cross(first - pivot, second - pivot) of a closing triangle: -1 or 1 (0 is refused
 # by describe()).
 _ORIENTATION = Number(min=-1.0, max=1.0, integer=True)
+_RPY = Numbers(3, item=Number(min=-2.0 * math.pi, max=2.0 * math.pi, unit="rad"))
 _CYLINDER_SPEED = Number(min=0.0, max=5.0, unit="m/s", exclusive_min=True)
 # A swing range of up to a full turn either way of the reference heading.
 _SWING_ANGLE = Number(min=-2.0 * math.pi, max=2.0 * math.pi, unit="rad")
@@ -50,18 +51,29 @@ def _cylinder(**pins: Any) -> dict[str, Any]:
 
 #: The ``excavator:`` section of a parameters file; every key is required.
 SCHEMA = {
-    "name": Text(empty=False),
+    "name": Text(empty=False, doc="the machine's name: the robot name of its URDF"),
     # Height of the base frame's origin above the level ground the machine stands on: z = 0 of
     # the working ranges (SAE J1193 / ISO 7135 ground reference plane) is z = -base_height.
     "base_height": Number(min=-30.0, max=30.0, unit="m"),
     "boom": {"foot_pin": _POINT, "length": _LENGTH},
     "arm": {"length": _LENGTH},
-    "bucket": {"length": _LENGTH},
+    # width: of the cutting edge, whose ends the grade outputs report (design_surface).
+    "bucket": {"length": _LENGTH, "width": _LENGTH},
     "boom_cylinder": _cylinder(base_pin=_POINT, rod_pin=_POINT),
     "arm_cylinder": _cylinder(base_pin=_POINT, rod_pin=_POINT),
     "bucket_cylinder": _cylinder(base_pin=_POINT),
     "side_link": {"pivot": _POINT, "length": _LENGTH},
     "h_link": {"bucket_pin": _POINT, "length": _LENGTH, "orientation": _ORIENTATION},
+    # Inclination sensors (excavator_imu_state): each one's mounting rotation, the sensor frame's
+    # roll, pitch, yaw (fixed x, y, z axes, rad) in the frame of the body it is bolted to (the
+    # upper structure's base frame, the boom/arm/bucket link frames, or the H-link's: x from the
+    # bucket cylinder's rod pin to the H-link pin, y = the boom-plane normal, left).
+    "imu": {
+        "cab": {"rotation_rpy": _RPY},
+        "boom": {"rotation_rpy": _RPY},
+        "arm": {"rotation_rpy": _RPY},
+        "bucket_linkage": {"body": Text(choices=("h_link", "bucket")), "rotation_rpy": _RPY},
+    },
     "swing": {
         "min_angle": _SWING_ANGLE,
         "max_angle": _SWING_ANGLE,
@@ -113,6 +125,7 @@ class Description:
     boom_length: float  # l2
     arm_length: float  # l3
     bucket_length: float  # l4
+    bucket_width: float  # cutting edge, the tip in its middle
     boom_cylinder_pins: tuple[tuple[float, float], tuple[float, float]]  # base, rod
     arm_cylinder_pins: tuple[tuple[float, float], tuple[float, float]]  # base, rod
     bucket_cylinder_base: tuple[float, float]
@@ -121,6 +134,7 @@ class Description:
     h_link_pin: tuple[float, float]
     h_link_length: float
     orientations: tuple[int, int, int, int]  # boom, arm, bucket cylinder, H-link
+    imu: dict[str, Any]  # the machine file's imu section (mounting rotations), as validated
     limits: Limits
 
 
@@ -154,6 +168,7 @@ def describe(params: Mapping[str, Any], prefix: str = SECTION) -> Description:
         boom_length=params["boom"]["length"],
         arm_length=params["arm"]["length"],
         bucket_length=params["bucket"]["length"],
+        bucket_width=params["bucket"]["width"],
         boom_cylinder_pins=(point(cylinders[0]["base_pin"]), point(cylinders[0]["rod_pin"])),
         arm_cylinder_pins=(point(cylinders[1]["base_pin"]), point(cylinders[1]["rod_pin"])),
         bucket_cylinder_base=point(cylinders[2]["base_pin"]),
@@ -162,6 +177,7 @@ def describe(params: Mapping[str, Any], prefix: str = SECTION) -> Description:
         h_link_pin=point(params["h_link"]["bucket_pin"]),
         h_link_length=params["h_link"]["length"],
         orientations=(*(c["orientation"] for c in cylinders), params["h_link"]["orientation"]),
+        imu=params["imu"],
         limits=Limits(
             stroke_min=np.array([c["min_length"] for c in cylinders]),
             stroke_max=np.array([c["max_length"] for c in cylinders]),

@@ -28,6 +28,7 @@ from excavator_kinematics.state_input import InputError, Plausible
 from manipulator_kinematics.joint_state import joint_values
 from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes import MachineNode, run_node
+from manipulator_kinematics.nodes.base import input_qos
 from manipulator_kinematics.registry import Machine
 
 NODE = "excavator_sim"
@@ -58,7 +59,7 @@ class Simulator(MachineNode):
         self.cylinder_pub = self.create_publisher(JointState, s["topics"]["cylinder_lengths"], qos)
         self.swing_pub = self.create_publisher(JointState, s["topics"]["joint_states"], qos)
         # Only the latest command matters; a queue of old ones would delay the loop.
-        latest = QoSProfile(depth=s["input_queue_depth"], reliability=ReliabilityPolicy.RELIABLE)
+        latest = input_qos(s["input_queue_depth"], s["input_reliability"])
         self.create_subscription(JointState, s["topics"]["rate_commands"], self.on_command, latest)
         self.last_ns = self.now_ns()
         self.create_timer(1.0 / s["rate"], self.on_timer)

@@ -10,6 +10,15 @@ machine also when targets come slower than states. Rates go out as JointState (n
 swing_joint, boom_cylinder, arm_cylinder, bucket_cylinder; velocity only) and, if
 ``publish_array``, as Float64MultiArray in that fixed order.
 
+Direction kept (docs/excavator_nodes.md, "The direction rule at stroke ends"): the rates are the
+ideal ones times one factor in [0, 1], so a target the machine cannot follow is slowed or stopped
+in its own direction, never bent into another one. ``status`` (diagnostic_msgs/DiagnosticArray,
+one DiagnosticStatus) says which: tracking, slowed (by what) or stopped (why), on every change and
+at least every ``status_period`` s while commanding; each change to slowed or stopped is logged
+once (throttled). A constant target's drift from its line is corrected (``line_gain``,
+:func:`excavator_kinematics.rate_command.toward_line`), and a stop at a stroke end holds until
+the target changes.
+
 Stopping: no accepted target for ``command_timeout`` s, or a target/state that cannot be used
 while moving, publishes zero rates once and holds (publishes nothing) until the next good target.
 
@@ -25,23 +34,28 @@ from collections.abc import Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import TwistStamped
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, Header
 
 from excavator_kinematics import messages
 from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
 from excavator_kinematics.node_settings import NODES_CONFIG, VELOCITY_IK
-from excavator_kinematics.rate_command import rate_command
+from excavator_kinematics.rate_command import SLOWED, STOPPED, TRACKING, describe, rate_command, toward_line
 from excavator_kinematics.state_input import PLAUSIBILITY_FACTOR, InputError, Plausible, SwingHold
 from excavator_kinematics.twist import split_twist
 from manipulator_kinematics.joint_state import joint_values
 from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes import MachineNode, run_node
+from manipulator_kinematics.nodes.base import input_qos
 from manipulator_kinematics.registry import Machine
 
 NODE = "excavator_velocity_ik"
+# Status levels: tracking is OK; slowed or stopped is a warning (the machine does what it can, in
+# the commanded direction); a target or state that cannot be used is an error.
+LEVELS = {TRACKING: DiagnosticStatus.OK, SLOWED: DiagnosticStatus.WARN, STOPPED: DiagnosticStatus.WARN}
 
 
 class VelocityIk(MachineNode):
@@ -54,12 +68,24 @@ class VelocityIk(MachineNode):
         super().__init__(node_name, machine, argv)
         s = self.settings
         self.exc: Excavator = self.model
-        self.frame = s["base_frame"]
+        self.frame = s["frame_prefix"] + s["base_frame"]
         self.command_timeout_ns = int(s["command_timeout"] * 1e9)
         self.state_timeout_ns = int(s["state_timeout"] * 1e9)
         self.condition_threshold = float(s["condition_threshold"])
         self.stroke_horizon = float(s["stroke_horizon"])
         self.residual_tolerance = float(s["twist_residual_tolerance"])
+        self.bucket_angle_gives_way = bool(s["bucket_angle_gives_way"])
+        self.status_period_ns = int(s["status_period"] * 1e9)
+        self.line_gain = float(s["line_gain"])
+        # The commanded line: (target linear, angular, Q where it began, its Q_dot); a target with
+        # other numbers begins a new one, so does a bucket farther than LINE_RESTART from it.
+        self.line: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        # Why the machine stopped on this line: it stays stopped until the target changes (also
+        # across a timeout or a stale state: the same target again is still the same line), so it
+        # does not creep on and off at the end (the correction toward the line, or the secondary
+        # task's minimum speed, can tip a command just past the stop).
+        self.stopped_on_line: str | None = None
+        self.status_sent: tuple[int, str] | None = None  # (node clock ns, message) of the last status
         self.log = ThrottledLog(self, s["warning_period"])
         self.swing = SwingHold(s["swing_max_age"])
         limits = self.exc.limits
@@ -78,13 +104,17 @@ class VelocityIk(MachineNode):
         qos = QoSProfile(depth=s["qos_depth"], reliability=ReliabilityPolicy.RELIABLE)
         # A controller acts on the latest target and state: a short input queue drops what a busy
         # moment left behind instead of working through it late (a backlog is a delay in the loop).
-        latest = QoSProfile(depth=s["input_queue_depth"], reliability=ReliabilityPolicy.RELIABLE)
+        latest = input_qos(s["input_queue_depth"], s["input_reliability"])
         self.command_pub = self.create_publisher(JointState, s["topics"]["rate_commands"], qos)
         self.array_pub = (
             self.create_publisher(Float64MultiArray, s["topics"]["rate_command_array"], qos)
             if s["publish_array"]
             else None
         )
+        # Transient local: a monitor that starts later still gets the current status.
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.status_pub = self.create_publisher(DiagnosticArray, s["topics"]["status"], latched)
         self.create_subscription(TwistStamped, s["topics"]["target_bucket_twist"], self.on_target, latest)
         self.create_subscription(JointState, s["topics"]["joint_states"], self.on_swing, latest)
         self.create_subscription(JointState, s["topics"]["cylinder_lengths"], self.on_cylinders, latest)
@@ -122,7 +152,7 @@ class VelocityIk(MachineNode):
 
     def on_target(self, msg: TwistStamped) -> None:
         try:
-            if msg.header.frame_id != self.frame:
+            if msg.header.frame_id not in ("", self.frame):  # empty: the base frame, as on the services
                 raise InputError(f"frame_id {msg.header.frame_id!r} is not the base frame {self.frame!r}")
             linear, angular = messages.twist_arrays(msg)
             with np.errstate(over="ignore"):  # a norm that overflows is inf: refused just below
@@ -163,7 +193,8 @@ class VelocityIk(MachineNode):
         _, linear, angular = self.target
         try:
             D = self.exc.validate(self.state())
-            tip = self.exc.pose(D)[:3]
+            Q = self.exc.pose(D)
+            tip = Q[:3]
             split = split_twist(D[0], tip, linear, angular)
             residual = float(np.linalg.norm(split.residual))
             if residual > self.residual_tolerance:
@@ -172,29 +203,77 @@ class VelocityIk(MachineNode):
                     f"target twist not achievable: angular velocity residual {residual:.4f} rad/s "
                     f"({split.residual.round(4).tolist()}); following its linear velocity and alpha rate",
                 )
+            line = self.line
+            if line is None or not (np.array_equal(line[0], linear) and np.array_equal(line[1], angular)):
+                line = self.line = (linear, angular, Q, split.q_dot)
+                self.stopped_on_line = None
+            correction = toward_line(line[2], line[3], Q, self.line_gain, not self.bucket_angle_gives_way)
+            if correction is None:  # moved, not drifted: a new line from here
+                self.line, correction = (linear, angular, Q, split.q_dot), np.zeros(4)
+                self.stopped_on_line = None
+            if self.stopped_on_line is not None:
+                self.publish(stamp, np.zeros(4))
+                self.report(stamp, LEVELS[STOPPED], self.stopped_on_line)
+                return
             rates = rate_command(
                 self.exc.jc0(D),
                 D,
-                split.q_dot,
+                split.q_dot + correction,
                 self.exc.limits,
                 self.condition_threshold,
                 self.stroke_horizon,
+                self.bucket_angle_gives_way,
             )
         except ValueError as error:  # InputError, StrokeError, an overflowing target
             self.stop(f"cannot command: {error}")
             return
         if rates.damping > 0.0:
-            self.log("warning", f"JC0 badly conditioned (cond {rates.condition:.0f}): damped least squares")
+            self.log(
+                "warning",
+                f"JC0 badly conditioned (cond {rates.condition:.0f}): slowed to the speed of damped least "
+                "squares, direction kept",
+            )
         self.publish(stamp, rates.d_dot)
         self.moving = True
+        state, message = describe(rates, ACTUATORS)
+        if state == STOPPED:
+            self.stopped_on_line = message
+        self.report(stamp, LEVELS[state], message, scale=rates.scale, condition=rates.condition)
+
+    def report(self, stamp: Time, level: bytes, message: str, scale: float = 0.0,
+               condition: float = float("nan"), log: bool = True) -> None:
+        """Publish the status on a change of ``message`` or after ``status_period``; log a change to
+        slowed or stopped once (throttled)."""
+        now = self.now_ns()
+        changed = self.status_sent is None or self.status_sent[1] != message
+        if not changed and now - self.status_sent[0] < self.status_period_ns:
+            return
+        if changed and log and level != DiagnosticStatus.OK:
+            self.log("warning" if message.startswith(STOPPED) else "info", message)
+        self.status_sent = (now, message)
+        # No NaN in the status either: a condition not computed (no command) is "n/a".
+        values = {
+            "scale": f"{scale:.6g}",
+            "condition": f"{condition:.6g}" if np.isfinite(condition) else "n/a",
+            "bucket_angle_gives_way": str(self.bucket_angle_gives_way).lower(),
+        }
+        status = DiagnosticStatus(
+            level=level, name=self.get_fully_qualified_name(), message=message, hardware_id=self.exc.name,
+            values=[KeyValue(key=k, value=v) for k, v in values.items()],
+        )
+        self.status_pub.publish(DiagnosticArray(header=Header(stamp=stamp), status=[status]))
 
     def stop(self, reason: str, severity: str = "error") -> None:
         """Log ``reason``; drop the target and publish zero rates once if a motion may be in force."""
         self.log(severity, reason)
         self.target = None
+        now = self.get_clock().now().to_msg()
         if self.moving:
-            self.publish(self.get_clock().now().to_msg(), np.zeros(4))
+            self.publish(now, np.zeros(4))
             self.moving = False
+        level = DiagnosticStatus.ERROR if severity == "error" else DiagnosticStatus.OK
+        message = f"{STOPPED}: {reason}" if severity == "error" else f"idle: {reason}"
+        self.report(now, level, message, log=False)  # logged just above
 
     def publish(self, stamp: Time, d_dot: np.ndarray) -> None:
         # rate_command guarantees both; a command is what moves the machine, so it is checked here.

@@ -26,7 +26,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Union
 
-from manipulator_kinematics.params import ConfigError
+from manipulator_kinematics.params import SHOWN, ConfigError, shown
 
 __all__ = [
     "ConfigError",
@@ -59,16 +59,16 @@ class Number:
 
     def check(self, value: Any, key: str) -> float | int:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{key}: expected a number{_unit(self.unit)}, got {value!r}")
+            raise ConfigError(f"{key}: expected a number{_unit(self.unit)}, got {shown(value)}")
         if not math.isfinite(value):
-            raise ConfigError(f"{key}: expected a finite number, got {value!r}")
+            raise ConfigError(f"{key}: expected a finite number, got {shown(value)}")
         if self.integer and float(value) != int(value):
-            raise ConfigError(f"{key}: expected a whole number, got {value!r}")
+            raise ConfigError(f"{key}: expected a whole number, got {shown(value)}")
         below = value <= self.min if self.exclusive_min else value < self.min
         if below or value > self.max:
             low = "(" if self.exclusive_min else "["
             interval = f"{low}{self.min:g}, {self.max:g}]"
-            raise ConfigError(f"{key} = {value!r} is outside {interval}{_unit(self.unit)}")
+            raise ConfigError(f"{key} = {shown(value)} is outside {interval}{_unit(self.unit)}")
         return int(value) if self.integer else float(value)
 
 
@@ -83,9 +83,9 @@ class Numbers:
 
     def check(self, value: Any, key: str) -> list[float | int]:
         if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, Sequence):
-            raise ConfigError(f"{key}: expected a list of {self._what()}, got {value!r}")
+            raise ConfigError(f"{key}: expected a list of {self._what()}, got {shown(value)}")
         if self.count is not None and len(value) != self.count:
-            raise ConfigError(f"{key}: expected {self._what()}, got {len(value)}: {list(value)!r}")
+            raise ConfigError(f"{key}: expected {self._what()}, got {len(value)}: {shown(value)}")
         return [self.item.check(v, f"{key}[{i}]") for i, v in enumerate(value)]
 
     def _what(self) -> str:
@@ -102,11 +102,11 @@ class Names:
 
     def check(self, value: Any, key: str) -> list[str]:
         if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, Sequence):
-            raise ConfigError(f"{key}: expected a list of names, got {value!r}")
+            raise ConfigError(f"{key}: expected a list of names, got {shown(value)}")
         if self.count is not None and len(value) != self.count:
-            raise ConfigError(f"{key}: expected {self.count} names, got {len(value)}: {list(value)!r}")
+            raise ConfigError(f"{key}: expected {self.count} names, got {len(value)}: {shown(value)}")
         if not all(isinstance(v, str) and v for v in value) or len(set(value)) != len(value):
-            raise ConfigError(f"{key}: names must be distinct non-empty strings, got {list(value)!r}")
+            raise ConfigError(f"{key}: names must be distinct non-empty strings, got {shown(value)}")
         return list(value)
 
 
@@ -121,9 +121,9 @@ class Text:
 
     def check(self, value: Any, key: str) -> str:
         if not isinstance(value, str):
-            raise ConfigError(f"{key}: expected a string, got {value!r}")
+            raise ConfigError(f"{key}: expected a string, got {shown(value)}")
         if self.choices is not None and value not in self.choices:
-            raise ConfigError(f"{key} = {value!r}: expected one of {', '.join(map(repr, self.choices))}")
+            raise ConfigError(f"{key} = {shown(value)}: expected one of {', '.join(map(repr, self.choices))}")
         if not self.empty and not value:
             raise ConfigError(f"{key}: must not be empty")
         return value
@@ -138,7 +138,7 @@ class Flag:
 
     def check(self, value: Any, key: str) -> bool:
         if not isinstance(value, bool):
-            raise ConfigError(f"{key}: expected true or false, got {value!r}")
+            raise ConfigError(f"{key}: expected true or false, got {shown(value)}")
         return value
 
 
@@ -152,10 +152,11 @@ def validate(values: Any, schema: Schema, prefix: str = "") -> dict[str, Any]:
     Raises ConfigError naming the first unknown, missing or invalid key (dotted, under ``prefix``).
     """
     if not isinstance(values, Mapping):
-        raise ConfigError(f"{prefix or 'parameters'}: expected a mapping of keys, got {values!r}")
+        raise ConfigError(f"{prefix or 'parameters'}: expected a mapping of keys, got {shown(values)}")
     for key in values:
         if key not in schema:
-            raise ConfigError(f"{_join(prefix, key)}: unknown key{_did_you_mean(str(key), schema)}")
+            name = _join(prefix, key) if len(str(key)) <= SHOWN else _join(prefix, shown(str(key)))
+            raise ConfigError(f"{name}: unknown key{_did_you_mean(str(key), schema)}")
     out: dict[str, Any] = {}
     for key, spec in schema.items():
         name = _join(prefix, key)

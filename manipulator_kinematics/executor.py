@@ -21,6 +21,10 @@ nowhere else:
 * a subscription callback taking ``(msg, info)`` is never called: every message raises
   ``SystemError: null argument to internal routine`` from the executor. :func:`spin` refuses such
   a node up front under ``events``.
+
+A node whose callbacks must run concurrently (every ``plan_path`` server's plan in a callback
+group of its own, beside ``solve_ik``) says so with a class attribute ``THREADS = k`` (k >= 2): it is
+served by rclpy's ``MultiThreadedExecutor`` with k threads, whatever the executor's name.
 """
 
 from __future__ import annotations
@@ -33,7 +37,7 @@ import traceback
 from collections.abc import Callable
 from typing import Any
 
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.task import Future
@@ -69,23 +73,30 @@ def spin(
     """Serve ``node`` with the executor named ``executor`` (:func:`executor_name`) until its context
     shuts down or, when given, ``until()`` is true; ``until`` is asked every ``poll`` s.
 
-    Returns normally in both cases. Callbacks run one at a time in the calling thread.
+    Returns normally in both cases. Callbacks run one at a time in the calling thread, except for
+    a node with ``THREADS`` (module docstring).
     """
     name = executor_name(executor)
     guard_callbacks(node)
-    if name == "events":
+    threads = getattr(node, "THREADS", 0)
+    if threads:
+        name = "multi"
+    elif name == "events":
         with_info = [s.topic_name for s in node.subscriptions if _wants_message_info(s.callback)]
         if with_info:
             raise ValueError(
                 f"subscriptions of {', '.join(with_info)} take (msg, info): EventsExecutor of rclpy 7.1.6 "
                 f"cannot call them (SystemError); use {ENVIRONMENT}=single"
             )
-    executor_ = EXECUTORS[name](context=node.context)
+    if threads:
+        executor_ = MultiThreadedExecutor(num_threads=threads, context=node.context)
+    else:
+        executor_ = EXECUTORS[name](context=node.context)
     executor_.add_node(node)
     try:
         # A shutdown can land in any wait: rclpy then raises ExternalShutdownException.
         with contextlib.suppress(ExternalShutdownException):
-            if until is None and name == "single":
+            if until is None and name != "events":
                 executor_.spin()
                 return
             slice_ = SLICE if until is None else poll

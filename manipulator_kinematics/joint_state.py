@@ -16,6 +16,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from manipulator_kinematics.codec import cdr
+from manipulator_kinematics.params import shown
 
 
 class InputError(ValueError):
@@ -52,10 +53,10 @@ def joint_values(
     """
     index = {name: i for i, name in enumerate(msg.name)}
     if len(index) != len(msg.name):
-        raise InputError(f"joint names repeat in the message: {_shown(msg.name)}")
+        raise InputError(f"joint names repeat in the message: {shown(msg.name)}")
     missing = [name for name in names if name not in index]
     if missing:
-        raise InputError(f"joint names {missing} missing from the message (has {_shown(msg.name)})")
+        raise InputError(f"joint names {missing} missing from the message (has {shown(msg.name)})")
     rows = [index[name] for name in names]
     out = []
     for label, field, required in (
@@ -74,16 +75,6 @@ def joint_values(
             raise InputError(f"non-finite {label} {values} for {list(names)}")
         out.append(np.array(values))
     return out[0], out[1]
-
-
-# Names of a message shown in a reason: a message may carry thousands.
-_SHOWN_NAMES = 8
-
-
-def _shown(names: Sequence[str]) -> str:
-    """``names`` for a log line: the first few (each cut to 40 characters) and how many in all."""
-    shown = [name[:40] for name in names[:_SHOWN_NAMES]]
-    return str(shown) if len(names) <= _SHOWN_NAMES else f"{str(shown)[:-1]}, ... ({len(names)} names)]"
 
 
 class RawJointState(NamedTuple):

@@ -38,6 +38,28 @@ from manipulator_kinematics.serial_chain import JointLimits, parts_where
 
 #: Quaternion components below this count as zero when the sign of a quaternion is fixed.
 QUATERNION_ZERO = 1e-12
+
+# Shepperd's K = 1 x _SHEPPERD_ONE + r.flat @ _SHEPPERD (rows x, y, z, w of matrix_quaternion):
+#   [1+m00-m11-m22, m01+m10, m02+m20, m21-m12], [m01+m10, 1-m00+m11-m22, m12+m21, m02-m20],
+#   [m02+m20, m12+m21, 1-m00-m11+m22, m10-m01], [m21-m12, m02-m20, m10-m01, 1+m00+m11+m22].
+_SHEPPERD_TERMS = {
+    (0, 0): ((0, 1), (4, -1), (8, -1)), (0, 1): ((1, 1), (3, 1)), (0, 2): ((2, 1), (6, 1)),
+    (0, 3): ((7, 1), (5, -1)), (1, 1): ((0, -1), (4, 1), (8, -1)), (1, 2): ((5, 1), (7, 1)),
+    (1, 3): ((2, 1), (6, -1)), (2, 2): ((0, -1), (4, -1), (8, 1)), (2, 3): ((3, 1), (1, -1)),
+    (3, 3): ((0, 1), (4, 1), (8, 1)),
+}
+
+
+def _shepperd_matrix() -> np.ndarray:
+    weights = np.zeros((9, 16))
+    for (a, b), terms in _SHEPPERD_TERMS.items():
+        for element, sign in terms:
+            weights[element, 4 * a + b] = weights[element, 4 * b + a] = sign
+    return weights
+
+
+_SHEPPERD = _shepperd_matrix()
+_SHEPPERD_ONE = np.eye(4).reshape(16)
 #: Two seed distances closer than this (relative) count as a tie.
 TIE_TOLERANCE = 1e-9
 
@@ -96,6 +118,20 @@ class IKSolutions:
     @property
     def ok(self) -> np.ndarray:
         return self.selected >= 0
+
+    def failure(self, index: tuple[int, ...] | int = (), branch: str | None = None) -> IKStatus:
+        """Why one target has no selected solution: the one rule of every machine's services.
+
+        The best (least) failed status of its candidates, or of the ``branch`` asked for alone
+        (the other branches are no answer to that request): UNREACHABLE (NO_IK_SOLUTION) when
+        no geometric solution exists, JOINT_LIMITS only when solutions exist and every one breaks
+        a limit. INVALID if no candidate failed (nothing was selected all the same).
+        """
+        status = self.status[index if isinstance(index, tuple) else (index,)]
+        if branch is not None and branch in self.branches:
+            status = status[[self.branches.index(branch)]]
+        failed = status[status != _SUCCESS]
+        return IKStatus(int(failed.min())) if failed.size else IKStatus.INVALID
 
     @property
     def solution(self) -> np.ndarray:
@@ -212,6 +248,18 @@ def describe_limits(q: np.ndarray, limits: JointLimits) -> str:
     return ", ".join(parts) or "inside every limit"
 
 
+def level_rotation(up: ArrayLike) -> np.ndarray:
+    """(..., 3, 3) rows: the axes of the gravity-aligned *level frame* in a body frame whose world
+    up is ``up`` (..., 3): z = up, x = the body's x projected onto the horizontal, y = z x x. Same
+    origin and heading as the body, roll and pitch taken out (REP 105's gravity-aligned frames);
+    ``p_level = R @ p_body``. Needs a body x that is not vertical (any machine standing)."""
+    z = np.asarray(up, dtype=float)
+    z = z / np.linalg.norm(z, axis=-1, keepdims=True)
+    x = np.array([1.0, 0.0, 0.0]) - z[..., :1] * z
+    x = x / np.linalg.norm(x, axis=-1, keepdims=True)
+    return np.stack([x, np.cross(z, x), z], axis=-2)
+
+
 def pose_matrix(position: ArrayLike, quaternion: ArrayLike | None = None) -> np.ndarray:
     """4x4 from a position (3,) and a unit quaternion (x, y, z, w) (identity rotation if None)."""
     matrix = np.eye(4)
@@ -242,20 +290,13 @@ def matrix_quaternion(rotation: ArrayLike) -> np.ndarray:
     down) the one whose first non-zero of x, y, z is positive, so round-off in w cannot flip it.
     """
     r = np.asarray(rotation, dtype=float)
-    m00, m11, m22 = r[..., 0, 0], r[..., 1, 1], r[..., 2, 2]
-    candidates = np.stack([1 + m00 - m11 - m22, 1 - m00 + m11 - m22, 1 - m00 - m11 + m22,
-                           1 + m00 + m11 + m22], axis=-1)
-    k = np.argmax(candidates, axis=-1)
-    s = np.sqrt(np.maximum(np.take_along_axis(candidates, k[..., None], axis=-1)[..., 0], 1e-300)) * 2
-    xs = np.stack([s / 4, (r[..., 0, 1] + r[..., 1, 0]) / s, (r[..., 0, 2] + r[..., 2, 0]) / s,
-                   (r[..., 2, 1] - r[..., 1, 2]) / s], axis=-1)
-    ys = np.stack([(r[..., 0, 1] + r[..., 1, 0]) / s, s / 4, (r[..., 1, 2] + r[..., 2, 1]) / s,
-                   (r[..., 0, 2] - r[..., 2, 0]) / s], axis=-1)
-    zs = np.stack([(r[..., 0, 2] + r[..., 2, 0]) / s, (r[..., 1, 2] + r[..., 2, 1]) / s, s / 4,
-                   (r[..., 1, 0] - r[..., 0, 1]) / s], axis=-1)
-    ws = np.stack([(r[..., 2, 1] - r[..., 1, 2]) / s, (r[..., 0, 2] - r[..., 2, 0]) / s,
-                   (r[..., 1, 0] - r[..., 0, 1]) / s, s / 4], axis=-1)
-    q = np.choose(k[..., None], [xs, ys, zs, ws])
+    # Row k of Shepperd's symmetric matrix K is 4 q_k q (its diagonal 4 q_k^2): one product with
+    # constants builds all four rows (one call instead of some twenty small ones, per message in
+    # the forward nodes), the row of the largest diagonal divided by 2 sqrt(K_kk) is q.
+    K = (r.reshape(*r.shape[:-2], 9) @ _SHEPPERD + _SHEPPERD_ONE).reshape(*r.shape[:-2], 4, 4)
+    diagonal = K.diagonal(axis1=-2, axis2=-1)
+    row = np.take_along_axis(K, diagonal.argmax(axis=-1)[..., None, None], axis=-2)[..., 0, :]
+    q = row / (2 * np.sqrt(np.maximum(diagonal.max(axis=-1, keepdims=True), 1e-300)))
     leading = np.where(np.abs(q) > QUATERNION_ZERO, q, 0.0)
     # The sign of the first component (w, then x, y, z) that is not zero decides.
     order = leading[..., [3, 0, 1, 2]]

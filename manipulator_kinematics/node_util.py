@@ -10,19 +10,17 @@ unless the node applies changes itself and opts out.
 from __future__ import annotations
 
 import shutil
-import signal
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.signals import SignalHandlerOptions, get_current_signal_handlers_options
 
-from manipulator_kinematics import executor
+from manipulator_kinematics import executor, stopping
 from manipulator_kinematics.params import ConfigError, check_ros_arguments
 from manipulator_kinematics.throttle import ThrottledLog
 
@@ -55,14 +53,22 @@ def make_node(name: str) -> Node:
     return Node(name, automatically_declare_parameters_from_overrides=True)
 
 
-def param(node: Node, name: str, default: Any, description: str = "") -> Any:
+def param(node: Node, name: str, default: Any, description: str = "",
+          bounds: tuple[float, float] | None = None, constraints: str = "") -> Any:
     """Value of parameter ``name``, declaring it with ``default`` when no override exists; either
-    way it gets a read-only descriptor, so ``ros2 param describe`` shows it as a start-up setting."""
+    way it gets a read-only descriptor, so ``ros2 param describe`` shows it as a start-up setting,
+    with ``bounds`` (min, max) as its range when it is a single number and ``constraints`` (what
+    values it takes) after that."""
     given = node.get_parameter(name) if node.has_parameter(name) else None
     kind = given.type_ if given is not None else Parameter.Type.from_parameter_value(default)
     descriptor = ParameterDescriptor(
-        description=description, type=kind.value, read_only=True, additional_constraints=STARTUP_ONLY
+        description=description, type=kind.value, read_only=True,
+        additional_constraints=f"{STARTUP_ONLY}; {constraints}" if constraints else STARTUP_ONLY,
     )
+    if bounds is not None and kind == Parameter.Type.DOUBLE:
+        descriptor.floating_point_range = [FloatingPointRange(from_value=bounds[0], to_value=bounds[1])]
+    elif bounds is not None and kind == Parameter.Type.INTEGER:
+        descriptor.integer_range = [IntegerRange(from_value=int(bounds[0]), to_value=int(bounds[1]))]
     if given is not None:
         node.set_descriptor(name, descriptor)
         return given.value
@@ -83,11 +89,9 @@ def run(
     every other gets :func:`refuse_runtime_changes`. A machine description or setting that fails
     validation ends the process with its message and exit code 2 (nothing to serve).
     """
-    # rclpy's handlers (installed by init) turn SIGINT and SIGTERM into a shutdown of the
-    # context, which ends the spin. For SIGINT they also call the Python handler found at init,
-    # which by default raises KeyboardInterrupt wherever the main thread is: in a callback or
-    # half-way through destroy_node. This one is that handler, and stays quiet once rclpy's are in.
-    signal.signal(signal.SIGINT, _interrupt_until_rclpy_handles_it)
+    # A signal from here on is only recorded (manipulator_kinematics.stopping): rclpy's handlers,
+    # installed by init, shut the context down, which ends the spin, and then call ours.
+    stopping.hold()
     argv = list(args) if args is not None else sys.argv
     try:
         check_ros_arguments(argv)
@@ -100,6 +104,8 @@ def run(
         return 2
     node = None
     try:
+        if stopping.requested():  # during rclpy.init, before its handlers were in
+            return 0
         name = executor.executor_name()
         node = node_factory()
         if refuse_parameter_changes:
@@ -108,18 +114,26 @@ def run(
     except ConfigError as error:
         print(f"configuration error: {error}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        pass  # SIGINT before rclpy.init
     except Exception:
         # A signal shuts the context down from rclpy's own thread, also while the node is being
         # built: rclpy then raises RCLError or RuntimeError from wherever the main thread was.
-        if rclpy.ok():
+        if not stopping.requested():
             raise
     finally:
+        _shut_down(node)
+    return 0
+
+
+def _shut_down(node: Node | None) -> None:
+    """Destroy ``node`` and shut rclpy down; a signal's shutdown racing either is no failure."""
+    try:
         if node is not None:
             node.destroy_node()
+    except Exception:
+        if not stopping.requested():
+            raise
+    finally:
         rclpy.try_shutdown()
-    return 0
 
 
 def refuse_runtime_changes(node: Node) -> None:
@@ -135,8 +149,3 @@ def refuse_runtime_changes(node: Node) -> None:
         return SetParametersResult(successful=True)
 
     node.add_on_set_parameters_callback(on_set)
-
-
-def _interrupt_until_rclpy_handles_it(signum: int, frame: object) -> None:
-    if get_current_signal_handlers_options() == SignalHandlerOptions.NO:
-        raise KeyboardInterrupt

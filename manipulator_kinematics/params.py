@@ -6,6 +6,7 @@ dotted parameter names in ROS (``excavator.boom.length``). Cores take the nested
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -13,12 +14,37 @@ from typing import Any
 import yaml
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "config"
-#: libyaml's parser when PyYAML has it: the same safe constructor, about 10 times faster.
-_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+#: Longest text of one value in an error line (characters): longer ones are cut with "...".
+SHOWN = 100
+#: Most items of a list in a parameters file, and its largest size: no parameter of this package
+#: comes near either, and rcl takes seconds to parse a 100,000-element list (refused before it).
+MAX_ITEMS = 10_000
+MAX_FILE_BYTES = 4 << 20
+
+
+# libyaml's parser where PyYAML has it: the pure-Python one takes 3.5 s for a 1.2 MB file, this 0.4 s.
+class RosLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
+    """YAML as rcl reads a parameter: a plain ``1e3`` is a number (YAML 1.2), as rcl's parser
+    takes it, not the string PyYAML's YAML 1.1 rules make of it; quoted values stay strings."""
+
+
+RosLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."))
 
 
 class ConfigError(ValueError):
     """A machine description is missing a key or holds an invalid value; the message names it."""
+
+
+def shown(value: Any, limit: int = SHOWN) -> str:
+    """``repr(value)`` for an error line, cut with "..." beyond ``limit`` characters (a list's
+    length added), so that no value, such as a 100,000-element list, makes a line long."""
+    text = repr(value)
+    if len(text) <= limit:
+        return text
+    count = f" ({len(value)} items)" if isinstance(value, (list, tuple)) else ""
+    return f"{text[: limit - 20]}...{text[-12:]}{count}"
 
 
 def config_path(name: str) -> Path:
@@ -51,7 +77,7 @@ def load_parameters(path: str | Path, node_name: str = "/**") -> dict[str, Any]:
     more specific section winning: ``/**``, then ``/**/<name>``, then ``<name>`` / ``/<ns>/<name>``.
     """
     with open(path, encoding="utf-8") as stream:
-        document = yaml.load(stream, Loader=_LOADER) or {}
+        document = yaml.load(stream, Loader=RosLoader) or {}
     if not isinstance(document, dict):
         raise ConfigError(f"{path}: not a ROS parameters file (top level is not a mapping)")
     base = node_name.rsplit("/", 1)[-1]
@@ -78,7 +104,7 @@ def check_ros_arguments(argv: Sequence[str]) -> None:
             if expect == "--params-file":
                 _check_params_file(Path(arg))
             elif ":=" not in arg or arg.startswith(":="):
-                raise ConfigError(f"{expect} {arg!r}: expected NAME:=VALUE")
+                raise ConfigError(f"{expect} {shown(arg)}: expected NAME:=VALUE")
             expect = None
         elif arg == "--ros-args":
             in_ros_args = True
@@ -92,8 +118,14 @@ def check_ros_arguments(argv: Sequence[str]) -> None:
 
 def _check_params_file(path: Path) -> None:
     try:
+        size = path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise ConfigError(f"--params-file {path}: {size / 2**20:.1f} MiB, more than the "
+                              f"{MAX_FILE_BYTES >> 20} MiB a parameters file may have")
         with open(path, encoding="utf-8") as stream:
-            document = yaml.safe_load(stream)
+            _refuse_long_lists(path, stream)
+            stream.seek(0)
+            document = yaml.load(stream, Loader=RosLoader)
     except OSError as error:
         raise ConfigError(f"--params-file {path}: {error.strerror}") from None
     except yaml.YAMLError as error:
@@ -107,8 +139,34 @@ def _check_params_file(path: Path) -> None:
             raise ConfigError(f"--params-file {path}: {node}: expected a mapping 'ros__parameters:'")
         for name, value in _leaves(section["ros__parameters"]):
             if not _parameter_value(value):
-                raise ConfigError(f"--params-file {path}: {node}: {name} = {value!r} is not a ROS parameter "
-                                  "value (a number, string, bool, or a list of one of those)")
+                raise ConfigError(f"--params-file {path}: {node}: {name} = {shown(value)} is not a ROS "
+                                  "parameter value (a number, string, bool, or a list of one of those)")
+
+
+def _refuse_long_lists(path: Path, stream: Any) -> None:
+    """ConfigError naming the first list of more than MAX_ITEMS items, read as YAML events up to
+    its item MAX_ITEMS + 1: a 100,000-element list is refused in milliseconds, before PyYAML
+    builds it (0.4 s) and rcl parses it (2 s)."""
+    stack: list[list[Any]] = []  # per open collection: [is_mapping, next_is_key, items, key]
+    for event in yaml.parse(stream, Loader=RosLoader):
+        if isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
+            stack.pop()
+            continue
+        if not isinstance(event, (yaml.NodeEvent, yaml.CollectionStartEvent)):
+            continue
+        if stack and not stack[-1][0]:  # an item of a list
+            stack[-1][2] += 1
+            if stack[-1][2] > MAX_ITEMS:
+                keys = [str(c[3])[:SHOWN] for c in stack if c[0]]
+                name = ".".join(keys[2:] if keys[1:2] == ["ros__parameters"] else keys[1:])
+                raise ConfigError(f"--params-file {path}: {keys[0] if keys else ''}: {name} has more "
+                                  f"than the {MAX_ITEMS} items a parameter may have")
+        elif stack:  # a key of a mapping, or its value
+            if stack[-1][1]:
+                stack[-1][3] = getattr(event, "value", "?")
+            stack[-1][1] = not stack[-1][1]
+        if isinstance(event, yaml.CollectionStartEvent):
+            stack.append([isinstance(event, yaml.MappingStartEvent), True, 0, None])
 
 
 def _leaves(nested: dict[str, Any], prefix: str = "") -> list[tuple[str, Any]]:

@@ -36,7 +36,8 @@ def serial_machine(
     serial_urdf = Hook("manipulator_kinematics.urdf:serial_urdf")
 
     def urdf(model: Any) -> str:
-        return serial_urdf(name, model, to_chain=None if to_chain is None else to_chain(model))
+        # The robot name is the machine file's ``name`` (several machines, several names).
+        return serial_urdf(model.name, model, to_chain=None if to_chain is None else to_chain(model))
 
     return Machine(
         name=name,

@@ -43,6 +43,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from manipulator_kinematics.params import ConfigError
+from manipulator_kinematics.plain import plain
 from manipulator_kinematics.registry import machine as find
 from manipulator_kinematics.registry import machines
 from manipulator_kinematics.serial_chain import JointLimits, SerialChain, transl, trotx, trotz
@@ -56,6 +57,12 @@ MATERIALS = {
 }
 # Entries this close to zero are written as 0 (no -0.0 or 1e-17 round-off in committed files).
 _ZERO = 1e-15
+# Numbers are written with 15 significant digits (DBL_DIG: every such decimal survives the trip
+# to a double and back, so a config's 0.6545196915 comes out as typed): repr's 17 digits would
+# show the last bit of a computed value, which differs between CPUs (numpy's SIMD paths), and
+# make the shipped files depend on the machine they were made on. 15 digits keep every value
+# of these machines (|x| < 100 m) to 1e-13, far below what a URDF user can see.
+PRECISION = 15
 
 
 def machine_urdf(machine_name: str, model: Any = None) -> str:
@@ -72,7 +79,7 @@ def machine_urdf(machine_name: str, model: Any = None) -> str:
 # ---------------------------------------------------------------------------------------------- XML
 def _number(value: float) -> str:
     value = float(value)
-    return "0" if abs(value) < _ZERO else repr(value)
+    return "0" if abs(value) < _ZERO else f"{value:.{PRECISION}g}"
 
 
 def _numbers(values: ArrayLike) -> str:
@@ -296,22 +303,39 @@ def _owners(K: np.ndarray, names: Sequence[str]) -> dict[int, int]:
     return owners
 
 
+def prefixed_urdf(text: str, prefix: str) -> str:
+    """The URDF with ``prefix`` before every link name (several machines in one tf tree)."""
+    if not prefix:
+        return text
+    root = ET.fromstring(text)
+    for link in root.iter("link"):
+        link.set("name", prefix + link.get("name"))
+    for joint in root.iter("joint"):
+        for end in ("parent", "child"):
+            element = joint.find(end)
+            element.set("link", prefix + element.get("link"))
+    return ET.tostring(root, encoding="unicode")
+
+
 # ------------------------------------------------------------------------------------------- CLI
 def main(argv: Sequence[str] | None = None) -> int:
     """``mk_urdf MACHINE [-o FILE] [--params-file FILE]`` or ``mk_urdf --all DIR``."""
-    parser = argparse.ArgumentParser(prog="mk_urdf", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="mk_urdf", description=plain(__doc__.splitlines()[0]))
     parser.add_argument("machine", nargs="?", help="registered machine name (omit with --all)")
     parser.add_argument("-o", "--output", type=Path,
                         help="URDF file to write (default: standard output)")
     parser.add_argument("--params-file", type=Path,
                         help="ROS params file with the machine (default: the shipped one)")
+    parser.add_argument("--frame-prefix", default="", metavar="PREFIX",
+                        help="put PREFIX before every link name (e.g. m1/: two machines in one TF tree; "
+                             "robot_state_publisher's frame_prefix does this for /tf itself)")
     parser.add_argument("--all", type=Path, metavar="DIR",
                         help="write <machine>.urdf of every registered machine (shipped configs) into DIR")
     args = parser.parse_args(argv)
     if (args.all is None) == (args.machine is None):
         parser.error("give a machine name or --all DIR")
-    if args.all is not None and (args.output or args.params_file):
-        parser.error("--all writes the shipped configs' URDFs: no -o or --params-file")
+    if args.all is not None and (args.output or args.params_file or args.frame_prefix):
+        parser.error("--all writes the shipped configs' URDFs: no -o, --params-file or --frame-prefix")
     try:
         if args.all is not None:
             args.all.mkdir(parents=True, exist_ok=True)
@@ -321,7 +345,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                     path.write_text(machine_urdf(name))
                     print(f"wrote {path}")
             return 0
-        text = machine_urdf(args.machine, find(args.machine).model(args.params_file))
+        text = prefixed_urdf(machine_urdf(args.machine, find(args.machine).model(args.params_file)),
+                             args.frame_prefix)
     except (KeyError, LookupError, ConfigError, ValueError) as error:
         print(f"mk_urdf: {error}", file=sys.stderr)
         return 2

@@ -136,6 +136,7 @@ _ANGLE = Number(min=-2 * math.tau, max=2 * math.tau, unit="rad")
 
 #: The ``palletizer:`` section of a parameters file (manipulator_kinematics.config).
 SCHEMA = {
+    "name": Text(empty=False, default="palletizer", doc="the machine's name: the robot name of its URDF"),
     "variant": Text(choices=VARIANTS, doc="single or double parallelogram: which axis angles the motors see"),
     "a1": Number(min=0.0, max=10.0, unit="m", doc="D-H a1: axis 1 to axis 2, horizontal"),
     "a2": Number(min=0.0, max=10.0, unit="m", exclusive_min=True, doc="D-H a2: lower arm, axis 2 to 3"),
@@ -212,7 +213,9 @@ class Palletizer:
         singular_elbow: float = 0.01,
         singular_radius: float = 0.01,
         tilt_tolerance: float = 1e-6,
+        name: str = "palletizer",
     ) -> None:
+        self.name = name
         self.geometry = geometry
         self.variant = _variant(variant)
         if len(limits.names) != 4:
@@ -266,6 +269,7 @@ class Palletizer:
             singular_elbow=p["singular_elbow"],
             singular_radius=p["singular_radius"],
             tilt_tolerance=p["tilt_tolerance"],
+            name=p["name"],
         )
 
     @classmethod

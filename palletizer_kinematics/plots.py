@@ -33,6 +33,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from manipulator_kinematics.bag.synthetic import START_NS, serial_topics, write_bag
+from manipulator_kinematics.plain import plain
 from palletizer_kinematics.door import DOOR_POINTS, DoorTrajectory, door_trajectory
 from palletizer_kinematics.kinematics import VARIANTS, Palletizer, axis_from_dh, dh_from_axis
 from palletizer_kinematics.statics import holding_torques
@@ -225,7 +226,7 @@ def write_door_bag(model: Palletizer, trajectory: DoorTrajectory, path: Path) ->
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="palletizer_plots", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="palletizer_plots", description=plain(__doc__.split("\n")[0]))
     parser.add_argument("out_dir", type=Path, help="directory to write into (created if missing)")
     parser.add_argument(
         "--config", type=Path, default=None, help="machine file (default: config/irb460.yaml)"

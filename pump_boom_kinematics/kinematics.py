@@ -70,12 +70,19 @@ ENVELOPE_TOL = 1e-9
 #: The paper's example (section 2.2, Fig. 5), deg: fixed theta1..theta4, ranges of theta5, theta6.
 PAPER_EXAMPLE = {"fixed": (0.0, 75.0, 165.0, 160.0), "theta5": (160.0, 240.0), "theta6": (30.0, 170.0)}
 
+#: The interpolation step (m) and the tip speed (m/s) of a pour: in the machine file and in a
+#: request (a step below 1 mm or a crawl below 1 mm/s is a typo, not a pour).
+STEP_RANGE = (1e-3, 10.0)
+TIP_SPEED_RANGE = (1e-3, 10.0)
+
 SCHEMA = {
+    "name": Text(empty=False, default="pump_boom", doc="the machine's name: the robot name of its URDF"),
     "root": Numbers(2, Number(min=-20.0, max=20.0, unit="m")),
     "lengths": Numbers(5, Number(min=0.0, max=100.0, unit="m", exclusive_min=True)),
     "joint_names": Names(6),
     "joint_min": Numbers(6, Number(min=-4 * math.pi, max=4 * math.pi, unit="rad")),
     "joint_max": Numbers(6, Number(min=-4 * math.pi, max=4 * math.pi, unit="rad")),
+    "joint_max_speed": Numbers(6, Number(min=0.0, max=10.0, unit="rad/s", exclusive_min=True)),
     "regions": {
         "table_file": Text(empty=False),
         "origin": Numbers(2, Number(min=-100.0, max=100.0, unit="m")),
@@ -83,8 +90,8 @@ SCHEMA = {
         "band": Number(min=0.0, max=100.0, unit="m", exclusive_min=True),
     },
     "pour": {
-        "step": Number(min=0.0, max=10.0, unit="m", exclusive_min=True),
-        "tip_speed": Number(min=0.0, max=10.0, unit="m/s", exclusive_min=True),
+        "step": Number(min=STEP_RANGE[0], max=STEP_RANGE[1], unit="m"),
+        "tip_speed": Number(min=TIP_SPEED_RANGE[0], max=TIP_SPEED_RANGE[1], unit="m/s"),
     },
 }
 
@@ -180,7 +187,10 @@ class PumpBoom:
         pour_step: float = 0.1,
         tip_speed: float = 0.2,
         table_file: str | Path | None = None,
+        joint_speed: ArrayLike | None = None,
+        name: str = "pump_boom",
     ) -> None:
+        self.name = name
         self.root = np.asarray(root, dtype=float)
         self.lengths = np.asarray(lengths, dtype=float)
         if self.root.shape != (2,) or self.lengths.shape != (5,) or not np.all(self.lengths > 0.0):
@@ -194,6 +204,10 @@ class PumpBoom:
         self.table_file = None if table_file is None else Path(table_file)
         self.pour_step = float(pour_step)
         self.tip_speed = float(tip_speed)
+        #: Joint speed limits (6,) rad/s (inf: none), which pours respect (:mod:`.pour`).
+        self.joint_speed = np.full(6, np.inf) if joint_speed is None else np.asarray(joint_speed, dtype=float)
+        if self.joint_speed.shape != (6,) or not np.all(self.joint_speed > 0.0):
+            raise ValueError(f"need six joint speed limits > 0 (inf: none), got {joint_speed}")
         self.reach = float(self.lengths.sum())
         # Plain-float copies for region_ik_point (numpy scalars cost more than the arithmetic).
         self._root = tuple(self.root.tolist())
@@ -243,6 +257,8 @@ class PumpBoom:
             pour_step=p["pour"]["step"],
             tip_speed=p["pour"]["tip_speed"],
             table_file=regions["table_file"],
+            joint_speed=p["joint_max_speed"],
+            name=p["name"],
         )
 
     @classmethod

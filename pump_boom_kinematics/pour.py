@@ -3,8 +3,10 @@
 A path is a polyline through waypoints (base frame). Each segment is interpolated as eqs. 5-7:
 L = |p1 - p0|, N = ceil(L / step), p_i = p0 + i (p1 - p0) / N (the shared
 :func:`manipulator_kinematics.trajectory.straight_line`), and every point is solved by the region
-IK. The tip moves at constant speed, so point i is reached at t_i = s_i / v (s_i the path
-length up to it).
+IK. The trajectory is timed by the shared :func:`manipulator_kinematics.time_scaling.time_scale`:
+the tip at the asked speed wherever the joints allow it, slower only where a joint would exceed
+its speed limit (``PumpBoom.joint_speed``), starting and ending at rest with the tip's acceleration
+along the path bounded (``acceleration``); positions, velocities and accelerations of every point.
 
 Section 3.3 step 1: an end point outside the automatic pour workspace is replaced by the
 farthest reachable point of the line. Here: the path is followed from the first waypoint while
@@ -13,6 +15,11 @@ the previous point is found by bisection (to 1 um) and the path ends there, re-i
 the segment's start. The plan says so (``truncated``, ``message``) and gives the index of the
 last waypoint reached in full. theta1 is unwrapped along the path (no jump of 2 pi when the pour
 passes behind the truck).
+
+A plan is bounded before any point is solved: at most :data:`MAX_WAYPOINTS` waypoints and
+:data:`MAX_POINTS` points, no longer than :data:`MAX_DURATION` at the asked speed, the step and
+the speed within ``STEP_RANGE`` and ``TIP_SPEED_RANGE``, the acceleration within
+:data:`ACCELERATION_RANGE`; anything else is a ValueError with the reason.
 """
 
 from __future__ import annotations
@@ -23,8 +30,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from manipulator_kinematics.planar import wrap_angle
+from manipulator_kinematics.time_scaling import TimeScaling, time_scale
 from manipulator_kinematics.trajectory import straight_line
-from pump_boom_kinematics.kinematics import PumpBoom
+from pump_boom_kinematics.kinematics import STEP_RANGE, TIP_SPEED_RANGE, PumpBoom
 
 _C30, _S30 = np.cos(np.radians(30.0)), np.sin(np.radians(30.0))
 #: The paper's two typical pours (section 3.4, Figs. 9-10) on the default boom: name ->
@@ -48,7 +56,10 @@ END_TOLERANCE = 1e-6
 
 @dataclass(frozen=True)
 class PathPlan:
-    """A planned pour: ``points`` (M, 3), ``q`` (M, 6), ``s`` (M,) path length (m), ``t`` (M,) s.
+    """A planned pour: ``points`` (M, 3), ``q``, ``qd``, ``qdd`` (M, 6), ``s`` (M,) path length (m),
+    ``t`` (M,) s, ``speed`` (M,) tip speed (m/s), ``active`` (M,) what sets it there (a joint
+    index, or ``time_scaling.TIP_SPEED`` / ``ACCELERATION``); ``timing`` the whole time scaling
+    (None without a point).
 
     ``ok``: at least the first waypoint is solvable (M >= 1); ``truncated``: the path ends short
     of the last waypoint; ``last_waypoint``: index of the last waypoint reached (-1: none);
@@ -65,11 +76,24 @@ class PathPlan:
     end: np.ndarray
     message: str
     blended: np.ndarray  # (M,) True where a transition band set theta2..theta4
+    qd: np.ndarray
+    qdd: np.ndarray
+    speed: np.ndarray
+    active: np.ndarray
+    timing: TimeScaling | None
 
 
-#: Most points one plan may have (10^6: 100 km at the default 0.1 m step), so that a request with
-#: a tiny step or far waypoints cannot make the planner allocate without bound.
-MAX_POINTS = 1_000_000
+#: Most waypoints of one plan.
+MAX_WAYPOINTS = 1_000
+#: Most points of one plan (2 km at the default 0.1 m step), so that a request with a tiny step or
+#: far waypoints cannot make the planner allocate without bound, and a plan takes at most about
+#: a second (benchmarks/bench_pump_boom_ik.py measures the worst case).
+MAX_POINTS = 20_000
+#: Longest plan (s) at the asked tip speed (the timing can only make it longer): one day.
+MAX_DURATION = 86_400.0
+#: Default bound of the tip's acceleration along the path (m/s^2): the node's ``tip_acceleration``.
+ACCELERATION = 0.1
+ACCELERATION_RANGE = (1e-3, 10.0)
 
 
 def plan_path(
@@ -78,27 +102,38 @@ def plan_path(
     step: float | None = None,
     tip_speed: float | None = None,
     seed: ArrayLike | None = None,
+    acceleration: float = ACCELERATION,
 ) -> PathPlan:
     """Plan a pour through ``waypoints`` (K, 3) (module docstring); ``step`` (m) and ``tip_speed``
-    (m/s) default to the machine's; ``seed`` (6,) the current joint state (the slew turn).
+    (m/s) default to the machine's; ``seed`` (6,) the current joint state (the slew turn);
+    ``acceleration`` (m/s^2) bounds the tip's acceleration along the path.
 
-    Raises ValueError for a malformed request (no waypoint, not finite, step or speed <= 0), and
-    its subclass RegionTableError when the boom's region table was built for another geometry.
+    Raises ValueError for a request out of the bounds (module docstring), and its subclass
+    RegionTableError when the boom's region table was built for another geometry.
     """
     waypoints = np.asarray(waypoints, dtype=float)
     step = boom.pour_step if step is None else float(step)
     speed = boom.tip_speed if tip_speed is None else float(tip_speed)
-    if waypoints.ndim != 2 or waypoints.shape[1] != 3 or len(waypoints) == 0:
-        raise ValueError(f"waypoints must have shape (K, 3) with K >= 1, got {waypoints.shape}")
+    if waypoints.ndim != 2 or waypoints.shape[1] != 3 or not 1 <= len(waypoints) <= MAX_WAYPOINTS:
+        raise ValueError(f"waypoints must have shape (K, 3) with 1 <= K <= {MAX_WAYPOINTS}, "
+                         f"got {waypoints.shape}")
     if not np.all(np.isfinite(waypoints)):
         raise ValueError("waypoints must be finite")
-    if not (np.isfinite(step) and step > 0.0 and np.isfinite(speed) and speed > 0.0):
-        raise ValueError(f"step and tip speed must be > 0, got {step} m and {speed} m/s")
-    with np.errstate(over="ignore"):
-        count = float(np.sum(np.ceil(np.linalg.norm(np.diff(waypoints, axis=0), axis=1) / step)))
+    bounds = (("step", step, "m", STEP_RANGE), ("tip_speed", speed, "m/s", TIP_SPEED_RANGE),
+              ("acceleration", acceleration, "m/s^2", ACCELERATION_RANGE))
+    for name, value, unit, (low, high) in bounds:
+        if not low <= value <= high:  # NaN fails too
+            raise ValueError(f"{name} {value:g} {unit} is outside [{low:g}, {high:g}] {unit}")
+    with np.errstate(over="ignore", invalid="ignore"):
+        lengths = np.linalg.norm(np.diff(waypoints, axis=0), axis=1)
+        count = float(np.sum(np.ceil(lengths / step))) + 1.0
+        duration = float(np.sum(lengths)) / speed + speed / acceleration
     if not count <= MAX_POINTS:
         raise ValueError(f"the path would have {count:.3g} points at step {step:g} m; at most {MAX_POINTS} "
                          "(a longer step, or fewer or closer waypoints)")
+    if not duration <= MAX_DURATION:
+        raise ValueError(f"the path would take at least {duration:.3g} s at {speed:g} m/s; at most "
+                         f"{MAX_DURATION:g} s (a higher tip_speed, or a shorter path)")
     first = boom.region_ik(waypoints[0], seed)
     if not first.ok:
         return _plan(
@@ -106,7 +141,7 @@ def plan_path(
             np.empty((0, 3)),
             np.empty((0, 6)),
             np.empty(0, bool),
-            speed,
+            (speed, acceleration),
             False,
             -1,
             waypoints[0],
@@ -137,14 +172,12 @@ def plan_path(
             f"waypoint {k} {_show(goal)} cannot be reached along the line from {_show(start)}: {reason}; "
             f"the path ends at the farthest reachable point of the line {_show(end)}"
         )
-        return _plan(
-            boom, np.vstack(points), np.vstack(q), np.concatenate(blended), speed, True, k - 1, end, text
-        )
+        return _plan(boom, np.vstack(points), np.vstack(q), np.concatenate(blended), (speed, acceleration),
+                     True, k - 1, end, text)
     pts = np.vstack(points)
-    text = f"{len(pts)} points through {len(waypoints)} waypoint(s), step {step:g} m, tip speed {speed:g} m/s"
-    return _plan(
-        boom, pts, np.vstack(q), np.concatenate(blended), speed, False, len(waypoints) - 1, pts[-1], text
-    )
+    text = f"{len(pts)} points through {len(waypoints)} waypoint(s), step {step:g} m"
+    return _plan(boom, pts, np.vstack(q), np.concatenate(blended), (speed, acceleration), False,
+                 len(waypoints) - 1, pts[-1], text)
 
 
 def pour_line(
@@ -154,11 +187,11 @@ def pour_line(
     step: float | None = None,
     tip_speed: float | None = None,
     seed: ArrayLike | None = None,
+    acceleration: float = ACCELERATION,
 ) -> PathPlan:
     """The paper's straight-line pour from ``start`` to ``end`` (section 3.2)."""
-    return plan_path(
-        boom, np.stack([np.asarray(start, float), np.asarray(end, float)]), step, tip_speed, seed
-    )
+    waypoints = np.stack([np.asarray(start, float), np.asarray(end, float)])
+    return plan_path(boom, waypoints, step, tip_speed, seed, acceleration)
 
 
 def _farthest(boom: PumpBoom, good: np.ndarray, bad: np.ndarray, seed: np.ndarray) -> np.ndarray:
@@ -177,33 +210,31 @@ def _plan(
     points: np.ndarray,
     q: np.ndarray,
     blended: np.ndarray,
-    speed: float,
+    limits: tuple[float, float],
     truncated: bool,
     last: int,
     end: np.ndarray,
     message: str,
 ) -> PathPlan:
-    if len(q):
-        # Unwrap the slew angle along the path: each point's turn follows the previous one.
-        q = q.copy()
-        q[:, 0] = q[0, 0] + np.concatenate([[0.0], np.cumsum(wrap_angle(np.diff(q[:, 0])))])
-    s = (
-        np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
-        if len(points)
-        else np.empty(0)
-    )
-    return PathPlan(
-        points=points,
-        q=q,
-        s=s,
-        t=s / speed,
-        ok=len(points) > 0,
-        truncated=truncated,
-        last_waypoint=last,
-        end=np.asarray(end, dtype=float),
-        message=message,
-        blended=blended,
-    )
+    """The plan of the solved ``points``, timed within ``limits`` = (tip speed, acceleration)."""
+    speed, acceleration = limits
+    if not len(q):
+        empty = np.empty((0, 6))
+        return PathPlan(points=points, q=q, s=np.empty(0), t=np.empty(0), ok=False, truncated=truncated,
+                        last_waypoint=last, end=np.asarray(end, dtype=float), message=message,
+                        blended=blended, qd=empty, qdd=empty, speed=np.empty(0), active=np.empty(0, int),
+                        timing=None)
+    # Unwrap the slew angle along the path: each point's turn follows the previous one.
+    q = q.copy()
+    q[:, 0] = q[0, 0] + np.concatenate([[0.0], np.cumsum(wrap_angle(np.diff(q[:, 0])))])
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    timing = time_scale(q, s, boom.joint_speed, speed, acceleration)
+    counts = ", ".join(f"{name} {count}" for name, count in timing.limited_by(boom.joint_names).items())
+    message = (f"{message}; tip speed up to {speed:g} m/s, acceleration {acceleration:g} m/s^2, "
+               f"{timing.duration:.4g} s; speed set at (points): {counts}")
+    return PathPlan(points=points, q=q, s=s, t=timing.t, ok=True, truncated=truncated, last_waypoint=last,
+                    end=np.asarray(end, dtype=float), message=message, blended=blended, qd=timing.qd,
+                    qdd=timing.qdd, speed=timing.speed, active=timing.active, timing=timing)
 
 
 def _show(p: np.ndarray) -> str:

@@ -50,7 +50,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from manipulator_kinematics.config import Names, Number, Numbers, require, validate
+from manipulator_kinematics.config import Names, Number, Numbers, Text, require, validate
 from manipulator_kinematics.model import IKSolutions, IKStatus, RequestError
 from manipulator_kinematics.params import config_path, load_parameters
 from manipulator_kinematics.planar import two_link_ik, wrap_angle
@@ -68,6 +68,7 @@ CONFIG_FILE = "scara.yaml"
 
 #: The ``scara:`` section of a parameters file (manipulator_kinematics.config).
 SCHEMA = {
+    "name": Text(empty=False, default="scara", doc="the machine's name: the robot name of its URDF"),
     "l1": Number(min=0.0, max=100.0, unit="m", doc="base offset: shoulder x at rail_joint = 0 (m)"),
     "l2": Number(min=0.0, max=100.0, unit="m", exclusive_min=True, doc="upper arm, shoulder to elbow (m)"),
     "l3": Number(min=0.0, max=100.0, unit="m", exclusive_min=True, doc="forearm, elbow to tool point (m)"),
@@ -158,7 +159,7 @@ class Scara:
     """The P-R-R arm: geometry l1, l2, l3 (m), joint limits, singularity threshold."""
 
     def __init__(self, l1: float, l2: float, l3: float, limits: JointLimits,
-                 singularity_threshold: float = 0.01) -> None:
+                 singularity_threshold: float = 0.01, name: str = "scara") -> None:
         if not (l1 >= 0.0 and l2 > 0.0 and l3 > 0.0):
             raise ValueError(f"need l1 >= 0, l2 > 0, l3 > 0; got {l1}, {l2}, {l3}")
         if len(limits.names) != 3:
@@ -168,6 +169,7 @@ class Scara:
         self.l1, self.l2, self.l3 = float(l1), float(l2), float(l3)
         self.limits = limits
         self.singularity_threshold = float(singularity_threshold)
+        self.name = name
 
     # ---- construction -------------------------------------------------------------------------
     @classmethod
@@ -186,7 +188,7 @@ class Scara:
         require(p["singularity_threshold"] < 1.0, f"{prefix}.singularity_threshold",
                 f"{p['singularity_threshold']} must be below 1 (it bounds |cos theta1|)")
         limits = JointLimits(tuple(names), np.array(lower), np.array(upper), prismatic=(True, False, False))
-        return cls(p["l1"], p["l2"], p["l3"], limits, p["singularity_threshold"])
+        return cls(p["l1"], p["l2"], p["l3"], limits, p["singularity_threshold"], p["name"])
 
     @classmethod
     def default(cls) -> Scara:

@@ -10,3 +10,8 @@ MK_VENV_DIR="$(cd "$MK_VENV_DIR" && pwd)"
 export VIRTUAL_ENV="$MK_VENV_DIR"
 export PATH="$MK_VENV_DIR/bin:$PATH"
 unset PYTHONHOME
+# Commands started by hand (the README's examples) stay on this machine, in the project's own
+# domain, unless you set these yourself (manipulator_kinematics/ros_domain.py: EXAMPLES_DOMAIN).
+# The demo and the tests each reserve a free domain of their own instead.
+export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
+export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-101}"

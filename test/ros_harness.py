@@ -112,6 +112,12 @@ class NodeProcess:
         self.stop()
 
 
+#: For a test that checks an output for every input it sends. The nodes' default
+#: input_reliability is best_effort (docs/architecture.md, "Input QoS"): it hears every kind of
+#: publisher, but a message sent right after the publisher matched the node's reader (before the
+#: reader knows the writer) or on a loaded machine can be lost, and the test would wait for it.
+RELIABLE_INPUTS = ("-p", "input_reliability:=reliable")
+
 #: The IK/FK services every serial machine's IK server offers.
 IK_FK = ((SolveIK, "solve_ik"), (SolveFK, "solve_fk"))
 

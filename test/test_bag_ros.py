@@ -6,6 +6,7 @@ a condition with a timeout."""
 
 from __future__ import annotations
 
+import struct
 import subprocess
 import time
 from collections.abc import Iterator, Sequence
@@ -18,7 +19,7 @@ from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from ros_harness import NodeProcess, Probe
+from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Int64
 
@@ -98,7 +99,7 @@ def replay_into(
     received: dict[str, list] = {t: [] for t in outputs}
     for topic in outputs:
         probe.node.create_subscription(TYPES[expected[topic].msgtype], topic, received[topic].append, QOS)
-    with NodeProcess(*node) as process:
+    with NodeProcess(*node, *RELIABLE_INPUTS) as process:
         probe.wait_until(
             lambda: all(probe.node.count_publishers(t) for t in outputs) or not process.alive(),
             TIMEOUT,
@@ -469,6 +470,50 @@ def test_replay_loops_until_stopped(probe: Probe, tmp_path: Path) -> None:
     ) as player:
         probe.wait_until(lambda: len(numbers) >= 12 or not player.alive(), TIMEOUT, "three passes")
     assert numbers[:12] == [0, 1, 2, 3, 4] * 2 + [0, 1]
+
+
+def flip_a_record_time(bag: Path, index: int, bit: int) -> int:
+    """Flip ``bit`` of message ``index``'s record time in the bag's mcap file (the first copy of
+    it: the message record's); the new record time."""
+    (data,) = bag.glob("*.mcap")
+    stamp = BagReader(bag).log_times(BagReader(bag).select(None)[0])[index]
+    raw = bytearray(data.read_bytes())
+    at = raw.find(struct.pack("<Q", int(stamp)))
+    raw[at : at + 8] = struct.pack("<Q", int(stamp) ^ (1 << bit))
+    data.write_bytes(bytes(raw))
+    return int(stamp) ^ (1 << bit)
+
+
+def test_replay_refuses_a_gap_longer_than_the_limit_or_skips_it(probe: Probe, tmp_path: Path) -> None:
+    """One flipped bit of a record time (2^36 ns = 68.7 s) makes a gap: refused in one line before
+    anything is published, or with --skip-gaps played across without the wait."""
+    numbered_bag(tmp_path / "bag", ["/gap"], 5, 10_000_000)
+    flipped = flip_a_record_time(tmp_path / "bag", 2, 36)
+    times = sorted(BagReader(tmp_path / "bag").log_times("/gap").tolist())
+    assert flipped in times and 68.0 < max(np.diff(times)) * 1e-9 < 69.0
+    refused = subprocess.run([console_script("mk_replay"), str(tmp_path / "bag")],
+                             capture_output=True, text=True, timeout=TIMEOUT)
+    assert refused.returncode == 1, refused.stderr
+    [line] = refused.stderr.splitlines()
+    assert line.startswith("mk_replay: error: ") and "68.7 s of record time without a message" in line, line
+    assert "--max-gap 10 s" in line and "--skip-gaps" in line, line
+    numbers: list[float] = []
+    probe.node.create_subscription(JointState, "/gap", lambda m: numbers.append(m.position[0]), QOS)
+    # A limit above the gap plays it as recorded: what comes before it, then a wait of 68.7 s.
+    with NodeProcess("mk_replay", args=(str(tmp_path / "bag"), "--max-gap", "100", "--wait-for-subscribers",
+                                        "30")) as patient:
+        probe.wait_until(lambda: len(numbers) >= 1 or not patient.alive(), TIMEOUT, "the first message")
+        assert patient.alive() and len(numbers) < 5, patient.log()
+    numbers.clear()
+    # Skipped, the whole bag is played within TIMEOUT (60 s), less than the gap.
+    with NodeProcess("mk_replay", args=(str(tmp_path / "bag"), "--skip-gaps", "--wait-for-subscribers",
+                                        "30")) as player:
+        probe.wait_until(lambda: len(numbers) == 5 or not player.alive(), TIMEOUT, "all five messages")
+        probe.wait_until(lambda: not player.alive(), TIMEOUT, "the end of the replay")
+    assert sorted(numbers) == [0, 1, 2, 3, 4]
+    assert player.process.returncode == 0, player.log()
+    [skipped] = [line for line in player.log().splitlines() if "skipping" in line]
+    assert skipped.startswith("mk_replay: skipping 68.7 s of record time without a message"), skipped
 
 
 def test_replay_refuses_what_it_cannot_play(tmp_path: Path) -> None:

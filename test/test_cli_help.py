@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import re
 import subprocess
 import sys
 from importlib.metadata import distribution
@@ -11,6 +12,7 @@ from importlib.metadata import distribution
 import pytest
 
 from manipulator_kinematics.node_util import console_script
+from manipulator_kinematics.plain import plain
 
 ENTRY_POINTS = sorted((e for e in distribution("manipulator_kinematics").entry_points
                        if e.group == "console_scripts"), key=lambda e: e.name)
@@ -51,3 +53,17 @@ def test_a_node_help_lists_its_parameters_with_defaults_and_topics(monkeypatch: 
         assert line in text, line
     server = in_process(entries["tool_changer_ik_server"], "-h", monkeypatch)[1]
     assert "solve_ik" in server and "solve_fk" in server and "base_frame = 'base_link'" in server
+    excavator = in_process(entries["excavator_ik_server"], "--help", monkeypatch)[1]
+    assert "solve_ik" in excavator and "excavator.boom.length = " in excavator
+
+
+@pytest.mark.parametrize("entry", ENTRY_POINTS, ids=lambda e: e.name)
+def test_help_is_plain_text(entry, monkeypatch: pytest.MonkeyPatch) -> None:
+    """No reST markup from the docstrings (issue #20: ``:meth:``, ````literal````)."""
+    text = in_process(entry, "--help", monkeypatch)[1]
+    assert not re.search(r"``|:[a-z]+:`", text), re.search(r".*(``|:[a-z]+:`).*", text)[0]
+
+
+def test_plain_reduces_roles_and_literals() -> None:
+    assert plain("A :meth:`Excavator.state` on ``joint_states``; :class:`~a.b.Scene`, :func:`f <g.h>`") == (
+        "A Excavator.state on joint_states; Scene, f")

@@ -10,7 +10,7 @@ import pytest
 import yaml
 from geometry_msgs.msg import PointStamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from ros_harness import NodeProcess, Probe
+from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe
 from sensor_msgs.msg import JointState
 
 from excavator_kinematics.display import DesignPlane, urdf_joint_states
@@ -107,7 +107,7 @@ def test_forward_node_publishes_grade_and_urdf_joints(tmp_path):
     probe = Probe("grade_probe")
     node = probe.node
     process = NodeProcess("excavator_forward", *[a for f in files for a in ("--params-file", str(f))],
-                          "-r", "__ns:=/gr")
+                          *RELIABLE_INPUTS, "-r", "__ns:=/gr")
     got: dict[str, list] = {"grade": [], "urdf": []}
     node.create_subscription(PointStamped, "/gr/grade_height", got["grade"].append, qos)
     node.create_subscription(JointState, "/gr/urdf_joint_states", got["urdf"].append, qos)

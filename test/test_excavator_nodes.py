@@ -14,9 +14,10 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import AccelStamped, PoseStamped, TwistStamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from ros_harness import NodeProcess, Probe
+from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
@@ -47,10 +48,10 @@ COMMAND_NAMES = (JOINTS[0], *CYLINDERS)
 
 def start(exe: str, namespace: str, **overrides: object) -> NodeProcess:
     """Console script ``exe`` (node of the same name) in ``namespace`` with the package's config,
-    plus ``overrides`` in one more params file for this node (a later file wins; ``-p`` would
-    not beat a node section, and ``-p node:name:=v`` does not reach a namespaced node)."""
+    reliable inputs (the tests check an output per input), plus ``overrides`` in one more params
+    file for this node (a later file wins)."""
     params = {f"{namespace}/{exe}": {"ros__parameters": overrides}} if overrides else None
-    return NodeProcess(exe, *PARAMS, "-r", f"__ns:={namespace}", params=params)
+    return NodeProcess(exe, *PARAMS, *RELIABLE_INPUTS, "-r", f"__ns:={namespace}", params=params)
 
 
 class Collector:
@@ -398,6 +399,12 @@ def damped(J: np.ndarray, q_dot: np.ndarray, threshold: float) -> np.ndarray:
     return J.T @ np.linalg.solve(J @ J.T + lam**2 * np.eye(4), q_dot)
 
 
+def slowed(J: np.ndarray, q_dot: np.ndarray, threshold: float) -> np.ndarray:
+    """The exact solution (LU) brought down to the size of the damped one: the direction kept."""
+    exact = np.linalg.solve(J, q_dot)
+    return exact * np.linalg.norm(damped(J, q_dot, threshold)) / np.linalg.norm(exact)
+
+
 class TestVelocityIkNode:
     """excavator_velocity_ik: the twist through JC0 and every safety behaviour."""
 
@@ -426,16 +433,16 @@ class TestVelocityIkNode:
         ik.wait_stopped()
 
     def test_never_commands_past_a_stroke_end_or_the_swing_limit(self, ik: VelocityIk) -> None:
+        """Issue #18 item 4: an end stops (or slows) the whole command, so the bucket keeps its
+        direction; before, only the actuator at its end stopped and the bucket turned away."""
         D = LIMITS.reference.copy()
         D[0], D[1] = LIMITS.swing_max, LIMITS.stroke_max[0]  # swing at its limit, boom fully extended
         wanted = np.array([0.1, 0.05, -0.02, 0.03])  # further on both
-        np.testing.assert_allclose(
-            ik.q_dot_command(D, EXC.jc0(D) @ wanted), [0.0, 0.0, -0.02, 0.03], atol=1e-12
-        )
+        assert np.all(ik.q_dot_command(D, EXC.jc0(D) @ wanted) == 0.0)
         D[0], D[1] = 0.0, LIMITS.stroke_max[0] - 0.002  # 2 mm before the end: at most 2 mm / stroke_horizon
         d_dot = ik.q_dot_command(D, EXC.jc0(D) @ wanted)
         assert d_dot[1] == pytest.approx(0.002 / 0.1, rel=1e-9)
-        np.testing.assert_allclose(d_dot[[0, 2, 3]], wanted[[0, 2, 3]], atol=1e-12)
+        np.testing.assert_allclose(d_dot, wanted * (0.002 / 0.1) / wanted[1], rtol=1e-9, atol=1e-12)
         ik.wait_stopped()
 
     def test_damped_least_squares_above_the_condition_threshold(self, ik_damped: VelocityIk) -> None:
@@ -443,8 +450,12 @@ class TestVelocityIkNode:
         q_dot = np.array([0.05, 0.0, 0.05, 0.05])
         d_dot = ik_damped.q_dot_command(D, q_dot)
         J = EXC.jc0(D)
-        np.testing.assert_allclose(d_dot, damped(J, q_dot, 2.0), rtol=1e-9, atol=1e-12)
+        # Issue #18 item 4: damped least squares alone bends the direction; its size is used on the
+        # exact solution (scale, don't bend).
+        np.testing.assert_allclose(d_dot, slowed(J, q_dot, 2.0), rtol=1e-9, atol=1e-12)
         assert np.linalg.norm(J @ d_dot - q_dot) > 1e-3  # the damping is visible
+        achieved = J @ d_dot
+        np.testing.assert_allclose(achieved, (achieved @ q_dot) / (q_dot @ q_dot) * q_dot, atol=1e-12)
         wait_for_log(ik_damped.probe, ik_damped.process, "damped least squares")
         ik_damped.wait_stopped()
 
@@ -458,7 +469,7 @@ class TestVelocityIkNode:
         linear, angular = twist_from_q_dot(D[0], EXC.pose(D)[:3], q_dot)
         roll = 0.2 * np.array([np.cos(D[0]), np.sin(D[0]), 0.0])  # about the radial axis: impossible
         np.testing.assert_allclose(
-            ik.command(D, linear, angular + roll), damped(EXC.jc0(D), q_dot, 2.0), atol=1e-12
+            ik.command(D, linear, angular + roll), slowed(EXC.jc0(D), q_dot, 2.0), atol=1e-12
         )
         for _ in range(10):
             ik.send(linear, angular + roll)
@@ -608,3 +619,100 @@ class TestClosedLoop:
         assert len(tips) > 0.5 * 100 * duration  # the sim publishes at 100 Hz
         assert along.max() > LINE_LENGTH - 0.005, f"the line was driven to {along.max():.4f} m only"
         assert across.max() < 0.005, f"max distance from the line {across.max() * 1000:.2f} mm"
+
+
+# -------------------------------------------------------------------- the line past the stroke ends
+# Legs of constant linear target twists (angular 0: hold the bucket angle) driven one after the other
+# from the reference state, each until the machine cannot continue it: the issue's +x 2 m/s (far
+# above the speed limits) first, then -z, +z, -x at 1 m/s (each moves the tip 0.6 to 5 m).
+LEGS = [(2.0, 0.0, 0.0), (0.0, 0.0, -1.0), (0.0, 0.0, 1.0), (-1.0, 0.0, 0.0)]
+LINE_TOLERANCE = 0.03  # m: "a few centimetres"; measured 7-12 mm across processes
+
+
+# bucket_angle_gives_way is driven the same way in one process (test_excavator_rate_command.py); across
+# processes it is not asserted here: on a machine at load 12 it left the line by up to 9 cm (the
+# bucket turning at full speed while the tip creeps, on commands that arrive late).
+@pytest.fixture(scope="class", params=[False], ids=["direction_kept"])
+def stroke_line(probe: Probe, request: pytest.FixtureRequest) -> Iterator[tuple[bool, list[NodeProcess]]]:
+    """The three nodes from the reference state (the IK's bucket_angle_gives_way as the param)."""
+    namespace = "/strokes_angle" if request.param else "/strokes"
+    processes = [
+        start("excavator_sim", namespace),
+        start("excavator_forward", namespace),
+        start("excavator_velocity_ik", namespace, bucket_angle_gives_way=request.param),
+    ]
+    try:
+        yield request.param, processes
+    finally:
+        for process in processes:
+            print(process.stop())
+
+
+class TestLineAtStrokeEnds:
+    """excavator_sim -> excavator_velocity_ik -> excavator_forward with a constant target at 50 Hz."""
+
+    def test_the_tip_keeps_the_commanded_line_and_stops_where_it_cannot_go_on(
+        self, probe: Probe, stroke_line: tuple[bool, list[NodeProcess]]
+    ) -> None:
+        """Before the fix the tip left the line by 4.25 m (+x 2 m/s, from z = 1.0 m down to -3.2 m), 1.12,
+        1.93 and 2.08 m; now within LINE_TOLERANCE, the status says stopped (which cylinder) at the
+        end of every leg, the tip then stays, and the stop is logged once while the target goes on.
+        With bucket_angle_gives_way the bucket turns instead of stopping the tip, as the status says,
+        and the tip gets further along the first leg (5.3 m instead of 3.3 m in one process)."""
+        gives_way, processes = stroke_line
+        ns = "/strokes_angle" if gives_way else "/strokes"
+        n = probe.node
+        target = n.create_publisher(TwistStamped, f"{ns}/target_bucket_twist", QOS)
+        poses = Collector(probe, PoseStamped, f"{ns}/bucket_pose")
+        statuses = Collector(probe, DiagnosticArray, f"{ns}/velocity_ik_status")
+        commands = Collector(probe, JointState, f"{ns}/cylinder_rate_commands")
+        linear: list[np.ndarray] = []
+
+        def send() -> None:
+            if linear:
+                when = n.get_clock().now().to_msg()
+                target.publish(messages.bucket_twist(when, "base_link", linear[0], np.zeros(3)))
+
+        n.create_timer(0.02, send)
+        wait_connected(probe, [target], [poses, statuses])
+        probe.wait_until(lambda: len(poses.messages) > 5, 20.0, "bucket_pose from the sim")
+        ik = processes[2]
+        for number, leg in enumerate(LEGS):
+            log_start = len(ik.log())
+            start_tip = vec(poses.messages[-1].pose.position)
+            first_pose, first_status = len(poses.messages), len(statuses.messages)
+            linear[:] = [np.array(leg)]
+
+            def stopped(after: int = first_status) -> bool:
+                """Moving, then stopped at an end (a stale state on a loaded machine also stops, with
+                another reason, and the next target moves on)."""
+                texts = [m.status[0].message for m in statuses.messages[after:]]
+                moving = [i for i, t in enumerate(texts) if not t.startswith("stopped")]
+                return bool(moving) and any("at its stroke end" in t for t in texts[moving[0]:])
+
+            probe.wait_until(stopped, 20.0, f"the stopped status of the leg {leg}")
+            stop_pose = len(poses.messages)
+            probe.wait_until(lambda s=stop_pose: len(poses.messages) > s + 50, 5.0, "0.5 s more poses")
+            tips = np.array([vec(m.pose.position) for m in poses.messages[first_pose:]])
+            u = np.array(leg) / np.linalg.norm(leg)
+            offsets = tips - start_tip
+            along = offsets @ u
+            off = np.linalg.norm(offsets - along[:, None] * u, axis=1)
+            assert off.max() <= LINE_TOLERANCE, f"leg {leg}: {off.max() * 1000:.1f} mm from the line"
+            assert along.max() > (4.0 if gives_way else 3.0) if number == 0 else along.max() > 0.1, (
+                f"leg {leg}: only {along.max():.3f} m along the line"
+            )
+            after = np.array([vec(m.pose.position) for m in poses.messages[stop_pose + 5:]])
+            assert np.abs(after - after[0]).max() <= 1e-3  # stopped for good
+            last = statuses.messages[-1].status[0]
+            assert last.level == DiagnosticStatus.WARN and "at its stroke end" in last.message, last.message
+            # 25 more targets since: said once (or not again, within warning_period of the same words)
+            said = ik.log()[log_start:].count(last.message)
+            assert said == 1 if number == 0 else said <= 1, ik.log()[log_start:]
+        linear.clear()
+        probe.wait_until(lambda: statuses.messages[-1].status[0].message.startswith("idle"), 5.0, "idle")
+        assert all(np.all(np.isfinite(m.velocity)) for m in commands.messages)
+        assert all(np.isfinite(float(v.value)) for m in statuses.messages for v in m.status[0].values
+                   if v.key == "scale")
+        assert any("bucket angle gives way" in m.status[0].message for m in statuses.messages) == gives_way
+        assert all(p.alive() for p in processes)

@@ -19,6 +19,7 @@ good (reliable, in order). ``test_empty_payload_stalls_only_its_writer`` pins th
 
 from __future__ import annotations
 
+import copy
 import math
 import struct
 import tempfile
@@ -29,7 +30,7 @@ import numpy as np
 import pytest
 import yaml
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import AccelStamped, PointStamped, PoseStamped, TwistStamped
+from geometry_msgs.msg import AccelStamped, Point, PointStamped, PoseStamped, TwistStamped
 from rclpy.duration import Duration
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
@@ -43,10 +44,10 @@ from excavator_kinematics.plant import Plant
 from excavator_kinematics.rate_command import rate_command
 from excavator_kinematics.twist import split_twist
 from manipulator_kinematics.model import RequestError, matrix_quaternion
-from manipulator_kinematics.params import config_path
+from manipulator_kinematics.params import config_path, load_parameters
 from manipulator_kinematics.registry import machine
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
-from manipulator_kinematics_interfaces.srv import SolveFK, SolveIK
+from manipulator_kinematics_interfaces.srv import PlanPath, SolveFK, SolveIK
 
 EXC = Excavator.default()
 LIMITS = EXC.limits
@@ -126,18 +127,22 @@ def tmp() -> Iterator[Path]:
 def nodes(tmp: Path) -> Iterator[dict[str, NodeProcess]]:
     """Every node under test, started at once; a test takes its nodes out (``pop``) and stops them."""
     started = {
+        # Reliable inputs (the default is best_effort): each burst is checked to arrive whole, and
+        # the empty-payload limit pinned below is one of reliable readers.
         "excavator_forward": start("excavator_forward", "/fz_fwd", tmp, EXCAVATOR_PARAMS, qos_depth=400,
                                    urdf_joint_states_rate=0.0, **FUZZ_SETTINGS,
-                                   grade=GRADE_SETTINGS),
+                                   grade=GRADE_SETTINGS, input_reliability="reliable"),
         "excavator_velocity_ik": start("excavator_velocity_ik", "/fz_vik", tmp, EXCAVATOR_PARAMS,
                                        input_queue_depth=400, command_timeout=30.0, state_timeout=30.0,
-                                       **FUZZ_SETTINGS),
+                                       input_reliability="reliable", **FUZZ_SETTINGS),
         "excavator_sim": start("excavator_sim", "/fz_sim", tmp, EXCAVATOR_PARAMS, input_queue_depth=400,
                                rate=100.0, **FUZZ_SETTINGS),
+        "excavator_ik_server": start("excavator_ik_server", "/fz_eik", tmp, EXCAVATOR_PARAMS),
     }
     for name in SERIAL:
         params = (str(config_path(machine(name).config_file)),)
-        started[f"{name}_forward"] = start(f"{name}_forward", f"/fz_{name}", tmp, params, qos_depth=400)
+        started[f"{name}_forward"] = start(f"{name}_forward", f"/fz_{name}", tmp, params, qos_depth=400,
+                                           input_reliability="reliable")
         started[f"{name}_ik_server"] = start(f"{name}_ik_server", f"/fz_{name}", tmp, params)
     yield started
     for process in started.values():
@@ -539,6 +544,46 @@ def check_ik_answers(requests: list, responses: list, limits) -> int:
     return problems
 
 
+def fuzz_ik_server(probe: Probe, ik, fk, model, limits, rng: np.random.Generator,
+                   targets=None) -> dict[str, int]:
+    """Every kind of request 60 times (8 kinds of IK request, 3 of FK request, frame every 7th),
+    then the library's numbers; the counts of the answers. ``targets``: the model whose fkine
+    makes the valid targets (default ``model``)."""
+    ik_requests = [random_request(rng, targets or model, limits, k) for k in range(480)]
+    fk_requests = [random_fk(rng, limits, k) for k in range(210)]
+    ik_responses = calls(probe, ik, ik_requests)
+    fk_responses = calls(probe, fk, fk_requests)
+    ik_problems = check_ik_answers(ik_requests, ik_responses, limits)
+    fk_problems = sum(
+        not ((r.success and r.error_code.val == Codes.SUCCESS
+              and all_finite(r.pose) and all_finite(r.twist))
+             or (not r.success and r.error_code.val != Codes.SUCCESS and r.message))
+        for r in fk_responses)
+    q_good = 0.5 * (limits.lower + limits.upper)
+    pose = model.fkine(q_good)
+    orientation = True
+    try:
+        expected = model.solve_ik(pose, use_orientation=True)
+    except RequestError:  # a position-only machine (the pump boom)
+        orientation = False
+        expected = model.solve_ik(pose, use_orientation=False)
+    request = SolveIK.Request(use_orientation=orientation)
+    p, o = request.target.pose.position, request.target.pose.orientation
+    p.x, p.y, p.z = (float(v) for v in pose[:3, 3])
+    o.x, o.y, o.z, o.w = (float(v) for v in matrix_quaternion(pose[:3, :3]))
+    answer = probe.call(ik, request, TIMEOUT)
+    if bool(expected.ok):
+        assert answer.success, answer.message
+        np.testing.assert_allclose(answer.solution.position, expected.solution, atol=1e-12)
+    else:
+        assert not answer.success
+    fk_answer = probe.call(fk, SolveFK.Request(joint_state=joint_state(limits.names, q_good)), TIMEOUT)
+    got = fk_answer.pose.pose.position
+    np.testing.assert_allclose([got.x, got.y, got.z], pose[:3, 3], atol=1e-12)
+    return {"ik_requests": len(ik_requests), "ik_successes": sum(r.success for r in ik_responses),
+            "ik_problems": ik_problems, "fk_requests": len(fk_requests), "fk_problems": fk_problems}
+
+
 @pytest.mark.parametrize("name", SERIAL)
 def test_serial_nodes_survive_any_input(probe: Probe, nodes: dict[str, NodeProcess], name: str) -> None:
     record = machine(name)
@@ -581,48 +626,80 @@ def test_serial_nodes_survive_any_input(probe: Probe, nodes: dict[str, NodeProce
                     states.publish(msg)
                 sent += 1
             marker(100_000 + burst)
-        # Every kind of request 60 times (8 kinds of IK request, 3 of FK request, frame every 7th).
-        ik_requests = [random_request(rng, model, limits, k) for k in range(480)]
-        fk_requests = [random_fk(rng, limits, k) for k in range(210)]
-        ik_responses = calls(probe, ik, ik_requests)
-        fk_responses = calls(probe, fk, fk_requests)
-        ik_problems = check_ik_answers(ik_requests, ik_responses, limits)
-        fk_problems = sum(
-            not ((r.success and r.error_code.val == Codes.SUCCESS
-                  and all_finite(r.pose) and all_finite(r.twist))
-                 or (not r.success and r.error_code.val != Codes.SUCCESS and r.message))
-            for r in fk_responses)
-        # The library's numbers afterwards.
-        pose = model.fkine(q_good)
-        orientation = True
-        try:
-            expected = model.solve_ik(pose, use_orientation=True)
-        except RequestError:  # a position-only machine (the pump boom)
-            orientation = False
-            expected = model.solve_ik(pose, use_orientation=False)
-        request = SolveIK.Request(use_orientation=orientation)
-        p, o = request.target.pose.position, request.target.pose.orientation
-        p.x, p.y, p.z = (float(v) for v in pose[:3, 3])
-        o.x, o.y, o.z, o.w = (float(v) for v in matrix_quaternion(pose[:3, :3]))
-        answer = probe.call(ik, request, TIMEOUT)
-        if bool(expected.ok):
-            assert answer.success, answer.message
-            np.testing.assert_allclose(answer.solution.position, expected.solution, atol=1e-12)
-        else:
-            assert not answer.success
-        fk_answer = probe.call(fk, SolveFK.Request(joint_state=joint_state(limits.names, q_good)), TIMEOUT)
-        got = fk_answer.pose.pose.position
-        np.testing.assert_allclose([got.x, got.y, got.z], pose[:3, 3], atol=1e-12)
+        counts = fuzz_ik_server(probe, ik, fk, model, limits, rng)
         marker(200_000)
+        pose = model.fkine(q_good)
         got = next(m for m in out.messages[f"{ns}/tool_pose"] if m.header.stamp.sec == 200_000).pose.position
         np.testing.assert_allclose([got.x, got.y, got.z], pose[:3, 3], atol=1e-12)
         alive = forward.alive() + server.alive()
     finally:
         forward_log, server_log = forward.stop(), server.stop()
-    successes = sum(r.success for r in ik_responses)
-    report(f"{name}", topic_sent=sent, outputs_checked=out.count(), non_finite=out.non_finite(),
-           ik_requests=len(ik_requests), ik_successes=successes, ik_problems=ik_problems,
-           fk_requests=len(fk_requests), fk_problems=fk_problems, alive=alive)
-    assert alive == 2 and out.non_finite() == 0 and ik_problems == 0 and fk_problems == 0
+    report(f"{name}", topic_sent=sent, outputs_checked=out.count(), non_finite=out.non_finite(), **counts,
+           alive=alive)
+    assert alive == 2 and out.non_finite() == 0 and counts["ik_problems"] == 0 and counts["fk_problems"] == 0
     for log in (forward_log, server_log):
         assert "Traceback" not in log and "failed on" not in log and "unexpectedly" not in log, log[-3000:]
+
+
+class WideExcavator:
+    """Targets of the excavator IK fuzz: its FK cannot leave the stroke box (a linkage need not
+    close there), so states outside the limits are posed by a machine with 5 cm longer strokes
+    at both ends (clipped to them)."""
+
+    def __init__(self) -> None:
+        section = copy.deepcopy(load_parameters(config_path("excavator_cet200.yaml"))["excavator"])
+        for name in CYLINDERS:
+            section[name]["min_length"] -= 0.05
+            section[name]["max_length"] += 0.05
+        self.model = Excavator.from_parameters(section)
+        self.ik_modes, self.ik_branches = self.model.ik_modes, self.model.ik_branches
+
+    def fkine(self, q: np.ndarray) -> np.ndarray:
+        return self.model.fkine(self.model.joint_limits.clip(q))
+
+
+def random_path(rng: np.random.Generator, model: Excavator, k: int) -> PlanPath.Request:
+    """A PlanPath request: plausible waypoints near the machine, or malformed (extremes, NaN,
+    bad steps and speeds, wrong seeds, many waypoints)."""
+    start = model.pose(model.limits.reference)[:3]
+    count = int(rng.integers(0, 5)) if k % 5 else int(rng.integers(0, 200))
+    waypoints = start + rng.normal(scale=2.0, size=(count, 3))
+    request = PlanPath.Request(step=float(rng.choice([0.0, 0.05, 0.5, 1e-300, -1.0, math.nan, math.inf])),
+                               tip_speed=float(rng.choice([0.0, 0.2, 3.0, 1e-300, -0.5, math.nan, 1e308])),
+                               mode=str(rng.choice(["", "", "pose", "region", "x" * 300])))
+    if k % 3 == 1 and count:
+        waypoints[rng.integers(count)] = extreme(rng, 3, 10.0)
+    request.waypoints = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in waypoints]
+    if k % 4 == 2:
+        seed = extreme(rng, 4, 1.0) if rng.random() < 0.5 else list(model.limits.reference)
+        request.seed = JointState(name=list(ACTUATORS)[: int(rng.integers(2, 5))], position=seed)
+    return request
+
+
+def test_excavator_ik_server_survives_any_input(probe: Probe, nodes: dict[str, NodeProcess]) -> None:
+    record = machine("excavator")
+    model = record.model()
+    server = nodes.pop("excavator_ik_server")
+    ik = probe.node.create_client(SolveIK, "/fz_eik/solve_ik")
+    fk = probe.node.create_client(SolveFK, "/fz_eik/solve_fk")
+    planner = probe.node.create_client(PlanPath, "/fz_eik/plan_path")
+    rng = np.random.default_rng(9200)
+    try:
+        clients = (ik, fk, planner)
+        probe.wait_until(lambda: all(c.service_is_ready() for c in clients) or not server.alive(), TIMEOUT,
+                         "excavator_ik_server")
+        assert server.alive(), server.log()
+        probe.call(ik, SolveIK.Request(), TIMEOUT)
+        counts = fuzz_ik_server(probe, ik, fk, model, record.limits(model), rng, targets=WideExcavator())
+        plans = calls(probe, planner, [random_path(rng, model, k) for k in range(150)], window=2)
+        plan_problems = sum(
+            not ((r.success and r.error_code.val == Codes.SUCCESS and len(r.trajectory.points) > 0)
+                 or (not r.success and r.error_code.val != Codes.SUCCESS and r.message))
+            or not all_finite(r.trajectory) for r in plans)
+        alive = server.alive()
+    finally:
+        log = server.stop()
+    report("excavator_ik_server", **counts, plan_requests=len(plans),
+           plan_successes=sum(r.success for r in plans), plan_problems=plan_problems, alive=int(alive))
+    assert alive and counts["ik_problems"] == 0 and counts["fk_problems"] == 0 and plan_problems == 0
+    assert "Traceback" not in log and "failed on" not in log and "unexpectedly" not in log, log[-3000:]

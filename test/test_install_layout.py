@@ -146,6 +146,15 @@ def test_ament_index_marker_package_xml_and_config(colcon_install: Path) -> None
     assert installed == shipped
 
 
+def test_launch_files_and_urdfs_are_installed(colcon_install: Path) -> None:
+    """ros2 launch finds share/<pkg>/launch/*.launch.xml; they read the URDFs from share/<pkg>/urdf."""
+    share = colcon_install / PKG / "share" / PKG
+    for folder, pattern in (("launch", "*.launch.xml"), ("urdf", "*.urdf")):
+        shipped = sorted(p.name for p in (REPO / folder).glob(pattern))
+        assert shipped, f"{folder}/{pattern}: nothing to install"
+        assert sorted(p.name for p in (share / folder).glob(pattern)) == shipped, folder
+
+
 def test_ament_index_resolves_to_install(colcon_install: Path, install_env: dict[str, str]) -> None:
     out = _run_python(install_env, (
         "from ament_index_python.packages import get_package_prefix, get_package_share_directory\n"

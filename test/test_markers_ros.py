@@ -8,7 +8,7 @@ import subprocess
 import numpy as np
 from builtin_interfaces.msg import Time
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from ros_harness import NodeProcess, Probe
+from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
@@ -29,7 +29,7 @@ def markers_for(probe: Probe, config: str, messages: dict[str, JointState]) -> M
     received: list[MarkerArray] = []
     sub = probe.node.create_subscription(MarkerArray, "machine_markers", received.append, qos)
     pubs = {topic: probe.node.create_publisher(JointState, topic, qos) for topic in messages}
-    process = NodeProcess("machine_markers", "--params-file", str(config_path(config)))
+    process = NodeProcess("machine_markers", "--params-file", str(config_path(config)), *RELIABLE_INPUTS)
 
     def arrived() -> bool:
         assert process.alive(), process.log()

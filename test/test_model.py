@@ -1,12 +1,14 @@
 """The shared selection rule: select_parts (scalar parts: floats for one target, arrays for a
-batch) against select (numpy), with and without a seed, over allowed subsets and exact ties."""
+batch) against select (numpy), with and without a seed, over allowed subsets and exact ties; the
+one failure rule (IKSolutions.failure) on every machine and the error codes MoveIt shares."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from manipulator_kinematics.model import IKStatus, select, select_parts
+from manipulator_kinematics.model import IKSolutions, IKStatus, pose_matrix, select, select_parts
+from manipulator_kinematics.registry import machine
 from manipulator_kinematics.serial_chain import parts_rows
 
 RNG = np.random.default_rng(8)
@@ -47,3 +49,54 @@ def test_select_parts_is_select(allowed: tuple[bool, ...] | None, seeded: bool) 
         one = select_parts(q[k].ravel().tolist(), status[k].tolist(),
                            seed=None if seed is None else seed[k].tolist(), allowed=allowed)
         assert one == (int(expected[k]), bool(expected_tie[k]))
+
+
+def test_error_codes_are_moveits_where_the_names_are_shared() -> None:
+    """moveit_msgs/MoveItErrorCodes (MoveIt 2, Jazzy): the values of the names both define."""
+    from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
+
+    moveit = {"SUCCESS": 1, "FAILURE": 99999, "INVALID_GOAL_CONSTRAINTS": -16, "INVALID_ROBOT_STATE": -17,
+              "FRAME_TRANSFORM_FAILURE": -21, "NO_IK_SOLUTION": -31}
+    assert {name: getattr(Codes, name) for name in moveit} == moveit
+    # Our own codes lie outside the values MoveIt uses (1, 99999, -1 ... -33).
+    ours = {name: getattr(Codes, name) for name in ("SINGULAR", "JOINT_LIMITS_VIOLATED", "INVALID_MODE")}
+    assert ours == {"SINGULAR": -40, "JOINT_LIMITS_VIOLATED": -41, "INVALID_MODE": -42}
+
+
+def _solutions(status: list[int], branches: tuple[str, ...]) -> IKSolutions:
+    m = len(status)
+    return IKSolutions(q=np.zeros((m, 2)), status=np.array(status, dtype=np.int8), branches=branches,
+                       selected=np.array(-1), tie=np.array(False))
+
+
+def test_failure_is_the_best_status_or_the_asked_branchs() -> None:
+    U, J, S, N = IKStatus.UNREACHABLE, IKStatus.JOINT_LIMITS, IKStatus.SINGULAR, IKStatus.INVALID
+    branches = ("a", "b", "c")
+    assert _solutions([U, J, U], branches).failure() is J  # a solution exists, it breaks a limit
+    assert _solutions([U, U, U], branches).failure() is U
+    assert _solutions([U, S, J], branches).failure() is S
+    # With a branch asked for, the other branches are no answer: no geometric solution in it.
+    assert _solutions([U, J, U], branches).failure(branch="a") is U
+    assert _solutions([U, J, U], branches).failure(branch="b") is J
+    assert _solutions([N, N, N], branches).failure(branch="c") is N
+    assert _solutions([IKStatus.SUCCESS] * 3, branches).failure() is N  # nothing failed, nothing selected
+
+
+@pytest.mark.parametrize("name, target, branch, expected", [
+    ("scara", (2.0, 0.0, 0.0), None, IKStatus.JOINT_LIMITS),  # the arm reaches it from x_l = 1.63 m > 0.4 m
+    ("scara", (0.0, 2.0, 0.0), None, IKStatus.UNREACHABLE),  # |y| > l2 + l3: no rail length helps
+    ("tool_changer", (1.5, 0.0, 1.0), None, IKStatus.JOINT_LIMITS),
+    ("tool_changer", (1.5, 0.0, 1.0), "front_up_noflip", IKStatus.UNREACHABLE),  # J3 out of reach there
+    ("tool_changer", (1.5, 0.0, 1.0), "front_up_flip", IKStatus.JOINT_LIMITS),
+    ("tool_changer", (4.0, 0.0, 1.0), None, IKStatus.UNREACHABLE),
+    ("palletizer", (0.0, 0.0, 0.0), None, IKStatus.JOINT_LIMITS),
+    ("palletizer", (100.0, 0.0, 0.0), None, IKStatus.UNREACHABLE),
+    ("pump_boom", (100.0, 0.0, 0.0), None, IKStatus.UNREACHABLE),
+])
+def test_one_failure_rule_on_every_machine(name: str, target: tuple[float, float, float], branch: str | None,
+                                           expected: IKStatus) -> None:
+    model = machine(name).model()
+    result = model.solve_ik(pose_matrix(np.array(target)), use_orientation=False, branch=branch)
+    assert not result.ok and result.failure(branch=branch) is expected, result.note()
+    geometric = result.status[[result.branches.index(branch)]] if branch else result.status
+    assert (expected is IKStatus.UNREACHABLE) == bool(np.all(geometric >= IKStatus.UNREACHABLE))

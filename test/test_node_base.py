@@ -12,9 +12,10 @@ from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
 from ros_harness import NodeProcess, Probe
 
+from manipulator_kinematics.config import Number, validate
 from manipulator_kinematics.node_util import console_script
 from manipulator_kinematics.nodes.base import params_files
-from manipulator_kinematics.params import config_path, load_parameters
+from manipulator_kinematics.params import SHOWN, ConfigError, config_path, load_parameters, shown
 
 TIMEOUT = 15.0
 SCARA = load_parameters(config_path("scara.yaml"))["scara"]
@@ -126,3 +127,38 @@ def test_parameters_are_read_only_and_a_set_is_refused_with_a_reason(probe: Prob
         assert not result.successful and "read-only" in result.reason, result.reason
         assert get(probe, "scara_ik_server", ["scara.l2"])[0].double_value == SCARA["l2"]
         assert process.alive()
+
+
+def test_an_oversized_params_value_is_refused_before_anything_parses_it(tmp_path: Path) -> None:
+    """A 100,000-element list (78 s and a 500,070-character line before): refused by its key,
+    read only up to item 10,001: the broken YAML after the list is never reached."""
+    path = tmp_path / "big.yaml"
+    items = ", ".join(["0.2"] * 100_000)
+    path.write_text(f"/**:\n  ros__parameters:\n    scara:\n      l2: 0.3\n      l1: [{items}]\n    x: [\n")
+    line = start_fails("--params-file", str(path))
+    assert "/**: scara.l1 has more than the 10000 items a parameter may have" in line, line
+    assert len(line) < 300, line
+    huge = tmp_path / "huge.yaml"
+    huge.write_text("#" * (5 << 20) + "\n/**:\n  ros__parameters: {}\n")
+    line = start_fails("--params-file", str(huge))
+    assert "5.0 MiB, more than the 4 MiB a parameters file may have" in line, line
+
+
+@pytest.mark.parametrize(("value", "message"), [
+    ([0.2] * 9000, "scara.l1: expected a number (m), got [0.2, 0.2, 0.2, "),
+    ("x" * 100_000, "scara.l1: expected a number (m), got 'xxxx"),
+])
+def test_values_in_error_lines_are_cut(tmp_path: Path, value, message: str) -> None:
+    line = start_fails("--params-file", machine_file(tmp_path, dict(SCARA) | {"l1": value}))
+    assert message in line and "..." in line and len(line) < 300, line[:400]
+
+
+def test_shown_cuts_long_values_only() -> None:
+    assert shown([1.0, 2.0]) == "[1.0, 2.0]" and shown("a" * 98) == repr("a" * 98)  # 100 characters
+    assert shown("a" * 99) == "'" + "a" * 79 + "..." + "a" * 11 + "'"
+    text = shown(list(range(100_000)))
+    assert text.startswith("[0, 1, 2, ") and text.endswith("...9998, 99999] (100000 items)")
+    assert len(text) < SHOWN + 20
+    with pytest.raises(ConfigError, match=r"^scara\.'x{79}\.\.\.x{11}': unknown key") as refused:
+        validate({"x" * 100_000: 1.0}, {"l1": Number()}, "scara")
+    assert len(str(refused.value)) < 300

@@ -1,15 +1,19 @@
 """Nodes as processes, spun by the package's entry point (node_util.run): they serve, survive a
 failing callback, refuse run-time parameter changes with a reason, and end with exit 0 on SIGINT
-and SIGTERM while inputs are still arriving; so does the recorder (isolated domain; every wait on
-a condition)."""
+and SIGTERM while inputs are still arriving; so does the recorder. Every executable, nodes and
+mk_* tools, ends with exit 0 and no traceback on a signal at any moment of its start-up and
+shutdown (isolated domain; every wait on a condition)."""
 from __future__ import annotations
 
+import ast
 import os
 import signal
 import subprocess
 import sys
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from importlib.metadata import distribution
 from pathlib import Path
 
 import pytest
@@ -18,7 +22,7 @@ from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from ros_harness import NodeProcess, Probe
+from ros_harness import REPO, NodeProcess, Probe
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Int64
 from std_srvs.srv import Trigger
@@ -210,19 +214,26 @@ def scara_forward_traffic(probe: Probe, namespace: str) -> tuple[Callable[[], No
     return send, counter(probe, PoseStamped, f"{namespace}/tool_pose")
 
 
-def scara_ik_server_traffic(probe: Probe, namespace: str) -> tuple[Callable[[], None], Callable[[], int]]:
-    client = probe.node.create_client(SolveFK, f"{namespace}/solve_fk")
-    answered: list[object] = []
-    request = SolveFK.Request(joint_state=JointState(name=["rail_joint", "shoulder_joint", "elbow_joint"],
-                                                     position=[0.1, 0.5, 1.0]))
+Traffic = Callable[[Probe, str], tuple[Callable[[], None], Callable[[], int]]]
 
-    def send() -> None:
-        # Requests sent before the server's response reader matched are lost (rmw_fastrtps):
-        # only answers count, and requests keep coming.
-        if client.service_is_ready():
-            client.call_async(request).add_done_callback(answered.append)
 
-    return send, lambda: len(answered)
+def fk_server_traffic(names: list[str], position: list[float]) -> Traffic:
+    """Traffic of an IK/FK server: solve_fk requests of one joint state; answers count."""
+
+    def traffic(probe: Probe, namespace: str) -> tuple[Callable[[], None], Callable[[], int]]:
+        client = probe.node.create_client(SolveFK, f"{namespace}/solve_fk")
+        answered: list[object] = []
+        request = SolveFK.Request(joint_state=JointState(name=names, position=position))
+
+        def send() -> None:
+            # Requests sent before the server's response reader matched are lost (rmw_fastrtps):
+            # only answers count, and requests keep coming.
+            if client.service_is_ready():
+                client.call_async(request).add_done_callback(answered.append)
+
+        return send, lambda: len(answered)
+
+    return traffic
 
 
 EXCAVATOR = ("--params-file", str(config_path("excavator_cet200.yaml")),
@@ -232,7 +243,9 @@ KINDS = [
     Kind("excavator_forward", EXCAVATOR, forward_traffic),
     Kind("excavator_velocity_ik", EXCAVATOR, velocity_ik_traffic),
     Kind("excavator_sim", EXCAVATOR, sim_traffic),
-    Kind("scara_ik_server", SCARA, scara_ik_server_traffic),
+    Kind("excavator_ik_server", EXCAVATOR, fk_server_traffic(list(ACTUATORS), [0.0, 2.8, 3.3, 2.3])),
+    Kind("scara_ik_server", SCARA,
+         fk_server_traffic(["rail_joint", "shoulder_joint", "elbow_joint"], [0.1, 0.5, 1.0])),
     Kind("scara_forward", SCARA, scara_forward_traffic),
 ]
 
@@ -293,3 +306,107 @@ def test_record_stops_on_sigint_while_a_publisher_keeps_sending(probe: Probe, tm
         assert " messages on 1 topics in " in process.log()
     finally:
         process.stop()
+
+
+# Every executable that runs until it is stopped or works on for seconds: the nodes and mk_* tools.
+BAG = str(sorted((Path(__file__).resolve().parent / "data").glob("*_golden"))[0])
+EXECUTABLES: dict[str, Callable[[Path], tuple[tuple[str, ...], tuple[str, ...]]]] = {
+    # name: scratch directory -> (our arguments, ROS arguments)
+    **{exe: (lambda _, ros=ros: ((), ros)) for exe, ros in (
+        ("excavator_forward", EXCAVATOR), ("excavator_velocity_ik", EXCAVATOR), ("excavator_sim", EXCAVATOR),
+        ("excavator_ik_server", EXCAVATOR), ("excavator_imu_state", EXCAVATOR),
+        ("scara_forward", SCARA), ("scara_ik_server", SCARA), ("tool_changer_forward", ()),
+        ("tool_changer_ik_server", ()), ("palletizer_forward", ()), ("palletizer_ik_server", ()),
+        ("pump_boom_forward", ()), ("pump_boom_ik_server", ()), ("machine_markers", SCARA))},
+    "mk_record": lambda work: (("-o", str(work / "bag"), "--topics", "/signalled/numbers",
+                                "--type", "/signalled/numbers:=std_msgs/msg/Int64"), ()),
+    "mk_replay": lambda _: ((BAG,), ()),
+    "mk_replay --loop": lambda _: ((BAG, "--loop"), ()),
+    "mk_evaluate": lambda work: ((BAG, "-o", str(work / "report")), ()),
+    "mk_urdf": lambda work: (("--all", str(work)), ()),
+}
+# Seconds after the process catches SIGTERM (its first import of ours): imports, arguments,
+# rclpy.init, building the node, serving. Each run gets one; a second signal follows the first
+# by SHUTDOWN_DELAY (the shutdown itself). Which signal a delay gets alternates between executables.
+DELAYS = (0.0, 0.4, 1.0, 2.0)
+SHUTDOWN_DELAY = 0.05
+
+
+def catches_sigterm(pid: int) -> bool:
+    """Whether process ``pid`` has a handler for SIGTERM (Python has none of its own): ours."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except FileNotFoundError:
+        return True  # ended: nothing more to wait for
+    caught = int(next(line for line in status.splitlines() if line.startswith("SigCgt:")).split()[1], 16)
+    return bool(caught >> (signal.SIGTERM - 1) & 1)
+
+
+@pytest.mark.parametrize("name", sorted(EXECUTABLES))
+def test_every_executable_ends_with_exit_0_on_a_signal_at_any_moment(
+    probe: Probe, name: str, tmp_path: Path
+) -> None:
+    """Several runs side by side, each signalled at its own delay (any delay must do)."""
+    exe = name.split()[0]
+    first = sorted(EXECUTABLES).index(name)
+    runs = []
+    try:
+        for i, delay in enumerate(DELAYS):
+            work = tmp_path / str(i)
+            work.mkdir()
+            args, ros = EXECUTABLES[name](work)
+            signum = (signal.SIGINT, signal.SIGTERM)[(first + i) % 2]
+            ros = (*ros, "-r", f"__ns:=/signalled_{i}") if exe not in ("mk_evaluate", "mk_urdf") else ros
+            process = NodeProcess(exe, *ros, args=args)
+            runs.append([process, delay, signum, None])
+        probe.wait_until(lambda: all(catches_sigterm(run[0].process.pid) for run in runs), TIMEOUT,
+                         f"{name} to catch SIGTERM")
+        start = time.monotonic()
+
+        def signalled() -> bool:
+            now = time.monotonic() - start
+            for run in runs:
+                process, delay, signum, sent = run
+                if not process.alive():
+                    continue
+                if sent is None and now >= delay:
+                    process.process.send_signal(signum)
+                    run[3] = now
+                elif sent is not None and sent >= 0 and now >= sent + SHUTDOWN_DELAY:
+                    process.process.send_signal(signum)
+                    run[3] = -1.0  # both sent
+            return all(not run[0].alive() for run in runs)
+
+        probe.wait_until(signalled, 3 * TIMEOUT, f"the end of every {name}")
+        for process, delay, signum, _ in runs:
+            log = process.log()
+            assert process.process.returncode == 0, (delay, signum, log)
+            assert "Traceback" not in log, (delay, signum, log)
+    finally:
+        for run in runs:
+            run[0].stop()
+
+
+# Console scripts that are one-shot batch jobs (plots, tables, the demo's driver): Python's defaults.
+BATCH = {"excavator_demo", "excavator_slope_example", "excavator_working_ranges", "pump_boom_regions",
+         "pump_boom_plots", "tool_changer_plots", "palletizer_plots"}
+
+
+def test_every_node_and_mk_tool_is_named_in_its_package_init_and_importing_leaves_signals_alone() -> None:
+    """stopping.install_for in the packages' __init__ names exactly the executables above (a new
+    node must be added to both), and only acts in a process that is one of them."""
+    named = set()
+    for init in REPO.glob("*/__init__.py"):
+        for node in ast.walk(ast.parse(init.read_text())):
+            if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "install_for":
+                named |= {arg.value for arg in node.args}
+    assert named == {name.split()[0] for name in EXECUTABLES}
+    entries = distribution("manipulator_kinematics").entry_points
+    scripts = {e.name for e in entries if e.group == "console_scripts"}
+    assert scripts == named | BATCH
+    imported = subprocess.run(
+        [sys.executable, "-c", "import signal, manipulator_kinematics, excavator_kinematics, "
+         "scara_kinematics, pump_boom_kinematics, tool_changer_kinematics, palletizer_kinematics; "
+         "print(signal.getsignal(signal.SIGTERM))"],
+        capture_output=True, text=True, timeout=TIMEOUT, check=True)
+    assert imported.stdout.strip() == str(signal.SIG_DFL), imported.stdout

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped
-from ros_harness import IK_FK, NodeProcess, Probe, start_with_services
+from ros_harness import IK_FK, RELIABLE_INPUTS, NodeProcess, Probe, start_with_services
 from sensor_msgs.msg import JointState
 
 from manipulator_kinematics.model import matrix_quaternion
@@ -121,6 +121,7 @@ def test_forward_node_publishes_the_tcp_pose(probe: Probe, model: Palletizer) ->
         "palletizer_forward",
         "--params-file",
         PARAMS,
+        *RELIABLE_INPUTS,
         "-p",
         "palletizer_forward:topics.joint_states:=palletizer_test/joint_states",
         "-p",

@@ -1,18 +1,21 @@
 """Pump boom nodes across processes (isolated domain): solve_ik / solve_fk round trips and their
 failures against a real ``pump_boom_ik_server``, ``plan_path`` for the paper's typical pours and a
-truncated one (the trajectory equals the library's plan), a server on a changed geometry (FK yes,
-region IK refused with the fix), and ``pump_boom_forward``'s tip pose and twist."""
+truncated one (the trajectory, with its velocities and accelerations, equals the library's plan),
+every degenerate plan request refused with INVALID_GOAL_CONSTRAINTS and its reason, solve_ik
+answered while a long plan runs, a server on a changed geometry (FK yes, region IK refused with
+the fix), and ``pump_boom_forward``'s tip pose and twist."""
 
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Iterator
 
 import numpy as np
 import pytest
 from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Point, PoseStamped, TwistStamped
-from ros_harness import IK_FK, NodeProcess, Probe, start_with_services
+from ros_harness import IK_FK, RELIABLE_INPUTS, NodeProcess, Probe, start_with_services
 from sensor_msgs.msg import JointState
 
 from manipulator_kinematics.model import matrix_quaternion
@@ -20,7 +23,7 @@ from manipulator_kinematics.params import config_path
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
 from manipulator_kinematics_interfaces.srv import PlanPath, SolveFK, SolveIK
 from pump_boom_kinematics.kinematics import PumpBoom
-from pump_boom_kinematics.pour import TYPICAL_POURS, plan_path, pour_line
+from pump_boom_kinematics.pour import MAX_POINTS, MAX_WAYPOINTS, TYPICAL_POURS, plan_path, pour_line
 
 NAMES = ["slew_joint", "section_1_joint", "section_2_joint", "section_3_joint", "section_4_joint",
          "section_5_joint"]
@@ -88,6 +91,18 @@ def plan_request(
 
 def seconds(duration: Duration) -> float:
     return duration.sec + 1e-9 * duration.nanosec
+
+
+def assert_trajectory_is_the_plan(trajectory, plan) -> None:
+    """Times, positions, velocities and accelerations of the trajectory are the plan's, at rest at
+    both ends."""
+    t = np.array([seconds(point.time_from_start) for point in trajectory.points])
+    np.testing.assert_allclose(t, plan.t, atol=1e-9)
+    for field, expected in (("positions", plan.q), ("velocities", plan.qd), ("accelerations", plan.qdd)):
+        np.testing.assert_allclose(np.array([getattr(p, field) for p in trajectory.points]), expected,
+                                   atol=1e-12, err_msg=field)
+    np.testing.assert_array_equal(trajectory.points[0].velocities, 0.0)
+    np.testing.assert_array_equal(trajectory.points[-1].velocities, 0.0)
 
 
 def test_solve_ik_round_trip_over_the_table_and_solve_fk(probe: Probe, server, boom: PumpBoom) -> None:
@@ -194,9 +209,8 @@ def test_plan_path_of_the_papers_typical_pours(probe: Probe, server, boom: PumpB
         q = np.array([point.positions for point in trajectory.points])
         np.testing.assert_allclose(q, plan.q, atol=1e-12)
         np.testing.assert_allclose(boom.tip(q), plan.points, atol=1e-9)
-        t = np.array([seconds(point.time_from_start) for point in trajectory.points])
-        np.testing.assert_allclose(t, plan.s / (speed or 0.2), atol=1e-9)
-        assert f"{len(plan.q)} points" in response.message
+        assert_trajectory_is_the_plan(trajectory, plan)
+        assert f"{len(plan.q)} points" in response.message and "speed set at" in response.message
 
 
 def test_plan_path_through_several_waypoints_with_a_seed(probe: Probe, server, boom: PumpBoom) -> None:
@@ -207,7 +221,7 @@ def test_plan_path_through_several_waypoints_with_a_seed(probe: Probe, server, b
     assert response.success, response.message
     assert response.last_reachable_waypoint == 2
     q = np.array([point.positions for point in response.trajectory.points])
-    np.testing.assert_allclose(q, plan_path(boom, waypoints, seed=np.array(seed)).q, atol=1e-12)
+    assert_trajectory_is_the_plan(response.trajectory, plan_path(boom, waypoints, seed=np.array(seed)))
     assert q[0, 0] < -math.pi  # the seed's slew turn, kept (unwrapped) along the path
     assert np.abs(np.diff(q[:, 0])).max() < 0.1
 
@@ -221,21 +235,40 @@ def test_plan_path_truncated_and_refused(probe: Probe, server, boom: PumpBoom) -
     assert response.last_reachable_waypoint == 0
     plan = pour_line(boom, start, end)
     q = np.array([point.positions for point in response.trajectory.points])
-    np.testing.assert_allclose(q, plan.q, atol=1e-12)
+    assert_trajectory_is_the_plan(response.trajectory, plan)  # stopping at rest at the farthest point
     np.testing.assert_allclose(boom.tip(q[-1]), plan.end, atol=1e-9)  # the end of the reachable part
     assert boom.region_ik(plan.end).ok and not boom.region_ik(plan.end + [2e-6, 0.0, 0.0]).ok
     nothing = call(probe, plan_client, plan_request([[60.0, 0.0, 3.6], [20.0, 0.0, 17.5]]))
     assert not nothing.success and nothing.error_code.val == Codes.NO_IK_SOLUTION
     assert nothing.last_reachable_waypoint == -1 and len(nothing.trajectory.points) == 0
     assert "first waypoint is not reachable" in nothing.message
+    invalid = Codes.INVALID_GOAL_CONSTRAINTS
+    line = [start, end]
     cases = {
-        "no waypoint": (plan_request([]), Codes.INVALID_GOAL_CONSTRAINTS, "at least one"),
-        "nan": (plan_request([start, [math.nan, 0.0, 1.0]]), Codes.INVALID_GOAL_CONSTRAINTS, "finite"),
-        "step": (plan_request([start, end], step=-0.1), Codes.INVALID_GOAL_CONSTRAINTS, "must be >= 0"),
-        "speed": (plan_request([start, end], tip_speed=math.inf), Codes.INVALID_GOAL_CONSTRAINTS,
-                  "must be >= 0"),
-        "mode": (plan_request([start, end], mode="phi"), Codes.INVALID_MODE, "unknown mode 'phi'"),
-        "seed": (plan_request([start, end], seed=[0.0, 1.0]), Codes.INVALID_ROBOT_STATE, "seed:"),
+        "no waypoint": (plan_request([]), invalid, "waypoints: need 1 to 1000, got 0"),
+        "too many waypoints": (plan_request([start] * (MAX_WAYPOINTS + 1)), invalid,
+                               f"need 1 to {MAX_WAYPOINTS}, got {MAX_WAYPOINTS + 1}"),
+        "nan": (plan_request([start, [math.nan, 0.0, 1.0]]), invalid, "finite"),
+        "huge waypoint": (plan_request([start, [1e300, 0.0, 17.5]]), invalid,
+                          "waypoint 1 [1e+300, 0.0, 17.5] is beyond 1000 x the machine's reach"),
+        "too many points": (plan_request([start, [20.0, 20.0, 17.5]], step=0.001), invalid,
+                            f"would have 2e+04 points at step 0.001 m; at most {MAX_POINTS}"),
+        "too long": (plan_request([start, [20.0, 20.0, 17.5]] * 3, tip_speed=0.001), invalid,
+                     "would take at least 1e+05 s at 0.001 m/s; at most 86400 s"),
+        "step negative": (plan_request(line, step=-0.1), invalid, "step -0.1 m is outside [0.001, 10] m"),
+        "step tiny": (plan_request(line, step=1e-10), invalid, "step 1e-10 m is outside"),
+        "step nan": (plan_request(line, step=math.nan), invalid, "step nan m is outside"),
+        "speed inf": (plan_request(line, tip_speed=math.inf), invalid, "tip_speed inf m/s is outside"),
+        "speed tiny": (plan_request(line, tip_speed=1e-300), invalid, "tip_speed 1e-300 m/s is outside"),
+        "speed denormal": (plan_request(line, tip_speed=5e-324), invalid,
+                           "tip_speed 4.94066e-324 m/s is outside"),
+        "speed huge": (plan_request(line, tip_speed=1e300), invalid, "tip_speed 1e+300 m/s is outside"),
+        "speed nan": (plan_request(line, tip_speed=math.nan), invalid, "tip_speed nan m/s is outside"),
+        "speed negative": (plan_request(line, tip_speed=-0.2), invalid, "tip_speed -0.2 m/s is outside"),
+        "mode": (plan_request(line, mode="phi"), Codes.INVALID_MODE, "unknown mode 'phi'"),
+        "seed": (plan_request(line, seed=[0.0, 1.0]), Codes.INVALID_ROBOT_STATE, "seed:"),
+        "seed huge": (plan_request(line, seed=[1e300, 1.0, 2.0, 2.0, 2.0, 2.0]), Codes.INVALID_ROBOT_STATE,
+                      "seed: slew_joint = 1e+300 is beyond 1000 x its range"),
     }
     for name, (request, code, text) in cases.items():
         response = call(probe, plan_client, request)
@@ -243,6 +276,34 @@ def test_plan_path_truncated_and_refused(probe: Probe, server, boom: PumpBoom) -
         assert text in response.message, (name, response.message)
         assert response.last_reachable_waypoint == -1 and len(response.trajectory.points) == 0, name
     assert process.alive()
+
+
+def test_solve_ik_is_answered_while_a_long_plan_runs(probe: Probe, server, boom: PumpBoom) -> None:
+    # plan_path runs in a callback group of its own on a multi-threaded executor: solve_ik keeps
+    # being answered while the largest plan there is (1000 waypoints, ~19,000 points) is computed.
+    # A server serving one callback at a time answers no solve_ik until the plan is done.
+    _, ik, _, plan_client = server
+    assert call(probe, plan_client, plan_request([[20.0, 5.0, 17.5], [21.0, 5.0, 17.5]])).success  # matched
+    waypoints = np.array([[16.0 + 12.0 * (k % 2), -6.0 + 12.0 * k / 999, 12.5] for k in range(MAX_WAYPOINTS)])
+    step = float(np.sum(np.linalg.norm(np.diff(waypoints, axis=0), axis=1))) / (MAX_POINTS - 2000)
+    sent = time.monotonic()
+    future = plan_client.call_async(plan_request(waypoints, step=step))
+    answered = []
+    while not future.done():
+        response = call(probe, ik, ik_request([20.0, 5.0, 17.5]))
+        assert response.success, response.message
+        if not future.done():
+            answered.append(time.monotonic())
+    finished = time.monotonic()
+    plan = future.result()
+    assert plan.success, plan.message
+    assert MAX_POINTS - 2000 <= len(plan.trajectory.points) <= MAX_POINTS
+    took = finished - sent
+    gaps = np.diff([sent, *answered, finished])
+    assert took > 0.3 and len(answered) >= 3, (took, len(answered))
+    assert gaps.max() < 0.5 * took, (took, gaps.max(), len(answered))
+    print(f"plan of {len(plan.trajectory.points)} points answered after {took:.2f} s; "
+          f"{len(answered)} solve_ik answered meanwhile, longest gap {gaps.max():.3f} s")
 
 
 def test_a_server_on_a_changed_geometry_solves_fk_and_refuses_region_ik(probe: Probe, boom: PumpBoom) -> None:
@@ -278,16 +339,16 @@ def test_forward_node_publishes_the_tip_pose_and_twist(probe: Probe, boom: PumpB
     pose_sub = node.create_subscription(PoseStamped, "pump_boom_test/tool_pose", poses.append, 10)
     twist_sub = node.create_subscription(TwistStamped, "pump_boom_test/tool_twist", twists.append, 10)
     process = NodeProcess(
-        "pump_boom_forward", "--params-file", PARAMS,
+        "pump_boom_forward", "--params-file", PARAMS, *RELIABLE_INPUTS,
         "-p", "pump_boom_forward:topics.joint_states:=pump_boom_test/joint_states",
         "-p", "pump_boom_forward:topics.tool_pose:=pump_boom_test/tool_pose",
         "-p", "pump_boom_forward:topics.tool_twist:=pump_boom_test/tool_twist",
     )
-    # Joint states along the slanted pour, with the rates of its constant tip speed.
+    # Joint states along the slanted pour, with the plan's joint rates.
     plan = pour_line(boom, *TYPICAL_POURS["slanted_line"][1:])
     index = np.linspace(1, len(plan.q) - 2, 5).astype(int)
     states = plan.q[index]
-    rates = (plan.q[index + 1] - plan.q[index - 1]) / (plan.t[index + 1] - plan.t[index - 1])[:, None]
+    rates = plan.qd[index]
     try:
         probe.wait_until(
             lambda: (publisher.get_subscription_count() > 0 and pose_sub.get_publisher_count() > 0
@@ -307,13 +368,13 @@ def test_forward_node_publishes_the_tip_pose_and_twist(probe: Probe, boom: PumpB
         log = process.stop()
     assert "dropped joint_states" in log and "Traceback" not in log, log
     assert [p.header.stamp for p in poses] == [Time(sec=300 + i, nanosec=250) for i in range(len(states))]
-    for pose, twist, q, qd in zip(poses, twists, states, rates, strict=True):
+    for pose, twist, q, qd, speed in zip(poses, twists, states, rates, plan.speed[index], strict=True):
         assert pose.header.frame_id == "base_link"
         p = pose.pose.position
         np.testing.assert_allclose([p.x, p.y, p.z], boom.tip(q), atol=1e-9)
         v = twist.twist.linear
         velocity = boom.tip_jacobian(q) @ qd
         np.testing.assert_allclose([v.x, v.y, v.z], velocity, atol=1e-9)
-        # The rates are central differences of the pour: the tip moves at about 0.2 m/s along the line.
-        assert np.linalg.norm(velocity) == pytest.approx(boom.tip_speed, rel=1e-3)
+        # The rates are the plan's: the tip moves at the plan's speed along the line.
+        assert np.linalg.norm(velocity) == pytest.approx(speed, rel=1e-3)
     np.testing.assert_allclose([p.pose.position.z for p in poses], 12.5, atol=1e-9)

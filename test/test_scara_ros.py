@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, TwistStamped
-from ros_harness import IK_FK, NodeProcess, Probe, start_with_services
+from ros_harness import IK_FK, RELIABLE_INPUTS, NodeProcess, Probe, start_with_services
 from sensor_msgs.msg import JointState
 
 from manipulator_kinematics.params import config_path
@@ -186,7 +186,7 @@ def test_forward_node_publishes_pose_and_twist(probe: Probe, scara: Scara) -> No
     twist_sub = node.create_subscription(TwistStamped, "twist_remapped", twists.append, 10)
     # Topic names by parameter (node-scoped, so they win over the params file's section) and by remapping.
     process = NodeProcess(
-        "scara_forward", "--params-file", PARAMS,
+        "scara_forward", "--params-file", PARAMS, *RELIABLE_INPUTS,
         "-p", "scara_forward:topics.joint_states:=scara_test/joint_states",
         "-p", "scara_forward:topics.tool_pose:=scara_test/pose",
         "-p", "scara_forward:base_frame:=arm_base",

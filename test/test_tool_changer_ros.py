@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped, TwistStamped
-from ros_harness import IK_FK, NodeProcess, Probe, start_with_services
+from ros_harness import IK_FK, RELIABLE_INPUTS, NodeProcess, Probe, start_with_services
 from sensor_msgs.msg import JointState
 
 from manipulator_kinematics.model import matrix_quaternion, pose_matrix
@@ -74,11 +74,15 @@ def test_ik_and_fk_services_round_trip(probe: Probe, arm: ToolChanger) -> None:
         # Failures: a code and a reason, and the server keeps serving.
         far = np.eye(4)
         far[:3, 3] = (4.0, 0.0, 1.0)
+        branch_far = np.eye(4)
+        branch_far[:3, 3] = (1.5, 0.0, 1.0)
         for request, code, text in (
             (ik_request(far, names), Codes.NO_IK_SOLUTION, "cannot reach"),
             (ik_request(arm.fkine([0.3, 1.0, -1.2, 1.5, 1.0, 0.2]), names), Codes.JOINT_LIMITS_VIOLATED,
              "wrist_pitch_joint"),
             (ik_request(T, names, branch="elbow_up"), Codes.INVALID_MODE, "unknown branch"),
+            # Out of this branch's reach, only other branches have (limit-breaking) solutions.
+            (ik_request(branch_far, names, branch="front_up_noflip"), Codes.NO_IK_SOLUTION, "cannot reach"),
         ):
             response = probe.call(ik, request, TIMEOUT)
             assert not response.success and response.error_code.val == code, response.message
@@ -96,7 +100,7 @@ def test_forward_node_publishes_pose_and_twist(probe: Probe, arm: ToolChanger) -
     publisher = node.create_publisher(JointState, "tc_test/joint_states", 10)
     pose_sub = node.create_subscription(PoseStamped, "tool_pose", poses.append, 10)
     twist_sub = node.create_subscription(TwistStamped, "tool_twist", twists.append, 10)
-    process = NodeProcess("tool_changer_forward", "--params-file", PARAMS,
+    process = NodeProcess("tool_changer_forward", "--params-file", PARAMS, *RELIABLE_INPUTS,
                           "-p", "tool_changer_forward:topics.joint_states:=tc_test/joint_states")
     rng = np.random.default_rng(11)
     states = rng.uniform(arm.limits.lower, arm.limits.upper, (4, 6))

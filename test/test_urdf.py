@@ -10,17 +10,27 @@ and the cut loops closing) to 1e-9.
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
+from artefacts import xml_differences
 
 from excavator_kinematics.kinematics import bucket_quaternion
 from excavator_kinematics.urdf_joints import URDF_JOINTS, joint_positions
 from manipulator_kinematics.model import quaternion_matrix
 from manipulator_kinematics.registry import machine, machines
-from manipulator_kinematics.urdf import affine_map, machine_urdf, main, rotation_rpy, rpy, serial_urdf
+from manipulator_kinematics.urdf import (
+    PRECISION,
+    affine_map,
+    machine_urdf,
+    main,
+    rotation_rpy,
+    rpy,
+    serial_urdf,
+)
 
 REPO = Path(__file__).resolve().parent.parent
 SERIAL = ("scara", "tool_changer", "palletizer", "pump_boom")
@@ -47,12 +57,41 @@ def _random_states(limits, rng: np.random.Generator) -> np.ndarray:
 
 
 def test_every_machine_has_a_urdf_and_the_shipped_files_are_current() -> None:
-    """urdf/<machine>.urdf is exactly what the shipped config generates (regenerate: mk_urdf --all urdf)."""
+    """urdf/<machine>.urdf is what the shipped config generates (regenerate: mk_urdf --all urdf):
+    the same XML exactly, every number within 1e-12 (the last bits differ between CPUs)."""
     assert set(machines()) == {"excavator", *SERIAL}
     for name in machines():
         committed = REPO / "urdf" / f"{name}.urdf"
-        assert committed.read_text() == machine_urdf(name), f"{committed} is stale: run mk_urdf --all urdf"
+        differences = xml_differences(committed.read_text(), machine_urdf(name))
+        assert not differences, f"{committed} is stale: run mk_urdf --all urdf; {differences[:5]}"
     assert machine_urdf("scara") == machine_urdf("scara")  # deterministic
+
+
+def test_the_urdf_comparison_finds_every_kind_of_change() -> None:
+    text = (REPO / "urdf" / "scara.urdf").read_text()
+    assert xml_differences(text, text) == []
+    assert xml_differences(text, text.replace('length="0.2"', 'length="0.2000000000001"')) == []
+    changed = {
+        "number": text.replace('length="0.2"', 'length="0.200000000002"'),
+        "count": text.replace('xyz="0.1 0 0"', 'xyz="0.1 0"', 1),
+        "word": text.replace('type="revolute"', 'type="continuous"', 1),
+        "name": text.replace('name="shoulder_joint"', 'name="shoulder"', 1),
+        "attribute": text.replace('effort="0"', 'effort2="0"', 1),
+        "element": text.replace("</robot>", '<link name="extra" />\n</robot>'),
+        "comment": text.replace("do not edit", "edit", 1),
+    }
+    for what, other in changed.items():
+        assert other != text, what
+        assert xml_differences(text, other), what
+
+
+def test_urdf_numbers_have_fixed_precision() -> None:
+    """At most 15 significant digits: no CPU-dependent last bits, config values as typed."""
+    for name in machines():
+        numbers = re.findall(r'"(-?[0-9][0-9.e+-]*(?: -?[0-9][0-9.e+-]*)*)"', machine_urdf(name))
+        digits = [len(re.sub(r"e.*|[-.]", "", v).lstrip("0")) for n in numbers for v in n.split()]
+        assert digits and max(digits) <= PRECISION, name
+    assert 'xyz="0.6545196915 0 0"' in machine_urdf("excavator")  # 0.6545196914999999 with repr
 
 
 def _serial_models():

@@ -65,7 +65,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from manipulator_kinematics.config import Names, Number, Numbers, require, validate
+from manipulator_kinematics.config import Names, Number, Numbers, Text, require, validate
 from manipulator_kinematics.model import (
     IKSolutions,
     IKStatus,
@@ -118,6 +118,7 @@ _SIX = Numbers(6)
 
 #: The ``tool_changer:`` section of a parameters file (manipulator_kinematics.config).
 SCHEMA = {
+    "name": Text(empty=False, default="tool_changer", doc="the machine's name: the robot name of its URDF"),
     "joint_names": Names(6),
     "dh": {
         "a": Numbers(6, Number(min=-100.0, max=100.0, unit="m")),
@@ -142,7 +143,8 @@ class ToolChanger:
 
     def __init__(self, a: ArrayLike, d: ArrayLike, limits: JointLimits, *, offset: ArrayLike | None = None,
                  tool: ArrayLike | None = None, wrist_singularity: float = 0.01,
-                 axis_singularity: float = 0.005) -> None:
+                 axis_singularity: float = 0.005, name: str = "tool_changer") -> None:
+        self.name = name
         a = np.asarray(a, dtype=float)
         d = np.asarray(d, dtype=float)
         offset = np.zeros(6) if offset is None else np.asarray(offset, dtype=float)
@@ -198,7 +200,8 @@ class ToolChanger:
         tool = transl(*p["tool_xyz"]) @ trotz(yaw) @ troty(pitch) @ trotx(roll)
         limits = JointLimits(tuple(names), np.array(lower), np.array(upper))
         return cls(dh["a"], dh["d"], limits, offset=dh["offset"], tool=tool,
-                   wrist_singularity=p["wrist_singularity"], axis_singularity=p["axis_singularity"])
+                   wrist_singularity=p["wrist_singularity"], axis_singularity=p["axis_singularity"],
+                   name=p["name"])
 
     @classmethod
     def default(cls) -> ToolChanger:

@@ -18,6 +18,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from manipulator_kinematics.plain import plain
 from tool_changer_kinematics.kinematics import BRANCHES, ToolChanger
 from tool_changer_kinematics.trajectory import paper_trajectory
 from tool_changer_kinematics.workspace import Workspace, sample, section
@@ -108,7 +109,7 @@ def animate_trajectory(arm: ToolChanger, path: Path) -> Path:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=plain(__doc__.splitlines()[0]))
     parser.add_argument("outdir", type=Path, help="directory for the PNG files (created)")
     parser.add_argument("--samples", type=int, default=1_000_000, help="Monte-Carlo samples (Fig. 5)")
     parser.add_argument("--section-samples", type=int, default=200_000,

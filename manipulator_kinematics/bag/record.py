@@ -1,7 +1,8 @@
 """mk_record: topics into a rosbag2 bag (mcap by default), from raw subscriptions, flushed as it goes.
 
     mk_record [-o BAG] [-s mcap|sqlite3] [--overwrite] [--topics T ...] [--type T:=pkg/msg/Type ...]
-              [--duration S] [--flush-interval S] [--visuals [PARAMS ...]] [--ros-args ...]
+              [--duration S] [--flush-interval S] [--visuals [PARAMS ...]] [--frame-prefix NS:=PREFIX ...]
+              [--root-frame FRAME] [--ros-args ...]
 
 Default topics: every topic of the registered machines' nodes (``Machine.topics``). Topic names,
 relative or absolute, are resolved in the recorder's namespace (``--ros-args -r __ns:=/machine1``)
@@ -20,7 +21,6 @@ from __future__ import annotations
 import argparse
 import importlib
 import math
-import signal
 import sys
 import threading
 import time
@@ -33,6 +33,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
+from manipulator_kinematics import stopping
 from manipulator_kinematics.bag.cli import guarded, parse_assignments, split_ros_args
 from manipulator_kinematics.bag.topics import package_topics
 from manipulator_kinematics.bag.types import BagError, TopicQos
@@ -230,6 +231,14 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
         "(default: the shipped ones)",
     )
     parser.add_argument(
+        "--frame-prefix", nargs="+", default=[], metavar="NS:=PREFIX",
+        help="with --visuals: the frame prefix of the machine in namespace NS, e.g. /m1:=m1/ (as its "
+        "nodes' frame_prefix; default: none for one machine, <ns>_<machine>/ for several)",
+    )
+    parser.add_argument("--root-frame", default="", metavar="FRAME",
+                        help="with --visuals: a static identity transform FRAME -> each machine's base "
+                        "frame (several machines in one TF tree)")
+    parser.add_argument(
         "--flush-interval", type=float, default=0.5, metavar="S", help="most data a SIGKILL can lose (s)"
     )
     args = parser.parse_args(argv)
@@ -245,19 +254,19 @@ def record(argv: Sequence[str]) -> int:
     if (output.exists() or output.is_symlink()) and not args.overwrite:
         raise BagError(f"{output} exists; not overwriting it (use --overwrite)")
     given = parse_assignments(args.types, "--type")
+    prefixes = parse_assignments(args.frame_prefix, "--frame-prefix")  # refused before recording
     try:
         executor = executor_name()
     except ConfigError as error:
         raise BagError(str(error)) from None
 
-    # Our own handlers instead of rclpy's: those shut the context down at once, losing what is
-    # still queued, and their SIGINT also raises KeyboardInterrupt wherever the recorder is, which
-    # could cut a bag write in half. SIGTERM (what launch and test harnesses send) stops the
-    # recording like Ctrl-C.
+    # No handlers from rclpy: those shut the context down at once, losing what is still queued.
+    # A signal (SIGTERM too: what launch and test harnesses send) only sets ``stop``, whatever the
+    # recorder is doing (manipulator_kinematics.stopping), and the recording then ends itself.
+    stopping.hold()
     rclpy.init(args=[NAME, *ros_args], signal_handler_options=SignalHandlerOptions.NO)
     stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stopping.on_request(stop.set)
     node = Node("bag_recorder")
     writer: BagWriter | None = None
     try:
@@ -284,7 +293,7 @@ def record(argv: Sequence[str]) -> int:
         total = sum(recorder.counts.values())
         say(f"{total} messages on {len(recorder.counts)} topics in {output}")
         if args.visuals is not None:
-            add_visuals_to_recording(output, args.visuals)
+            add_visuals_to_recording(output, args.visuals, prefixes, args.root_frame)
         return 0
     finally:
         if writer is not None:
@@ -293,13 +302,14 @@ def record(argv: Sequence[str]) -> int:
         rclpy.try_shutdown()
 
 
-def add_visuals_to_recording(output: Path, params: Sequence[Path]) -> None:
+def add_visuals_to_recording(output: Path, params: Sequence[Path], frame_prefix: dict[str, str] | None = None,
+                             root_frame: str = "") -> None:
     """``--visuals``: the recorded bag rewritten with its visual topics (the recording stays as it
     is when that fails)."""
     from manipulator_kinematics.bag.visual import add_visuals  # URDF and scene code: only when asked
 
     try:
-        added = add_visuals(output, output, params=params)
+        added = add_visuals(output, output, params=params, frame_prefix=frame_prefix, root_frame=root_frame)
     except BagError as error:
         raise BagError(f"{output} is recorded, but no visual topics were added: {error}") from None
     for item in added:

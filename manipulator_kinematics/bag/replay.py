@@ -1,7 +1,7 @@
 """mk_replay: publish a bag's messages again with their recorded timing.
 
     mk_replay BAG [--rate R] [--loop] [--topics T ...] [--remap FROM:=TO ...] [--start-offset S]
-           [--wait-for-subscribers S] [--recover] [--ros-args ...]
+           [--wait-for-subscribers S] [--recover] [--max-gap S] [--skip-gaps] [--ros-args ...]
 
 Messages go out as recorded (raw CDR, header stamps untouched) on their recorded topic names,
 or the names given with ``--remap`` (a relative target is resolved in the replayer's namespace).
@@ -10,12 +10,18 @@ slash (``joint_states`` is the bag's ``/joint_states``).
 Message k is published ``(t_k - t_start) / rate`` seconds after the start, t being the record
 time and t_start the first message's plus ``--start-offset``. Publishers use the recorded QoS
 (reliability, durability) with a deep queue.
+
+Record times are not trusted: a gap longer than ``--max-gap`` (default 10 s of record time)
+between two played messages, one flipped byte of a time stamp for instance, refuses the bag
+before anything is published (exit 1, one line); with ``--skip-gaps`` each such gap is cut out
+(the next message goes out at once) and named in one line. SIGINT and SIGTERM end the replay
+after the message being published, at any moment, with exit 0
+(:mod:`manipulator_kinematics.stopping`).
 """
 
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 import time
 from collections.abc import Sequence
@@ -26,7 +32,9 @@ import rclpy
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 
+from manipulator_kinematics import stopping
 from manipulator_kinematics.bag.cli import guarded, parse_assignments, split_ros_args
 from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.bag.record import QUEUE_DEPTH, message_class
@@ -37,6 +45,8 @@ NAME = "mk_replay"
 MAX_SLEEP = 0.1
 ACK_TIMEOUT = 5.0
 MATCH_SETTLE = 0.5
+#: Longest gap between two played messages (record time, s) that is played as recorded.
+MAX_GAP = 10.0
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
@@ -72,7 +82,19 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
         action="store_true",
         help="play an mcap bag whose recorder was killed, up to its last flush",
     )
+    parser.add_argument(
+        "--max-gap",
+        type=float,
+        default=MAX_GAP,
+        metavar="S",
+        help=f"refuse a bag with more than S s between two messages (default {MAX_GAP:g}): a damaged stamp",
+    )
+    parser.add_argument(
+        "--skip-gaps", action="store_true", help="play on across such a gap: the next message at once"
+    )
     args = parser.parse_args(argv)
+    if not args.max_gap > 0:
+        parser.error(f"--max-gap must be positive, got {args.max_gap}")
     if not args.rate > 0:
         parser.error(f"--rate must be positive, got {args.rate}")
     if args.start_offset < 0:
@@ -104,7 +126,7 @@ def wait_for_subscribers(node: Node, publishers: dict, timeout: float) -> None:
     that second half, which the publishing side cannot observe.
     """
     deadline = time.monotonic() + timeout
-    while rclpy.ok():
+    while not stopping.requested():
         alone = [topic for topic, pub in publishers.items() if pub.get_subscription_count() == 0]
         if not alone:
             time.sleep(MATCH_SETTLE)
@@ -120,10 +142,11 @@ def wait_for_subscribers(node: Node, publishers: dict, timeout: float) -> None:
 @dataclass(frozen=True)
 class Playlist:
     """What replay publishes: messages (topic, record time ns, CDR bytes) in record order, from
-    ``start`` on, each topic with its message class, recorded QoS and published name."""
+    t_start on, each topic with its message class, recorded QoS and published name; ``due``:
+    when each message goes out, ns of record time after t_start (skipped gaps taken out)."""
 
     messages: list[tuple[str, int, bytes]]
-    start: int
+    due: list[int]
     classes: dict[str, type]
     qos: dict[str, TopicQos | None]
     names: dict[str, str]
@@ -149,13 +172,35 @@ def load(args: argparse.Namespace) -> Playlist:
             f"--start-offset {args.start_offset:g} s is past the end of the selected messages "
             f"({(messages[-1][1] - messages[0][1]) * 1e-9:.3f} s)"
         )
+    messages = [m for m in messages if m[1] >= start]
     return Playlist(
         messages,
-        start,
+        schedule(messages, start, args),
         classes,
         {topic: bag.topics[topic].qos for topic in topics},
         {topic: remap.get(topic, topic) for topic in topics},
     )
+
+
+def schedule(messages: Sequence[tuple[str, int, bytes]], start: int, args: argparse.Namespace) -> list[int]:
+    """When each message goes out (ns of record time after ``start``): its record time, less every
+    gap longer than ``--max-gap`` before it when ``--skip-gaps`` is given; BagError for such a gap
+    without it."""
+    limit, skipped, due = int(args.max_gap * 1e9), 0, []
+    previous = start
+    for index, (topic, log_time, _) in enumerate(messages):
+        gap = log_time - previous
+        if gap > limit:
+            where = (f"{gap * 1e-9:.1f} s of record time without a message before message {index} "
+                     f"({topic}, record time {log_time} ns)")
+            if not args.skip_gaps:
+                raise BagError(f"{args.bag}: {where}, more than --max-gap {args.max_gap:g} s (a damaged "
+                               "stamp?); --skip-gaps plays on across it")
+            print(f"{NAME}: skipping {where}", file=sys.stderr)
+            skipped += gap
+        due.append(log_time - start - skipped)
+        previous = log_time
+    return due
 
 
 def replay(argv: Sequence[str]) -> int:
@@ -163,8 +208,11 @@ def replay(argv: Sequence[str]) -> int:
     args = parse_args(ours)
     playlist = load(args)
 
-    rclpy.init(args=[NAME, *ros_args])
-    signal.signal(signal.SIGTERM, lambda *_: rclpy.try_shutdown())
+    # rclpy's handlers would shut the context down from their own thread, under a publish() in
+    # progress (an RCLError): a signal is only recorded, and the loop ends after the message it
+    # is publishing.
+    stopping.hold()
+    rclpy.init(args=[NAME, *ros_args], signal_handler_options=SignalHandlerOptions.NO)
     node = Node("bag_replay")
     try:
         publishers = {
@@ -174,15 +222,13 @@ def replay(argv: Sequence[str]) -> int:
         if args.wait_for_subscribers > 0:
             wait_for_subscribers(node, publishers, args.wait_for_subscribers)
         played = 0
-        while rclpy.ok():
+        while not stopping.requested():
             wall0 = time.monotonic()
-            for topic, log_time, raw in playlist.messages:
-                if log_time < playlist.start:
-                    continue
-                due = wall0 + (log_time - playlist.start) * 1e-9 / args.rate
-                while rclpy.ok() and (wait := due - time.monotonic()) > 0:
+            for (topic, _, raw), due_ns in zip(playlist.messages, playlist.due):
+                due = wall0 + due_ns * 1e-9 / args.rate
+                while not stopping.requested() and (wait := due - time.monotonic()) > 0:
                     time.sleep(min(wait, MAX_SLEEP))
-                if not rclpy.ok():
+                if stopping.requested():
                     break
                 publishers[topic].publish(raw)
                 played += 1

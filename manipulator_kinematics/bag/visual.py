@@ -10,7 +10,14 @@
   fixed ones on /tf_static; the values of every moving joint come from ``Scene.joints``, mimic
   joints follow their URDF rule); without one, ``base_link`` -> each frame of the scene;
 * ``machine_markers`` (visualization_msgs/MarkerArray): the scene as markers, as the
-  ``machine_markers`` node draws it, at most ``rate`` per second.
+  ``machine_markers`` node draws it, at most ``rate`` per second;
+* with a ``machine_tilt`` topic in the machine's namespace (geometry_msgs/Vector3Stamped: world up
+  in its header's frame, a URDF link, as excavator_imu_state publishes it from the cab IMU): at
+  every state with a valid tilt at or before its stamp, ``base_level`` -> ``base_link`` on /tf,
+  the gravity-aligned level frame as the parent (REP 105, like odom -> base_link;
+  :func:`manipulator_kinematics.model.level_rotation`), so the tree's root is ``base_level``.
+  ``extra_static`` transforms (e.g. ``site`` -> ``base_level``, the machine's place on a site)
+  go on /tf_static with the URDF's fixed joints.
 
 The machines are found as ``evaluate`` finds them (:func:`manipulator_kinematics.bag.evaluate.machines_in`):
 through the registry, with the models of ``params`` files or the shipped ones, in every
@@ -19,6 +26,10 @@ namespace of the bag. A machine's state is gathered by joint name from its Joint
 node), stamped with the header stamp and written at the record time of the message that
 completed it. With one machine in the bag the frames are the URDF's own names; with several,
 each machine's frames (and the links of its URDF) get the prefix ``<namespace>_<machine>/``.
+``frame_prefix`` ({namespace: prefix}, e.g. ``{"/m1": "m1/"}``) sets a machine's prefix instead,
+as the nodes' and robot_state_publisher's ``frame_prefix`` do at run time; ``root_frame`` (e.g.
+``world``) adds a static identity transform from it to each machine's base frame, so several
+machines form one TF tree.
 Messages are serialised with rosbags' ROS 2 Jazzy type store.
 """
 
@@ -40,14 +51,15 @@ from manipulator_kinematics.bag.reader import BagReader, TopicArrays
 from manipulator_kinematics.bag.topics import JOINT_STATE, package_topics
 from manipulator_kinematics.bag.types import BagError, TopicQos
 from manipulator_kinematics.bag.writer import BagWriter
-from manipulator_kinematics.model import matrix_quaternion
+from manipulator_kinematics.model import level_rotation, matrix_quaternion
 from manipulator_kinematics.registry import Machine
 from manipulator_kinematics.scene import Scene, solids
-from manipulator_kinematics.urdf import rotation_rpy
+from manipulator_kinematics.urdf import prefixed_urdf, rotation_rpy
 
 #: JointState topics a machine's state is gathered from (as config/machine_markers.yaml).
 STATE_TOPICS = ("joint_states", "cylinder_lengths")
 BASE_FRAME = "base_link"
+TILT, LEVEL_FRAME = "machine_tilt", "base_level"
 MARKERS = "machine_markers"
 TF, TF_STATIC, DESCRIPTION = "/tf", "/tf_static", "/robot_description"
 LATCHED = TopicQos(reliable=True, transient_local=True, depth=1)
@@ -118,18 +130,41 @@ def joint_transforms(joints: Sequence[UrdfJoint], values: Mapping[str, np.ndarra
     return out
 
 
-def prefixed_urdf(text: str, prefix: str) -> str:
-    """The URDF with ``prefix`` before every link name (several machines in one tf tree)."""
-    if not prefix:
-        return text
-    root = ET.fromstring(text)
-    for link in root.iter("link"):
-        link.set("name", prefix + link.get("name"))
-    for joint in root.iter("joint"):
-        for end in ("parent", "child"):
-            element = joint.find(end)
-            element.set("link", prefix + element.get("link"))
-    return ET.tostring(root, encoding="unicode")
+def link_pose(joints: Sequence[UrdfJoint], moving: Mapping[str, np.ndarray], frame: str,
+              root: str = BASE_FRAME) -> np.ndarray:
+    """``root`` -> ``frame`` (..., 4, 4) through the URDF's joints (``moving``: joint_transforms)."""
+    parent_of = {j.child: j for j in joints}
+    pose = np.eye(4)
+    while frame != root:
+        joint = parent_of.get(frame)
+        if joint is None:
+            raise BagError(f"frame {frame!r} is not a link of the URDF below {root!r}")
+        pose = moving.get(joint.name, joint.origin) @ pose
+        frame = joint.parent
+    return pose
+
+
+def level_poses(tilt: TopicArrays, stamp_ns: np.ndarray, joints: Sequence[UrdfJoint],
+                moving: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Which states (M,) have a tilt and base_level -> base_link (K, 4, 4) for them: the latest
+    finite, unit (1e-3), upward tilt at or before each stamp, turned into base_link through the
+    URDF at that state."""
+    up = np.column_stack([tilt[f"vector.{axis}"] for axis in "xyz"]).astype(float)
+    valid = np.isfinite(up).all(axis=1) & (np.abs(np.linalg.norm(up, axis=1) - 1.0) <= 1e-3) & (up[:, 2] > 0)
+    frames = set(np.asarray(tilt["header.frame_id"])[valid].tolist())
+    if len(frames) > 1:
+        raise BagError(f"{tilt.topic}: the tilt changes frame ({sorted(frames)})")
+    stamps = tilt.stamp_ns()[valid]
+    order = np.argsort(stamps, kind="stable")
+    row = np.searchsorted(stamps[order], stamp_ns, side="right") - 1
+    have = row >= 0
+    if not frames or not have.any():
+        return have, np.empty((0, 4, 4))
+    frame = frames.pop() or BASE_FRAME
+    rotation = np.broadcast_to(link_pose(joints, moving, frame)[..., :3, :3], (len(stamp_ns), 3, 3))[have]
+    pose = np.broadcast_to(np.eye(4), (int(have.sum()), 4, 4)).copy()
+    pose[:, :3, :3] = level_rotation(np.einsum("kij,kj->ki", rotation, up[valid][order][row[have]]))
+    return have, pose
 
 
 # ---------------------------------------------------------------------------------------- states
@@ -258,8 +293,12 @@ class Added:
     topics: dict[str, tuple[str, TopicQos, list[int], list[bytes]]]
 
 
-def visual_topics(bag: BagReader, params: Sequence[Path] = (), rate: float = 30.0) -> list[Added]:
-    """The visual topics (module docstring) of every machine with a scene hook found in ``bag``."""
+def visual_topics(bag: BagReader, params: Sequence[Path] = (), rate: float = 30.0,
+                  frame_prefix: Mapping[str, str] | None = None, root_frame: str = "",
+                  extra_static: Sequence[tuple[str, str, np.ndarray]] = ()) -> list[Added]:
+    """The visual topics (module docstring) of every machine with a scene hook found in ``bag``;
+    ``extra_static``: (parent, child, (4, 4) pose) transforms for /tf_static."""
+    frame_prefix = {"/" + ns.strip("/"): p for ns, p in (frame_prefix or {}).items()}
     setup = load_setup(params)
     ours = package_topics()
     grouped: dict[str, dict[str, str]] = {}
@@ -268,8 +307,8 @@ def visual_topics(bag: BagReader, params: Sequence[Path] = (), rate: float = 30.
         if split is not None and info.count and info.msgtype == ours[split[1]]:
             grouped.setdefault(split[0], {})[split[1]] = topic
     # The JointState topics are all it takes: to find the machines (evaluate's rule) and their states.
-    arrays = bag.arrays([t for names in grouped.values() for t in names.values()
-                         if bag.topics[t].msgtype == JOINT_STATE])
+    arrays = bag.arrays([t for names in grouped.values() for n, t in names.items()
+                         if bag.topics[t].msgtype == JOINT_STATE or n == TILT])
     found = []
     for namespace, names in sorted(grouped.items()):
         data = {name: arrays[topic] for name, topic in names.items() if topic in arrays}
@@ -277,7 +316,8 @@ def visual_topics(bag: BagReader, params: Sequence[Path] = (), rate: float = 30.
     added = []
     for namespace, data, machine in found:
         space = namespace.strip("/").replace("/", "_")
-        prefix = "" if len(found) == 1 else f"{space}_{machine.name}/".lstrip("_")
+        automatic = "" if len(found) == 1 else f"{space}_{machine.name}/".lstrip("_")
+        prefix = frame_prefix.get(namespace, automatic)
         base = "" if namespace == "/" else namespace
         model = setup.model(machine)
         log_time, stamp, states = gather_states(data, machine.joint_names(model))
@@ -301,6 +341,10 @@ def visual_topics(bag: BagReader, params: Sequence[Path] = (), rate: float = 30.
                 poses = list(scene.frames.values())
             tf_raw += tf_messages(t_stamp, edges, poses)
             tf_times += t_log.tolist()
+            if TILT in data and urdf is not None:
+                have, level = level_poses(data[TILT], t_stamp, joints, moving)
+                tf_raw += tf_messages(t_stamp[have], [(prefix + LEVEL_FRAME, prefix + BASE_FRAME)], [level])
+                tf_times += t_log[have].tolist()
             shown = decimate(t_stamp, rate)
             marker_raw += marker_messages(scene.take(shown), t_stamp[shown], prefix + BASE_FRAME)
             marker_times += t_log[shown].tolist()
@@ -308,12 +352,17 @@ def visual_topics(bag: BagReader, params: Sequence[Path] = (), rate: float = 30.
         topics[TF] = ("tf2_msgs/msg/TFMessage", TopicQos(reliable=True, depth=100), tf_times, tf_raw)
         topics[f"{base}/{MARKERS}"] = ("visualization_msgs/msg/MarkerArray", TopicQos(reliable=True),
                                        marker_times, marker_raw)
+        extras = () if added else extra_static  # once, with the first machine
+        fixed = [j for j in joints if j.kind == "fixed"]
+        edges = [(prefix + j.parent, prefix + j.child) for j in fixed] + [e[:2] for e in extras]
+        origins = [j.origin[None] for j in fixed] + [e[2][None] for e in extras]
+        if root_frame:
+            edges.append((root_frame, prefix + BASE_FRAME))
+            origins.append(np.eye(4)[None])
+        if edges:
+            static = tf_messages(np.array([stamp[0]]), edges, origins)
+            topics[TF_STATIC] = ("tf2_msgs/msg/TFMessage", LATCHED, [first], static)
         if urdf is not None:
-            fixed = [j for j in joints if j.kind == "fixed"]
-            if fixed:
-                edges = [(prefix + j.parent, prefix + j.child) for j in fixed]
-                static = tf_messages(np.array([stamp[0]]), edges, [j.origin[None] for j in fixed])
-                topics[TF_STATIC] = ("tf2_msgs/msg/TFMessage", LATCHED, [first], static)
             topics[f"{base}{DESCRIPTION}"] = ("std_msgs/msg/String", LATCHED, [first],
                                              [string_message(prefixed_urdf(urdf, prefix))])
         added.append(Added(machine.name, namespace, len(states), topics))
@@ -328,13 +377,16 @@ def add_visuals(
     rate: float = 30.0,
     overwrite: bool = False,
     storage: str | None = None,
+    frame_prefix: Mapping[str, str] | None = None,
+    root_frame: str = "",
+    extra_static: Sequence[tuple[str, str, np.ndarray]] = (),
 ) -> list[Added]:
     """Write ``output``: every message of the bag ``source`` and its visual topics (module
     docstring). ``output`` may be ``source`` itself: the new bag is written beside it and
     replaces it once complete. BagError if no registered machine with a scene is in the bag."""
     source, output = Path(source), Path(output)
     bag = BagReader(source)
-    added = visual_topics(bag, params, rate)
+    added = visual_topics(bag, params, rate, frame_prefix, root_frame, extra_static)
     if not added:
         raise BagError(f"{source}: no registered machine's state topics in the bag: nothing to draw")
     merged: dict[str, tuple[str, TopicQos, list[int], list[bytes]]] = {}
@@ -379,6 +431,7 @@ def add_visuals(
 
 
 __all__ = [
-    "Added", "UrdfJoint", "add_visuals", "decimate", "gather_states", "joint_transforms", "marker_messages",
+    "Added", "UrdfJoint", "add_visuals", "decimate", "gather_states", "joint_transforms", "level_poses",
+    "link_pose", "marker_messages",
     "tf_messages", "urdf_joints", "visual_topics",
 ]

@@ -60,17 +60,23 @@ def _type_name(cls: type) -> str:
     return f"{cls.__module__.split('.')[0]}/{cls.__name__}"
 
 
+def serialize_unpadded(message: Any) -> bytes:
+    """rclpy's CDR bytes of ``message`` up to its last value: rclpy's serializer leaves bytes
+    after some messages (empty sequences of doubles at the end: 4 bytes after a JointState with
+    an empty effort, 8 with empty velocity and effort), rmw's writer does not, and a bag reader
+    (:func:`cdr.walk`) takes at most 3 bytes of padding. The walk of the known type finds the end."""
+    raw = serialize_message(message)
+    return raw[: cdr.walk(raw, _type_name(type(message)), _schemas(type(message)), max_padding=64).end]
+
+
 class PackedMessage:
     """``template`` serialized once; :meth:`pack` returns its bytes with new values for the
     numeric fields under ``prefixes`` (``"header.stamp"``, ``"pose"``, ``"position"``), given in
     the order of the message definition. Strings and sequence lengths stay the template's."""
 
     def __init__(self, template: Any, prefixes: Sequence[str]) -> None:
-        raw = serialize_message(template)
-        # rclpy's serializer pads some messages (an empty sequence of doubles at the end) to a
-        # multiple of 8 bytes, rmw's writer does not: keep the bytes up to the last value, as sent.
-        layout = cdr.walk(raw, _type_name(type(template)), _schemas(type(template)), max_padding=7)
-        raw = raw[: layout.end]
+        raw = serialize_unpadded(template)
+        layout = cdr.walk(raw, _type_name(type(template)), _schemas(type(template)))
         wanted = [
             (offset, dtype, count)
             for path, dtype, offset, count, _ in layout.numbers

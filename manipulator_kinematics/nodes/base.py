@@ -6,6 +6,13 @@ Parameters, one dialect for every node (``config/<machine>.yaml`` or ``config/<x
 * the node's settings under ``/**/<node>: ros__parameters: {...}``: ``base_frame``,
   ``qos_depth``, ``warning_period``, ``topics.<key>`` and the node's own keys.
 
+Precedence, the same for every node (:func:`command_line_values`): the package's defaults file,
+then every ``--params-file`` in the order given (a later file wins; within one file the node's own
+section ``/**/<node>`` or ``/<ns>/<node>`` beats ``/**``), then every ``-p name:=value``, which
+wins over every params file wherever it stands on the command line. rcl alone orders sections by
+their first appearance, so ``-p`` lost to a ``/**/<node>`` section of a file that also held a
+``/**`` section; the node applies this rule to its parameters before it reads them.
+
 Rules (:func:`machine_section`): with no machine file on the command line a node runs the default
 machine of the package, and ``-p <section>.<key>:=v`` may change single values of it; a machine
 file that is given must be complete, and is never filled from the default machine. Unknown,
@@ -16,35 +23,88 @@ with a description: a run-time ``ros2 param set`` is refused with that reason.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, ClassVar
 
+import yaml
 from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from manipulator_kinematics.config import Schema, validate
+from manipulator_kinematics.config import Flag, Names, Number, Numbers, Schema, Text, validate
 from manipulator_kinematics.node_util import param
-from manipulator_kinematics.params import ConfigError, config_path, flatten, load_parameters, unflatten
+from manipulator_kinematics.params import (
+    ConfigError,
+    RosLoader,
+    config_path,
+    flatten,
+    load_parameters,
+    unflatten,
+)
 from manipulator_kinematics.registry import Machine
 
 #: Parameters rclpy declares on every node by itself.
 _RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
 
 
-def params_files(argv: Sequence[str]) -> list[Path]:
-    """The ``--params-file`` arguments inside ``--ros-args`` sections of a command line."""
-    files, in_ros_args, expect = [], False, False
+def ros_arguments(argv: Sequence[str]) -> list[tuple[str, str]]:
+    """(flag, value) of every ``--params-file`` and ``-p``/``--param`` inside ``--ros-args``, in order."""
+    found, in_ros_args, expect = [], False, None
     for arg in argv:
-        if expect:
-            files.append(Path(arg))
-            expect = False
+        if expect is not None:
+            found.append((expect, arg))
+            expect = None
         elif arg == "--ros-args":
             in_ros_args = True
         elif arg == "--":
             in_ros_args = False
-        elif in_ros_args and arg == "--params-file":
-            expect = True
-    return files
+        elif in_ros_args and arg in ("--params-file", "-p", "--param"):
+            expect = "-p" if arg == "--param" else arg
+    return found
+
+
+def params_files(argv: Sequence[str]) -> list[Path]:
+    """The ``--params-file`` arguments inside ``--ros-args`` sections of a command line."""
+    return [Path(value) for flag, value in ros_arguments(argv) if flag == "--params-file"]
+
+
+def command_line_values(node_name: str, argv: Sequence[str]) -> dict[str, Any]:
+    """The parameter values the command line gives the node ``node_name`` (fully qualified), flat,
+    by the one precedence rule (module docstring): params files in order, then ``-p``. A ``-p``
+    value is YAML, as rcl reads it; ``-p other_node:name:=v`` applies to that node only."""
+    files: dict[str, Any] = {}
+    assigned: dict[str, Any] = {}
+    base = node_name.rsplit("/", 1)[-1]
+    for flag, value in ros_arguments(argv):
+        if flag == "--params-file":
+            if Path(value).is_file():
+                files.update(flatten(load_parameters(value, node_name)))
+            continue
+        name, _, text = value.partition(":=")
+        target, _, name = name.rpartition(":")
+        if target in ("", base, node_name):
+            try:
+                assigned[name] = yaml.load(text, Loader=RosLoader) if text else ""
+            except yaml.YAMLError:  # rcl takes such a value as a string
+                assigned[name] = text
+    return {**files, **assigned}
+
+
+def apply_precedence(node: Node, argv: Sequence[str]) -> None:
+    """Give every parameter the value :func:`command_line_values` says it has (rcl's own merge can
+    differ: module docstring). Done before anything is read or declared read-only."""
+    for name, value in command_line_values(node.get_fully_qualified_name(), argv).items():
+        if name in _RCLPY_PARAMETERS or not node.has_parameter(name):
+            continue
+        current = node.get_parameter(name).value
+        if _plain(current) != value:
+            node.undeclare_parameter(name)
+            node.declare_parameter(name, value, ignore_override=True)
+
+
+def _plain(value: Any) -> Any:
+    return value if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") else list(value)
 
 
 def machine_section(node: Node, machine: Machine, argv: Sequence[str]) -> dict[str, Any]:
@@ -78,10 +138,60 @@ def node_settings(
 
 
 def declare(node: Node, values: Mapping[str, Any], schema: Schema, prefix: str = "") -> None:
-    """Declare every value (nested) read-only, described by its schema field's ``doc``."""
+    """Declare every value (nested) read-only: its schema field's ``doc`` (else what it takes) as
+    description, what it takes (:func:`describe`) as constraints, a single number's range."""
     for name, value in flatten(dict(values)).items():
         if value is not None:  # an optional setting left out: nothing to declare
-            param(node, f"{prefix}.{name}" if prefix else name, value, _doc(schema, name.split(".")))
+            spec = _field(schema, name.split("."))
+            bounds = None
+            if isinstance(spec, Number) and math.isfinite(spec.min) and math.isfinite(spec.max):
+                bounds = (spec.min, spec.max)
+            kind = describe(spec)
+            param(node, f"{prefix}.{name}" if prefix else name, value, getattr(spec, "doc", "") or kind,
+                  bounds, kind)
+
+
+def describe(spec: Any) -> str:
+    """What a schema field takes, for ``ros2 param describe``: kind, range and unit."""
+    if isinstance(spec, Number):
+        low = "(" if spec.exclusive_min else "["
+        kind = f"{'whole ' if spec.integer else ''}number in {low}{spec.min:g}, {spec.max:g}]"
+        return kind + (f" {spec.unit}" if spec.unit else "")
+    if isinstance(spec, Numbers):
+        count = "" if spec.count is None else f"{spec.count} "
+        return f"list of {count}numbers, each a {describe(spec.item)}"
+    if isinstance(spec, Names):
+        return f"list of {'' if spec.count is None else f'{spec.count} '}distinct names"
+    if isinstance(spec, Text):
+        if spec.choices:
+            return "one of " + ", ".join(spec.choices)
+        return "text" if spec.empty else "text, not empty"
+    if isinstance(spec, Flag):
+        return "true or false"
+    return ""
+
+
+#: Reliability of a node's input subscriptions (setting ``input_reliability``). A best-effort
+#: subscription hears reliable and best-effort publishers (a sensor driver on SensorDataQoS);
+#: a reliable one only reliable publishers, and lets none of their messages get lost. Each node's
+#: default is in its config file, with the reason (docs/architecture.md, "Input QoS").
+RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
+
+
+#: Setting ``frame_prefix`` of every node that publishes or accepts frame_ids.
+FRAME_PREFIX = Text(doc="put before base_frame (and every other frame_id the node publishes or accepts), as "
+                        "robot_state_publisher's frame_prefix: 'm1/' puts a machine's frames under m1/")
+
+
+def input_reliability(what: str) -> Text:
+    """The ``input_reliability`` setting of a node whose inputs are ``what``."""
+    return Text(choices=tuple(RELIABILITY), doc=f"QoS reliability of the subscriptions to {what}: "
+                "best_effort hears both kinds of publisher, reliable only reliable ones")
+
+
+def input_qos(depth: int, reliability: str) -> QoSProfile:
+    """Keep-last ``depth`` subscription QoS with the ``input_reliability`` setting's policy."""
+    return QoSProfile(depth=depth, reliability=RELIABILITY[reliability])
 
 
 class MachineNode(Node):
@@ -96,6 +206,7 @@ class MachineNode(Node):
 
     def __init__(self, node_name: str, machine: Machine, argv: Sequence[str]) -> None:
         super().__init__(node_name, automatically_declare_parameters_from_overrides=True)
+        apply_precedence(self, argv)
         self.machine = machine
         section = machine_section(self, machine, argv)
         declare(self, section, machine.schema, machine.section)
@@ -108,13 +219,13 @@ def _values(node: Node, prefix: str) -> dict[str, Any]:
     return {name: parameter.value for name, parameter in node.get_parameters_by_prefix(prefix).items()}
 
 
-def _doc(schema: Schema, path: list[str]) -> str:
+def _field(schema: Schema, path: list[str]) -> Any:
     spec: Any = schema
     for part in path:
         if not isinstance(spec, Mapping) or part not in spec:
-            return ""
+            return None
         spec = spec[part]
-    return getattr(spec, "doc", "")
+    return spec
 
 
 def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
@@ -125,4 +236,19 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-__all__ = ["ConfigError", "MachineNode", "declare", "machine_section", "node_settings", "params_files"]
+__all__ = [
+    "FRAME_PREFIX",
+    "RELIABILITY",
+    "ConfigError",
+    "MachineNode",
+    "apply_precedence",
+    "command_line_values",
+    "declare",
+    "describe",
+    "input_qos",
+    "input_reliability",
+    "machine_section",
+    "node_settings",
+    "params_files",
+    "ros_arguments",
+]

@@ -12,7 +12,9 @@ from collections.abc import Mapping
 from typing import Any
 
 from manipulator_kinematics.config import REQUIRED, Schema
+from manipulator_kinematics.nodes.base import describe
 from manipulator_kinematics.params import config_path, flatten, load_parameters
+from manipulator_kinematics.plain import plain
 from manipulator_kinematics.registry import Machine, machines
 
 HELP_FLAGS = ("-h", "--help")
@@ -28,7 +30,7 @@ def wants_help(argv: list[str]) -> bool:
 def help_text(node_class: type, machine: Machine | None, node_name: str, defaults_file: str | None) -> str:
     """The help of ``node_class`` run as ``node_name`` for ``machine`` (None: any registered one,
     chosen by the params file given)."""
-    doc = inspect.getdoc(inspect.getmodule(node_class)) or ""
+    doc = plain(inspect.getdoc(inspect.getmodule(node_class)) or "")
     settings_file = defaults_file or (machine.config_file if machine else "")
     defaults = load_parameters(config_path(settings_file), f"/**/{node_name}")
     settings = _rows(node_class.SETTINGS, flatten(defaults))
@@ -70,7 +72,8 @@ def _rows(schema: Schema, defaults: Mapping[str, Any], prefix: str = "") -> list
         full = f"{prefix}.{name}" if prefix else name
         value = defaults.get(name, spec.default)
         shown = "(required)" if value is REQUIRED else ("(none)" if value is None else repr(value))
-        rows.append(f"  {full} = {shown}" + (f"  # {spec.doc}" if spec.doc else ""))
+        what = spec.doc or describe(spec)  # a machine key without a doc: its kind, range and unit
+        rows.append(f"  {full} = {shown}" + (f"  # {what}" if what else ""))
     return rows
 
 

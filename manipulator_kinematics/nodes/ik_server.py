@@ -21,9 +21,11 @@ refused where they enter: a target farther from the base than 1000 x the machine
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from sensor_msgs.msg import JointState
 
 from manipulator_kinematics.config import Text
 from manipulator_kinematics.joint_state import (
@@ -33,14 +35,22 @@ from manipulator_kinematics.joint_state import (
     joint_values,
 )
 from manipulator_kinematics.model import IKStatus, RequestError, describe_limits, pose_matrix
-from manipulator_kinematics.nodes.base import MachineNode
-from manipulator_kinematics.nodes.messages import joint_state, pose_array, pose_stamped, twist_stamped
+from manipulator_kinematics.nodes.base import FRAME_PREFIX, MachineNode
+from manipulator_kinematics.nodes.messages import (
+    joint_state,
+    joint_trajectory,
+    pose_array,
+    pose_stamped,
+    twist_stamped,
+)
 from manipulator_kinematics.registry import Machine
+from manipulator_kinematics.time_scaling import TimeScaling
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes
-from manipulator_kinematics_interfaces.srv import SolveFK, SolveIK
+from manipulator_kinematics_interfaces.srv import PlanPath, SolveFK, SolveIK
 
 SETTINGS = {
     "base_frame": Text(empty=False, doc="frame of targets and results; an empty target frame_id means it"),
+    "frame_prefix": FRAME_PREFIX,
 }
 
 CODES = {
@@ -68,7 +78,7 @@ class IKServerNode(MachineNode):
 
     def __init__(self, node_name: str, machine: Machine, argv: Sequence[str]) -> None:
         super().__init__(node_name, machine, argv)
-        self.frame = self.settings["base_frame"]
+        self.frame = self.settings["frame_prefix"] + self.settings["base_frame"]
         self.joint_names = machine.joint_names(self.model)
         self.limits = machine.limits(self.model)
         self.max_distance = PLAUSIBILITY_FACTOR * max(self._reach(), 1.0)
@@ -95,7 +105,8 @@ class IKServerNode(MachineNode):
                            f"target position {position.tolist()} is beyond {PLAUSIBILITY_FACTOR:g} x the "
                            f"machine's reach (|coordinate| <= {self.max_distance:.6g} m): implausible")
         # The norm of a finite quaternion can still overflow (1e308): that is not a rotation either.
-        norm = float(np.linalg.norm(quaternion))
+        with np.errstate(over="ignore"):  # inf: refused below, not a RuntimeWarning on stderr
+            norm = float(np.linalg.norm(quaternion))
         if request.use_orientation and not (np.isfinite(norm) and norm >= 1e-9):
             raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
                            f"target orientation is not a rotation: {quaternion.tolist()}")
@@ -104,14 +115,7 @@ class IKServerNode(MachineNode):
             # A machine may answer some modes in other joints (the palletizer's D-H angles).
             names_for = getattr(self.model, "joint_names_for", None)
             names = self.joint_names if names_for is None else tuple(names_for(mode))
-            seed = None
-            if len(request.seed.name) or len(request.seed.position):
-                try:
-                    seed, _ = joint_values(request.seed, names, require_position=True)
-                    if tuple(names) == tuple(self.limits.names):  # limits are known in these joints
-                        check_plausible_positions(seed, names, self.limits.lower, self.limits.upper)
-                except InputError as error:
-                    raise Rejected(KinematicsErrorCodes.INVALID_ROBOT_STATE, f"seed: {error}") from None
+            seed = self._seed(request.seed, names)
             target = pose_matrix(position, quaternion if request.use_orientation else None)
             result = self.model.solve_ik(target, use_orientation=request.use_orientation, mode=mode,
                                          seed=seed, branch=request.branch or None)
@@ -121,10 +125,8 @@ class IKServerNode(MachineNode):
         response.message = result.note()
         if not bool(result.ok):
             # A valid candidate can exist without a selection (the requested branch is not valid):
-            # the code is then the best failure, never SUCCESS with success = false.
-            failed = result.status[result.status != IKStatus.SUCCESS]
-            raise Rejected(CODES[IKStatus(int(failed.min())) if failed.size else IKStatus.INVALID],
-                           response.message)
+            # the code is then that branch's failure, never SUCCESS with success = false.
+            raise Rejected(CODES[result.failure(branch=request.branch or None)], response.message)
         ordered = result.ordered()
         if not (np.all(np.isfinite(result.solution)) and np.all(np.isfinite(result.q[ordered]))):
             raise Rejected(KinematicsErrorCodes.FAILURE,
@@ -169,6 +171,19 @@ class IKServerNode(MachineNode):
         q = np.random.default_rng(0).uniform(lower, upper, (4096, len(lower)))
         return float(np.max(np.linalg.norm(self.model.fkine(q)[..., :3, 3], axis=-1)))
 
+    def _seed(self, seed: JointState, names: Sequence[str]) -> np.ndarray | None:
+        """The seed's positions in ``names`` (None: no seed given); INVALID_ROBOT_STATE when it
+        lacks a joint or is further outside the limits than 1000 x a joint's range."""
+        if not (len(seed.name) or len(seed.position)):
+            return None
+        try:
+            q, _ = joint_values(seed, names, require_position=True)
+            if tuple(names) == tuple(self.limits.names):  # limits are known in these joints
+                check_plausible_positions(q, names, self.limits.lower, self.limits.upper)
+        except InputError as error:
+            raise Rejected(KinematicsErrorCodes.INVALID_ROBOT_STATE, f"seed: {error}") from None
+        return q
+
     def _check_frame(self, frame_id: str) -> None:
         if frame_id not in ("", self.frame):
             raise Rejected(KinematicsErrorCodes.FRAME_TRANSFORM_FAILURE,
@@ -188,3 +203,89 @@ class IKServerNode(MachineNode):
             response.message = f"internal error: {error!r}"
         return response
 
+
+
+class Plan(Protocol):
+    """What a machine's planner returns to :class:`PlanPathServer`: ``timing`` (None without a
+    point), ``ok`` (the first waypoint is solvable), ``truncated`` (the path ends short of the
+    last waypoint), ``last_waypoint`` (-1: none) and ``message``."""
+
+    timing: TimeScaling | None
+    ok: bool
+    truncated: bool
+    last_waypoint: int
+    message: str
+
+
+class PlanPathServer(IKServerNode):
+    """The IK/FK server plus ``plan_path`` (manipulator_kinematics_interfaces/srv/PlanPath): one
+    request check and one answer for every machine; the machine gives :attr:`PLAN_MODES`,
+    :attr:`MAX_WAYPOINTS` and :meth:`plan`.
+
+    Refused before any work, with success = false, ``last_reachable_waypoint`` -1 and no points:
+    an unknown mode (INVALID_MODE); no waypoint, more than MAX_WAYPOINTS, one not finite or
+    beyond 1000 x the reach (INVALID_GOAL_CONSTRAINTS); a seed as in solve_ik
+    (INVALID_ROBOT_STATE); a request the planner refuses, ValueError (INVALID_GOAL_CONSTRAINTS).
+    A plan that ends short answers NO_IK_SOLUTION with the reason, ``last_reachable_waypoint``
+    and the trajectory up to there. plan_path runs in a callback group of its own on two threads
+    (``THREADS``), so solve_ik and solve_fk are answered while a plan is computed."""
+
+    # plan_path (a group of its own) served beside solve_ik/solve_fk (the default group): the
+    # largest plans take seconds (the pump boom's 20,000 points 2-3 s; the excavator allows more).
+    THREADS = 2
+    #: Modes plan_path takes ("" is always the default).
+    PLAN_MODES: ClassVar[tuple[str, ...]] = ()
+    #: Most waypoints of one request (None: only the planner's bounds).
+    MAX_WAYPOINTS: ClassVar[int | None] = None
+
+    def __init__(self, node_name: str, machine: Machine, argv: Sequence[str]) -> None:
+        super().__init__(node_name, machine, argv)
+        self.create_service(PlanPath, "plan_path", self.plan_path,
+                            callback_group=MutuallyExclusiveCallbackGroup())
+
+    def plan(self, request: PlanPath.Request, waypoints: np.ndarray, seed: np.ndarray | None) -> Plan:
+        """The machine's plan through ``waypoints`` (K, 3) (checked finite and plausible) from
+        ``seed`` (joints, or None); raises :class:`Rejected`, or ValueError for a request out of
+        the planner's bounds."""
+        raise NotImplementedError
+
+    def plan_path(self, request: PlanPath.Request, response: PlanPath.Response) -> PlanPath.Response:
+        response.last_reachable_waypoint = -1
+        return self._answer(self._plan_path, request, response)
+
+    def _plan_path(self, request: PlanPath.Request, response: PlanPath.Response) -> None:
+        if request.mode not in ("", *self.PLAN_MODES):
+            raise Rejected(KinematicsErrorCodes.INVALID_MODE,
+                           f"unknown mode {request.mode!r}; known: {', '.join(self.PLAN_MODES)}")
+        count, most = len(request.waypoints), self.MAX_WAYPOINTS
+        if count == 0 or (most is not None and count > most):
+            wanted = "at least one" if most is None else f"1 to {most}"
+            raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
+                           f"waypoints: need {wanted}, got {count}")
+        waypoints = np.array([[p.x, p.y, p.z] for p in request.waypoints], dtype=float).reshape(-1, 3)
+        if not np.all(np.isfinite(waypoints)):
+            raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS, "waypoints must be finite")
+        far = np.flatnonzero(np.max(np.abs(waypoints), axis=1) > self.max_distance)
+        if len(far):
+            raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
+                           f"waypoint {far[0]} {waypoints[far[0]].tolist()} is beyond "
+                           f"{PLAUSIBILITY_FACTOR:g} x the machine's reach (|coordinate| <= "
+                           f"{self.max_distance:.6g} m): implausible")
+        seed = self._seed(request.seed, self.joint_names)
+        try:
+            plan = self.plan(request, waypoints, seed)
+        except ValueError as error:  # a request out of the planner's bounds
+            raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS, str(error)) from None
+        response.message = plan.message
+        response.last_reachable_waypoint = plan.last_waypoint
+        response.trajectory.header.frame_id = self.frame
+        response.trajectory.joint_names = list(self.joint_names)
+        if plan.timing is not None:
+            try:
+                response.trajectory = joint_trajectory(self.frame, self.joint_names, plan.timing.trajectory)
+            except ValueError as error:
+                raise Rejected(KinematicsErrorCodes.FAILURE, f"the plan cannot be sent: {error}") from None
+        if not plan.ok or plan.truncated:
+            raise Rejected(KinematicsErrorCodes.NO_IK_SOLUTION, plan.message)
+        response.success = True
+        response.error_code.val = KinematicsErrorCodes.SUCCESS

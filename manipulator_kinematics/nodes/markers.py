@@ -37,7 +37,13 @@ from visualization_msgs.msg import Marker, MarkerArray
 from manipulator_kinematics.config import Names, Number, Text
 from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes import run_node
-from manipulator_kinematics.nodes.base import MachineNode, params_files
+from manipulator_kinematics.nodes.base import (
+    FRAME_PREFIX,
+    MachineNode,
+    input_qos,
+    input_reliability,
+    params_files,
+)
 from manipulator_kinematics.nodes.help import help_text, wants_help
 from manipulator_kinematics.params import ConfigError, load_parameters
 from manipulator_kinematics.registry import Machine, by_section, machines
@@ -48,9 +54,11 @@ DEFAULTS_FILE = "machine_markers.yaml"
 
 SETTINGS = {
     "base_frame": Text(empty=False, doc="frame_id of the markers (the machine's base)"),
+    "frame_prefix": FRAME_PREFIX,
     "rate": Number(min=0.0, max=1000.0, exclusive_min=True, unit="Hz",
                    doc="most MarkerArrays per second; a new state is drawn at the next tick"),
-    "qos_depth": Number(min=1, max=100_000, integer=True, doc="reliable keep-last depth of every topic"),
+    "qos_depth": Number(min=1, max=100_000, integer=True, doc="keep-last depth of every topic"),
+    "input_reliability": input_reliability("topics.states"),
     "warning_period": Number(min=0.0, max=3600.0, unit="s",
                              doc="the same kind of rejection is logged at most this often"),
     "topics": {
@@ -89,7 +97,7 @@ class MarkersNode(MachineNode):
         s = self.settings
         if not s["topics"]["states"]:
             raise ConfigError("topics.states: give at least one sensor_msgs/JointState topic")
-        self.frame = s["base_frame"]
+        self.frame = s["frame_prefix"] + s["base_frame"]
         self.joint_names = tuple(machine.joint_names(self.model))
         self.index = {name: i for i, name in enumerate(self.joint_names)}
         self.state = np.full(len(self.joint_names), np.nan)
@@ -99,7 +107,8 @@ class MarkersNode(MachineNode):
         qos = QoSProfile(depth=s["qos_depth"], reliability=ReliabilityPolicy.RELIABLE)
         self.publisher = self.create_publisher(MarkerArray, s["topics"]["markers"], qos)
         for topic in s["topics"]["states"]:
-            self.create_subscription(JointState, topic, self.on_state, qos)
+            self.create_subscription(JointState, topic, self.on_state,
+                                     input_qos(s["qos_depth"], s["input_reliability"]))
         self.create_timer(1.0 / s["rate"], self.on_tick)
         self.get_logger().info(
             f"{machine.name}: {s['topics']['states']} {list(self.joint_names)} -> {s['topics']['markers']} "

@@ -5,12 +5,17 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from builtin_interfaces.msg import Time
+from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Pose, PoseStamped, TwistStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from manipulator_kinematics.model import matrix_quaternion
+from manipulator_kinematics.trajectory import JointTrajectory as Samples
+
+#: Latest time_from_start a Duration holds (its ``sec`` is an int32).
+MAX_TIME_FROM_START = 2.0**31 - 1.0
 
 
 def pose_stamped(stamp: Time, frame_id: str, transform: np.ndarray) -> PoseStamped:
@@ -39,3 +44,20 @@ def pose_array(pose: Pose) -> tuple[np.ndarray, np.ndarray]:
     p, o = pose.position, pose.orientation
     return np.array([p.x, p.y, p.z]), np.array([o.x, o.y, o.z, o.w])
 
+
+
+def joint_trajectory(frame_id: str, names: Sequence[str], samples: Samples) -> JointTrajectory:
+    """Timed joint samples (t, q, qd, qdd) as a JointTrajectory with positions, velocities and
+    accelerations. ValueError when a value is not finite or a time is outside what a Duration holds."""
+    t = np.asarray(samples.t, dtype=float)
+    values = (samples.q, samples.qd, samples.qdd)
+    if not (np.all(np.isfinite(t)) and np.all(t >= 0.0) and np.all(t <= MAX_TIME_FROM_START)):
+        raise ValueError(f"times must lie in [0, {MAX_TIME_FROM_START:.0f}] s")
+    if not all(np.all(np.isfinite(v)) for v in values):
+        raise ValueError("positions, velocities and accelerations must be finite")
+    nanoseconds = np.rint(t * 1e9).astype(np.int64).tolist()
+    q, qd, qdd = (np.asarray(v, dtype=float).tolist() for v in values)
+    points = [JointTrajectoryPoint(positions=p, velocities=v, accelerations=a,
+                                   time_from_start=Duration(sec=ns // 10**9, nanosec=ns % 10**9))
+              for p, v, a, ns in zip(q, qd, qdd, nanoseconds, strict=True)]
+    return JointTrajectory(header=Header(frame_id=frame_id), joint_names=list(names), points=points)

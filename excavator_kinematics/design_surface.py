@@ -1,0 +1,283 @@
+"""Design surfaces for grade control: a triangulated surface (TIN) from LandXML 1.2 (numpy, no rclpy).
+
+A machine-control display shows the height of the bucket's cutting edge, its middle (the tip Q[:3]
+of paper 000's eq. 3) and both corners, above the design surface that civil-design software
+exports as a LandXML TIN. Everything here is in the **site frame** (REP 105 style, ENU): x =
+easting, y = northing, z = elevation, metres.
+
+* :func:`read_landxml` reads ``LandXML/Surfaces/Surface/Definition[@surfType="TIN"]`` with its
+  ``Pnts/P id="..."`` ("northing easting elevation", LandXML's order, swapped here to x = easting,
+  y = northing) and ``Faces/F`` (three point ids; ``i="1"`` marks an invisible face, a hole, which
+  is left out). Linear units from ``Units/Metric`` or ``Units/Imperial`` are converted to metres.
+* :class:`Tin` finds the triangle vertically below each query point with matplotlib's
+  :class:`~matplotlib.tri.TrapezoidMapTriFinder` (a trapezoid-map point location, O(log n) per
+  point; benchmarks/bench_design_surface.py: about 3 us for the three points of one state on
+  10^5 triangles), and its height above the triangle's plane ``z = a x + b y + c``:
+  ``h = z - (a x + b y + c)``, vertical, positive above (material to cut), negative below (fill).
+  A point whose vertical line misses every triangle is *outside*: ``inside`` is False there and
+  the height NaN, never a number that could be mistaken for a grade.
+* :func:`cutting_edge` gives the tip and the left and right ends of the cutting edge (bucket width
+  w from the machine file): tip +- w/2 along the boom-plane normal (-sin theta1, cos theta1, 0).
+* :class:`SitePose` places the machine (base_link) in the site frame: p_site = R p_base + t.
+
+Coordinates of a site are large (UTM northings of 10^6 m): the TIN is held relative to its own
+origin (the middle of its bounding box), so the planes' coefficients keep their digits.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+from matplotlib.tri import TrapezoidMapTriFinder, Triangulation
+from numpy.typing import ArrayLike
+from scipy.spatial.transform import Rotation
+
+from manipulator_kinematics.params import ConfigError
+
+#: LandXML linearUnit values -> metres (LandXML 1.2 schema, enumerations metLinear and impLinear).
+LINEAR_UNITS = {
+    "meter": 1.0,
+    "kilometer": 1000.0,
+    "centimeter": 0.01,
+    "millimeter": 0.001,
+    "foot": 0.3048,
+    "internationalFoot": 0.3048,
+    "USSurveyFoot": 1200.0 / 3937.0,
+    "inch": 0.0254,
+    "mile": 1609.344,
+}
+
+
+class SurfaceHeights(NamedTuple):
+    """Heights of points above a surface; arrays of the points' batch shape (...,)."""
+
+    height: np.ndarray  # m, vertical, positive above; NaN where not inside
+    inside: np.ndarray  # bool: the vertical through the point meets the surface
+    triangle: np.ndarray  # index of the triangle below the point, -1 outside
+
+
+@dataclass(frozen=True)
+class Tin:
+    """A triangulated irregular network: ``vertices`` (V, 3) site frame, ``faces`` (F, 3) indices."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    name: str = ""
+    origin: np.ndarray = field(init=False, repr=False)
+    #: (F, 3): a, b, c of each triangle's plane z = a x + b y + c, relative to ``origin``.
+    planes: np.ndarray = field(init=False, repr=False)
+    _finder: TrapezoidMapTriFinder = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        vertices = np.asarray(self.vertices, dtype=float)
+        faces = np.asarray(self.faces)
+        what = f"surface {self.name!r}" if self.name else "surface"
+        if vertices.ndim != 2 or vertices.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3:
+            raise ValueError(f"{what}: expected vertices of shape (V, 3) and faces (F, 3), "
+                             f"got shapes {vertices.shape} and {faces.shape}")
+        if len(faces) == 0:
+            raise ConfigError(f"{what}: no (visible) faces")
+        if not np.all(np.isfinite(vertices)):
+            raise ConfigError(f"{what}: a vertex coordinate is not finite")
+        if faces.min() < 0 or faces.max() >= len(vertices):
+            raise ConfigError(f"{what}: a face refers to a vertex index outside 0..{len(vertices) - 1}")
+        faces = faces.astype(np.int32)
+        used = np.unique(faces)
+        lo, hi = vertices[used, :2].min(axis=0), vertices[used, :2].max(axis=0)
+        origin = np.array([*(0.5 * (lo + hi)), 0.0])
+        local = vertices - origin
+        # The point location needs a valid triangulation (matplotlib: no duplicate points, no
+        # degenerate triangles); refuse what would give wrong answers, naming it.
+        _, first, counts = np.unique(local[used, :2], axis=0, return_index=True, return_counts=True)
+        if np.any(counts > 1):
+            shared = vertices[used[first[counts > 1][0]], :2].tolist()
+            raise ConfigError(f"{what}: two vertices share x, y {shared}")
+        p0, p1, p2 = local[faces[:, 0]], local[faces[:, 1]], local[faces[:, 2]]
+        normal = np.cross(p1 - p0, p2 - p0)
+        scale = float(np.max(hi - lo)) or 1.0
+        flat = np.abs(normal[:, 2]) <= 1e-12 * scale * scale
+        if np.any(flat):
+            raise ConfigError(f"{what}: face {int(np.argmax(flat))} has no area in plan view (degenerate)")
+        a, b = -normal[:, 0] / normal[:, 2], -normal[:, 1] / normal[:, 2]
+        planes = np.column_stack([a, b, p0[:, 2] - a * p0[:, 0] - b * p0[:, 1]])
+        finder = TrapezoidMapTriFinder(Triangulation(local[:, 0], local[:, 1], faces))
+        for name, value in (("vertices", vertices), ("faces", faces), ("origin", origin),
+                            ("planes", planes), ("_finder", finder)):
+            object.__setattr__(self, name, value)
+
+    def locate(self, xy: ArrayLike) -> np.ndarray:
+        """Index of the triangle below each point ``xy`` (..., 2) (site frame), -1 outside."""
+        xy = np.asarray(xy, dtype=float)
+        return self._finder(xy[..., 0] - self.origin[0], xy[..., 1] - self.origin[1])
+
+    def heights(self, points: ArrayLike) -> SurfaceHeights:
+        """Vertical heights of ``points`` (..., 3) (site frame) above the surface."""
+        points = np.asarray(points, dtype=float)
+        local = points - self.origin
+        triangle = self._finder(local[..., 0], local[..., 1])
+        inside = triangle >= 0
+        a, b, c = np.moveaxis(self.planes[np.where(inside, triangle, 0)], -1, 0)
+        height = local[..., 2] - (a * local[..., 0] + b * local[..., 1] + c)
+        return SurfaceHeights(np.where(inside, height, np.nan), inside, triangle)
+
+    def locate_all_triangles(self, xy: ArrayLike) -> np.ndarray:
+        """:meth:`locate` without an index: every point against every triangle (barycentric signs).
+
+        The baseline of benchmarks/bench_design_surface.py and the tests' independent check;
+        O(points x triangles). A point on a shared edge gets the lowest index of its triangles.
+        """
+        xy = np.asarray(xy, dtype=float) - self.origin[:2]
+        tri = (self.vertices - self.origin)[self.faces][:, :, :2]  # (F, 3, 2)
+        p = xy[..., None, :]  # (..., 1, 2)
+        sides = []
+        for i in range(3):
+            start, end = tri[:, i], tri[:, (i + 1) % 3]
+            edge, to_p = end - start, p - start
+            sides.append(edge[:, 0] * to_p[..., 1] - edge[:, 1] * to_p[..., 0])
+        sides = np.stack(sides, axis=-1)  # (..., F, 3)
+        hit = np.all(sides >= 0.0, axis=-1) | np.all(sides <= 0.0, axis=-1)
+        return np.where(hit.any(axis=-1), np.argmax(hit, axis=-1), -1)
+
+
+def read_landxml(path: str | Path, surface: str = "") -> Tin:
+    """The TIN named ``surface`` of a LandXML 1.2 file (``""``: the file's only surface).
+
+    ConfigError naming the file and what is wrong: not XML, no such surface (the names found are
+    listed), not a TIN, a point or face that does not parse, an unknown linear unit.
+    """
+    path = Path(path)
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError) as error:
+        raise ConfigError(f"{path}: cannot read a LandXML file: {error}") from None
+    if _local(root.tag) != "LandXML":
+        raise ConfigError(f"{path}: the root element is {_local(root.tag)!r}, not LandXML")
+    metres = _linear_unit(root, path)
+    surfaces = [s for s in _children(root, "Surfaces") for s in _children(s, "Surface")]
+    names = [s.get("name", "") for s in surfaces]
+    if surface:
+        chosen = [s for s in surfaces if s.get("name", "") == surface]
+        if not chosen:
+            raise ConfigError(f"{path}: no Surface named {surface!r} (surfaces: {names})")
+    elif len(surfaces) != 1:
+        raise ConfigError(f"{path}: {len(surfaces)} surfaces {names}: name the one to use")
+    else:
+        chosen = surfaces
+    element = chosen[0]
+    name = element.get("name", "")
+    definitions = _children(element, "Definition")
+    if not definitions or definitions[0].get("surfType", "").upper() != "TIN":
+        kind = definitions[0].get("surfType") if definitions else None
+        raise ConfigError(f"{path}: surface {name!r} has no Definition with surfType=\"TIN\" (got {kind!r})")
+    definition = definitions[0]
+    ids, coordinates = [], []
+    for p in (p for pnts in _children(definition, "Pnts") for p in _children(pnts, "P")):
+        ids.append(p.get("id", ""))
+        coordinates.append(_numbers(p.text, 3, f"{path}: surface {name!r} point id={ids[-1]!r}"))
+    index = {pid: i for i, pid in enumerate(ids)}
+    if len(index) != len(ids):
+        raise ConfigError(f"{path}: surface {name!r}: point ids are not unique")
+    faces = []
+    for f in (f for fs in _children(definition, "Faces") for f in _children(fs, "F")):
+        if f.get("i", "0") == "1":  # invisible: a hole in the surface
+            continue
+        corners = (f.text or "").split()
+        missing = [c for c in corners if c not in index]
+        if len(corners) != 3 or missing:
+            raise ConfigError(f"{path}: surface {name!r}: face {f.text!r} is not three point ids "
+                              f"of its Pnts{f' (unknown: {missing})' if missing else ''}")
+        faces.append([index[c] for c in corners])
+    if not coordinates or not faces:
+        raise ConfigError(f"{path}: surface {name!r} has no points or no faces")
+    northing_easting_elevation = np.array(coordinates) * metres
+    vertices = northing_easting_elevation[:, [1, 0, 2]]
+    return Tin(vertices, np.array(faces), name)
+
+
+def write_landxml(path: str | Path, tin: Tin, application: str = "manipulator_kinematics") -> None:
+    """``tin`` as a LandXML 1.2 file (metres, points "northing easting elevation")."""
+    ns = "http://www.landxml.org/schema/LandXML-1.2"
+    root = ET.Element("LandXML", {"xmlns": ns, "version": "1.2", "date": "2026-01-01", "time": "00:00:00"})
+    ET.SubElement(ET.SubElement(root, "Units"), "Metric", {
+        "areaUnit": "squareMeter", "linearUnit": "meter", "volumeUnit": "cubicMeter",
+        "temperatureUnit": "celsius", "pressureUnit": "milliBars"})
+    ET.SubElement(root, "Application", {"name": application, "version": "1"})
+    surface = ET.SubElement(ET.SubElement(root, "Surfaces"), "Surface", {"name": tin.name or "design"})
+    definition = ET.SubElement(surface, "Definition", {"surfType": "TIN"})
+    pnts, faces = ET.SubElement(definition, "Pnts"), ET.SubElement(definition, "Faces")
+    for i, (x, y, z) in enumerate(tin.vertices.tolist(), start=1):
+        ET.SubElement(pnts, "P", {"id": str(i)}).text = f"{y:.6f} {x:.6f} {z:.6f}"
+    for a, b, c in (tin.faces + 1).tolist():
+        ET.SubElement(faces, "F").text = f"{a} {b} {c}"
+    ET.indent(root)
+    ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
+
+
+def _local(tag: str) -> str:
+    """An element's name without its namespace (files differ in how they declare LandXML's)."""
+    return tag.rsplit("}", 1)[-1]
+
+
+def _children(element: ET.Element, name: str) -> list[ET.Element]:
+    return [child for child in element if _local(child.tag) == name]
+
+
+def _linear_unit(root: ET.Element, path: Path) -> float:
+    for units in _children(root, "Units"):
+        for system in units:
+            unit = system.get("linearUnit")
+            if unit is not None:
+                if unit not in LINEAR_UNITS:
+                    raise ConfigError(f"{path}: linearUnit {unit!r} is not one of {sorted(LINEAR_UNITS)}")
+                return LINEAR_UNITS[unit]
+    return 1.0  # LandXML without Units: metres, as every metric exporter writes
+
+
+def _numbers(text: str | None, count: int, what: str) -> list[float]:
+    try:
+        values = [float(v) for v in (text or "").split()]
+    except ValueError:
+        values = []
+    if len(values) != count or not all(np.isfinite(values)):
+        raise ConfigError(f"{what}: expected {count} numbers, got {text!r}")
+    return values
+
+
+def cutting_edge(tip: ArrayLike, theta1: ArrayLike, width: float) -> np.ndarray:
+    """Tip, left and right end of the cutting edge (..., 3, 3) in the base frame.
+
+    ``tip`` (..., 3) is Q[:3] (the middle of the cutting edge, eq. 3), ``theta1`` (...,) the swing;
+    the edge lies along the boom-plane normal (-sin theta1, cos theta1, 0) (docs/excavator.md:
+    the bucket frame's y axis), left = +y.
+    """
+    tip = np.asarray(tip, dtype=float)
+    theta1 = np.asarray(theta1, dtype=float)
+    half = 0.5 * width * np.stack([-np.sin(theta1), np.cos(theta1), np.zeros_like(theta1)], axis=-1)
+    return np.stack([tip, tip + half, tip - half], axis=-2)
+
+
+@dataclass(frozen=True)
+class SitePose:
+    """The machine's base_link in the site frame: ``rotation`` (3, 3) and ``translation`` (3,)."""
+
+    rotation: np.ndarray
+    translation: np.ndarray
+
+    @classmethod
+    def from_quaternion(cls, position: ArrayLike, quaternion_xyzw: ArrayLike) -> SitePose:
+        """From a geometry_msgs/Pose: position and unit quaternion [x, y, z, w]."""
+        return cls(Rotation.from_quat(quaternion_xyzw).as_matrix(), np.asarray(position, dtype=float))
+
+    @classmethod
+    def from_rpy(cls, position: ArrayLike, rpy: ArrayLike) -> SitePose:
+        """From roll, pitch, yaw (rad) about the fixed x, y, z axes (REP 103)."""
+        return cls(Rotation.from_euler("xyz", rpy).as_matrix(), np.asarray(position, dtype=float))
+
+    def apply(self, points: ArrayLike) -> np.ndarray:
+        """Points (..., 3) of the base frame in the site frame; with one rotation per state
+        (N, 3, 3) (a tilt measured at each), points (N, k, 3)."""
+        return np.asarray(points, dtype=float) @ np.swapaxes(self.rotation, -1, -2) + self.translation
