@@ -42,8 +42,8 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike
 
-from manipulator_kinematics.config import ConfigError, Number, Numbers, require, validate
-from manipulator_kinematics.params import load_parameters
+from manipulator_kinematics.config import ConfigError, Number, Numbers, Text, require, validate
+from manipulator_kinematics.params import load_parameters, shown
 
 #: Section of the table file under ``/**: ros__parameters``.
 TABLE_SECTION = "pump_boom_regions"
@@ -67,13 +67,7 @@ TABLE_SCHEMA = {
         "start": Numbers(2, Number(min=-1000, max=1000, integer=True)),
         "levels": Number(min=0, max=12, integer=True),
     },
-    "column": Numbers(item=Number(min=-100_000, max=100_000, integer=True)),
-    "row": Numbers(item=Number(min=-100_000, max=100_000, integer=True)),
-    "level": Numbers(item=Number(min=0, max=12, integer=True)),
-    "theta2": Numbers(),
-    "theta3": Numbers(),
-    "theta4": Numbers(),
-    "margin": Numbers(item=Number(unit="m")),
+    "squares": Text(doc="one line per square: column row level theta2 theta3 theta4 (rad) margin (m)"),
     "coverage": {
         "squares": Number(min=0, integer=True),
         "covered_area": Number(min=0.0, unit="m^2"),
@@ -88,6 +82,13 @@ TABLE_SCHEMA = {
     },
 }
 
+
+#: The columns of a line of the table file's ``squares`` text: the square (i, j, level), its triple
+#: (rad) and its margin (m). One text block rather than seven lists of numbers: a YAML parser builds
+#: each list item as a Python object (150 ms for 1500 squares), a block is one string (2 ms).
+SQUARE_COLUMNS = ("column", "row", "level", "theta2", "theta3", "theta4", "margin")
+INDEX_RANGE = 100_000  # |column|, |row| at most this
+MAX_LEVEL = 12
 
 #: A point this close (m) to a square's edge lies on it (closed squares, see the module docstring).
 EDGE = 1e-9
@@ -147,13 +148,24 @@ class RegionTable:
         high = low + scale[:, None]
         lower = low.min(axis=0) if len(index) else np.zeros(2, dtype=int)
         shape = tuple((high.max(axis=0) - lower).tolist()) if len(index) else (0, 0)
-        owner = np.full(shape, -1, dtype=np.int32)  # cell -> the square covering it
-        for k, (a, b) in enumerate(zip((low - lower).tolist(), (high - lower).tolist())):
-            block = owner[a[0] : b[0], a[1] : b[1]]
-            if np.any(block >= 0):
-                other = tuple(index[int(block.max())].tolist())
-                raise ValueError(f"region table: square {tuple(index[k].tolist())} overlaps square {other}")
-            block[...] = k
+        # cell -> the square covering it: the cells of every square, level by level (all of a level
+        # have the same number of cells), as flat indices of the lookup arrays.
+        cells, rows = [np.zeros(0, dtype=int)], [np.zeros(0, dtype=int)]
+        for n in np.unique(scale).tolist():
+            k = np.flatnonzero(scale == n)
+            offset = np.stack(np.meshgrid(np.arange(n), np.arange(n), indexing="ij"), axis=-1).reshape(-1, 2)
+            at = (low[k] - lower)[:, None, :] + offset[None]
+            cells.append((at[..., 0] * shape[1] + at[..., 1]).ravel())
+            rows.append(np.repeat(k, len(offset)))
+        cells, rows = np.concatenate(cells), np.concatenate(rows)
+        count = np.bincount(cells, minlength=int(np.prod(shape)))
+        if np.any(count > 1):
+            clash = np.flatnonzero(count[cells] > 1)
+            first, other = rows[clash[cells[clash] == cells[clash[0]]]][:2]
+            a, b = tuple(index[first].tolist()), tuple(index[other].tolist())
+            raise ValueError(f"region table: square {a} overlaps square {b}")
+        owner = np.full(shape, -1, dtype=np.int32)
+        owner.flat[cells] = rows
         covered = owner >= 0
         field = np.zeros(shape + (4,))
         field[covered, :3] = triples[owner[covered]]
@@ -310,9 +322,7 @@ class RegionTable:
         if TABLE_SECTION not in params:
             raise ConfigError(f"{path}: no {TABLE_SECTION!r} section under /**: ros__parameters")
         p = validate(params[TABLE_SECTION], TABLE_SCHEMA, TABLE_SECTION)
-        m = len(p["column"])
-        for key in ("row", "level", "theta2", "theta3", "theta4", "margin"):
-            require(len(p[key]) == m, f"{TABLE_SECTION}.{key}", f"has {len(p[key])} entries, column has {m}")
+        rows = _squares(p["squares"], f"{TABLE_SECTION}.squares")
         built = p["built_for"]
         if expected is not None:
             for key, value in expected.items():
@@ -325,9 +335,9 @@ class RegionTable:
         grid = Grid(tuple(built["origin"]), built["size"], built["band"])
         return cls(
             grid=grid,
-            index=np.stack([p["column"], p["row"], p["level"]], axis=-1),
-            triples=np.stack([p["theta2"], p["theta3"], p["theta4"]], axis=-1),
-            margin=np.array(p["margin"]),
+            index=rows[:, :3].astype(int),
+            triples=rows[:, 3:6],
+            margin=rows[:, 6],
             built_for=built,
             search=p["search"],
             coverage=p["coverage"],
@@ -338,13 +348,6 @@ class RegionTable:
         section = {
             "built_for": {k: _plain(v) for k, v in self.built_for.items()},
             "search": {k: _plain(v) for k, v in self.search.items()},
-            "column": [int(i) for i in self.index[:, 0]],
-            "row": [int(j) for j in self.index[:, 1]],
-            "level": [int(level) for level in self.index[:, 2]],
-            "theta2": [float(t) for t in self.triples[:, 0]],
-            "theta3": [float(t) for t in self.triples[:, 1]],
-            "theta4": [float(t) for t in self.triples[:, 2]],
-            "margin": [round(float(m), 6) for m in self.margin],
             "coverage": {k: _plain(v) for k, v in self.coverage.items()},
         }
         lines = [f"# {line}" if line else "#" for line in header]
@@ -366,7 +369,45 @@ class RegionTable:
             sort_keys=False,
             width=100,
         )
+        # The squares last, as a literal block (its lines indented under the section's keys).
+        indent = " " * 8
+        text += f"      squares: |  # {' '.join(SQUARE_COLUMNS)}\n"
+        for (i, j, level), t, m in zip(self.index.tolist(), self.triples.tolist(), self.margin.tolist()):
+            text += f"{indent}{i} {j} {level} {t[0]!r} {t[1]!r} {t[2]!r} {round(m, 6)!r}\n"
         Path(path).write_text("\n".join(lines) + "\n" + text, encoding="utf-8")
+
+
+def _squares(text: str, key: str) -> np.ndarray:
+    """The rows (m, 7) of a table file's ``squares`` text (SQUARE_COLUMNS); ConfigError names the
+    key and the first bad line."""
+    lines = [line for line in text.splitlines() if line.strip()]
+    try:
+        rows = np.array([line.split() for line in lines], dtype=float).reshape(-1, len(SQUARE_COLUMNS))
+    except ValueError:
+        bad = next((n for n, line in enumerate(lines)
+                    if len(line.split()) != len(SQUARE_COLUMNS) or not _numbers(line)), 0)
+        raise ConfigError(
+            f"{key}, line {bad + 1}: expected {len(SQUARE_COLUMNS)} numbers ({' '.join(SQUARE_COLUMNS)}), "
+            f"got {shown(lines[bad])}"
+        ) from None
+    index = rows[:, :3]
+    bad = ~np.isfinite(rows).all(axis=1) | np.any(index != np.round(index), axis=1)
+    bad |= np.any(np.abs(index[:, :2]) > INDEX_RANGE, axis=1) | (index[:, 2] < 0) | (index[:, 2] > MAX_LEVEL)
+    if bad.any():
+        n = int(np.argmax(bad))
+        raise ConfigError(
+            f"{key}, line {n + 1}: need finite numbers, whole column and row within +-{INDEX_RANGE} and a "
+            f"level in [0, {MAX_LEVEL}], got {shown(lines[n])}"
+        )
+    return rows
+
+
+def _numbers(line: str) -> bool:
+    try:
+        [float(word) for word in line.split()]
+    except ValueError:
+        return False
+    return True
 
 
 def _summed_point(summed: list, u: float, v: float, n_u: int, n_v: int) -> list[float]:

@@ -4,6 +4,7 @@ region IK round trips over the whole table, bands, envelope, the paper's example
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -469,6 +470,26 @@ def test_table_file_matches_the_machine(boom: PumpBoom) -> None:
     section["lenghts"] = section.pop("lengths")
     with pytest.raises(ConfigError, match=r"pump_boom\.lenghts.*did you mean 'lengths'"):
         PumpBoom.from_parameters(section)
+
+
+@pytest.mark.parametrize(
+    ("line", "match"),
+    [
+        ("3 4 0 x 1.0 1.0 0.1", r"squares, line 2: expected 7 numbers"),
+        ("3 4 0 1.0 1.0 0.1", r"squares, line 2: expected 7 numbers"),
+        ("3 4.5 0 1.0 1.0 1.0 0.1", r"squares, line 2: need .* whole column and row"),
+        ("3 4 13 1.0 1.0 1.0 0.1", r"squares, line 2: need .* level in \[0, 12\]"),
+        ("3 4 0 nan 1.0 1.0 0.1", r"squares, line 2: need finite numbers"),
+    ],
+)
+def test_a_bad_line_of_the_table_file_is_refused_with_its_key(tmp_path, line: str, match: str) -> None:
+    lines = Path(config_path("pump_boom_regions.yaml")).read_text(encoding="utf-8").splitlines()
+    first = next(n for n, text in enumerate(lines) if text.startswith("      squares: |")) + 1
+    lines[first + 1] = " " * 8 + line
+    path = tmp_path / "table.yaml"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"pump_boom_regions\." + match):
+        RegionTable.load(path)
 
 
 def test_a_changed_geometry_runs_fk_but_no_region_ik_until_its_table_is_built(
