@@ -2,8 +2,11 @@
 
 For every 5 m square of the pour plane (and, where no triple serves one, its quarters, down to
 ``levels`` splittings: a quadtree of the paper's method) the builder searches
-(theta2, theta3, theta4) on a grid of ``step_deg`` over the joint limits, vectorised over all
-triples at once:
+(theta2, theta3, theta4) on a grid of ``step_deg`` over the joint limits with section 2 unfolded
+(theta3 >= ``min_theta3``, 90 deg: one family of boom shapes over the workspace; where section 2
+folded back near the truck and unfolded around it, the two families met at seams 0.3 m wide that
+no 1 m band crosses within the step limit, and blends of the two broke the envelope), vectorised
+over all triples at once:
 
 1. exact tests over the whole square, cheap: the farthest corner within L4 + L5 of section 3's
    end S, the square no closer than |L4 - L5| to S, and P_1..P_3 left of the chord root -> p for
@@ -13,22 +16,26 @@ triples at once:
    limits and P_4 left of the chord; the triple's *margin* is the smallest clearance over the
    samples, in metres (a joint's distance from the chord, theta5's distance from a limit times
    L4, the distance from the 2R annulus' rims);
-3. choice, deterministic, level by level: the 5 m squares from the one with the most valid
-   triples outwards (by distance, ties by (i, j, level)), then the quarters of the squares left
-   over, and so on; the first square takes its largest-margin triple, every later one the triple
-   closest (sum of squared angle differences) to the mean of the triples its chosen neighbours
-   blend in around it, among those whose margin is at least min(``min_margin``, half the
-   square's best), so that transition bands move the joints little;
+3. choice, deterministic, as one front: the squares from the 5 m square with the most valid
+   triples outwards by distance (ties by (i, j, level)), a square that fails split at once into
+   quarters that join the same queue; the first square takes its largest-margin triple, every
+   later one the triple closest (sum of squared angle differences) to the mean of the triples
+   its chosen neighbours blend in around it, among those whose margin is at least
+   min(``min_margin``, half the square's best), so that transition bands move the joints little;
 4. a choice is kept only if the region IK then solves every point of the check lattice (grid
-   origin + ``check_spacing`` * integers) in the square widened by half a band on each side
-   (every point whose blended triple it changes) and no joint changes by more than ``max_step``
+   origin + ``check_spacing`` * integers) in the square widened by half a band and one lattice
+   step on each side (every point whose blended triple it changes, and the steps from those to
+   the points it does not change) and no joint changes by more than ``max_step``
    (7.5 deg) per 100 mm in any direction (the norm of its changes along r and z between lattice
    neighbours); the candidates are first checked alone on the square's own lattice points, many
    at once, then at most ``MAX_TRIES`` / 4^level with the neighbours; a square with no such
    triple is split into four (the quarters that hold a positive-envelope point of the coverage
    lattice are searched at the next level) or, at the last level, left out;
-5. the finished table is checked the same way over its whole area (``band_failures``, 0
-   expected, and ``largest_step``).
+5. the finished table is checked the same way over its whole area, on a lattice half the check
+   spacing apart and on every square's edges (off the lattices for small squares); where a point fails or a
+   step exceeds ``max_step`` (the blend around gaps between small squares can change faster than
+   their own checks saw), the smallest squares under the point's window are dropped and the check
+   runs again, until it passes (``band_failures`` 0, ``largest_step`` <= ``max_step``).
 
 Coverage (:func:`reachable_area`): the lattice points every 0.1 m of the pour plane in front of
 the slew axis that some joint state inside the limits reaches, and those it reaches in
@@ -41,8 +48,9 @@ points (with the covered ones) that the table covers and solves.
 from __future__ import annotations
 
 import argparse
+import heapq
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -50,7 +58,7 @@ import numpy as np
 
 from manipulator_kinematics.params import CONFIG_DIR, config_path, load_parameters
 from manipulator_kinematics.planar import two_link_ik, wrap_angle
-from pump_boom_kinematics.kinematics import CONFIG_FILE, LIMIT_TOL, SECTION, PumpBoom
+from pump_boom_kinematics.kinematics import CONFIG_FILE, LIMIT_TOL, SECTION, PumpBoom, RegionIK
 from pump_boom_kinematics.regions import Grid, RegionTable
 
 STEP_DEG = 2.5
@@ -64,6 +72,10 @@ CHUNK = 20_000
 MAX_TRIES = 100  # candidates tried per 5 m square before it is split (a quarter of that per level down)
 SCAN = 4  # candidates pre-checked per candidate tried
 MAX_STEP = math.radians(7.5)  # rad per 100 mm of tip motion in any direction, on the check lattice
+#: rad, the smallest theta3 searched: section 2 unfolded, one family of shapes over the workspace (with
+#: section 2 folded back too, near the truck, the two families met at seams no band can cross).
+MIN_THETA3 = math.pi / 2
+REPAIRS = 30  # passes of the final check that drop the squares around its failures, at most
 
 
 @dataclass(frozen=True)
@@ -119,22 +131,25 @@ def square_margin(
     l4, l5 = boom.lengths[3], boom.lengths[4]
     root = boom.root
     joints, phi3 = _shoulder(boom, triples) if shoulder is None else shoulder
-    shoulder = joints[:, 2]
+    # The farthest corner is no nearer than the centre: only the triples whose shoulder reaches the
+    # centre can pass step 1 (a pre-selection, same result: most of the grid is out of reach).
+    within = np.flatnonzero(np.linalg.norm(joints[:, 2] - (corner + 0.5 * size), axis=-1) <= l4 + l5)
+    shoulder = joints[within, 2]
     corners = corner + size * np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
     far = np.linalg.norm(corners[None] - shoulder[:, None], axis=-1).max(axis=-1)
     near = np.linalg.norm(np.clip(shoulder, corner, corner + size) - shoulder, axis=-1)
     chord = corners - root  # (4, 2)
-    rel = joints - root  # (N, 3, 2)
+    rel = joints[within] - root  # (n, 3, 2)
     cross = chord[None, :, None, 0] * rel[:, None, :, 1] - chord[None, :, None, 1] * rel[:, None, :, 0]
     cheap = (far <= l4 + l5) & (near >= abs(l4 - l5)) & (cross >= 0.0).all(axis=(1, 2))
     margin = np.full(len(triples), -np.inf)
-    survivors = np.flatnonzero(cheap)
+    survivors = within[cheap]
     offsets = np.linspace(0.0, size, max(2, math.ceil(size / spacing - 1e-9) + 1))
     samples = (corner + np.stack(np.meshgrid(offsets, offsets, indexing="ij"), axis=-1)).reshape(-1, 2)
     lo5, hi5 = boom.limits.lower[4], boom.limits.upper[4]
     for start in range(0, len(survivors), CHUNK):
         idx = survivors[start : start + CHUNK]
-        s = shoulder[idx][:, None]  # (n, 1, 2)
+        s = joints[idx, 2][:, None]  # (n, 1, 2)
         d_vec = samples[None] - s
         d = np.linalg.norm(d_vec, axis=-1)
         cos_beta = np.clip((l4 * l4 + d * d - l5 * l5) / (2.0 * l4 * np.maximum(d, 1e-12)), -1.0, 1.0)
@@ -143,7 +158,7 @@ def square_margin(
         p4 = s + l4 * np.stack([np.cos(phi4), np.sin(phi4)], axis=-1)
         chord_s = samples - root
         length = np.linalg.norm(chord_s, axis=-1)
-        fixed = rel[idx][:, None]  # (n, 1, 3, 2): P_1..P_3
+        fixed = (joints[idx] - root)[:, None]  # (n, 1, 3, 2): P_1..P_3
         cross_fixed = chord_s[None, :, None, 0] * fixed[..., 1] - chord_s[None, :, None, 1] * fixed[..., 0]
         p4_rel = p4 - root
         cross4 = chord_s[None, :, 0] * p4_rel[..., 1] - chord_s[None, :, 1] * p4_rel[..., 0]
@@ -166,11 +181,15 @@ def build_table(
     max_step: float = MAX_STEP,
     levels: int = LEVELS,
     coverage: Coverage | None = None,
+    progress: Callable[[str], None] | None = None,
+    min_theta3: float = MIN_THETA3,
 ) -> RegionTable:
-    """The region table of ``boom``'s geometry and grid (module docstring)."""
+    """The region table of ``boom``'s geometry and grid (module docstring); ``progress`` is
+    called with a line per level."""
     grid = boom.grid
     area = coverage if coverage is not None else reachable_area(boom)
     triples = candidate_triples(boom, step_deg)
+    triples = triples[triples[:, 1] >= min(min_theta3, boom.limits.upper[2])]
     shoulders = _shoulder(boom, triples)
     reach = boom.reach
     i_range = range(0, math.ceil((boom.root[0] + reach - grid.origin[0]) / grid.size) + 1)
@@ -181,41 +200,46 @@ def build_table(
     pending = [(i, j, 0) for i in i_range for j in j_range if _holds_envelope(area, grid, (i, j, 0))]
     chosen: dict[Key, tuple[int, float]] = {}
     buckets: dict[tuple[int, int], list[Key]] = {}
-    start: Key | None = None
-    for level in range(levels + 1):
-        side = float(grid.side(level))
-        margins: dict[Key, np.ndarray] = {}
-        split = []
-        for key in pending:
-            corner = np.array(grid.corner(*key), dtype=float)
-            margin = square_margin(boom, triples, corner, side, min(SCREEN_SPACING, side), shoulders)
-            if np.any(margin >= 0.0):
-                margins[key] = margin
-            else:
-                split.append(key)
-        if start is None and margins:
-            start = max(margins, key=lambda key: (int(np.sum(margins[key] >= 0.0)), -key[0], -key[1]))
-        centre = np.array(grid.corner(start[0] + 0.5, start[1] + 0.5)) if start else np.zeros(2)
-        order = sorted(
-            margins,
-            key=lambda key: (_distance(grid, key, centre), key),
-        )
+
+    def margin_of(key: Key) -> np.ndarray:
+        side = float(grid.side(key[2]))
+        corner = np.array(grid.corner(*key), dtype=float)
+        return square_margin(boom, triples, corner, side, min(SCREEN_SPACING, side), shoulders)
+
+    valid = {key: int(np.sum(margin_of(key) >= 0.0)) for key in pending}
+    if not any(valid.values()):
+        raise RuntimeError("no square of the grid can be covered: check the geometry and limits")
+    start = max(valid, key=lambda key: (valid[key], -key[0], -key[1]))
+    centre = np.array(grid.corner(start[0] + 0.5, start[1] + 0.5))
+    # One front from the start square outwards over every level: a square that fails is split at
+    # once and its quarters wait in the same queue by distance, so the chosen squares grow as one
+    # connected region (level by level, separate regions grew and met at seams no band crosses).
+    queue = [(_distance(grid, key, centre), key) for key in pending]
+    heapq.heapify(queue)
+    searched, unserved = [0] * (levels + 1), [0] * (levels + 1)
+    while queue:
+        _, key = heapq.heappop(queue)
+        level = key[2]
+        searched[level] += 1
+        margin = margin_of(key)
         tries = max(MAX_TRIES // 4**level, 10)
-        for key in order:
-            if not _choose(boom, grid, triples, margins[key], key, chosen, buckets, min_margin, check_spacing,
-                           max_step, tries):
-                split.append(key)
+        if np.any(margin >= 0.0) and _choose(boom, grid, triples, margin, key, chosen, buckets, min_margin,
+                                              check_spacing, max_step, tries):
+            continue
+        unserved[level] += 1
         if level < levels:
-            pending = sorted(
-                child
-                for i, j, _ in split
-                for child in ((2 * i, 2 * j, level + 1), (2 * i + 1, 2 * j, level + 1),
-                              (2 * i, 2 * j + 1, level + 1), (2 * i + 1, 2 * j + 1, level + 1))
-                if _holds_envelope(area, grid, child)
-            )
+            for a, b in ((0, 0), (1, 0), (0, 1), (1, 1)):
+                child = (2 * key[0] + a, 2 * key[1] + b, level + 1)
+                if _holds_envelope(area, grid, child):
+                    heapq.heappush(queue, (_distance(grid, child, centre), child))
+    if progress is not None:
+        for level in range(levels + 1):
+            progress(f"level {level} ({float(grid.side(level)):g} m): {searched[level]} squares searched, "
+                     f"{unserved[level]} not served")
     if not chosen:
         raise RuntimeError("no square of the grid can be covered: check the geometry and limits")
-    draft = _table(grid, sorted(chosen), chosen, triples)
+    keys = _repair(boom, grid, sorted(chosen), chosen, triples, check_spacing, max_step, progress)
+    draft = _table(grid, keys, chosen, triples)
     search = {
         "step_deg": step_deg,
         "min_margin": min_margin,
@@ -223,6 +247,7 @@ def build_table(
         "max_step": max_step,
         "start": [int(start[0]), int(start[1])],
         "levels": levels,
+        "min_theta3": min_theta3,
     }
     failures, checked, largest, covered = check_table(boom, draft, check_spacing, area)
     envelope = area.envelope | covered
@@ -326,6 +351,59 @@ def _alone(
     return passing[:count]
 
 
+def _repair(
+    boom: PumpBoom,
+    grid: Grid,
+    keys: list[Key],
+    chosen: dict[Key, tuple[int, float]],
+    triples: np.ndarray,
+    spacing: float,
+    max_step: float,
+    progress: Callable[[str], None] | None,
+) -> list[Key]:
+    """Step 5 of the module docstring: the squares that pass the final check. Each pass solves a
+    lattice half the check spacing apart over the whole table (it holds the check and coverage
+    lattices) and every square's edges and corners at that spacing (small squares' edges are off
+    the lattices), and where a point fails or a step of ``spacing`` from a lattice point along r
+    and z exceeds ``max_step`` drops the square nearest to the point among the smallest under its
+    window (the small squares' blend makes such points), until no point fails."""
+    fine = 0.5 * spacing
+    limit = max_step * spacing / 0.1
+    half = 0.5 * grid.band
+    for _ in range(REPAIRS):
+        table = _table(grid, keys, chosen, triples)
+        lattice = _lattice_over(table, fine)
+        result = _plane_ik(boom, lattice, table)
+        q = result.q
+        # Steps of ``spacing`` (two fine points) from every fine point: the check lattice shifted.
+        along_r = np.nan_to_num(np.abs(q[2:] - q[:-2]))[:, :-2]
+        along_z = np.nan_to_num(np.abs(q[:, 2:] - q[:, :-2]))[:-2, :]
+        steep = np.zeros(lattice.shape[:-1], dtype=bool)
+        steep[:-2, :-2] = np.hypot(along_r, along_z).max(axis=-1) > limit
+        steep[2:, :-2] |= steep[:-2, :-2]
+        steep[:-2, 2:] |= steep[:-2, :-2]
+        failed = table.contains(lattice[..., 0], lattice[..., 1]) & ~result.ok
+        # Every square's edges, and steps of ``spacing`` from them along r and z (near the rims the
+        # last two sections' angles change fastest at the edge, between the lattice points).
+        edges = table_samples(table, fine)
+        moves = np.array([[0.0, 0.0], [spacing, 0.0], [-spacing, 0.0], [0.0, spacing], [0.0, -spacing]])
+        around = _plane_ik(boom, edges[None] + moves[:, None], table)
+        step = np.nan_to_num(np.abs(around.q[1:] - around.q[:1])).max(axis=-1).max(axis=0)
+        bad = np.concatenate([lattice[steep | failed], edges[~around.ok[0] | (step > limit)]])
+        if not len(bad):
+            break
+        low, high = table._extent[None, :, :2], table._extent[None, :, 2:]
+        under = ((low < bad[:, None] + half) & (high > bad[:, None] - half)).all(axis=-1)
+        level = np.where(under, table.index[None, :, 2], -1)
+        gap = np.linalg.norm(np.clip(bad[:, None], low, high) - bad[:, None], axis=-1)
+        smallest = under & (level == level.max(axis=1, keepdims=True))
+        drop = set(np.argmin(np.where(smallest, gap, np.inf), axis=1).tolist())
+        if progress is not None:
+            progress(f"final check: {len(bad)} points fail, {len(drop)} squares dropped")
+        keys = [key for k, key in enumerate(keys) if k not in drop]
+    return keys
+
+
 def _distance(grid: Grid, key: Key, centre: np.ndarray) -> float:
     """Distance (m) of a square's centre from ``centre`` (the visiting order)."""
     r, z = grid.corner(key[0] + 0.5, key[1] + 0.5, key[2])
@@ -370,8 +448,9 @@ def _largest_step(q: np.ndarray) -> np.ndarray:
 
 def _lattice(grid: Grid, key: Key, spacing: float) -> np.ndarray:
     """Points (n_r, n_z, 2) of the check lattice (grid origin + spacing * integers) in square ``key``
-    widened by half a band on every side: every point whose triple the square's choice can change."""
-    side, half = float(grid.side(key[2])), 0.5 * grid.band
+    widened by half a band and one lattice step on every side: every point whose triple the square's
+    choice can change, and the steps from them to the points it does not change."""
+    side, half = float(grid.side(key[2])), 0.5 * grid.band + spacing
     r0, z0 = (float(c) for c in grid.corner(*key))
     axes = []
     for low, origin in ((r0, grid.origin[0]), (z0, grid.origin[1])):
@@ -401,18 +480,22 @@ def check_table(
     lattice step in any direction (rad), and with ``area`` its lattice points covered and solved).
     The check lattice is the grid origin + ``spacing`` * integers."""
     lattice = _lattice_over(table, spacing)
-    tips = np.stack([lattice[..., 0], np.zeros(lattice.shape[:-1]), lattice[..., 1]], axis=-1)
-    result = boom.region_ik(tips, table=table)
+    result = _plane_ik(boom, lattice, table)
     inside = table.contains(lattice[..., 0], lattice[..., 1])
     failures = int(np.sum(inside & ~result.ok))
     covered = np.zeros((0, 0), dtype=bool)
     if area is not None:
         centres = area.centres
-        tips = np.stack([centres[..., 0], np.zeros(centres.shape[:-1]), centres[..., 1]], axis=-1)
-        solved = boom.region_ik(tips, table=table)
+        solved = _plane_ik(boom, centres, table)
         covered = solved.ok
         failures += int(np.sum(table.contains(centres[..., 0], centres[..., 1]) & ~solved.ok))
     return failures, int(inside.sum()), float(_largest_step(result.q)), covered
+
+
+def _plane_ik(boom: PumpBoom, plane: np.ndarray, table: RegionTable) -> RegionIK:
+    """The region IK of boom-plane points (..., 2) (r, z) at theta1 = 0 with ``table``."""
+    return boom.region_ik(np.stack([plane[..., 0], np.zeros(plane.shape[:-1]), plane[..., 1]], axis=-1),
+                          table=table)
 
 
 def _lattice_over(table: RegionTable, spacing: float) -> np.ndarray:
@@ -557,6 +640,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="largest joint change per 100 mm in any direction (deg)",
     )
     parser.add_argument("--levels", type=int, default=LEVELS, help="splittings below the 5 m squares")
+    parser.add_argument("--min-theta3-deg", type=float, default=math.degrees(MIN_THETA3),
+                        help="smallest theta3 searched (deg): section 2 unfolded")
     args = parser.parse_args(argv)
     config = args.config if args.config is not None else config_path(CONFIG_FILE)
     section = load_parameters(config).get(SECTION, {})
@@ -573,6 +658,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         math.radians(args.max_step_deg),
         args.levels,
         coverage=area,
+        progress=print,
+        min_theta3=math.radians(args.min_theta3_deg),
     )
     header = table_header(table, config.name)
     table.dump(output, header)

@@ -66,6 +66,7 @@ TABLE_SCHEMA = {
         "max_step": Number(min=0.0, max=math.pi, unit="rad"),
         "start": Numbers(2, Number(min=-1000, max=1000, integer=True)),
         "levels": Number(min=0, max=12, integer=True),
+        "min_theta3": Number(min=0.0, max=2 * math.pi, unit="rad", default=0.0),
     },
     "squares": Text(doc="one line per square: column row level theta2 theta3 theta4 (rad) margin (m)"),
     "coverage": {
