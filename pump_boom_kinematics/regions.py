@@ -274,16 +274,17 @@ class RegionTable:
             self._summed.tolist(),
             self._bounds.tolist(),
             [tuple(t) for t in self.triples.tolist()],
+            tuple(self._lower.tolist()),  # plain ints: a numpy scalar would make every float after it one
         )
 
     def blend_point(self, r: float, z: float) -> tuple[tuple[float, float, float], bool] | None:
         """:meth:`blend` of one finite plane point in plain floats (no numpy: a controller's single
         point costs microseconds, not numpy's per-call overhead), with the same operations in the
         same order: ((theta2, theta3, theta4), blended) or None where the point is in no square."""
-        owner, summed, bounds, triples = self._plain
+        owner, summed, bounds, triples, lower = self._plain
         cell, n_u, n_v = self._cell, len(owner), len(owner[0]) if owner else 0
-        u = (r - self.grid.origin[0]) / cell - self._lower[0]
-        v = (z - self.grid.origin[1]) / cell - self._lower[1]
+        u = (r - self.grid.origin[0]) / cell - lower[0]
+        v = (z - self.grid.origin[1]) / cell - lower[1]
         edge = EDGE / cell
         k = -1
         for b in (math.floor(v + edge), math.floor(v - edge)):
@@ -303,8 +304,8 @@ class RegionTable:
         v0, v1 = min(max(v - half, 0.0), n_v), min(max(v + half, 0.0), n_v)
         s11, s01 = _summed_point(summed, u1, v1, n_u, n_v), _summed_point(summed, u0, v1, n_u, n_v)
         s10, s00 = _summed_point(summed, u1, v0, n_u, n_v), _summed_point(summed, u0, v0, n_u, n_v)
-        window = [s11[c] - s01[c] - s10[c] + s00[c] for c in range(4)]
-        blended = (window[0] / window[3], window[1] / window[3], window[2] / window[3])
+        t2, t3, t4, weight = (a - b - c + d for a, b, c, d in zip(s11, s01, s10, s00))
+        blended = (t2 / weight, t3 / weight, t4 / weight)
         return blended, blended != own
 
     def nearest(self, r: float, z: float) -> tuple[float, float]:
@@ -412,13 +413,14 @@ def _numbers(line: str) -> bool:
 
 
 def _summed_point(summed: list, u: float, v: float, n_u: int, n_v: int) -> list[float]:
-    """:meth:`RegionTable._summed_at` of one point on the plain-list summed-area table."""
+    """:meth:`RegionTable._summed_at` of one point on the plain-list summed-area table (the same
+    operations per channel)."""
     a, b = min(math.floor(u), n_u - 1), min(math.floor(v), n_v - 1)
     f, g = u - a, v - b
-    s00, s10, s01, s11 = summed[a][b], summed[a + 1][b], summed[a][b + 1], summed[a + 1][b + 1]
-    low = [s00[c] * (1.0 - f) + s10[c] * f for c in range(4)]
-    high = [s01[c] * (1.0 - f) + s11[c] * f for c in range(4)]
-    return [low[c] * (1.0 - g) + high[c] * g for c in range(4)]
+    f0, g0 = 1.0 - f, 1.0 - g
+    low, high = summed[a], summed[a + 1]
+    return [(s00 * f0 + s10 * f) * g0 + (s01 * f0 + s11 * f) * g
+            for s00, s10, s01, s11 in zip(low[b], high[b], low[b + 1], high[b + 1])]
 
 
 def _plain(value: Any) -> Any:
