@@ -469,6 +469,16 @@ def test_table_file_matches_the_machine(boom: PumpBoom) -> None:
         PumpBoom.from_parameters(section)
 
 
+def test_a_truncated_pour_ends_before_a_gap_its_resampled_points_catch(boom: PumpBoom) -> None:
+    # A 3-D line from a table point toward the slew axis: the first 100 mm samples step over the
+    # corner of a gap that the line spaced anew up to the farthest reachable point catches.
+    start = (5.358482531360314, -1.7024875603214558, 12.355303774866185)
+    plan = pour_line(boom, start, (-2.743753498101931, 2.199986119581032, 16.728457156643714))
+    assert plan.truncated and len(plan.points) > 10 and np.isfinite(plan.q).all()
+    np.testing.assert_allclose(boom.tip(plan.q), plan.points, atol=1e-9)
+    assert boom.region_ik(plan.points).ok.all()
+
+
 @pytest.mark.parametrize(
     ("line", "match"),
     [
