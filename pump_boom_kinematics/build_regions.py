@@ -56,9 +56,10 @@ from pathlib import Path
 
 import numpy as np
 
+from manipulator_kinematics.blocks import in_blocks
 from manipulator_kinematics.params import CONFIG_DIR, config_path, load_parameters
 from manipulator_kinematics.planar import two_link_ik, wrap_angle
-from pump_boom_kinematics.kinematics import CONFIG_FILE, LIMIT_TOL, SECTION, PumpBoom, RegionIK
+from pump_boom_kinematics.kinematics import CONFIG_FILE, LIMIT_TOL, SECTION, PumpBoom
 from pump_boom_kinematics.regions import Grid, RegionTable
 
 STEP_DEG = 2.5
@@ -373,8 +374,7 @@ def _repair(
     for _ in range(REPAIRS):
         table = _table(grid, keys, chosen, triples)
         lattice = _lattice_over(table, fine)
-        result = _plane_ik(boom, lattice, table)
-        q = result.q
+        q, ok = _plane_ik(boom, lattice, table)
         # Steps of ``spacing`` (two fine points) from every fine point: the check lattice shifted.
         along_r = np.nan_to_num(np.abs(q[2:] - q[:-2]))[:, :-2]
         along_z = np.nan_to_num(np.abs(q[:, 2:] - q[:, :-2]))[:-2, :]
@@ -382,14 +382,14 @@ def _repair(
         steep[:-2, :-2] = np.hypot(along_r, along_z).max(axis=-1) > limit
         steep[2:, :-2] |= steep[:-2, :-2]
         steep[:-2, 2:] |= steep[:-2, :-2]
-        failed = table.contains(lattice[..., 0], lattice[..., 1]) & ~result.ok
+        failed = table.contains(lattice[..., 0], lattice[..., 1]) & ~ok
         # Every square's edges, and steps of ``spacing`` from them along r and z (near the rims the
         # last two sections' angles change fastest at the edge, between the lattice points).
         edges = table_samples(table, fine)
         moves = np.array([[0.0, 0.0], [spacing, 0.0], [-spacing, 0.0], [0.0, spacing], [0.0, -spacing]])
-        around = _plane_ik(boom, edges[None] + moves[:, None], table)
-        step = np.nan_to_num(np.abs(around.q[1:] - around.q[:1])).max(axis=-1).max(axis=0)
-        bad = np.concatenate([lattice[steep | failed], edges[~around.ok[0] | (step > limit)]])
+        around, solved = _plane_ik(boom, edges[None] + moves[:, None], table)
+        step = np.nan_to_num(np.abs(around[1:] - around[:1])).max(axis=-1).max(axis=0)
+        bad = np.concatenate([lattice[steep | failed], edges[~solved[0] | (step > limit)]])
         if not len(bad):
             break
         low, high = table._extent[None, :, :2], table._extent[None, :, 2:]
@@ -480,22 +480,28 @@ def check_table(
     lattice step in any direction (rad), and with ``area`` its lattice points covered and solved).
     The check lattice is the grid origin + ``spacing`` * integers."""
     lattice = _lattice_over(table, spacing)
-    result = _plane_ik(boom, lattice, table)
+    q, ok = _plane_ik(boom, lattice, table)
     inside = table.contains(lattice[..., 0], lattice[..., 1])
-    failures = int(np.sum(inside & ~result.ok))
+    failures = int(np.sum(inside & ~ok))
     covered = np.zeros((0, 0), dtype=bool)
     if area is not None:
         centres = area.centres
-        solved = _plane_ik(boom, centres, table)
-        covered = solved.ok
-        failures += int(np.sum(table.contains(centres[..., 0], centres[..., 1]) & ~solved.ok))
-    return failures, int(inside.sum()), float(_largest_step(result.q)), covered
+        covered = _plane_ik(boom, centres, table)[1]
+        failures += int(np.sum(table.contains(centres[..., 0], centres[..., 1]) & ~covered))
+    return failures, int(inside.sum()), float(_largest_step(q)), covered
 
 
-def _plane_ik(boom: PumpBoom, plane: np.ndarray, table: RegionTable) -> RegionIK:
-    """The region IK of boom-plane points (..., 2) (r, z) at theta1 = 0 with ``table``."""
-    return boom.region_ik(np.stack([plane[..., 0], np.zeros(plane.shape[:-1]), plane[..., 1]], axis=-1),
-                          table=table)
+def _plane_ik(boom: PumpBoom, plane: np.ndarray, table: RegionTable) -> tuple[np.ndarray, np.ndarray]:
+    """The region IK of boom-plane points (..., 2) (r, z) at theta1 = 0 with ``table``: q (..., 6)
+    (NaN where it fails) and ok (...,), in blocks (the final check's lattices hold millions of
+    points: in one piece their temporaries took 3.8 GB)."""
+    def solve(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        tips = np.stack([points[:, 0], np.zeros(len(points)), points[:, 1]], axis=-1)
+        result = boom.region_ik(tips, table=table)
+        return result.q, result.ok
+
+    q, ok = in_blocks(solve, plane.reshape(-1, 2))
+    return q.reshape(plane.shape[:-1] + (6,)), ok.reshape(plane.shape[:-1])
 
 
 def _lattice_over(table: RegionTable, spacing: float) -> np.ndarray:
