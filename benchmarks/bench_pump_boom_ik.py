@@ -49,6 +49,7 @@ POURS = {
 TOLERANCE = 1e-10
 RANDOM_LINES = 40
 RANDOM_LENGTH = 10.0  # m
+PLANE_LINES = 20_000
 
 
 def numerical_ik(boom: PumpBoom, points: np.ndarray, start: np.ndarray) -> tuple[np.ndarray, list[float]]:
@@ -88,8 +89,8 @@ def random_lines(boom: PumpBoom, count: int, rng: np.random.Generator) -> list[n
     solvable by the region IK (lines leaving the table are drawn again)."""
     lines = []
     while len(lines) < count:
-        i, j = boom.table.index[rng.integers(len(boom.table))]
-        r, z = np.array(boom.grid.corner(i, j)) + boom.grid.size * rng.random(2)
+        i, j, level = boom.table.index[rng.integers(len(boom.table))]
+        r, z = np.array(boom.grid.corner(i, j, level)) + boom.grid.side(level) * rng.random(2)
         heading = rng.uniform(-math.pi, math.pi)
         start = np.array([r * math.cos(heading), r * math.sin(heading), z])
         direction = rng.normal(size=3)
@@ -97,6 +98,43 @@ def random_lines(boom: PumpBoom, count: int, rng: np.random.Generator) -> list[n
         if plan.ok and not plan.truncated:
             lines.append(plan.points)
     return lines
+
+
+def plane_continuity(boom: PumpBoom, count: int, rng: np.random.Generator) -> list[str]:
+    """Rows of the continuity table: ``count`` random 4 m lines in the boom plane inside the covered
+    area (100 mm steps, starts in squares drawn by count and by area), the largest joint change per
+    step over all steps, the steps in a square's core, in bands between squares of one size and in
+    bands between squares of different sizes (the window around the step's middle holds both)."""
+    table = boom.table
+    side = boom.grid.side(table.index[:, 2])
+    rows = np.concatenate([rng.integers(0, len(table), count // 2),
+                           rng.choice(len(table), count - count // 2, p=side**2 / np.sum(side**2))])
+    corner = np.stack(boom.grid.corner(*table.index[rows].T), axis=-1)
+    start = corner + side[rows, None] * rng.random((count, 2))
+    angle = rng.uniform(0.0, 2.0 * math.pi, count)
+    direction = np.stack([np.cos(angle), np.sin(angle)], axis=-1)
+    plane = start[:, None] + 0.1 * np.arange(41)[None, :, None] * direction[:, None]
+    plane = plane[table.contains(plane[..., 0], plane[..., 1]).all(axis=1)]
+    result = boom.region_ik(np.stack([plane[..., 0], np.zeros(plane.shape[:-1]), plane[..., 1]], axis=-1))
+    assert result.ok.all()
+    step = np.degrees(np.abs(np.diff(result.q, axis=1)).max(axis=-1))  # (lines, 40)
+    middle = 0.5 * (plane[:, 1:] + plane[:, :-1])
+    half = 0.5 * boom.grid.band
+    corners = [middle + [dr, dz] for dr in (-half, half) for dz in (-half, half)] + [middle]
+    levels = np.stack([table.square(c[..., 0], c[..., 1])[..., 2] for c in corners], axis=-1)
+    levels = np.where(levels < 0, levels.max(axis=-1, keepdims=True), levels)
+    band = result.blended[:, 1:] | result.blended[:, :-1]
+    mixed = band & (levels.min(axis=-1) != levels.max(axis=-1))
+    kinds = [
+        ("all steps", np.ones_like(band)),
+        ("square cores", ~band),
+        ("bands, squares of one size", band & ~mixed),
+        ("bands between squares of different sizes", mixed),
+    ]
+    return [
+        f"| {name} | {len(plane)} | {int(mask.sum())} | {step[mask].max(initial=0.0):.2f} |"
+        for name, mask in kinds
+    ]
 
 
 def quality(boom: PumpBoom, q: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -185,6 +223,12 @@ def main() -> None:
         print(smoothness_row(boom, name, [plan.points]))
     lines = random_lines(boom, RANDOM_LINES, np.random.default_rng(1))
     print(smoothness_row(boom, f"{RANDOM_LINES} random {RANDOM_LENGTH:g} m lines", lines))
+    print()
+    print(f"Continuity in the boom plane ({PLANE_LINES} random 4 m lines drawn; those inside the table):")
+    print("| steps of 100 mm | lines | steps | largest joint change per 100 mm (deg, limit 8) |")
+    print("| --- | ---: | ---: | ---: |")
+    for row in plane_continuity(boom, PLANE_LINES, np.random.default_rng(2)):
+        print(row)
 
 
 if __name__ == "__main__":

@@ -435,20 +435,10 @@ class PumpBoom:
         triple, inside = table.blend(r, z)
         own = table.own_triple(r, z)
         blended = inside & np.any(triple != own, axis=-1)
-        # Section 4's shoulder: the end P_3 of section 3 under the triple (eq. 4's constants).
-        phi3 = triple.sum(axis=-1) - 2.0 * np.pi
-        phi1, phi2 = triple[..., 0], triple[..., 0] + triple[..., 1] - np.pi
-        l1, l2, l3, l4, l5 = self.lengths
-        shoulder_r = self.root[0] + l1 * np.cos(phi1) + l2 * np.cos(phi2) + l3 * np.cos(phi3)
-        shoulder_z = self.root[1] + l1 * np.sin(phi1) + l2 * np.sin(phi2) + l3 * np.sin(phi3)
-        arm = two_link_ik(r - shoulder_r, z - shoulder_z, l4, l5, tol=1e-9)
-        phi4 = arm.theta1[..., ELBOW_NEGATIVE]
-        theta5 = wrap_angle(phi4 - phi3) + np.pi
-        theta6 = arm.theta2[..., ELBOW_NEGATIVE] + np.pi
-        q = np.concatenate([theta1[..., None], triple, theta5[..., None], theta6[..., None]], axis=-1)
-        within = self.limits.within(q, LIMIT_TOL)
+        q, reachable, _, envelope = self.complete(triple, r, z)
+        q[..., 0] = theta1
+        within = self.limits.within(q, LIMIT_TOL)  # the slew turn as well
         q = np.where(within[..., None], self.limits.clip(q), q)
-        envelope = self.positive_envelope(q)
         distance = np.hypot(r - self.root[0], z - self.root[1])
         failure = np.select(
             [
@@ -456,7 +446,7 @@ class PumpBoom:
                 distance > self.reach + 1e-9,
                 r < self.root[0],
                 ~inside,
-                ~arm.reachable,
+                ~reachable,
                 ~within,
                 ~envelope,
             ],
@@ -473,6 +463,33 @@ class PumpBoom:
         ).astype(np.int8)
         solved = np.where((failure == Failure.NONE)[..., None], q, np.nan)
         return RegionIK(q=solved, failure=failure, r=r, z=z, blended=blended, boom=self, table=table, raw=q)
+
+    def complete(
+        self, triple: ArrayLike, r: ArrayLike, z: ArrayLike
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Step 3 of the region IK: theta5, theta6 of sections 4-5 (eq. 4, elbow-over 2R) for the
+        triples (..., 3) and plane points (r, z). Returns q (..., 6) with theta1 = 0 (joints within
+        LIMIT_TOL of a limit moved onto it) and where the 2R reaches, the joints are inside the
+        limits, the shape is positive envelope (all (...,))."""
+        triple = np.asarray(triple, dtype=float)
+        # Section 4's shoulder: the end P_3 of section 3 under the triple (eq. 4's constants).
+        phi3 = triple.sum(axis=-1) - 2.0 * np.pi
+        phi1, phi2 = triple[..., 0], triple[..., 0] + triple[..., 1] - np.pi
+        l1, l2, l3, l4, l5 = self.lengths
+        shoulder_r = self.root[0] + l1 * np.cos(phi1) + l2 * np.cos(phi2) + l3 * np.cos(phi3)
+        shoulder_z = self.root[1] + l1 * np.sin(phi1) + l2 * np.sin(phi2) + l3 * np.sin(phi3)
+        arm = two_link_ik(r - shoulder_r, z - shoulder_z, l4, l5, tol=1e-9)
+        phi4 = arm.theta1[..., ELBOW_NEGATIVE]
+        theta5 = wrap_angle(phi4 - phi3) + np.pi
+        theta6 = arm.theta2[..., ELBOW_NEGATIVE] + np.pi
+        q = np.concatenate(
+            [np.zeros(theta5.shape + (1,)), np.broadcast_to(triple, theta5.shape + (3,)), theta5[..., None],
+             theta6[..., None]],
+            axis=-1,
+        )
+        within = self.limits.within(q, LIMIT_TOL)
+        q = np.where(within[..., None], self.limits.clip(q), q)
+        return q, arm.reachable, within, self.positive_envelope(q)
 
     def region_ik_point(
         self, x: float, y: float, z: float, seed_slew: float | None = None
@@ -610,9 +627,10 @@ class PumpBoom:
         where = f"pour point at r = {r:.4g} m, z = {z:.4g} m"
         if failure is Failure.NONE:
             how = "blended in a transition band" if blended else "its square's triple"
-            i, j = table.square(r, z)
+            i, j, level = (int(v) for v in table.square(r, z))
             return (
-                f"region mode: square ({int(i)}, {int(j)}), theta2..theta4 {how}; theta5, theta6 closed form"
+                f"region mode: square ({i}, {j}) of level {level} ({float(table.grid.side(level)):g} m), "
+                f"theta2..theta4 {how}; theta5, theta6 closed form"
             )
         if failure is Failure.NOT_FINITE:
             return "pour point is not finite"
@@ -620,20 +638,22 @@ class PumpBoom:
             distance = math.hypot(r - self.root[0], z - self.root[1])
             return (
                 f"{where} is {distance:.4g} m from the root pin, beyond the boom's reach {self.reach:.4g} m"
+                f"{_nearest(table, r, z)}"
             )
         if failure is Failure.BEHIND_ROOT:
             return (
                 f"{where} is behind the boom root pin (r = {self.root[0]:.4g} m): the positive "
                 "envelope is undefined there and it is outside the automatic pour workspace"
+                f"{_nearest(table, r, z)}"
             )
         if failure is Failure.NOT_IN_TABLE:
-            i, j = table.square(r, z)
-            r0, z0 = table.grid.corner(int(i), int(j))
+            i, j = table.grid.square(r, z)
+            r0, z0 = table.grid.corner(i, j)
             s = table.grid.size
             return (
-                f"{where} is outside the region table: its square ({int(i)}, {int(j)}) (r {r0:.4g}-"
-                f"{r0 + s:.4g} m, z {z0:.4g}-{z0 + s:.4g} m) is not in the automatic pour workspace "
-                f"({len(table)} squares)"
+                f"{where} is outside the region table: no square covers it (its {s:g} m square ({i}, {j}), "
+                f"r {r0:.4g}-{r0 + s:.4g} m, z {z0:.4g}-{z0 + s:.4g} m, is not wholly in the automatic pour "
+                f"workspace; {len(table)} squares, {table.covered_area:.0f} m^2){_nearest(table, r, z)}"
             )
         if failure is Failure.TWO_LINK:
             return f"{where}: the last two sections cannot reach it from the blended triple"
@@ -652,6 +672,17 @@ class PumpBoom:
             theta1 > upper, theta1 - 2.0 * np.pi, np.where(theta1 < lower, theta1 + 2.0 * np.pi, theta1)
         )
         return np.where(r > 0.0, theta1, start)
+
+
+def _nearest(table: RegionTable, r: float, z: float) -> str:
+    """The reason's tail: the nearest covered point in the boom plane (the pour point's heading)."""
+    if not len(table):
+        return ""
+    near_r, near_z = table.nearest(r, z)
+    return (
+        f"; the nearest covered point is r = {near_r:.4g} m, z = {near_z:.4g} m "
+        f"({math.hypot(near_r - r, near_z - z):.3g} m away, same slew angle)"
+    )
 
 
 def _joints(q: ArrayLike) -> np.ndarray:

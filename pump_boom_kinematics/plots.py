@@ -22,6 +22,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.colors import ListedColormap
 from matplotlib.patches import Rectangle
 
 from pump_boom_kinematics.build_regions import Coverage, reachable_area
@@ -41,42 +42,44 @@ def _truck(ax: plt.Axes, boom: PumpBoom) -> None:
 
 
 def plot_regions(boom: PumpBoom, out: Path, area: Coverage | None = None) -> Path:
-    """Fig. 6: squares of the region table over the reachable and positive-envelope regions."""
+    """Fig. 6: the region table's squares over the reachable region, the positive-envelope part
+    covered and not covered by the table in different colours."""
     area = reachable_area(boom) if area is None else area
     table = boom.table
-    fig, ax = plt.subplots(figsize=(8, 9))
+    centres = area.centres
+    covered = table.contains(centres[..., 0], centres[..., 1])
+    # 1: reachable, not positive envelope; 2: positive envelope, not covered; 3: covered.
+    shade = np.where(covered, 3, np.where(area.envelope, 2, np.where(area.reachable, 1, 0)))
+    colours = ListedColormap(["white", "0.8", "tab:red", "#b9dcb0"])
+    fig, ax = plt.subplots(figsize=(9, 11))
     extent = (area.r_edges[0], area.r_edges[-1], area.z_edges[0], area.z_edges[-1])
-    shade = area.reachable.astype(float) + area.envelope.astype(float)
     ax.imshow(
-        np.ma.masked_equal(shade.T, 0.0),
-        origin="lower",
-        extent=extent,
-        cmap="Blues",
-        vmin=0,
-        vmax=3,
-        interpolation="nearest",
+        shade.T, origin="lower", extent=extent, cmap=colours, vmin=-0.5, vmax=3.5, interpolation="nearest"
     )
-    s, half = table.grid.size, table.grid.band / 2
-    for (i, j), t in zip(table.index, np.degrees(table.triples)):
-        r, z = table.grid.corner(i, j)
-        ax.add_patch(Rectangle((r, z), s, s, fill=False, ec="tab:red", lw=1.0))
-        ax.add_patch(
-            Rectangle(
-                (r + half, z + half), s - 2 * half, s - 2 * half, fill=False, ec="tab:red", lw=0.4, ls=":"
-            )
-        )
-        ax.text(
-            r + s / 2, z + s / 2, f"{t[0]:.0f}\n{t[1]:.0f}\n{t[2]:.0f}", ha="center", va="center", fontsize=5
-        )
+    half = table.grid.band / 2
+    for (i, j, level), t in zip(table.index.tolist(), np.degrees(table.triples)):
+        r, z = table.grid.corner(i, j, level)
+        s = float(table.grid.side(level))
+        ax.add_patch(Rectangle((r, z), s, s, fill=False, ec="tab:green" if level else "darkgreen",
+                               lw=0.8 if level == 0 else 0.3))
+        if level == 0:
+            core = Rectangle((r + half, z + half), s - 2 * half, s - 2 * half, fill=False, ec="darkgreen")
+            core.set_linestyle(":")
+            core.set_linewidth(0.4)
+            ax.add_patch(core)
+            ax.text(r + s / 2, z + s / 2, f"{t[0]:.0f}/{t[1]:.0f}/{t[2]:.0f}", ha="center", va="center",
+                    fontsize=6.5)
     _truck(ax, boom)
     ax.plot(*boom.root, "k^")
     c = table.coverage
+    levels, counts = np.unique(table.index[:, 2], return_counts=True)
+    sizes = ", ".join(f"{n} x {float(table.grid.side(level)):g} m" for level, n in zip(levels, counts))
     ax.set_title(
-        f"Region table: {len(table)} squares of {s:g} m ({c['covered_area']:.0f} m²) over the reachable "
-        f"region\n({c['reachable_area']:.0f} m², dark: {c['envelope_area']:.0f} m² positive envelope); "
-        f"grid corner (r, z) = {table.grid.origin}; dotted: {table.grid.band:g} m bands; "
-        "numbers: θ2 θ3 θ4 (deg)",
-        fontsize=8,
+        f"Region table: {len(table)} squares ({sizes}), {c['covered_area']:.0f} m²\n"
+        f"green: covered, {100 * c['covered_share']:.1f} % of the {c['envelope_area']:.0f} m² reachable in "
+        "positive envelope; red: not covered;\ngrey: reachable only outside positive envelope. "
+        f"5 m squares: θ2/θ3/θ4 (deg), dotted: {table.grid.band:g} m bands",
+        fontsize=10,
     )
     ax.set_xlabel("r (m)")
     ax.set_ylabel("z (m)")
@@ -184,7 +187,7 @@ def animate_pour(boom: PumpBoom, plan: PathPlan, name: str, title: str, out: Pat
 
 def _save(fig: plt.Figure, path: Path) -> Path:
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight")  # equal-aspect axes: keep every label inside
     plt.close(fig)
     return path
 

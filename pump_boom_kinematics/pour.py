@@ -165,9 +165,14 @@ def plan_path(
         line = straight_line(start, end, step)[1:]
         if len(line):
             solved = boom.region_ik(line, q[-1][-1])
-            points.append(line)
-            q.append(solved.q)
-            blended.append(solved.blended)
+            # The line spaced anew puts points between the first ones: one may catch the corner of
+            # a gap in the table that the first ones stepped over. The path then ends before it.
+            reached = len(line) if solved.ok.all() else int(np.argmin(solved.ok))
+            if reached < len(line):
+                end = line[reached - 1] if reached else start
+            points.append(line[:reached])
+            q.append(solved.q[:reached])
+            blended.append(solved.blended[:reached])
         text = (
             f"waypoint {k} {_show(goal)} cannot be reached along the line from {_show(start)}: {reason}; "
             f"the path ends at the farthest reachable point of the line {_show(end)}"

@@ -1,21 +1,28 @@
 """The region table of the pump boom's IK (paper 001, section 2.2), as data.
 
 The vertical pour plane (r, z) of the boom (r horizontal from the slew axis, z up from the
-ground) is cut into squares of side ``size`` whose corners lie on the grid
-``origin + size * (i, j)``; square (i, j) spans r in [r0 + i s, r0 + (i + 1) s], z in
-[z0 + j s, z0 + (j + 1) s]. Each square of the table holds one triple (theta2, theta3, theta4)
-(rad, paper convention) for which the last two sections reach every point of the square inside
-the joint limits in positive-envelope shape.
+ground) is cut into squares. The paper's squares have side ``size`` with corners on the grid
+``origin + size * (i, j)``; a square that no single triple serves is split into four, and so on
+(a quadtree of the paper's method): square (i, j) of level l has side s_l = size / 2^l and spans
+r in [r0 + i s_l, r0 + (i + 1) s_l], z in [z0 + j s_l, z0 + (j + 1) s_l]. Squares are closed:
+a point on an edge or a corner belongs to every square that contains it (within ``EDGE`` m), so
+the covered area is the union of the closed squares. Each square holds one triple
+(theta2, theta3, theta4) (rad, paper convention) for which the last two sections reach every
+point of the square inside the joint limits in positive-envelope shape.
 
-Transition bands (section 2.2, step 3): a band of width ``band`` centred on every edge between
-two squares, in which the triple is the blend of the neighbouring squares' triples. The blend is a
-partition of unity: along r, square column k weighs a_k(u) = ramp(u - k) - ramp(u - k - 1) with
-u = (r - r0) / s and ramp(x) = clip((x + h) / (2 h), 0, 1), h = band / (2 s) (likewise b_l(v)
-along z); square (k, l) weighs a_k b_l. Away from every edge (more than band / 2) one weight is 1
-and the triple is the square's own; across a band it changes linearly (bilinearly near a
-corner). Squares missing from the table drop out and the rest are renormalised, so a point of a
-table square next to a missing one keeps its own square's triple up to the edge. A point whose
-own square is not in the table is outside the automatic pour workspace.
+Transition bands (section 2.2, step 3), for squares of any size: the triple at a point is the
+mean of the piecewise-constant triple field over the covered part of a window of side ``band``
+centred on the point (each square weighs the area it shares with the window). On a grid of equal
+squares this is exactly the partition of unity of the paper's bands: along r the window's
+share of square column k is ramp(u - k) - ramp(u - k - 1) with ramp(x) = clip((x + h) / 2h, 0, 1),
+h = band / (2 s) (likewise along z), the product of the two for square (k, l). Where the window
+lies inside the point's own square (more than band / 2 from its edges) the triple is the
+square's own, unchanged; across a band it changes linearly, and by at most (the spread of the
+triples under the window) / band per metre whatever the squares' sizes; missing squares drop out
+(the mean is over the covered part only), so a square next to a gap keeps its own triple up to
+the edge. The window mean is evaluated from a summed-area table of the field on the finest
+squares' cells (four bilinear look-ups, exact for a piecewise-constant field), so a band costs
+the same for any number of small squares under the window.
 
 The table file (``config/pump_boom_regions.yaml``, a ROS parameters file) is written by
 ``pump_boom_regions`` (:mod:`.build_regions`) and records the geometry it was built for; loading
@@ -27,6 +34,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -34,8 +42,8 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike
 
-from manipulator_kinematics.config import ConfigError, Number, Numbers, require, validate
-from manipulator_kinematics.params import load_parameters
+from manipulator_kinematics.config import ConfigError, Number, Numbers, Text, require, validate
+from manipulator_kinematics.params import load_parameters, shown
 
 #: Section of the table file under ``/**: ros__parameters``.
 TABLE_SECTION = "pump_boom_regions"
@@ -57,27 +65,40 @@ TABLE_SCHEMA = {
         "check_spacing": Number(min=0.01, max=5.0, unit="m"),
         "max_step": Number(min=0.0, max=math.pi, unit="rad"),
         "start": Numbers(2, Number(min=-1000, max=1000, integer=True)),
+        "levels": Number(min=0, max=12, integer=True),
+        "min_theta3": Number(min=0.0, max=2 * math.pi, unit="rad", default=0.0),
     },
-    "column": Numbers(item=Number(min=-1000, max=1000, integer=True)),
-    "row": Numbers(item=Number(min=-1000, max=1000, integer=True)),
-    "theta2": Numbers(),
-    "theta3": Numbers(),
-    "theta4": Numbers(),
-    "margin": Numbers(item=Number(unit="m")),
+    "squares": Text(doc="one line per square: column row level theta2 theta3 theta4 (rad) margin (m)"),
     "coverage": {
         "squares": Number(min=0, integer=True),
         "covered_area": Number(min=0.0, unit="m^2"),
         "reachable_area": Number(min=0.0, unit="m^2"),
         "envelope_area": Number(min=0.0, unit="m^2"),
+        "covered_share": Number(min=0.0, max=1.0),
+        "raster_cell": Number(min=0.0, unit="m"),
+        "raster_samples": Number(min=0, integer=True),
         "band_failures": Number(min=0, integer=True),
         "checked_points": Number(min=0, integer=True),
+        "largest_step": Number(min=0.0, unit="rad"),
     },
 }
 
 
+#: The columns of a line of the table file's ``squares`` text: the square (i, j, level), its triple
+#: (rad) and its margin (m). One text block rather than seven lists of numbers: a YAML parser builds
+#: each list item as a Python object (150 ms for 1500 squares), a block is one string (2 ms).
+SQUARE_COLUMNS = ("column", "row", "level", "theta2", "theta3", "theta4", "margin")
+INDEX_RANGE = 100_000  # |column|, |row| at most this
+MAX_LEVEL = 12
+
+#: A point this close (m) to a square's edge lies on it (closed squares, see the module docstring).
+EDGE = 1e-9
+
+
 @dataclass(frozen=True)
 class Grid:
-    """The square grid of the pour plane: corner ``origin`` (r0, z0) m, side ``size`` m, ``band`` m."""
+    """The square grid of the pour plane: corner ``origin`` (r0, z0) m, side ``size`` m of the
+    level-0 squares, transition band ``band`` m (the side of the blending window)."""
 
     origin: tuple[float, float]
     size: float
@@ -87,31 +108,26 @@ class Grid:
         if not (self.size > 0.0 and 0.0 < self.band < self.size):
             raise ValueError(f"need size > 0 and 0 < band < size, got size {self.size}, band {self.band}")
 
-    def cell(self, r: ArrayLike, z: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """Grid coordinates (u, v) of plane points: square (floor(u), floor(v))."""
-        return (
-            (np.asarray(r, dtype=float) - self.origin[0]) / self.size,
-            (np.asarray(z, dtype=float) - self.origin[1]) / self.size,
-        )
+    def side(self, level: ArrayLike = 0) -> np.ndarray:
+        """Side (m) of the squares of ``level``: size / 2^level."""
+        return self.size / 2.0 ** np.asarray(level)
 
-    def corner(self, i: ArrayLike, j: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """Lower-left corner (r, z) of squares (i, j)."""
-        return (self.origin[0] + np.asarray(i) * self.size, self.origin[1] + np.asarray(j) * self.size)
+    def corner(self, i: ArrayLike, j: ArrayLike, level: ArrayLike = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Lower-left corner (r, z) of squares (i, j) of ``level``."""
+        side = self.side(level)
+        return (self.origin[0] + np.asarray(i) * side, self.origin[1] + np.asarray(j) * side)
 
-    def weights(self, u: np.ndarray) -> np.ndarray:
-        """(..., 3) blend weights of squares floor(u) - 1, floor(u), floor(u) + 1 along one axis."""
-        h = self.band / (2.0 * self.size)
-        k = np.floor(u)[..., None] + np.array([-1.0, 0.0, 1.0])
-        x = u[..., None] - k
-        return np.clip((x + h) / (2.0 * h), 0.0, 1.0) - np.clip((x - 1.0 + h) / (2.0 * h), 0.0, 1.0)
+    def square(self, r: float, z: float) -> tuple[int, int]:
+        """Level-0 square (i, j) whose half-open extent holds the finite point (r, z)."""
+        return (math.floor((r - self.origin[0]) / self.size), math.floor((z - self.origin[1]) / self.size))
 
 
 @dataclass(frozen=True)
 class RegionTable:
-    """Squares (i, j) with their triples (theta2, theta3, theta4) and the geometry they fit."""
+    """Squares (i, j, level) with their triples (theta2, theta3, theta4) and the geometry they fit."""
 
     grid: Grid
-    index: np.ndarray  # (m, 2) int: column i, row j
+    index: np.ndarray  # (m, 3) int: column i, row j, level l (side size / 2^l)
     triples: np.ndarray  # (m, 3) rad
     margin: np.ndarray  # (m,) m: the smallest clearance of the square's check (see build_regions)
     built_for: Mapping[str, Any]
@@ -119,109 +135,185 @@ class RegionTable:
     coverage: Mapping[str, Any]
 
     def __post_init__(self) -> None:
-        index = np.asarray(self.index, dtype=int).reshape(-1, 2)
+        index = np.asarray(self.index, dtype=int).reshape(-1, 3)
+        triples = np.asarray(self.triples, dtype=float).reshape(-1, 3)
         object.__setattr__(self, "index", index)
-        object.__setattr__(self, "triples", np.asarray(self.triples, dtype=float).reshape(-1, 3))
+        object.__setattr__(self, "triples", triples)
         object.__setattr__(self, "margin", np.asarray(self.margin, dtype=float).reshape(-1))
-        if len({tuple(row) for row in index.tolist()}) != len(index):
-            raise ValueError("region table lists a square twice")
-        lower = index.min(axis=0) if len(index) else np.zeros(2, dtype=int)
-        upper = index.max(axis=0) if len(index) else -np.ones(2, dtype=int)
-        # Dense lookup array with a one-square NaN border, so the 3x3 neighbourhood of any table
-        # square is inside it.
-        shape = tuple(upper - lower + 3)
-        dense = np.full(shape + (3,), np.nan)
-        dense[index[:, 0] - lower[0] + 1, index[:, 1] - lower[1] + 1] = self.triples
-        object.__setattr__(self, "_lower", lower - 1)
-        object.__setattr__(self, "_dense", dense)
-        squares = {(i, j): (t[0], t[1], t[2]) for (i, j), t in zip(index.tolist(), self.triples.tolist())}
-        object.__setattr__(self, "_squares", squares)
+        if np.any(index[:, 2] < 0):
+            raise ValueError("region table: a square level is negative")
+        depth = int(index[:, 2].max()) if len(index) else 0
+        cell = self.grid.size / 2**depth  # the finest squares' side: the cells of the lookup arrays
+        scale = 2 ** (depth - index[:, 2])
+        low = index[:, :2] * scale[:, None]
+        high = low + scale[:, None]
+        lower = low.min(axis=0) if len(index) else np.zeros(2, dtype=int)
+        shape = tuple((high.max(axis=0) - lower).tolist()) if len(index) else (0, 0)
+        # cell -> the square covering it: the cells of every square, level by level (all of a level
+        # have the same number of cells), as flat indices of the lookup arrays.
+        cells, rows = [np.zeros(0, dtype=int)], [np.zeros(0, dtype=int)]
+        for n in np.unique(scale).tolist():
+            k = np.flatnonzero(scale == n)
+            offset = np.stack(np.meshgrid(np.arange(n), np.arange(n), indexing="ij"), axis=-1).reshape(-1, 2)
+            at = (low[k] - lower)[:, None, :] + offset[None]
+            cells.append((at[..., 0] * shape[1] + at[..., 1]).ravel())
+            rows.append(np.repeat(k, len(offset)))
+        cells, rows = np.concatenate(cells), np.concatenate(rows)
+        count = np.bincount(cells, minlength=int(np.prod(shape)))
+        if np.any(count > 1):
+            clash = np.flatnonzero(count[cells] > 1)
+            first, other = rows[clash[cells[clash] == cells[clash[0]]]][:2]
+            a, b = tuple(index[first].tolist()), tuple(index[other].tolist())
+            raise ValueError(f"region table: square {a} overlaps square {b}")
+        owner = np.full(shape, -1, dtype=np.int32)
+        owner.flat[cells] = rows
+        covered = owner >= 0
+        field = np.zeros(shape + (4,))
+        field[covered, :3] = triples[owner[covered]]
+        field[covered, 3] = 1.0
+        summed = np.zeros((shape[0] + 1, shape[1] + 1, 4))
+        summed[1:, 1:] = field.cumsum(axis=0).cumsum(axis=1)
+        side = self.grid.side(index[:, 2])
+        corner = np.stack(self.grid.corner(index[:, 0], index[:, 1], index[:, 2]), axis=-1).reshape(-1, 2)
+        object.__setattr__(self, "_cell", cell)
+        object.__setattr__(self, "_lower", lower)
+        object.__setattr__(self, "_owner", owner)
+        object.__setattr__(self, "_summed", summed)
+        object.__setattr__(self, "_bounds", np.concatenate([low - lower, high - lower], axis=1).astype(float))
+        object.__setattr__(self, "_extent", np.concatenate([corner, corner + side[:, None]], axis=1))
 
     def __len__(self) -> int:
         return len(self.index)
 
-    def contains(self, r: ArrayLike, z: ArrayLike) -> np.ndarray:
-        """(...,) True where the point's own square is in the table (NaN: False)."""
-        return ~np.isnan(self._own(*self.grid.cell(r, z))[..., 0])
+    @property
+    def covered_area(self) -> float:
+        """Area (m^2) of the union of the squares."""
+        return float(np.sum(self.grid.side(self.index[:, 2]) ** 2))
 
-    def square(self, r: ArrayLike, z: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """Column and row (i, j) of the square holding each point (int; -10^9 for NaN)."""
-        u, v = self.grid.cell(r, z)
-        fill = -(10**9)
+    def _cells(self, r: ArrayLike, z: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Plane points in cells of the lookup arrays (cell (a, b) is [a, a + 1) x [b, b + 1))."""
+        r, z = np.broadcast_arrays(np.asarray(r, dtype=float), np.asarray(z, dtype=float))
         return (
-            np.where(np.isfinite(u), np.floor(np.nan_to_num(u)), fill).astype(int),
-            np.where(np.isfinite(v), np.floor(np.nan_to_num(v)), fill).astype(int),
+            (r - self.grid.origin[0]) / self._cell - self._lower[0],
+            (z - self.grid.origin[1]) / self._cell - self._lower[1],
         )
 
-    def blend(self, r: ArrayLike, z: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """The triple (..., 3) at plane points (section 2.2 step 3; module docstring) and
-        ``inside`` (...,): NaN triples where the point's own square is not in the table."""
-        u, v = self.grid.cell(r, z)
-        u, v = np.broadcast_arrays(u, v)
-        inside = ~np.isnan(self._own(u, v)[..., 0])
-        # Points outside the table (NaN included) get a harmless stand-in; their triple is NaN.
-        ok_u = np.where(inside, u, 0.0)
-        ok_v = np.where(inside, v, 0.0)
-        iu = np.floor(ok_u).astype(int) - self._lower[0]
-        iv = np.floor(ok_v).astype(int) - self._lower[1]
-        iu = np.clip(iu, 1, self._dense.shape[0] - 2)
-        iv = np.clip(iv, 1, self._dense.shape[1] - 2)
-        offsets = np.array([-1, 0, 1])
-        neighbours = self._dense[
-            (iu[..., None] + offsets)[..., :, None], (iv[..., None] + offsets)[..., None, :]
-        ]
-        weight = self.grid.weights(ok_u)[..., :, None] * self.grid.weights(ok_v)[..., None, :]
-        present = ~np.isnan(neighbours[..., 0])
-        weight = np.where(present, weight, 0.0)
-        total = weight.sum(axis=(-2, -1))
-        with np.errstate(invalid="ignore", divide="ignore"):
-            triple = np.einsum("...kl,...klc->...c", weight, np.nan_to_num(neighbours)) / total[..., None]
-        return np.where(inside[..., None], triple, np.nan), inside
+    def owner(self, r: ArrayLike, z: ArrayLike) -> np.ndarray:
+        """(...,) row of the table of a square holding each point, -1 where none (NaN: -1). On an
+        edge (within EDGE) the square above/right of it if covered, else the one below/left."""
+        u, v = self._cells(r, z)
+        finite = np.isfinite(u) & np.isfinite(v)
+        u, v = np.where(finite, u, -1.0), np.where(finite, v, -1.0)
+        edge = EDGE / self._cell
+        found = np.full(u.shape, -1, dtype=np.int32)
+        for b in (np.floor(v + edge), np.floor(v - edge)):
+            for a in (np.floor(u + edge), np.floor(u - edge)):
+                hit = (a >= 0) & (a < self._owner.shape[0]) & (b >= 0) & (b < self._owner.shape[1])
+                if not hit.any():
+                    continue
+                k = self._owner[np.where(hit, a, 0).astype(int), np.where(hit, b, 0).astype(int)]
+                found = np.where((found < 0) & hit, k, found)
+        return found
 
-    def blend_point(self, r: float, z: float) -> tuple[tuple[float, float, float], bool] | None:
-        """:meth:`blend` of one finite plane point in plain floats (no numpy: a controller's single
-        point costs microseconds, not numpy's per-call overhead): ((theta2, theta3, theta4),
-        blended) or None where the point's own square is not in the table. Same weights as
-        :meth:`Grid.weights`: at a fraction f of its square the point weighs the previous square
-        max(0, (h - f) / 2h), the next max(0, (f - 1 + h) / 2h), its own the rest."""
-        size, origin = self.grid.size, self.grid.origin
-        u, v = (r - origin[0]) / size, (z - origin[1]) / size
-        i, j = math.floor(u), math.floor(v)
-        own = self._squares.get((i, j))
-        if own is None:
-            return None
-        h2 = self.grid.band / size
-        f, g = u - i, v - j
-        wu = (max(0.0, (0.5 * h2 - f) / h2), 0.0, max(0.0, (f - 1.0 + 0.5 * h2) / h2))
-        wv = (max(0.0, (0.5 * h2 - g) / h2), 0.0, max(0.0, (g - 1.0 + 0.5 * h2) / h2))
-        if wu[0] == wu[2] == wv[0] == wv[2] == 0.0:
-            return own, False  # the square's core: its own triple
-        wu = (wu[0], 1.0 - wu[0] - wu[2], wu[2])
-        wv = (wv[0], 1.0 - wv[0] - wv[2], wv[2])
-        total, a, b, c = 0.0, 0.0, 0.0, 0.0
-        for du in (-1, 0, 1):
-            for dv in (-1, 0, 1):
-                weight = wu[du + 1] * wv[dv + 1]
-                triple = self._squares.get((i + du, j + dv)) if weight else None
-                if triple is not None:
-                    total += weight
-                    a += weight * triple[0]
-                    b += weight * triple[1]
-                    c += weight * triple[2]
-        blended = (a / total, b / total, c / total)
-        return blended, blended != own
+    def contains(self, r: ArrayLike, z: ArrayLike) -> np.ndarray:
+        """(...,) True where the point lies in a square of the table (edges included; NaN: False)."""
+        return self.owner(r, z) >= 0
+
+    def square(self, r: ArrayLike, z: ArrayLike) -> np.ndarray:
+        """(..., 3) (i, j, level) of the square holding each point (:meth:`owner`); -1 outside."""
+        k = self.owner(r, z)
+        return np.where((k >= 0)[..., None], self.index[np.maximum(k, 0)] if len(self) else -1, -1)
 
     def own_triple(self, r: ArrayLike, z: ArrayLike) -> np.ndarray:
         """The triple of the point's own square (..., 3), no blending; NaN outside the table."""
-        return self._own(*self.grid.cell(r, z))
+        k = self.owner(r, z)
+        return np.where((k >= 0)[..., None], self.triples[np.maximum(k, 0)] if len(self) else np.nan, np.nan)
 
-    def _own(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        finite = np.isfinite(u) & np.isfinite(v)
-        iu = np.floor(np.where(finite, u, 0.0)).astype(int) - self._lower[0]
-        iv = np.floor(np.where(finite, v, 0.0)).astype(int) - self._lower[1]
-        hit = finite & (iu >= 0) & (iu < self._dense.shape[0]) & (iv >= 0) & (iv < self._dense.shape[1])
-        out = self._dense[np.where(hit, iu, 0), np.where(hit, iv, 0)]
-        return np.where(hit[..., None], out, np.nan)
+    def blend(self, r: ArrayLike, z: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """The triple (..., 3) at plane points (section 2.2 step 3; module docstring) and
+        ``inside`` (...,): NaN triples where the point is in no square of the table."""
+        u, v = self._cells(r, z)
+        k = self.owner(r, z)
+        inside = k >= 0
+        if not len(self):
+            return np.full(u.shape + (3,), np.nan), inside
+        k = np.maximum(k, 0)
+        u, v = np.where(inside, u, 0.0), np.where(inside, v, 0.0)
+        half = 0.5 * self.grid.band / self._cell
+        low_u, low_v, high_u, high_v = np.moveaxis(self._bounds[k], -1, 0)
+        core = (u - half >= low_u) & (u + half <= high_u) & (v - half >= low_v) & (v + half <= high_v)
+        n_u, n_v = self._owner.shape
+        u0, u1 = np.clip(u - half, 0.0, n_u), np.clip(u + half, 0.0, n_u)
+        v0, v1 = np.clip(v - half, 0.0, n_v), np.clip(v + half, 0.0, n_v)
+        window = (
+            self._summed_at(u1, v1)
+            - self._summed_at(u0, v1)
+            - self._summed_at(u1, v0)
+            + self._summed_at(u0, v0)
+        )
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = window[..., :3] / window[..., 3:]
+        triple = np.where(core[..., None], self.triples[k], mean)
+        return np.where(inside[..., None], triple, np.nan), inside
+
+    def _summed_at(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The summed-area table (..., 4) at cell coordinates in [0, n]: bilinear in each cell."""
+        a = np.minimum(np.floor(u), self._owner.shape[0] - 1).astype(int)
+        b = np.minimum(np.floor(v), self._owner.shape[1] - 1).astype(int)
+        f, g = (u - a)[..., None], (v - b)[..., None]
+        s = self._summed
+        low = s[a, b] * (1.0 - f) + s[a + 1, b] * f
+        high = s[a, b + 1] * (1.0 - f) + s[a + 1, b + 1] * f
+        return low * (1.0 - g) + high * g
+
+    @cached_property
+    def _plain(self) -> tuple[Any, ...]:
+        """Plain-Python copies of the lookup arrays for :meth:`blend_point` (built on first use)."""
+        return (
+            self._owner.tolist(),
+            self._summed.tolist(),
+            self._bounds.tolist(),
+            [tuple(t) for t in self.triples.tolist()],
+            tuple(self._lower.tolist()),  # plain ints: a numpy scalar would make every float after it one
+        )
+
+    def blend_point(self, r: float, z: float) -> tuple[tuple[float, float, float], bool] | None:
+        """:meth:`blend` of one finite plane point in plain floats (no numpy: a controller's single
+        point costs microseconds, not numpy's per-call overhead), with the same operations in the
+        same order: ((theta2, theta3, theta4), blended) or None where the point is in no square."""
+        owner, summed, bounds, triples, lower = self._plain
+        cell, n_u, n_v = self._cell, len(owner), len(owner[0]) if owner else 0
+        u = (r - self.grid.origin[0]) / cell - lower[0]
+        v = (z - self.grid.origin[1]) / cell - lower[1]
+        edge = EDGE / cell
+        k = -1
+        for b in (math.floor(v + edge), math.floor(v - edge)):
+            for a in (math.floor(u + edge), math.floor(u - edge)):
+                if k < 0 and 0 <= a < n_u and 0 <= b < n_v:
+                    k = owner[a][b]
+            if k >= 0:
+                break
+        if k < 0:
+            return None
+        own = triples[k]
+        half = 0.5 * self.grid.band / cell
+        low_u, low_v, high_u, high_v = bounds[k]
+        if u - half >= low_u and u + half <= high_u and v - half >= low_v and v + half <= high_v:
+            return own, False  # the window lies in the square: its own triple
+        u0, u1 = min(max(u - half, 0.0), n_u), min(max(u + half, 0.0), n_u)
+        v0, v1 = min(max(v - half, 0.0), n_v), min(max(v + half, 0.0), n_v)
+        s11, s01 = _summed_point(summed, u1, v1, n_u, n_v), _summed_point(summed, u0, v1, n_u, n_v)
+        s10, s00 = _summed_point(summed, u1, v0, n_u, n_v), _summed_point(summed, u0, v0, n_u, n_v)
+        t2, t3, t4, weight = (a - b - c + d for a, b, c, d in zip(s11, s01, s10, s00))
+        blended = (t2 / weight, t3 / weight, t4 / weight)
+        return blended, blended != own
+
+    def nearest(self, r: float, z: float) -> tuple[float, float]:
+        """The point of the covered area nearest to the finite plane point (r, z) (m)."""
+        extent = self._extent
+        closest = np.clip([r, z], extent[:, :2], extent[:, 2:])
+        k = int(np.argmin(np.hypot(closest[:, 0] - r, closest[:, 1] - z)))
+        return float(closest[k, 0]), float(closest[k, 1])
 
     # ---- file ---------------------------------------------------------------------------------
     @classmethod
@@ -232,9 +324,7 @@ class RegionTable:
         if TABLE_SECTION not in params:
             raise ConfigError(f"{path}: no {TABLE_SECTION!r} section under /**: ros__parameters")
         p = validate(params[TABLE_SECTION], TABLE_SCHEMA, TABLE_SECTION)
-        m = len(p["column"])
-        for key in ("row", "theta2", "theta3", "theta4", "margin"):
-            require(len(p[key]) == m, f"{TABLE_SECTION}.{key}", f"has {len(p[key])} entries, column has {m}")
+        rows = _squares(p["squares"], f"{TABLE_SECTION}.squares")
         built = p["built_for"]
         if expected is not None:
             for key, value in expected.items():
@@ -247,9 +337,9 @@ class RegionTable:
         grid = Grid(tuple(built["origin"]), built["size"], built["band"])
         return cls(
             grid=grid,
-            index=np.stack([p["column"], p["row"]], axis=-1),
-            triples=np.stack([p["theta2"], p["theta3"], p["theta4"]], axis=-1),
-            margin=np.array(p["margin"]),
+            index=rows[:, :3].astype(int),
+            triples=rows[:, 3:6],
+            margin=rows[:, 6],
             built_for=built,
             search=p["search"],
             coverage=p["coverage"],
@@ -260,23 +350,20 @@ class RegionTable:
         section = {
             "built_for": {k: _plain(v) for k, v in self.built_for.items()},
             "search": {k: _plain(v) for k, v in self.search.items()},
-            "column": [int(i) for i in self.index[:, 0]],
-            "row": [int(j) for j in self.index[:, 1]],
-            "theta2": [float(t) for t in self.triples[:, 0]],
-            "theta3": [float(t) for t in self.triples[:, 1]],
-            "theta4": [float(t) for t in self.triples[:, 2]],
-            "margin": [round(float(m), 6) for m in self.margin],
             "coverage": {k: _plain(v) for k, v in self.coverage.items()},
         }
         lines = [f"# {line}" if line else "#" for line in header]
-        lines += ["#", "# square (i, j)   r (m)      z (m)      theta2  theta3  theta4 (deg)   margin (m)"]
-        for (i, j), t, m in zip(self.index, self.triples, self.margin):
-            r, z = self.grid.corner(i, j)
-            s = self.grid.size
+        lines += [
+            "#",
+            "# square (i, j, level)   r (m)          z (m)          theta2  theta3  theta4 (deg)  margin (m)",
+        ]
+        for (i, j, level), t, m in zip(self.index.tolist(), self.triples, self.margin):
+            r, z = self.grid.corner(i, j, level)
+            s = float(self.grid.side(level))
             deg = [math.degrees(x) for x in t]
             lines.append(
-                f"# ({i:3d}, {j:3d})   {r:5.2f}-{r + s:5.2f}  {z:6.2f}-{z + s:6.2f}"
-                f"  {deg[0]:6.1f}  {deg[1]:6.1f}  {deg[2]:6.1f}        {m:.3f}"
+                f"# ({i:4d}, {j:4d}, {level})   {r:7.3f}-{r + s:7.3f}  {z:8.3f}-{z + s:8.3f}"
+                f"  {deg[0]:6.1f}  {deg[1]:6.1f}  {deg[2]:6.1f}       {m:.3f}"
             )
         text = yaml.safe_dump(
             {"/**": {"ros__parameters": {TABLE_SECTION: section}}},
@@ -284,7 +371,56 @@ class RegionTable:
             sort_keys=False,
             width=100,
         )
+        # The squares last, as a literal block (its lines indented under the section's keys).
+        indent = " " * 8
+        text += f"      squares: |  # {' '.join(SQUARE_COLUMNS)}\n"
+        for (i, j, level), t, m in zip(self.index.tolist(), self.triples.tolist(), self.margin.tolist()):
+            text += f"{indent}{i} {j} {level} {t[0]!r} {t[1]!r} {t[2]!r} {round(m, 6)!r}\n"
         Path(path).write_text("\n".join(lines) + "\n" + text, encoding="utf-8")
+
+
+def _squares(text: str, key: str) -> np.ndarray:
+    """The rows (m, 7) of a table file's ``squares`` text (SQUARE_COLUMNS); ConfigError names the
+    key and the first bad line."""
+    lines = [line for line in text.splitlines() if line.strip()]
+    try:
+        rows = np.array([line.split() for line in lines], dtype=float).reshape(-1, len(SQUARE_COLUMNS))
+    except ValueError:
+        bad = next((n for n, line in enumerate(lines)
+                    if len(line.split()) != len(SQUARE_COLUMNS) or not _numbers(line)), 0)
+        raise ConfigError(
+            f"{key}, line {bad + 1}: expected {len(SQUARE_COLUMNS)} numbers ({' '.join(SQUARE_COLUMNS)}), "
+            f"got {shown(lines[bad])}"
+        ) from None
+    index = rows[:, :3]
+    bad = ~np.isfinite(rows).all(axis=1) | np.any(index != np.round(index), axis=1)
+    bad |= np.any(np.abs(index[:, :2]) > INDEX_RANGE, axis=1) | (index[:, 2] < 0) | (index[:, 2] > MAX_LEVEL)
+    if bad.any():
+        n = int(np.argmax(bad))
+        raise ConfigError(
+            f"{key}, line {n + 1}: need finite numbers, whole column and row within +-{INDEX_RANGE} and a "
+            f"level in [0, {MAX_LEVEL}], got {shown(lines[n])}"
+        )
+    return rows
+
+
+def _numbers(line: str) -> bool:
+    try:
+        [float(word) for word in line.split()]
+    except ValueError:
+        return False
+    return True
+
+
+def _summed_point(summed: list, u: float, v: float, n_u: int, n_v: int) -> list[float]:
+    """:meth:`RegionTable._summed_at` of one point on the plain-list summed-area table (the same
+    operations per channel)."""
+    a, b = min(math.floor(u), n_u - 1), min(math.floor(v), n_v - 1)
+    f, g = u - a, v - b
+    f0, g0 = 1.0 - f, 1.0 - g
+    low, high = summed[a], summed[a + 1]
+    return [(s00 * f0 + s10 * f) * g0 + (s01 * f0 + s11 * f) * g
+            for s00, s10, s01, s11 in zip(low[b], high[b], low[b + 1], high[b + 1])]
 
 
 def _plain(value: Any) -> Any:

@@ -47,13 +47,13 @@ def start_server(
 
 
 @pytest.fixture(scope="module")
-def server(probe: Probe) -> Iterator[tuple[NodeProcess, object, object, object]]:
+def server(probe: Probe, boom: PumpBoom) -> Iterator[tuple[NodeProcess, object, object, object]]:
     process, ik, fk, plan = start_server(probe)
     try:
         yield process, ik, fk, plan
     finally:
         log = process.stop()
-        assert "Traceback" not in log and "region table: 55 squares" in log, log
+        assert "Traceback" not in log and f"region table: {len(boom.table)} squares" in log, log
 
 
 def call(probe: Probe, client, request):
@@ -109,8 +109,8 @@ def test_solve_ik_round_trip_over_the_table_and_solve_fk(probe: Probe, server, b
     _, ik, fk, _ = server
     rng = np.random.default_rng(5)
     squares = boom.table.index[rng.integers(0, len(boom.table), 12)]
-    plane = np.stack(boom.grid.corner(squares[:, 0] + 0.05, squares[:, 1] + 0.05), axis=-1)
-    plane += 4.5 * rng.random((12, 2))
+    plane = np.stack(boom.grid.corner(squares[:, 0] + 0.05, squares[:, 1] + 0.05, squares[:, 2]), axis=-1)
+    plane += 0.9 * boom.grid.side(squares[:, 2])[:, None] * rng.random((12, 2))
     heading = rng.uniform(-math.pi, math.pi, 12)
     targets = np.stack([plane[:, 0] * np.cos(heading), plane[:, 0] * np.sin(heading), plane[:, 1]], axis=-1)
     for k, target in enumerate(targets):
@@ -150,7 +150,7 @@ def test_behind_the_slew_axis_the_seed_picks_the_slew_turn(probe: Probe, server,
 
 BAD_IK = {
     "outside the table": (ik_request([40.5, 0.0, 12.0]), Codes.NO_IK_SOLUTION,
-                          "outside the region table: its square (8, 2)"),
+                          "outside the region table: no square covers it (its 5 m square (8, 2)"),
     "beyond the reach": (ik_request([60.0, 0.0, 3.6]), Codes.NO_IK_SOLUTION, "beyond the boom's reach"),
     "on the slew axis": (ik_request([0.0, 0.0, 10.0]), Codes.NO_IK_SOLUTION, "behind the boom root pin"),
     "behind the root pin": (ik_request([-0.1, 0.05, 10.0]), Codes.NO_IK_SOLUTION, "behind the boom root pin"),
