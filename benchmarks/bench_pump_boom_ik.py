@@ -7,9 +7,10 @@ the root pin's ground level in the plane theta1 = -1 rad, as into a basement). E
 every point of every pour three ways, in this process, one after the other:
 
 * region IK per point: ``PumpBoom.region_ik_point``, one pour point per call with the previous
-  slew angle as seed, as a controller solves one point per cycle;
+  slew angle as seed, as a controller solves one point per cycle (the compiled kernel, loaded
+  before the timing starts);
 * region IK batched: ``PumpBoom.region_ik`` of all the points in one call (and, for reference, the
-  same numpy path called with one point: the per-call overhead that ``region_ik_point`` avoids);
+  same numpy path called with one point: the per-call overhead that the kernel avoids);
 * numerical: ``scipy.optimize.least_squares`` on the tip position (residual tip(q) - p with the
   closed-form tip Jacobian, bounded by the joint limits, method ``dogbox``, the fastest of scipy's
   methods on this problem; tolerances 1e-10), seeded with the previous point's solution and the
@@ -36,7 +37,7 @@ import time
 import numpy as np
 from scipy.optimize import least_squares
 
-from pump_boom_kinematics.kinematics import PumpBoom
+from pump_boom_kinematics.kinematics import PumpBoom, compiled_kernel
 from pump_boom_kinematics.pour import TYPICAL_POURS, pour_line
 
 C1, S1 = math.cos(-1.0), math.sin(-1.0)
@@ -173,6 +174,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5)
     args = parser.parse_args()
     boom = PumpBoom.default()
+    compiled_kernel(boom, wait=True)  # numba: from its cache, or compiled the first time
     plans = {name: pour_line(boom, start, end) for name, (start, end) in POURS.items()}
     for name, plan in plans.items():
         assert plan.ok and not plan.truncated, (name, plan.message)

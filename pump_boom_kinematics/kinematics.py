@@ -47,11 +47,13 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 from functools import cached_property
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.config import Names, Number, Numbers, Text, require, validate
 from manipulator_kinematics.model import IKSolutions, IKStatus, RequestError, describe_limits
 from manipulator_kinematics.params import ConfigError, config_path, load_parameters
@@ -125,6 +127,23 @@ _STATUS = {
     Failure.ENVELOPE: IKStatus.JOINT_LIMITS,
 }
 _STATUS_OF = np.array([_STATUS[f] for f in Failure], dtype=np.int8)
+_FAILURES = tuple(Failure)  # by code: indexing is 10 times cheaper than Failure(code)
+
+
+def _warm(ik_kernel: ModuleType, *lookup: np.ndarray) -> None:
+    """Run the kernel once (numba loads it from its cache or compiles it)."""
+    ik_kernel.region_ik(*lookup, 10.0, 0.0, 10.0, 0.0, True, np.empty(6))
+
+
+#: The single-point kernel (:mod:`pump_boom_kinematics.ik_kernel`), see manipulator_kinematics.compiled.
+KERNEL = Kernel("pump_boom_kinematics.ik_kernel", _warm)
+
+
+def compiled_kernel(boom: PumpBoom, wait: bool = False) -> ModuleType | None:
+    """The compiled kernel module if ready, else None (:class:`manipulator_kinematics.compiled.Kernel`:
+    the first single-point call starts loading it, calls take the numpy path meanwhile, the same
+    results within 1e-12). ``wait``: load it now (tests, benchmarks). Needs the boom's region table."""
+    return KERNEL.get(*boom._kernel_args, wait=wait)
 
 
 @dataclass(frozen=True)
@@ -209,10 +228,6 @@ class PumpBoom:
         if self.joint_speed.shape != (6,) or not np.all(self.joint_speed > 0.0):
             raise ValueError(f"need six joint speed limits > 0 (inf: none), got {joint_speed}")
         self.reach = float(self.lengths.sum())
-        # Plain-float copies for region_ik_point (numpy scalars cost more than the arithmetic).
-        self._root = tuple(self.root.tolist())
-        self._lengths = tuple(self.lengths.tolist())
-        self._bounds = tuple(zip(limits.lower.tolist(), limits.upper.tolist()))
 
     # ---- construction -------------------------------------------------------------------------
     @classmethod
@@ -494,82 +509,34 @@ class PumpBoom:
     def region_ik_point(
         self, x: float, y: float, z: float, seed_slew: float | None = None
     ) -> tuple[tuple[float, ...] | None, Failure]:
-        """:meth:`region_ik` of ONE pour point in plain floats, for a controller that solves a
-        point per cycle: numpy's overhead per call is about 30 times this whole computation, so
-        the single point is done with :mod:`math` (the same steps and order of checks; equal to
-        :meth:`region_ik` to round-off, which the tests check over the whole table).
+        """:meth:`region_ik` of ONE pour point, for a controller that solves a point per cycle:
+        the compiled kernel (:mod:`.ik_kernel`, the same steps and order of checks, equal to
+        :meth:`region_ik` to 1e-12, tested over the whole table), once loaded in the background
+        (:func:`compiled_kernel`); until then, or with ``MK_COMPILED=0``, :meth:`region_ik` on a
+        batch of one.
 
         ``seed_slew``: the current slew angle (the turn of theta1). Returns (q, Failure.NONE) or
         (None, failure); :meth:`region_ik` of the same point gives the reason in words.
         """
-        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
-            return None, Failure.NOT_FINITE
-        table = self.table
-        r = math.hypot(x, y)
-        heading = math.atan2(y, x)
-        if seed_slew is None:
-            theta1 = heading if r > 0.0 else 0.0
-        elif r > 0.0:
-            theta1 = heading + 2.0 * math.pi * round((seed_slew - heading) / (2.0 * math.pi))
-            if theta1 > self._bounds[0][1]:
-                theta1 -= 2.0 * math.pi
-            elif theta1 < self._bounds[0][0]:
-                theta1 += 2.0 * math.pi
-        else:
-            theta1 = seed_slew
-        r_root, z_root = self._root
-        if math.hypot(r - r_root, z - z_root) > self.reach + 1e-9:
-            return None, Failure.BEYOND_REACH
-        if r < r_root:
-            return None, Failure.BEHIND_ROOT
-        found = table.blend_point(r, z)
-        if found is None:
-            return None, Failure.NOT_IN_TABLE
-        (t2, t3, t4), _ = found
-        l1, l2, l3, l4, l5 = self._lengths
-        phi1, phi2, phi3 = t2, t2 + t3 - math.pi, t2 + t3 + t4 - 2.0 * math.pi
-        dr = r - (r_root + l1 * math.cos(phi1) + l2 * math.cos(phi2) + l3 * math.cos(phi3))
-        dz = z - (z_root + l1 * math.sin(phi1) + l2 * math.sin(phi2) + l3 * math.sin(phi3))
-        d = math.hypot(dr, dz)
-        if d > l4 + l5 + 1e-9 or d < abs(l4 - l5) - 1e-9:
-            return None, Failure.TWO_LINK
-        # Eq. 4, elbow-over branch of the 2R (section 5 bends down from section 4).
-        bend = -math.acos(min(max((d * d - l4 * l4 - l5 * l5) / (2.0 * l4 * l5), -1.0), 1.0))
-        phi4 = math.atan2(dz, dr) - math.atan2(l5 * math.sin(bend), l4 + l5 * math.cos(bend))
-        wrapped = (phi4 - phi3 + math.pi) % (2.0 * math.pi) - math.pi
-        q = [theta1, t2, t3, t4, wrapped + math.pi, bend + math.pi]
-        for k, (lower, upper) in enumerate(self._bounds):
-            if q[k] < lower:
-                if q[k] < lower - LIMIT_TOL:
-                    return None, Failure.JOINT_LIMITS
-                q[k] = lower
-            elif q[k] > upper:
-                if q[k] > upper + LIMIT_TOL:
-                    return None, Failure.JOINT_LIMITS
-                q[k] = upper
-        if self._point_margin(q) < -ENVELOPE_TOL:
-            return None, Failure.ENVELOPE
-        return tuple(q), Failure.NONE
+        kernel = compiled_kernel(self)
+        if kernel is None:
+            seed = None if seed_slew is None else np.array([seed_slew, 0.0, 0.0, 0.0, 0.0, 0.0])
+            result = self.region_ik(np.array([x, y, z], dtype=float), seed)
+            failure = Failure(int(result.failure))
+            return (tuple(result.q.tolist()) if failure is Failure.NONE else None), failure
+        q = np.empty(6)
+        seeded = seed_slew is not None
+        failure, _ = kernel.region_ik(*self._kernel_args, float(x), float(y), float(z),
+                                      float(seed_slew) if seeded else 0.0, seeded, q)
+        return (None if failure else tuple(q.tolist())), _FAILURES[failure]
 
-    def _point_margin(self, q: list[float]) -> float:
-        """Scalar :meth:`envelope_margin` of one joint state."""
-        l1, l2, l3, l4, l5 = self._lengths
-        phi1 = q[1]
-        phi2 = phi1 + (q[2] - math.pi)
-        phi3 = phi2 + (q[3] - math.pi)
-        phi4 = phi3 + (q[4] - math.pi)
-        phi5 = phi4 + (q[5] - math.pi)
-        # P_1..P_4 and the tip relative to the root pin.
-        r1, z1 = l1 * math.cos(phi1), l1 * math.sin(phi1)
-        r2, z2 = r1 + l2 * math.cos(phi2), z1 + l2 * math.sin(phi2)
-        r3, z3 = r2 + l3 * math.cos(phi3), z2 + l3 * math.sin(phi3)
-        r4, z4 = r3 + l4 * math.cos(phi4), z3 + l4 * math.sin(phi4)
-        tip_r, tip_z = r4 + l5 * math.cos(phi5), z4 + l5 * math.sin(phi5)
-        if tip_r < -ENVELOPE_TOL:
-            return -math.inf
-        cross = min(tip_r * z1 - tip_z * r1, tip_r * z2 - tip_z * r2, tip_r * z3 - tip_z * r3,
-                    tip_r * z4 - tip_z * r4)
-        return cross / math.hypot(tip_r, tip_z)
+    @cached_property
+    def _kernel_args(self) -> tuple[np.ndarray, ...]:
+        """The kernel's machine constants and the region table's lookup arrays (:mod:`.ik_kernel`)."""
+        constants, owner, summed, squares = self.table.lookup
+        machine = [*self.root, *self.lengths, self.reach, LIMIT_TOL, ENVELOPE_TOL, *self.limits.lower,
+                   *self.limits.upper]
+        return np.array([*machine, *constants], dtype=float), owner, summed, squares
 
     def solve_ik(
         self,
@@ -605,6 +572,10 @@ class PumpBoom:
                 raise RequestError(
                     f"seed must be finite joint values of shape (..., 6), got {seed.shape}", IKStatus.INVALID
                 )
+        if target.shape == (4, 4) and (seed is None or seed.shape == (6,)):
+            kernel = compiled_kernel(self)
+            if kernel is not None:
+                return self._solve_one(kernel, target[:3, 3], seed)
         result = self.region_ik(target[..., :3, 3], seed)
         ok = result.ok
 
@@ -617,6 +588,28 @@ class PumpBoom:
             branches=BRANCHES,
             selected=np.where(ok, 0, -1),
             tie=np.zeros(ok.shape, dtype=bool),
+            explain=explain,
+        )
+
+    def _solve_one(self, kernel: ModuleType, point: np.ndarray, seed: np.ndarray | None) -> IKSolutions:
+        """:meth:`solve_ik` of one pour point through the compiled kernel; the reason in words from
+        :meth:`region_ik` of the point, when asked for."""
+        q = np.empty(6)
+        seeded = seed is not None
+        failure, _ = kernel.region_ik(*self._kernel_args, *point.tolist(), float(seed[0]) if seeded else 0.0,
+                                      seeded, q)
+        if failure:
+            q[:] = np.nan
+
+        def explain(solutions: IKSolutions, index: tuple[int, ...]) -> str:
+            return self.region_ik(point, seed).reason(index)
+
+        return IKSolutions(
+            q=q[None],
+            status=_STATUS_OF[[failure]],
+            branches=BRANCHES,
+            selected=np.array(-1 if failure else 0),
+            tie=np.zeros((), dtype=bool),
             explain=explain,
         )
 

@@ -267,46 +267,14 @@ class RegionTable:
         return low * (1.0 - g) + high * g
 
     @cached_property
-    def _plain(self) -> tuple[Any, ...]:
-        """Plain-Python copies of the lookup arrays for :meth:`blend_point` (built on first use)."""
-        return (
-            self._owner.tolist(),
-            self._summed.tolist(),
-            self._bounds.tolist(),
-            [tuple(t) for t in self.triples.tolist()],
-            tuple(self._lower.tolist()),  # plain ints: a numpy scalar would make every float after it one
-        )
-
-    def blend_point(self, r: float, z: float) -> tuple[tuple[float, float, float], bool] | None:
-        """:meth:`blend` of one finite plane point in plain floats (no numpy: a controller's single
-        point costs microseconds, not numpy's per-call overhead), with the same operations in the
-        same order: ((theta2, theta3, theta4), blended) or None where the point is in no square."""
-        owner, summed, bounds, triples, lower = self._plain
-        cell, n_u, n_v = self._cell, len(owner), len(owner[0]) if owner else 0
-        u = (r - self.grid.origin[0]) / cell - lower[0]
-        v = (z - self.grid.origin[1]) / cell - lower[1]
-        edge = EDGE / cell
-        k = -1
-        for b in (math.floor(v + edge), math.floor(v - edge)):
-            for a in (math.floor(u + edge), math.floor(u - edge)):
-                if k < 0 and 0 <= a < n_u and 0 <= b < n_v:
-                    k = owner[a][b]
-            if k >= 0:
-                break
-        if k < 0:
-            return None
-        own = triples[k]
-        half = 0.5 * self.grid.band / cell
-        low_u, low_v, high_u, high_v = bounds[k]
-        if u - half >= low_u and u + half <= high_u and v - half >= low_v and v + half <= high_v:
-            return own, False  # the window lies in the square: its own triple
-        u0, u1 = min(max(u - half, 0.0), n_u), min(max(u + half, 0.0), n_u)
-        v0, v1 = min(max(v - half, 0.0), n_v), min(max(v + half, 0.0), n_v)
-        s11, s01 = _summed_point(summed, u1, v1, n_u, n_v), _summed_point(summed, u0, v1, n_u, n_v)
-        s10, s00 = _summed_point(summed, u1, v0, n_u, n_v), _summed_point(summed, u0, v0, n_u, n_v)
-        t2, t3, t4, weight = (a - b - c + d for a, b, c, d in zip(s11, s01, s10, s00))
-        blended = (t2 / weight, t3 / weight, t4 / weight)
-        return blended, blended != own
+    def lookup(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The lookup arrays of :meth:`owner` and :meth:`blend` for the compiled single-point IK
+        (:mod:`.ik_kernel`): the constants (grid origin r, z; the cell; the arrays' lower cell
+        column, row; half the band and EDGE in cells), the cell owners (int32), the summed-area
+        table and per square its bounds in cells and its triple (m, 7)."""
+        constants = np.array([*self.grid.origin, self._cell, *self._lower, 0.5 * self.grid.band / self._cell,
+                              EDGE / self._cell], dtype=float)
+        return constants, self._owner, self._summed, np.concatenate([self._bounds, self.triples], axis=1)
 
     def nearest(self, r: float, z: float) -> tuple[float, float]:
         """The point of the covered area nearest to the finite plane point (r, z) (m)."""
@@ -410,17 +378,6 @@ def _numbers(line: str) -> bool:
     except ValueError:
         return False
     return True
-
-
-def _summed_point(summed: list, u: float, v: float, n_u: int, n_v: int) -> list[float]:
-    """:meth:`RegionTable._summed_at` of one point on the plain-list summed-area table (the same
-    operations per channel)."""
-    a, b = min(math.floor(u), n_u - 1), min(math.floor(v), n_v - 1)
-    f, g = u - a, v - b
-    f0, g0 = 1.0 - f, 1.0 - g
-    low, high = summed[a], summed[a + 1]
-    return [(s00 * f0 + s10 * f) * g0 + (s01 * f0 + s11 * f) * g
-            for s00, s10, s01, s11 in zip(low[b], high[b], low[b + 1], high[b + 1])]
 
 
 def _plain(value: Any) -> Any:

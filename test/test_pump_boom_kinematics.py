@@ -5,15 +5,17 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 import pytest
 
+from manipulator_kinematics.compiled import enabled as compiled_enabled
 from manipulator_kinematics.model import IKStatus, RequestError, pose_matrix
 from manipulator_kinematics.params import ConfigError, config_path, load_parameters
 from manipulator_kinematics.time_scaling import ACCELERATION, TIP_SPEED
-from pump_boom_kinematics import build_regions
-from pump_boom_kinematics.kinematics import Failure, PumpBoom, RegionTableError
+from pump_boom_kinematics import build_regions, kinematics
+from pump_boom_kinematics.kinematics import Failure, PumpBoom, RegionIK, RegionTableError, compiled_kernel
 from pump_boom_kinematics.pour import ACCELERATION as TIP_ACCELERATION
 from pump_boom_kinematics.pour import (
     MAX_DURATION,
@@ -236,9 +238,10 @@ def test_a_refusal_names_the_nearest_covered_point(boom: PumpBoom) -> None:
         assert math.dist(near, (r, z)) <= np.hypot(*(samples - [r, z]).T).min() + 1e-12
 
 
-def test_single_point_path_equals_the_vectorised_ik(boom: PumpBoom) -> None:
-    """region_ik_point (plain floats) against region_ik over the table, its bands and around it:
-    the same joints to round-off and the same failure for every point."""
+def test_single_point_path_equals_the_vectorised_ik(boom: PumpBoom, monkeypatch: pytest.MonkeyPatch) -> None:
+    """region_ik_point (the compiled kernel, and before it is loaded region_ik on a batch of one)
+    against region_ik over the table, its bands and around it: the same joints to 1e-12, the same
+    failure and band flag for every point (the kernel's raw joints too where the failure needs them)."""
     rng = np.random.default_rng(17)
     inside = _plane(boom, 0.25)
     around = inside + np.stack([rng.normal(scale=4.0, size=len(inside)), np.zeros(len(inside)),
@@ -251,6 +254,8 @@ def test_single_point_path_equals_the_vectorised_ik(boom: PumpBoom) -> None:
     seed = np.zeros((len(points), 6))
     seed[:, 0] = slew
     expected = boom.region_ik(points, seed=seed)
+    assert len(points) >= 10_000
+    kernel = compiled_kernel(boom, wait=True) if compiled_enabled() else None
     q = np.full((len(points), 6), np.nan)
     failure = np.empty(len(points), dtype=int)
     for k, (point, s) in enumerate(zip(points.tolist(), slew.tolist(), strict=True)):
@@ -264,6 +269,46 @@ def test_single_point_path_equals_the_vectorised_ik(boom: PumpBoom) -> None:
     np.testing.assert_allclose(q, expected.q, atol=1e-12)  # NaN where both fail
     unseeded, _ = boom.region_ik_point(-20.0, 5.0, 17.5)
     assert unseeded == pytest.approx(tuple(boom.region_ik([-20.0, 5.0, 17.5]).q), abs=1e-12)
+    # Without the kernel (not loaded yet, or MK_COMPILED=0): region_ik on a batch of one.
+    monkeypatch.setattr(kinematics, "compiled_kernel", lambda boom, wait=False: None)
+    for k in range(0, len(points), 20):
+        solution, code = boom.region_ik_point(*points[k].tolist(), slew[k])
+        assert code == expected.failure[k]
+        assert (solution is None) == (code != Failure.NONE)
+        if solution is not None:
+            np.testing.assert_allclose(solution, expected.q[k], atol=1e-12)
+    monkeypatch.undo()
+    if kernel is None:
+        return
+    _kernel_equals_numpy(kernel, boom, points, slew, expected)
+    # A table of jittered triples fails in the steps the shipped table never fails in.
+    table = boom.table
+    jittered = RegionTable(grid=table.grid, index=table.index,
+                           triples=table.triples + rng.normal(scale=0.2, size=table.triples.shape),
+                           margin=table.margin, built_for=table.built_for, search=table.search,
+                           coverage=table.coverage)
+    other = PumpBoom(boom.root, boom.lengths, boom.limits, boom.grid, table=jittered)
+    inside_points = points[:len(inside)]
+    failures = _kernel_equals_numpy(kernel, other, inside_points, slew[:len(inside)],
+                                    other.region_ik(inside_points, seed=seed[:len(inside)]))
+    for code in (Failure.NONE, Failure.TWO_LINK, Failure.JOINT_LIMITS, Failure.ENVELOPE):
+        assert np.sum(failures == code) > 100, (code, np.bincount(failures))
+
+
+def _kernel_equals_numpy(kernel: ModuleType, boom: PumpBoom, points: np.ndarray, slew: np.ndarray,
+                         expected: RegionIK) -> np.ndarray:
+    """The kernel against region_ik (seeded): the same failures and band flags, joints to 1e-12
+    where solved and, before the failure mask, where the steps that fill every joint ran."""
+    raw, blended = np.full((len(points), 6), np.nan), np.zeros(len(points), dtype=bool)
+    failures = np.empty(len(points), dtype=int)
+    for k, (point, s) in enumerate(zip(points.tolist(), slew.tolist(), strict=True)):
+        failures[k], blended[k] = kernel.region_ik(*boom._kernel_args, *point, s, True, raw[k])
+    np.testing.assert_array_equal(failures, expected.failure)
+    reached = failures >= Failure.TWO_LINK
+    np.testing.assert_allclose(raw[reached], expected.raw[reached], atol=1e-12)
+    in_table = failures >= Failure.NOT_IN_TABLE
+    np.testing.assert_array_equal(blended[in_table], expected.blended[in_table])
+    return failures
 
 
 def test_paper_example_area(boom: PumpBoom) -> None:
@@ -296,6 +341,29 @@ def test_paper_example_area(boom: PumpBoom) -> None:
     result = boom.region_ik(boom.tip(flat), table=table)
     assert result.ok.all()
     np.testing.assert_allclose(result.q, flat, atol=1e-9)
+
+
+@pytest.mark.skipif(not compiled_enabled(), reason="MK_COMPILED=0: the kernel is off")
+def test_one_target_through_the_kernel_equals_a_batch_of_one(boom: PumpBoom) -> None:
+    """solve_ik of one target (the kernel once loaded) against the same target as a batch (numpy):
+    joints to 1e-12, statuses, selections and reasons equal, solved and failing targets."""
+    compiled_kernel(boom, wait=True)
+    rng = np.random.default_rng(29)
+    plane = np.concatenate([_plane(boom, 4.0)[:, [0, 2]], rng.uniform([-5.0, -45.0], [60.0, 50.0], (100, 2))])
+    heading = rng.uniform(-math.pi, math.pi, len(plane))
+    points = np.stack([plane[:, 0] * np.cos(heading), plane[:, 0] * np.sin(heading), plane[:, -1]], axis=-1)
+    points[0] = [np.nan, 0.0, 1.0]
+    seeds = np.zeros((len(points), 6))
+    seeds[:, 0] = rng.uniform(-6.0, 6.0, len(points))
+    statuses = set()
+    for point, seed in zip(points, seeds, strict=True):
+        one = boom.solve_ik(pose_matrix(point), use_orientation=False, seed=seed)
+        batch = boom.solve_ik(pose_matrix(point)[None], use_orientation=False, seed=seed[None])
+        np.testing.assert_allclose(one.q, batch.q[0], atol=1e-12)
+        np.testing.assert_array_equal(one.status, batch.status[0])
+        assert one.selected == batch.selected[0] and one.note() == batch.note(0)
+        statuses.add(int(one.status[0]))
+    assert statuses >= {IKStatus.SUCCESS, IKStatus.UNREACHABLE, IKStatus.INVALID}
 
 
 def test_behind_the_slew_axis(boom: PumpBoom, random_q: np.ndarray) -> None:
