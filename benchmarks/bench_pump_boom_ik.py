@@ -107,15 +107,7 @@ def plane_continuity(boom: PumpBoom, count: int, rng: np.random.Generator) -> li
     step over all steps, the steps in a square's core, in bands between squares of one size and in
     bands between squares of different sizes (the window around the step's middle holds both)."""
     table = boom.table
-    side = boom.grid.side(table.index[:, 2])
-    rows = np.concatenate([rng.integers(0, len(table), count // 2),
-                           rng.choice(len(table), count - count // 2, p=side**2 / np.sum(side**2))])
-    corner = np.stack(boom.grid.corner(*table.index[rows].T), axis=-1)
-    start = corner + side[rows, None] * rng.random((count, 2))
-    angle = rng.uniform(0.0, 2.0 * math.pi, count)
-    direction = np.stack([np.cos(angle), np.sin(angle)], axis=-1)
-    plane = start[:, None] + 0.1 * np.arange(41)[None, :, None] * direction[:, None]
-    plane = plane[table.contains(plane[..., 0], plane[..., 1]).all(axis=1)]
+    plane = table.random_lines(count, rng)
     result = boom.region_ik(np.stack([plane[..., 0], np.zeros(plane.shape[:-1]), plane[..., 1]], axis=-1))
     assert result.ok.all()
     step = np.degrees(np.abs(np.diff(result.q, axis=1)).max(axis=-1))  # (lines, 40)

@@ -276,6 +276,21 @@ class RegionTable:
                               EDGE / self._cell], dtype=float)
         return constants, self._owner, self._summed, np.concatenate([self._bounds, self.triples], axis=1)
 
+    def random_lines(self, count: int, rng: np.random.Generator, steps: int = 40,
+                     step: float = 0.1) -> np.ndarray:
+        """Straight lines (k, steps + 1, 2) of (r, z) points ``step`` apart inside the covered area:
+        of ``count`` lines in random directions, half starting in squares drawn by count (mostly
+        the small squares at the rim), half by area, the k that stay inside (continuity checks)."""
+        side = self.grid.side(self.index[:, 2])
+        rows = np.concatenate([rng.integers(0, len(self), count // 2),
+                               rng.choice(len(self), count - count // 2, p=side**2 / np.sum(side**2))])
+        corner = np.stack(self.grid.corner(*self.index[rows].T), axis=-1)
+        start = corner + side[rows, None] * rng.random((count, 2))
+        angle = rng.uniform(0.0, 2.0 * math.pi, count)
+        direction = np.stack([np.cos(angle), np.sin(angle)], axis=-1)
+        lines = start[:, None] + step * np.arange(steps + 1)[None, :, None] * direction[:, None]
+        return lines[self.contains(lines[..., 0], lines[..., 1]).all(axis=1)]
+
     def nearest(self, r: float, z: float) -> tuple[float, float]:
         """The point of the covered area nearest to the finite plane point (r, z) (m)."""
         extent = self._extent

@@ -184,19 +184,7 @@ def test_random_lines_inside_the_covered_area(boom: PumpBoom) -> None:
     through the squares and the bands between them: every point solved exactly, inside the
     limits, in positive envelope, and no joint moves more than 8 deg per step."""
     rng = np.random.default_rng(19)
-    table = boom.table
-    count, steps = 6000, 40  # lines of 4 m, points 100 mm apart
-    # Half the starts in squares drawn by count (mostly the small squares at the rim), half by area.
-    side = boom.grid.side(table.index[:, 2])
-    rows = np.concatenate([rng.integers(0, len(table), count // 2),
-                           rng.choice(len(table), count - count // 2, p=side**2 / np.sum(side**2))])
-    corner = np.stack(boom.grid.corner(*table.index[rows].T), axis=-1)
-    start = corner + side[rows, None] * rng.random((count, 2))
-    angle = rng.uniform(0.0, 2.0 * math.pi, count)
-    direction = np.stack([np.cos(angle), np.sin(angle)], axis=-1)
-    plane = start[:, None] + 0.1 * np.arange(steps + 1)[None, :, None] * direction[:, None]
-    inside = table.contains(plane[..., 0], plane[..., 1]).all(axis=1)
-    plane = plane[inside]
+    plane = boom.table.random_lines(6000, rng)  # lines of 4 m, points 100 mm apart
     assert len(plane) > 2000
     points = np.stack([plane[..., 0], np.zeros(plane.shape[:-1]), plane[..., 1]], axis=-1)
     result = boom.region_ik(points)
