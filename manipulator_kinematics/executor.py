@@ -97,7 +97,13 @@ def spin(
         # A shutdown can land in any wait: rclpy then raises ExternalShutdownException.
         with contextlib.suppress(ExternalShutdownException):
             if until is None and name != "events":
-                executor_.spin()
+                try:
+                    executor_.spin()
+                except RuntimeError:
+                    # rclpy's spin checks the context, then builds a wait set on it: a shutdown
+                    # landing between the two raises RCLError (a RuntimeError) instead.
+                    if node.context.ok():
+                        raise
                 return
             slice_ = SLICE if until is None else poll
             while node.context.ok() and not (until is not None and until()):
