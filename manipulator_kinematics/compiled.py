@@ -10,11 +10,12 @@ numpy path (to 1e-12, statuses and selections equal).
 
 :class:`Kernel` imports the kernel module and runs each function once (numba loads it from its
 cache, about half a second with numba's import; or compiles it, several seconds the first time)
-in a daemon thread started by the first call that can use it (a machine's IK: the first single
-target; the serial chain, whose kernel also loops over batches 3-4 times faster than numpy: the
-first call). Until it is ready every call takes the numpy path: a node's first output never
-waits for numba, and an IK process that only runs batches never imports it. ``MK_COMPILED=0``
-in the environment keeps every call on the numpy path.
+in a daemon thread started by the first call that can use it: the first call where the kernel's
+loop also serves batches faster than numpy (the serial chain, the tool changer's and the
+palletizer's IK), else the first single call (the excavator, SCARA and pump boom IK: a process
+that only runs their batches never imports numba). Until it is ready every call takes the numpy
+path, so a node's first output never waits for numba. ``MK_COMPILED=0`` in the environment
+keeps every call on the numpy path.
 """
 
 from __future__ import annotations

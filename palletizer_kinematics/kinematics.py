@@ -242,7 +242,7 @@ KERNEL = Kernel("palletizer_kinematics.ik_kernel", _warm)
 
 def compiled_kernel(model: Palletizer, wait: bool = False) -> ModuleType | None:
     """The compiled kernel module if ready, else None (:class:`manipulator_kinematics.compiled.Kernel`:
-    the first single-target call starts loading it, calls take the numpy path meanwhile, the same
+    the first IK call starts loading it, calls take the numpy path meanwhile, the same
     results within 1e-12). ``wait``: load it now (tests, benchmarks)."""
     return KERNEL.get(model._packed, wait=wait)
 

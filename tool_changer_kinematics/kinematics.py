@@ -452,7 +452,7 @@ class ToolChanger:
     # ---- the compiled single call ------------------------------------------------------------------
     def compiled_kernel(self, wait: bool = False) -> ModuleType | None:
         """The compiled kernel module if ready, else None (:class:`manipulator_kinematics.compiled.Kernel`:
-        the first single-target call starts loading it, calls take the numpy path meanwhile).
+        the first IK call starts loading it, calls take the numpy path meanwhile).
         ``wait``: load it now (tests, benchmarks)."""
         return KERNEL.get(self._packed, wait=wait)
 
