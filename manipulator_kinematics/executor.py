@@ -33,10 +33,12 @@ import contextlib
 import functools
 import inspect
 import os
+import sys
 import traceback
 from collections.abc import Callable
 from typing import Any
 
+from rclpy.context import Context
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
@@ -89,9 +91,11 @@ def spin(
                 f"cannot call them (SystemError); use {ENVIRONMENT}=single"
             )
     if threads:
-        executor_ = MultiThreadedExecutor(num_threads=threads, context=node.context)
+        executor_ = new_executor(MultiThreadedExecutor, node.context, num_threads=threads)
     else:
-        executor_ = EXECUTORS[name](context=node.context)
+        executor_ = new_executor(EXECUTORS[name], node.context)
+    if executor_ is None:
+        return
     executor_.add_node(node)
     try:
         # A shutdown can land in any wait: rclpy then raises ExternalShutdownException.
@@ -116,6 +120,34 @@ def spin(
     finally:
         executor_.shutdown()
         executor_.remove_node(node)
+
+
+def new_executor(factory: Callable[..., Any], context: Context, **options: Any) -> Any:
+    """``factory(context=context, **options)``, or None when the context is (or gets) shut down
+    first: a signal ends the process before its spin, and that is no failure.
+
+    rclpy 7.1.6's ``Executor.__init__`` fails on a shut-down context (RCLError) before it sets
+    ``_sigint_gc``, which ``Executor.__del__`` reads: collecting the half-built executor prints
+    "Exception ignored ... AttributeError: ... '_sigint_gc'" with a traceback (ros2/rclpy#1178
+    declined the guard). That one message, and only while building, is dropped here.
+    """
+    if not context.ok():
+        return None
+    hook = sys.unraisablehook
+    sys.unraisablehook = functools.partial(_drop_half_built_executor, hook)
+    try:
+        return factory(context=context, **options)
+    except RuntimeError:
+        if context.ok():
+            raise
+        return None
+    finally:
+        sys.unraisablehook = hook
+
+
+def _drop_half_built_executor(hook: Callable[[Any], None], unraisable: Any) -> None:
+    if not (isinstance(unraisable.exc_value, AttributeError) and "_sigint_gc" in str(unraisable.exc_value)):
+        hook(unraisable)
 
 
 def guard_callbacks(node: Node) -> None:

@@ -4,6 +4,8 @@ have is served, a failing callback is logged and the node keeps serving, shutdow
 ends the spin, and what EventsExecutor cannot serve is refused up front."""
 from __future__ import annotations
 
+import gc
+import sys
 import threading
 from collections.abc import Iterator
 from types import SimpleNamespace
@@ -12,6 +14,7 @@ import pytest
 import rclpy
 from rcl_interfaces.srv import GetParameters
 from rclpy.duration import Duration
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -19,7 +22,7 @@ from ros_harness import Probe
 from std_msgs.msg import Int64
 from std_srvs.srv import Trigger
 
-from manipulator_kinematics.executor import EXECUTORS, executor_name, spin
+from manipulator_kinematics.executor import EXECUTORS, executor_name, new_executor, spin
 from manipulator_kinematics.node_util import param, refuse_runtime_changes
 from manipulator_kinematics.params import ConfigError
 from manipulator_kinematics.throttle import ThrottledLog
@@ -199,6 +202,37 @@ def test_shutdown_of_the_context_ends_the_spin(spun: Spun) -> None:
     spun.context.shutdown()
     spun.thread.join(TIMEOUT)
     assert not spun.thread.is_alive() and spun.outcome is None
+
+
+@pytest.mark.parametrize("executor", [*sorted(EXECUTORS), "multi"])
+def test_a_shutdown_before_the_executor_is_built_ends_the_spin_quietly(
+    executor: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """rclpy's executors fail on a shut-down context half-built, and collecting one printed a
+    traceback (seen in a node signalled while it started): both moments of the shutdown."""
+    unraisable: list[object] = []
+    monkeypatch.setattr(sys, "unraisablehook", lambda what: unraisable.append(what.exc_value))
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = Node("built_late", context=context)
+    if executor == "multi":
+        node.THREADS = 2
+    built = EXECUTORS.get(executor, MultiThreadedExecutor)
+
+    def shut_down_then_build(**options: object) -> object:
+        context.shutdown()
+        return built(**options)
+
+    options = {"num_threads": 2} if executor == "multi" else {}
+    built_late = new_executor(shut_down_then_build, context, **options)
+    if executor == "events":  # EventsExecutor builds on a shut-down context; its spin ends at once
+        built_late.shutdown()
+    else:
+        assert built_late is None
+    spin(node, "single" if executor == "multi" else executor)  # already shut down: returns at once
+    node.destroy_node()
+    gc.collect()
+    assert unraisable == []
 
 
 def test_until_ends_the_spin(spun: Spun) -> None:
