@@ -126,15 +126,16 @@ def new_executor(factory: Callable[..., Any], context: Context, **options: Any) 
     """``factory(context=context, **options)``, or None when the context is (or gets) shut down
     first: a signal ends the process before its spin, and that is no failure.
 
-    rclpy 7.1.6's ``Executor.__init__`` fails on a shut-down context (RCLError) before it sets
-    ``_sigint_gc``, which ``Executor.__del__`` reads: collecting the half-built executor prints
-    "Exception ignored ... AttributeError: ... '_sigint_gc'" with a traceback (ros2/rclpy#1178
-    declined the guard). That one message, and only while building, is dropped here.
+    rclpy 7.1.6's executors fail on a shut-down context (RCLError) half-built: ``Executor.__del__``
+    then reads ``_sigint_gc``, which ``__init__`` sets last, and ``SignalHandlerGuardCondition``'s
+    reads a handle it never got, so collecting them prints "Exception ignored ... AttributeError"
+    with a traceback (ros2/rclpy#1178 declined the guard). Those messages, and only while
+    building, are dropped here.
     """
     if not context.ok():
         return None
     hook = sys.unraisablehook
-    sys.unraisablehook = functools.partial(_drop_half_built_executor, hook)
+    sys.unraisablehook = functools.partial(_drop_half_built, hook)
     try:
         return factory(context=context, **options)
     except RuntimeError:
@@ -145,8 +146,13 @@ def new_executor(factory: Callable[..., Any], context: Context, **options: Any) 
         sys.unraisablehook = hook
 
 
-def _drop_half_built_executor(hook: Callable[[Any], None], unraisable: Any) -> None:
-    if not (isinstance(unraisable.exc_value, AttributeError) and "_sigint_gc" in str(unraisable.exc_value)):
+# The finalizers of rclpy 7.1.6 that fail on an object whose __init__ failed.
+_HALF_BUILT = frozenset({"Executor.__del__", "SignalHandlerGuardCondition.__del__"})
+
+
+def _drop_half_built(hook: Callable[[Any], None], unraisable: Any) -> None:
+    if not (isinstance(unraisable.exc_value, AttributeError)
+            and getattr(unraisable.object, "__qualname__", None) in _HALF_BUILT):
         hook(unraisable)
 
 

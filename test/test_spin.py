@@ -18,6 +18,7 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerGuardCondition
 from ros_harness import Probe
 from std_msgs.msg import Int64
 from std_srvs.srv import Trigger
@@ -204,20 +205,21 @@ def test_shutdown_of_the_context_ends_the_spin(spun: Spun) -> None:
     assert not spun.thread.is_alive() and spun.outcome is None
 
 
-@pytest.mark.parametrize("executor", [*sorted(EXECUTORS), "multi"])
+@pytest.mark.parametrize("executor", [*sorted(EXECUTORS), "multi", "signal guard"])
 def test_a_shutdown_before_the_executor_is_built_ends_the_spin_quietly(
     executor: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """rclpy's executors fail on a shut-down context half-built, and collecting one printed a
-    traceback (seen in a node signalled while it started): both moments of the shutdown."""
+    traceback (seen in a node signalled while it started): a shutdown before the build, during it
+    (at the executor's guard condition, or at its signal guard condition, built after it), and
+    before the spin."""
     unraisable: list[object] = []
     monkeypatch.setattr(sys, "unraisablehook", lambda what: unraisable.append(what.exc_value))
     context = rclpy.Context()
     rclpy.init(context=context)
     node = Node("built_late", context=context)
-    if executor == "multi":
-        node.THREADS = 2
-    built = EXECUTORS.get(executor, MultiThreadedExecutor)
+    built = {"multi": MultiThreadedExecutor, "signal guard": SignalHandlerGuardCondition}.get(
+        executor, EXECUTORS.get(executor))
 
     def shut_down_then_build(**options: object) -> object:
         context.shutdown()
@@ -229,7 +231,9 @@ def test_a_shutdown_before_the_executor_is_built_ends_the_spin_quietly(
         built_late.shutdown()
     else:
         assert built_late is None
-    spin(node, "single" if executor == "multi" else executor)  # already shut down: returns at once
+    if executor == "multi":
+        node.THREADS = 2
+    spin(node, "single" if executor in ("multi", "signal guard") else executor)  # returns at once
     node.destroy_node()
     gc.collect()
     assert unraisable == []
