@@ -7,8 +7,9 @@ the ratios, which compare numbers of the same round; absolute times vary by mach
 * one call (one state) of pose, the full state (pose + twist + JC0 + acceleration, eqs. 1-11),
   JC0 and the inverse rates (eq. 9), beside the peer of the single call: a plain numba function
   computing the pose only (the kernel's steps, its result a new array), the kernel's ``pose``
-  called directly with its output preallocated (the floor of any call from Python), and the
-  construction of the result record (a BucketState of views of one table, as ``state`` makes it);
+  called directly with its output preallocated (the floor of any call from Python), the
+  construction of the result record (a BucketState over one table, as ``state`` makes it; its
+  fields are views made when read) and the full state with all seven fields read;
 * batches of 10^3 and 10^5 states (full state and pose, M states/s);
 * a root-finding baseline: every joint angle found by bisecting the angle -> length map after
   bracketing it on 240 samples, the way public excavator tools invert the cylinder linkages.
@@ -103,13 +104,18 @@ def one_round(exc: Excavator, scale: float, batches: dict[int, tuple[np.ndarray,
     kernel = compiled_kernel(exc, wait=True)
     packed, out, table = exc._packed, np.empty(4), np.empty((10, 4))
     n = int(2000 * scale) or 100
-    t = table
+
+    def every_field() -> tuple[np.ndarray, ...]:
+        s = exc.state(D, D_dot, D_ddot)
+        return s.theta, s.theta_dot, s.theta_ddot, s.Q, s.Q_dot, s.Q_ddot, s.jc0
+
     row = {
         "peer: plain numba pose function": per_call_us(lambda: plain_pose(packed, D), n),
         "kernel pose, output preallocated": per_call_us(lambda: kernel.pose(packed, D, out), n),
         "pose": per_call_us(lambda: exc.pose(D), n),
         "full state": per_call_us(lambda: exc.state(D, D_dot, D_ddot), n),
-        "result record alone": per_call_us(lambda: BucketState(t[0], t[1], t[2], t[3], t[4], t[5], t[6:]), n),
+        "result record alone": per_call_us(lambda: BucketState(table), n),
+        "full state, all 7 fields read": per_call_us(every_field, n),
         "JC0": per_call_us(lambda: exc.jc0(D), n),
         "inverse rates (eq. 9)": per_call_us(lambda: exc.cylinder_rates(D, Q_dot), n // 4),
     }

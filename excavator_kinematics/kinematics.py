@@ -43,11 +43,11 @@ read by :mod:`excavator_kinematics.parameters`.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
@@ -331,7 +331,7 @@ class Excavator:
         """``out`` filled by the kernel's ``function`` (:mod:`excavator_kinematics.state_kernel`)
         for one state, or None: the kernel not loaded yet, arguments of types it does not take
         (:func:`_warm`), or a state it refuses (the numpy path then says why)."""
-        kernel = KERNEL.get()
+        kernel = KERNEL.ready or KERNEL.get()
         if kernel is None:
             return None
         try:
@@ -617,14 +617,18 @@ class Excavator:
         :meth:`acceleration_matrices` for the paper's JC1_0 / JC2_0 split of those terms).
         """
         D = np.asarray(D, dtype=float)
-        if D.shape == (4,):
+        if D.shape == (4,) and (kernel := KERNEL.ready or KERNEL.get()) is not None:
             # The single call (a 1 kHz node calls it per message): the kernel checks shapes and
-            # values; the numpy path below raises the error for what it refuses.
+            # values; the numpy path below raises the error for what it refuses. _compiled written
+            # out: calling it costs 0.17 us, a fifth of the benchmark's peer (a numba pose call).
             rates = np.asarray(D_dot, dtype=float)
             accelerations = _NO_ACCELERATION if D_ddot is None else np.asarray(D_ddot, dtype=float)
-            table = self._compiled("state", np.empty((10, 4)), D, rates, accelerations)
-            if table is not None:
-                return BucketState(table[0], table[1], table[2], table[3], table[4], table[5], table[6:])
+            rows = np.empty((10, 4))  # a new table per call: the caller keeps the views
+            try:
+                if kernel.state(self._packed, D, rates, accelerations, rows):
+                    return BucketState(rows)
+            except TypeError:  # arguments of types the kernel does not take (_warm)
+                pass
         D = self.validate(D)
         rates = _finite(D_dot, D.shape, "D_dot").reshape(-1, 4)
         accelerations = None if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot").reshape(-1, 4)
@@ -632,13 +636,11 @@ class Excavator:
         table = None if len(flat) > _KERNEL_BATCH else self._compiled(
             "states", np.empty((len(flat), 10, 4)), flat, np.ascontiguousarray(rates),
             np.zeros((len(flat), 4)) if accelerations is None else np.ascontiguousarray(accelerations))
-        if table is not None:
-            table = table.reshape(D.shape[:-1] + (10, 4))
-            return BucketState(*(table[..., i, :] for i in range(6)), table[..., 6:, :])
-        table = in_blocks(self._states, D.reshape(-1, 4), rates, accelerations, block=_BLOCK, rows=True).T
-        table = table.reshape(D.shape[:-1] + (40,))
-        return BucketState(*(table[..., i:i + 4] for i in range(0, 24, 4)),
-                           table[..., 24:].reshape(D.shape[:-1] + (4, 4)))
+        if table is not None:  # (N, 10, 4): each state's table
+            return BucketState(table.reshape(D.shape[:-1] + (10, 4)).swapaxes(0, -2))
+        # (40, N): entry j of every state in row j.
+        table = in_blocks(self._states, flat, rates, accelerations, block=_BLOCK, rows=True)
+        return BucketState(table.reshape(10, 4, len(flat)).swapaxes(1, 2).reshape((10, *D.shape)))
 
     def _states(self, D: np.ndarray, D_dot: np.ndarray, D_ddot: np.ndarray | None) -> tuple[np.ndarray, ...]:
         """The 40 entries of BucketStates, each (N,): theta, theta_dot, theta_ddot, Q, Q_dot,
@@ -757,16 +759,54 @@ class Excavator:
 
 
 
-class BucketState(NamedTuple):
-    """Forward kinematic state; arrays of shape (..., 4) (jc0: (..., 4, 4))."""
+def _row(i: int, doc: str) -> property:
+    """The field in row ``i`` of :class:`BucketState`'s rows: a view, made when read."""
+    return property(lambda state: state._rows[i], doc=doc)
 
-    theta: np.ndarray  # open-chain joints theta1..theta4 (rad)
-    theta_dot: np.ndarray
-    theta_ddot: np.ndarray
-    Q: np.ndarray  # [x, y, z, alpha] bucket tip (m) and bucket angle (rad)
-    Q_dot: np.ndarray
-    Q_ddot: np.ndarray
-    jc0: np.ndarray
+
+class BucketState:
+    """Forward kinematic state; arrays of shape (..., 4) (jc0: (..., 4, 4)).
+
+    The fields are views of one array ``rows`` (10, ..., 4), made when a field is read: theta,
+    theta_dot, theta_ddot, Q, Q_dot, Q_ddot in rows 0-5, JC0's rows in 6-9 (what the kernel
+    writes per state). Why not a NamedTuple of the seven views: making them costs 0.5-0.8 us,
+    as much as the compiled call they come from, whether the caller reads them or not. Read
+    like the NamedTuple it was: by name, by position (``s[3]``, slices), unpacked, ``len``,
+    ``_fields``, ``_asdict``.
+    """
+
+    __slots__ = ("_rows",)
+    _fields = ("theta", "theta_dot", "theta_ddot", "Q", "Q_dot", "Q_ddot", "jc0")
+
+    def __init__(self, rows: np.ndarray) -> None:
+        self._rows = rows
+
+    theta = _row(0, "open-chain joints theta1..theta4 (rad)")
+    theta_dot = _row(1, "open-chain joint rates (rad/s, eq. 7)")
+    theta_ddot = _row(2, "open-chain joint accelerations (rad/s^2)")
+    Q = _row(3, "[x, y, z, alpha]: bucket tip (m) and bucket angle (rad), eq. 3")
+    Q_dot = _row(4, "tip velocity (eq. 8)")
+    Q_ddot = _row(5, "tip acceleration (eqs. 10-11)")
+
+    @property
+    def jc0(self) -> np.ndarray:
+        """JC0 = J0 K (eq. 8), (..., 4, 4)."""
+        return self._rows[6:].swapaxes(0, -2)  # (4, ..., 4) -> (..., 4, 4): "..." is (N,) or ()
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        return iter((self.theta, self.theta_dot, self.theta_ddot, self.Q, self.Q_dot, self.Q_ddot, self.jc0))
+
+    def __len__(self) -> int:
+        return len(self._fields)
+
+    def __getitem__(self, index: int | slice) -> Any:
+        return tuple(self)[index]
+
+    def _asdict(self) -> dict[str, np.ndarray]:
+        return dict(zip(self._fields, self, strict=True))
+
+    def __repr__(self) -> str:
+        return f"BucketState({', '.join(f'{name}={value!r}' for name, value in self._asdict().items())})"
 
 
 @dataclass(frozen=True)

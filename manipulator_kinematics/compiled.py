@@ -40,7 +40,10 @@ class Kernel:
     def __init__(self, module: str, warm: Callable[..., None]) -> None:
         self.module = module
         self._warm = warm
-        self._ready: ModuleType | None = None
+        # The loaded module, None until then (what get returns): a call on the hottest path reads
+        # it directly, ``KERNEL.ready or KERNEL.get()``, a method call costing 0.1 us (the
+        # excavator's full state: 7 % of its 1.4 us). None pretends it is not loaded (tests).
+        self.ready: ModuleType | None = None
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None  # why the kernel is not used, if it failed to load
@@ -52,12 +55,12 @@ class Kernel:
         except Exception as error:  # the numpy path answers; the reason is kept
             self.error = error
             return
-        self._ready = module
+        self.ready = module
 
     def get(self, *sample: Any, wait: bool = False) -> ModuleType | None:
         """The ready module, else None (starting the load on the first call). ``wait``: load it
         now and return it (tests, benchmarks); raises the load's error if it failed."""
-        if self._ready is None and enabled():
+        if self.ready is None and enabled():
             with self._lock:
                 if self._thread is None:
                     self._thread = threading.Thread(target=self._load, args=(sample,), daemon=True,
@@ -67,4 +70,4 @@ class Kernel:
                 self._thread.join()
                 if self.error is not None:
                     raise RuntimeError(f"kernel {self.module} did not load") from self.error
-        return self._ready
+        return self.ready

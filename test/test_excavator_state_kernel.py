@@ -4,6 +4,8 @@ one state through the numpy path = that row of a batch, bit for bit (the same co
 
 from __future__ import annotations
 
+import pickle
+
 import numpy as np
 import pytest
 
@@ -35,7 +37,7 @@ def _close(kernel: np.ndarray, reference: np.ndarray) -> bool:
 
 def test_kernel_equals_numpy_over_random_states_in_and_out_of_the_limits(monkeypatch: pytest.MonkeyPatch):
     kernel = compiled_kernel(EXC, wait=True)
-    monkeypatch.setattr(kinematics.KERNEL, "get", lambda *sample, wait=False: None)  # numpy below
+    monkeypatch.setattr(kinematics.KERNEL, "ready", None)  # numpy below
     D, rates, accelerations = _states(np.random.default_rng(20261202), N)
     table, Q, jc0 = np.empty((10, 4)), np.empty(4), np.empty((4, 4))
     refused = 0
@@ -72,11 +74,10 @@ def test_a_batch_through_the_kernel_equals_the_numpy_batch(monkeypatch: pytest.M
     accelerations = rng.uniform(-1.0, 1.0, size=(n, 4)) * LIM.max_rates
     compiled = [EXC.state(D, rates, accelerations), EXC.state(D, rates), EXC.state(D[:100], rates[0])]
     with monkeypatch.context() as numpy_only:
-        numpy_only.setattr(kinematics.KERNEL, "get", lambda *sample, wait=False: None)
+        numpy_only.setattr(kinematics.KERNEL, "ready", None)
         reference = [EXC.state(D, rates, accelerations), EXC.state(D, rates), EXC.state(D[:100], rates[0])]
     for got, expected in zip(compiled, reference, strict=True):
-        for a, b in zip(got if isinstance(got, tuple) else (got,), expected if isinstance(expected, tuple)
-                        else (expected,), strict=True):
+        for a, b in zip(got, expected, strict=True):
             assert a.shape == b.shape and _close(a, b)
     outside = D.copy()
     outside[5, 2] = LIM.d_max[2] + 0.1
@@ -112,8 +113,40 @@ def test_the_single_call_returns_the_kernel_result_and_refuses_as_the_numpy_path
     assert [len(f.signatures) for f in (kernel.state, kernel.pose, kernel.jc0)] == [1, 1, 1]
 
 
+@pytest.mark.parametrize("path", ["kernel", "numpy"])
+def test_the_record_reads_like_a_named_tuple_from_a_new_table_per_call(monkeypatch: pytest.MonkeyPatch,
+                                                                       path: str):
+    """BucketState of one state, a batch in the kernel's loop and one on numpy: by name = by
+    position = unpacked, the shapes, JC0's axes (Qdot = JC0 Ddot, eq. 8), Q = the pose, theta =
+    the joint angles, and a call leaves the fields of the one before alone (a table of its own)."""
+    if path == "kernel":
+        assert compiled_kernel(EXC, wait=True) is not None
+    else:
+        monkeypatch.setattr(kinematics.KERNEL, "ready", None)
+    rng = np.random.default_rng(5)
+    for shape in ((4,), (3, 4), (kinematics._KERNEL_BATCH + 1, 4)):
+        D = rng.uniform(LIM.d_min, LIM.d_max, size=shape)
+        V, A = rng.uniform(-1.0, 1.0, size=(2, *shape)) * LIM.max_rates
+        state = EXC.state(D, V, A)
+        kept = [field.copy() for field in state]
+        assert len(state) == 7 and tuple(state._asdict()) == BucketState._fields
+        theta, *_, Q, Q_dot, _, jc0 = state
+        for i, (name, value) in enumerate(state._asdict().items()):
+            assert value.shape == shape[:-1] + ((4, 4) if name == "jc0" else (4,)), name
+            for same in (getattr(state, name), state[i], state[i - 7], state[i:][0]):
+                np.testing.assert_array_equal(same, value, err_msg=name)
+        np.testing.assert_allclose(np.einsum("...ij,...j->...i", jc0, V), Q_dot, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(Q, EXC.pose(D), rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(theta[..., 1:], EXC.joint_angles(D[..., 1:]), rtol=1e-12, atol=1e-12)
+        EXC.state(D[::-1].copy(), -V, A)
+        for before, field in zip(kept, state, strict=True):
+            np.testing.assert_array_equal(field, before)
+        np.testing.assert_array_equal(pickle.loads(pickle.dumps(state)).jc0, jc0)
+        assert repr(state).startswith("BucketState(theta=array(")
+
+
 def test_one_state_on_the_numpy_path_is_that_row_of_a_batch_bit_for_bit(monkeypatch: pytest.MonkeyPatch):
-    monkeypatch.setattr(kinematics.KERNEL, "get", lambda *sample, wait=False: None)
+    monkeypatch.setattr(kinematics.KERNEL, "ready", None)
     rng = np.random.default_rng(7)
     lo, hi = LIM.d_min, LIM.d_max
     D = rng.uniform(lo, hi, size=(300, 4))
