@@ -276,10 +276,9 @@ class SerialChain:
     def _pack(self) -> np.ndarray:
         """The chain's constants as one float array, laid out as chain_kernel reads them (BASE below)."""
         rows = np.column_stack([self._a, np.cos(self._alpha), np.sin(self._alpha), self._d, self._theta,
-                                self._offset, self._prismatic])
+                                self._offset, self._prismatic, np.cos(self._theta), np.sin(self._theta)])
         identity = np.eye(4)
-        head = [self.n_rows, self.n, self.modified, self._identity, np.array_equal(self.base, identity),
-                np.array_equal(self.tool, identity)]
+        head = [self.n_rows, self.n, self.modified, self._identity, np.array_equal(self.tool, identity)]
         constants = (head, self.base.ravel(), self.tool.ravel(), rows.ravel(), self.coupling.ravel())
         return np.concatenate(constants)
 
@@ -291,10 +290,11 @@ class SerialChain:
 
 
 #: Layout of SerialChain._packed, the chain's constants for chain_kernel: n_rows, n, and 1.0 or
-#: 0.0 for modified D-H, identity coupling, identity base, identity tool; then base and tool
-#: (16 each, row-major); then per row a, cos alpha, sin alpha, d, theta, offset, prismatic (ROW
-#: floats); then the coupling C (n_rows x n, row-major).
-BASE, TOOL, ROWS, ROW = 6, 22, 38, 7
+#: 0.0 for modified D-H, identity coupling, identity tool; then base and tool
+#: (16 each, row-major); then per row a, cos alpha, sin alpha, d, theta, offset, prismatic, cos
+#: theta, sin theta (ROW floats; the last two are a prismatic row's constant link angle); then the
+#: coupling C (n_rows x n, row-major).
+BASE, TOOL, ROWS, ROW = 5, 21, 37, 9
 
 
 def _warm(kernel: ModuleType) -> None:
