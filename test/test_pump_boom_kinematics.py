@@ -4,6 +4,7 @@ region IK round trips over the whole table, bands, envelope, the paper's example
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from types import ModuleType
 
@@ -523,6 +524,50 @@ def test_table_file_matches_the_machine(boom: PumpBoom) -> None:
     section["lenghts"] = section.pop("lengths")
     with pytest.raises(ConfigError, match=r"pump_boom\.lenghts.*did you mean 'lengths'"):
         PumpBoom.from_parameters(section)
+
+
+def test_lookup_arrays_are_the_squares_drawn_one_by_one(boom: PumpBoom) -> None:
+    """The cell owners (filled level by level at load) and the summed-area table (built on first
+    use, row by row) against each square drawn on the cells on its own from its corner in metres
+    and numpy's cumsum of that field; first used from four threads at once (a node's executor)."""
+    table = boom.table
+    constants, owner, summed, _ = table.lookup
+    cell, lower = constants[2], constants[3:5]
+    drawn = np.full(owner.shape, -1)
+    field = np.zeros(owner.shape + (4,))
+    for k, (i, j, level) in enumerate(table.index.tolist()):
+        corner = np.array(boom.grid.corner(i, j, level), dtype=float)
+        a, b = np.rint((corner - boom.grid.origin) / cell - lower).astype(int)
+        n = round(float(boom.grid.side(level)) / cell)
+        assert (drawn[a:a + n, b:b + n] == -1).all()
+        drawn[a:a + n, b:b + n] = k
+        field[a:a + n, b:b + n] = [*table.triples[k], 1.0]
+    np.testing.assert_array_equal(owner, drawn)
+    assert (owner >= 0).sum() * cell**2 == pytest.approx(table.covered_area, rel=1e-12)
+    expected = np.zeros(summed.shape)
+    expected[1:, 1:] = field.cumsum(axis=0).cumsum(axis=1)
+    np.testing.assert_array_equal(summed, expected)
+    # A new table built from the same squares: its first blends in bands, lookups and nearest
+    # points from four threads at once give what the boom's table gives.
+    fresh = RegionTable(table.grid, table.index, table.triples, table.margin, {}, {}, {})
+    rng = np.random.default_rng(31)
+    r, z = rng.uniform(0.0, 45.0, 2000), rng.uniform(-30.0, 45.0, 2000)
+    blend = table.blend(r, z)[0]
+    with ThreadPoolExecutor(4) as pool:
+        results = list(pool.map(lambda _: (fresh.blend(r, z)[0], fresh.lookup[2], fresh.nearest(50.0, 50.0)),
+                                range(8)))
+    for blended, table_sums, near in results:
+        np.testing.assert_array_equal(blended, blend)
+        np.testing.assert_array_equal(table_sums, summed)
+        assert near == table.nearest(50.0, 50.0)
+
+
+def test_overlapping_squares_are_refused_naming_both(boom: PumpBoom) -> None:
+    # (7, 9) of level 1 is a quarter of (3, 4) of level 0.
+    index = np.array([[3, 4, 0], [10, 10, 2], [7, 9, 1]])
+    with pytest.raises(ValueError, match=r"square \(7, 9, 1\) overlaps square \(3, 4, 0\)"):
+        RegionTable(boom.grid, index, np.zeros((3, 3)), np.zeros(3), {}, {}, {})
+    RegionTable(boom.grid, index[:2], np.zeros((2, 3)), np.zeros(2), {}, {}, {})
 
 
 def test_a_truncated_pour_ends_before_a_gap_its_resampled_points_catch(boom: PumpBoom) -> None:
