@@ -67,6 +67,8 @@ TABLE_SCHEMA = {
         "start": Numbers(2, Number(min=-1000, max=1000, integer=True)),
         "levels": Number(min=0, max=12, integer=True),
         "min_theta3": Number(min=0.0, max=2 * math.pi, unit="rad", default=0.0),
+        # Tables from before this key had no fold rule (folded shapes wherever min_theta3 allowed): 1000 m.
+        "fold_width": Number(min=0.0, max=1000.0, unit="m", default=1000.0),
     },
     "squares": Text(doc="one line per square: column row level theta2 theta3 theta4 (rad) margin (m)"),
     "coverage": {

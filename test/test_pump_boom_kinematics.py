@@ -571,10 +571,11 @@ def test_overlapping_squares_are_refused_naming_both(boom: PumpBoom) -> None:
 
 
 def test_a_truncated_pour_ends_before_a_gap_its_resampled_points_catch(boom: PumpBoom) -> None:
-    # A 3-D line from a table point toward the slew axis: the first 100 mm samples step over the
-    # corner of a gap that the line spaced anew up to the farthest reachable point catches.
-    start = (5.358482531360314, -1.7024875603214558, 12.355303774866185)
-    plan = pour_line(boom, start, (-2.743753498101931, 2.199986119581032, 16.728457156643714))
+    # A 3-D line from a table point: the first 100 mm samples step over the corner of a gap that the
+    # line spaced anew up to the farthest reachable point catches (a line with this property in the
+    # shipped table, found by a seeded search over random lines; another table needs another line).
+    start = (2.5750003911571793, -1.0649440449825676, 7.387173223887741)
+    plan = pour_line(boom, start, (3.6127339969596, -7.8584148664640265, 15.557747108352295))
     assert plan.truncated and len(plan.points) > 10 and np.isfinite(plan.q).all()
     np.testing.assert_allclose(boom.tip(plan.q), plan.points, atol=1e-9)
     assert boom.region_ik(plan.points).ok.all()
@@ -624,6 +625,34 @@ def test_a_changed_geometry_runs_fk_but_no_region_ik_until_its_table_is_built(
         pour_line(changed, (20.0, 0.0, 17.5), (25.0, 0.0, 17.5))
     section["regions"]["table_file"] = str(tmp_path / "missing.yaml")
     assert "missing.yaml does not exist" in PumpBoom.from_parameters(section).table_problem()
+
+
+def test_section_2_folds_back_only_where_no_other_shape_reaches(boom: PumpBoom) -> None:
+    # By the truck above the root pin the table folds section 2 back; brute force over a 2.5 deg
+    # grid of every other shape (theta3 >= 15 deg, both elbows of sections 4-5) finds none that
+    # reaches the point inside the limits in positive envelope. Far from the truck it stays unfolded.
+    folded = boom.region_ik([2.5, 0.0, 10.0])
+    assert folded.ok and math.degrees(folded.q[2]) < 15.0
+    grid = np.radians(2.5)
+    axes = [np.arange(boom.limits.lower[k], boom.limits.upper[k] + 1e-9, grid) for k in (1, 2, 3)]
+    triples = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    triples = triples[triples[:, 1] >= np.radians(15.0)]
+    q = np.concatenate([np.zeros((len(triples), 1)), triples, np.full((len(triples), 2), np.pi)], axis=-1)
+    shoulder, phi3 = boom.plane_points(q)[:, 3], boom.section_angles(q)[:, 2]
+    reached = np.zeros(len(q), dtype=bool)
+    for elbow in (1.0, -1.0):
+        d = np.hypot(2.5 - shoulder[:, 0], 10.0 - shoulder[:, 1])
+        l4, l5 = boom.lengths[3], boom.lengths[4]
+        cos5 = np.clip((d * d - l4 * l4 - l5 * l5) / (2.0 * l4 * l5), -1.0, 1.0)
+        bend = elbow * np.arccos(cos5)
+        phi4 = np.arctan2(10.0 - shoulder[:, 1], 2.5 - shoulder[:, 0]) - np.arctan2(
+            l5 * np.sin(bend), l4 + l5 * np.cos(bend))
+        q[:, 4] = np.mod(phi4 - phi3 + np.pi, 2.0 * np.pi)
+        q[:, 5] = bend + np.pi
+        tip_error = np.abs(boom.plane_points(q)[:, 5] - [2.5, 10.0]).max(axis=-1)
+        reached |= (tip_error < 1e-9) & boom.limits.within(q, 1e-9) & boom.positive_envelope(q)
+    assert not reached.any()
+    assert math.degrees(boom.region_ik([20.0, 0.0, 17.5]).q[2]) >= 90.0
 
 
 def test_builder_is_deterministic_and_its_table_serves_a_changed_machine(tmp_path) -> None:
