@@ -10,12 +10,12 @@ numpy path (to 1e-12, statuses and selections equal).
 
 :class:`Kernel` imports the kernel module and runs each function once (numba loads it from its
 cache, about half a second with numba's import; or compiles it, several seconds the first time)
-in a daemon thread started by the first call that can use it: the first call where the kernel's
-loop also serves batches faster than numpy (the serial chain, the tool changer's and the
-palletizer's IK), else the first single call (the excavator, SCARA and pump boom IK: a process
-that only runs their batches never imports numba). Until it is ready every call takes the numpy
-path, so a node's first output never waits for numba. ``MK_COMPILED=0`` in the environment
-keeps every call on the numpy path.
+in a thread (not a daemon: a process ends after the load) started by the first call that can use
+it: the first call where the kernel's loop also serves batches faster than numpy (the serial
+chain, the tool changer's and the palletizer's IK), else the first single call (the excavator,
+SCARA and pump boom IK: a process that only runs their batches never imports numba). Until it
+is ready every call takes the numpy path, so a node's first output never waits for numba.
+``MK_COMPILED=0`` in the environment keeps every call on the numpy path.
 """
 
 from __future__ import annotations
@@ -63,7 +63,11 @@ class Kernel:
         if self.ready is None and enabled():
             with self._lock:
                 if self._thread is None:
-                    self._thread = threading.Thread(target=self._load, args=(sample,), daemon=True,
+                    # Not a daemon: a process ends only after the load (0.5-1 s from the cache,
+                    # the first compile 5-15 s). A daemon thread still running Python when the
+                    # interpreter finalizes is ended inside whatever it calls: in rclpy's handle
+                    # destructors (the thread's garbage collection) that aborted a signalled node.
+                    self._thread = threading.Thread(target=self._load, args=(sample,), daemon=False,
                                                     name=f"kernel {self.module}")
                     self._thread.start()
             if wait:

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -77,3 +81,24 @@ def test_in_blocks_rows_is_the_table_of_entries(n: int) -> None:
     table = in_blocks(entries, a, block=8, rows=True)
     assert table.shape == (3, n)
     np.testing.assert_array_equal(table, [a[:, 0] * 2.0, np.full(n, 1.5), np.hypot(a[:, 0], a[:, 1])])
+
+
+EXIT_DURING_THE_LOAD = """
+import atexit
+import numpy as np
+from excavator_kinematics import kinematics
+exc = kinematics.Excavator.default()
+D = np.concatenate([[0.1], 0.5 * (exc.limits.stroke_min + exc.limits.stroke_max)[-3:]])
+exc.state(D, np.zeros(4))  # starts the kernel's load, answered by numpy
+assert kinematics.KERNEL.ready is None
+atexit.register(lambda: print("loaded at exit:", kinematics.KERNEL.ready is not None))
+"""
+
+
+def test_a_process_ends_after_its_kernel_load_not_during_it() -> None:
+    """A loader still running Python while the interpreter finalizes was ended inside rclpy's
+    handle destructors (its garbage collection): a signalled node aborted (exit -6)."""
+    done = subprocess.run([sys.executable, "-c", EXIT_DURING_THE_LOAD], capture_output=True, text=True,
+                          timeout=120, env={**os.environ, "MK_COMPILED": "1"})
+    assert done.returncode == 0, done.stderr
+    assert "loaded at exit: True" in done.stdout, (done.stdout, done.stderr)
