@@ -652,6 +652,8 @@ def table_header(table: RegionTable, source: str) -> list[str]:
         " slew axis.",
         f"Check: {c['checked_points']} points every {spacing:g} m, {c['band_failures']} failures;"
         f" largest joint change {math.degrees(c['largest_step']):.2f} deg per {spacing:g} m step.",
+        "The squares, their extents and triples in degrees: pump_boom_regions --list"
+        " [--output <table file>].",
     ]
     return header
 
@@ -687,6 +689,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="smallest theta3 searched (deg)")
     parser.add_argument("--fold-width", type=float, default=FOLD_WIDTH,
                         help="folded shapes (theta3 < 15 deg) only this near the points needing them (m)")
+    parser.add_argument("--list", action="store_true",
+                        help="print the squares of the table file (--output) and exit, building nothing")
     args = parser.parse_args(argv)
     config = args.config if args.config is not None else config_path(CONFIG_FILE)
     section = load_parameters(config).get(SECTION, {})
@@ -694,6 +698,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     output = args.output
     if output is None:
         output = CONFIG_DIR / section["regions"]["table_file"]
+    if args.list:
+        print("\n".join(RegionTable.load(output, boom.table_key()).listing()))
+        return 0
     area = reachable_area(boom)
     table = build_table(
         boom,

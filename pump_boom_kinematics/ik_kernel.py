@@ -17,7 +17,7 @@ Same steps and the same order of checks as the numpy path (paper 001, section 2)
 3. the region table at (r, z) (:meth:`pump_boom_kinematics.regions.RegionTable.blend`): the
    square holding the point (closed squares: the four cells within EDGE, above/right first),
    NOT_IN_TABLE if none; its own triple where the band window lies inside the square, else the
-   window mean from four bilinear look-ups of the summed-area table;
+   window mean summed over the cells under the window (RegionTable._window_mean);
 4. theta5, theta6 from the planar 2R of sections 4-5 in closed form (eq. 4, elbow-over branch),
    TWO_LINK where it does not reach;
 5. JOINT_LIMITS outside the limits by more than LIMIT_TOL (joints within it moved onto the
@@ -27,8 +27,8 @@ The machine and the table arrive as numpy arrays, ``RegionTable.lookup`` and
 ``PumpBoom._packed``: the constants (root pin r, z; lengths l1..l5; reach; LIMIT_TOL;
 ENVELOPE_TOL; the lower (6) and upper (6) limits; the grid origin r, z; the lookup cell; the
 lookup arrays' lower cell column, row; half the band in cells; EDGE in cells), the cell owners
-(n_u, n_v) (-1: none), the summed-area table (n_u + 1, n_v + 1, 4) and per square its bounds in
-cells (low u, low v, high u, high v) and its triple (m, 7).
+(n_u, n_v) (-1: none) and per square its bounds in cells (low u, low v, high u, high v) and its
+triple (m, 7).
 """
 
 from __future__ import annotations
@@ -45,14 +45,31 @@ _REACH_TOL = 1e-9  # m: region_ik's reach check
 
 
 @njit(cache=True, error_model="numpy")
-def _summed_at(summed: np.ndarray, u: float, v: float, channel: int) -> float:
-    """RegionTable._summed_at of one channel: bilinear in the cell holding (u, v) in [0, n]."""
-    a = min(math.floor(u), summed.shape[0] - 2)
-    b = min(math.floor(v), summed.shape[1] - 2)
-    f, g = u - a, v - b
-    low = summed[a, b, channel] * (1.0 - f) + summed[a + 1, b, channel] * f
-    high = summed[a, b + 1, channel] * (1.0 - f) + summed[a + 1, b + 1, channel] * f
-    return low * (1.0 - g) + high * g
+def _window_mean(owner: np.ndarray, squares: np.ndarray, square: int, u: float, v: float, half: float,
+                 q: np.ndarray) -> None:
+    """RegionTable._window_mean of one point in cells into q[1:4] (the same weights; numpy's
+    matrix product adds them in its own order: the same to round-off); the square's own triple
+    where every square under the window holds it."""
+    n_u, n_v = owner.shape
+    span = math.ceil(2.0 * half) + 1
+    first_u, first_v = math.floor(u - half), math.floor(v - half)
+    total = np.zeros(4)
+    same = True
+    for i in range(span):
+        a = first_u + i
+        along_u = max(min(u + half, a + 1.0) - max(u - half, float(a)), 0.0) if 0 <= a < n_u else 0.0
+        for j in range(span):
+            b = first_v + j
+            along_v = max(min(v + half, b + 1.0) - max(v - half, float(b)), 0.0) if 0 <= b < n_v else 0.0
+            weight = along_u * along_v
+            k = owner[a, b] if weight > 0.0 else -1
+            if k >= 0:
+                for c in range(3):
+                    total[c] += weight * squares[k, 4 + c]
+                    same = same and squares[k, 4 + c] == squares[square, 4 + c]
+                total[3] += weight
+    for c in range(3):
+        q[1 + c] = squares[square, 4 + c] if same else total[c] / total[3]
 
 
 @njit(cache=True, error_model="numpy")
@@ -90,7 +107,7 @@ def _envelope_margin(k: np.ndarray, q: np.ndarray) -> float:
 
 
 @njit(cache=True, error_model="numpy")
-def region_ik(k: np.ndarray, owner: np.ndarray, summed: np.ndarray, squares: np.ndarray, x: float, y: float,
+def region_ik(k: np.ndarray, owner: np.ndarray, squares: np.ndarray, x: float, y: float,
               z: float, seed_slew: float, seeded: bool, q: np.ndarray) -> tuple[int, bool]:
     """Region IK of the pour point (x, y, z) (module docstring): the failure code and whether a
     transition band set the triple; q (6,) the joints (the limits applied within LIMIT_TOL) where
@@ -133,15 +150,8 @@ def region_ik(k: np.ndarray, owner: np.ndarray, summed: np.ndarray, squares: np.
         for i in range(3):
             q[1 + i] = squares[square, 4 + i]
     else:
-        n_u, n_v = owner.shape
-        u0, u1 = min(max(u - half, 0.0), n_u), min(max(u + half, 0.0), n_u)
-        v0, v1 = min(max(v - half, 0.0), n_v), min(max(v + half, 0.0), n_v)
-        window = np.empty(4)
-        for c in range(4):
-            window[c] = (_summed_at(summed, u1, v1, c) - _summed_at(summed, u0, v1, c)
-                         - _summed_at(summed, u1, v0, c) + _summed_at(summed, u0, v0, c))
+        _window_mean(owner, squares, square, u, v, half, q)
         for i in range(3):
-            q[1 + i] = window[i] / window[3]
             blended = blended or q[1 + i] != squares[square, 4 + i]
     # Step 4: sections 4-5 as the planar 2R from the end P_3 of section 3 (eq. 4).
     l1, l2, l3, l4, l5 = k[2], k[3], k[4], k[5], k[6]

@@ -533,10 +533,10 @@ class PumpBoom:
     @cached_property
     def _kernel_args(self) -> tuple[np.ndarray, ...]:
         """The kernel's machine constants and the region table's lookup arrays (:mod:`.ik_kernel`)."""
-        constants, owner, summed, squares = self.table.lookup
+        constants, owner, squares = self.table.lookup
         machine = [*self.root, *self.lengths, self.reach, LIMIT_TOL, ENVELOPE_TOL, *self.limits.lower,
                    *self.limits.upper]
-        return np.array([*machine, *constants], dtype=float), owner, summed, squares
+        return np.array([*machine, *constants], dtype=float), owner, squares
 
     def solve_ik(
         self,

@@ -20,9 +20,10 @@ lies inside the point's own square (more than band / 2 from its edges) the tripl
 square's own, unchanged; across a band it changes linearly, and by at most (the spread of the
 triples under the window) / band per metre whatever the squares' sizes; missing squares drop out
 (the mean is over the covered part only), so a square next to a gap keeps its own triple up to
-the edge. The window mean is evaluated from a summed-area table of the field on the finest
-squares' cells (four bilinear look-ups, exact for a piecewise-constant field), so a band costs
-the same for any number of small squares under the window.
+the edge. The window mean is summed over the cells of the finest squares under the window (at
+most 8 x 8 for a 1 m band on 0.156 m cells), each weighing the window's length in it along r
+times that along z: exact for a piecewise-constant field, and where every square under the
+window holds the point's own triple, that triple unchanged.
 
 The table file (``config/pump_boom_regions.yaml``, a ROS parameters file) is written by
 ``pump_boom_regions`` (:mod:`.build_regions`) and records the geometry it was built for; loading
@@ -31,6 +32,8 @@ it for another geometry is an error (the boom then solves FK but no region IK).
 
 from __future__ import annotations
 
+import base64
+import binascii
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -42,6 +45,7 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike
 
+from manipulator_kinematics.blocks import in_blocks
 from manipulator_kinematics.config import ConfigError, Number, Numbers, Text, require, validate
 from manipulator_kinematics.params import load_parameters, shown
 
@@ -70,7 +74,8 @@ TABLE_SCHEMA = {
         # Tables from before this key had no fold rule (folded shapes wherever min_theta3 allowed): 1000 m.
         "fold_width": Number(min=0.0, max=1000.0, unit="m", default=1000.0),
     },
-    "squares": Text(doc="one line per square: column row level theta2 theta3 theta4 (rad) margin (m)"),
+    "squares": Text(doc="base64 of the squares, little-endian: column, row (int32), level (uint8), "
+                        "theta2 theta3 theta4 (rad, float64), margin (m, float32)"),
     "coverage": {
         "squares": Number(min=0, integer=True),
         "covered_area": Number(min=0.0, unit="m^2"),
@@ -86,10 +91,14 @@ TABLE_SCHEMA = {
 }
 
 
-#: The columns of a line of the table file's ``squares`` text: the square (i, j, level), its triple
-#: (rad) and its margin (m). One text block rather than seven lists of numbers: a YAML parser builds
-#: each list item as a Python object (150 ms for 1500 squares), a block is one string (2 ms).
-SQUARE_COLUMNS = ("column", "row", "level", "theta2", "theta3", "theta4", "margin")
+#: A square in the table file's ``squares``: (i, j, level), its triple (rad) and its margin (m),
+#: packed little-endian (37 bytes) in base64 (lines of SQUARE_LINE characters): exact, and about
+#: 0.5 ms to read 1598 squares with libyaml's share. As text, 7 numbers a square, Python took 1.5-2.3 ms to
+#: read them and libyaml 1.5 ms more for the listing in the comments; ``pump_boom_regions --list``
+#: prints that listing.
+SQUARE_DTYPE = np.dtype([("column", "<i4"), ("row", "<i4"), ("level", "u1"), ("triple", "<f8", 3),
+                         ("margin", "<f4")])
+SQUARE_LINE = 100
 INDEX_RANGE = 100_000  # |column|, |row| at most this
 MAX_LEVEL = 12
 
@@ -147,53 +156,38 @@ class RegionTable:
         depth = int(index[:, 2].max()) if len(index) else 0
         cell = self.grid.size / 2**depth  # the finest squares' side: the cells of the lookup arrays
         scale = 2 ** (depth - index[:, 2])
-        low = index[:, :2] * scale[:, None]
-        high = low + scale[:, None]
-        lower = low.min(axis=0) if len(index) else np.zeros(2, dtype=int)
-        shape = tuple((high.max(axis=0) - lower).tolist()) if len(index) else (0, 0)
-        # cell -> the square covering it, level by level (the squares of a level all span n x n
-        # cells): one broadcast assignment per level, 0.5 ms for 1460 squares. (Not np.unique:
-        # its first call in a process imports numpy.ma, 20 ms.)
-        owner = np.full(shape, -1, dtype=np.int32)
-        for n in sorted(set(scale.tolist())):
-            k = np.flatnonzero(scale == n)
-            span = np.arange(n)
-            owner[(low[k, 0] - lower[0])[:, None, None] + span[:, None],
-                  (low[k, 1] - lower[1])[:, None, None] + span] = k[:, None, None]
+        # The lookup arrays span whole level-0 squares (lower0: the first one's (i, j)). Cell ->
+        # the square covering it: level by level, the cells so far split into four (np.repeat)
+        # and the level's squares written on their cells (at level l one cell per square): 0.6 ms
+        # for 1598 squares, the cells of each square drawn at once took 0.9 ms.
+        top = index[:, :2] >> index[:, 2:]  # the level-0 square holding each square (floor)
+        lower0 = top.min(axis=0) if len(index) else np.zeros(2, dtype=int)
+        owner = np.full(tuple((top.max(axis=0) - lower0 + 1).tolist()) if len(index) else (0, 0), -1,
+                        dtype=np.int32)
+        for level in range(depth + 1):
+            if level:
+                owner = owner.repeat(2, axis=0).repeat(2, axis=1)
+            k = np.flatnonzero(index[:, 2] == level)
+            owner[index[k, 0] - (lower0[0] << level), index[k, 1] - (lower0[1] << level)] = k
+        lower = lower0 << depth
+        low = index[:, :2] * scale[:, None] - lower
         if np.count_nonzero(owner >= 0) != int(np.sum(scale**2)):  # a cell claimed twice
-            a, b = _overlap(low - lower, scale, shape)
+            a, b = _overlap(low, scale, owner.shape)
             raise ValueError(f"region table: square {tuple(index[a].tolist())} overlaps square "
                              f"{tuple(index[b].tolist())}")
+        # Per square (triple, 1), and a row of zeros for the cells of no square (owner -1): the
+        # window sums of the blend.
+        values = np.zeros((len(index) + 1, 4))
+        values[:-1, :3], values[:-1, 3] = triples, 1.0
         object.__setattr__(self, "_cell", cell)
         object.__setattr__(self, "_lower", lower)
         object.__setattr__(self, "_owner", owner)
-        object.__setattr__(self, "_bounds", np.concatenate([low - lower, high - lower], axis=1).astype(float))
+        object.__setattr__(self, "_values", values)
+        object.__setattr__(self, "_bounds", np.concatenate([low, low + scale[:, None]], axis=1).astype(float))
 
-    # Built on first use, not at load (the load is the file and the cell owners): the tables of
-    # the blend in the transition bands and of the nearest covered point. functools.cached_property:
-    # Python 3.11's holds a lock while it builds; from 3.12 two threads (a node's executor) may both
-    # build one, and both get the same array.
-    @cached_property
-    def _summed(self) -> np.ndarray:
-        """The summed-area table (n_u + 1, n_v + 1, 4) of the field (triple, 1) on the lookup cells
-        (0 where no square), for :meth:`blend` in the bands and the compiled kernel
-        (:attr:`lookup`): built by the first blend that has a point in a band or by the first
-        :attr:`lookup` (the pump boom's first ``region_ik_point`` or ``solve_ik`` of one target,
-        before its kernel loads), 3-4 ms for 1460 squares (265 x 468 cells of 0.156 m, 4 MB),
-        5-10 ms in a new process (page faults)."""
-        values = np.zeros((len(self) + 1, 4))  # the row of owner -1 (no square) stays 0
-        values[:-1, :3], values[:-1, 3] = self.triples, 1.0
-        n_u, n_v = self._owner.shape
-        summed = np.zeros((n_u + 1, n_v + 1, 4))
-        # The sums of field.cumsum(axis=0).cumsum(axis=1), in the same order (the same bits), into
-        # the table itself: down the cell columns one row of cells at a time, then along each row
-        # in place. No field array (4 MB for 1460 squares): its page faults made the build twice
-        # as long in a new process (9 ms -> 5 ms).
-        for a in range(n_u):
-            np.add(summed[a, 1:], np.take(values, self._owner[a], axis=0), out=summed[a + 1, 1:])
-        np.cumsum(summed[1:, 1:], axis=1, out=summed[1:, 1:])
-        return summed
-
+    # Built on first use, not at load: the squares' extents of the nearest covered point.
+    # functools.cached_property: Python 3.11's holds a lock while it builds; from 3.12 two threads
+    # (a node's executor) may both build one, and both get the same array.
     @cached_property
     def _extent(self) -> np.ndarray:
         """Per square its extent (m, 4) (r low, z low, r high, z high) m, for :meth:`nearest`."""
@@ -258,47 +252,60 @@ class RegionTable:
         if not len(self):
             return np.full(u.shape + (3,), np.nan), inside
         k = np.maximum(k, 0)
-        u, v = np.where(inside, u, 0.0), np.where(inside, v, 0.0)
         half = 0.5 * self.grid.band / self._cell
         low_u, low_v, high_u, high_v = np.moveaxis(self._bounds[k], -1, 0)
         core = (u - half >= low_u) & (u + half <= high_u) & (v - half >= low_v) & (v + half <= high_v)
-        triple = self.triples[k]
-        if not core.all():  # a point in a band: the window mean (the summed-area table, built once)
-            n_u, n_v = self._owner.shape
-            u0, u1 = np.clip(u - half, 0.0, n_u), np.clip(u + half, 0.0, n_u)
-            v0, v1 = np.clip(v - half, 0.0, n_v), np.clip(v + half, 0.0, n_v)
-            window = (
-                self._summed_at(u1, v1)
-                - self._summed_at(u0, v1)
-                - self._summed_at(u1, v0)
-                + self._summed_at(u0, v0)
-            )
-            with np.errstate(invalid="ignore", divide="ignore"):
-                mean = window[..., :3] / window[..., 3:]
-            triple = np.where(core[..., None], triple, mean)
-        return np.where(inside[..., None], triple, np.nan), inside
+        triple = self.triples[k.reshape(-1)]  # a copy (an index of one point would be a view)
+        band = np.flatnonzero(inside & ~core)
+        if len(band):  # points in a band: the window mean, in blocks (its cells' temporaries)
+            triple[band] = in_blocks(self._window_mean, u.reshape(-1)[band], v.reshape(-1)[band],
+                                     k.reshape(-1)[band], block=1024)
+        return np.where(inside[..., None], triple.reshape(u.shape + (3,)), np.nan), inside
 
-    def _summed_at(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """The summed-area table (..., 4) at cell coordinates in [0, n]: bilinear in each cell."""
-        a = np.minimum(np.floor(u), self._owner.shape[0] - 1).astype(int)
-        b = np.minimum(np.floor(v), self._owner.shape[1] - 1).astype(int)
-        f, g = (u - a)[..., None], (v - b)[..., None]
-        s = self._summed
-        low = s[a, b] * (1.0 - f) + s[a + 1, b] * f
-        high = s[a, b + 1] * (1.0 - f) + s[a + 1, b + 1] * f
-        return low * (1.0 - g) + high * g
+    def _window_mean(self, u: np.ndarray, v: np.ndarray, own: np.ndarray) -> np.ndarray:
+        """The mean (n, 3) of the triple field over the covered part of the band windows centred
+        on the points (n,) in cells (module docstring), in the squares of rows ``own`` (n,): the
+        sum over the cells under the window of the window's length in the cell along r times that
+        along z times (triple, 1) of the cell's square; the square's own triple where every square
+        under the window holds it."""
+        half = 0.5 * self.grid.band / self._cell
+        span = math.ceil(2.0 * half) + 1  # cells a window covers along an axis, at most
+        cells, lengths = [], []
+        for x, n in zip((u, v), self._owner.shape):
+            first = np.floor(x - half)[:, None] + np.arange(span)  # (n, span)
+            length = np.minimum(x[:, None] + half, first + 1.0) - np.maximum(x[:, None] - half, first)
+            outside = (first < 0) | (first >= n)
+            cells.append(np.where(outside, 0, first).astype(np.intp))
+            lengths.append(np.where(outside, 0.0, np.maximum(length, 0.0)))
+        weight = (lengths[0][:, :, None] * lengths[1][:, None, :]).reshape(len(u), -1)  # (n, span^2)
+        flat = (cells[0][:, :, None] * self._owner.shape[1] + cells[1][:, None, :]).reshape(len(u), -1)
+        owner = np.where(weight > 0.0, self._owner.reshape(-1)[flat], -1)
+        total = (weight[:, None, :] @ self._values[owner])[:, 0]  # (n, 4); owner -1: the row of zeros
+        ids = self._triple_ids
+        same = ((owner < 0) | (ids[owner] == ids[own][:, None])).all(axis=1)
+        return np.where(same[:, None], self.triples[own], total[:, :3] / total[:, 3:])
 
     @cached_property
-    def lookup(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _triple_ids(self) -> np.ndarray:
+        """(m + 1,) per square a number of its triple (equal triples, equal numbers), -1 last (the
+        cells of no square): built by the first blend in a band. (Not np.unique: its first call
+        in a process imports numpy.ma, 20 ms.)"""
+        order = np.lexsort(self.triples.T[::-1])
+        new = np.ones(len(order), dtype=bool)
+        new[1:] = np.any(self.triples[order][1:] != self.triples[order][:-1], axis=1)
+        ids = np.full(len(order) + 1, -1, dtype=np.intp)
+        ids[order] = np.cumsum(new) - 1
+        return ids
+
+    @property
+    def lookup(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The lookup arrays of :meth:`owner` and :meth:`blend` for the compiled single-point IK
         (:mod:`.ik_kernel`): the constants (grid origin r, z; the cell; the arrays' lower cell
-        column, row; half the band and EDGE in cells), the cell owners (int32), the summed-area
-        table (built on first use, :attr:`_summed`: the pump boom's first single-point call,
-        which hands these to the kernel's loader) and per square its bounds in cells and its
-        triple (m, 7)."""
+        column, row; half the band and EDGE in cells), the cell owners (int32) and per square its
+        bounds in cells and its triple (m, 7)."""
         constants = np.array([*self.grid.origin, self._cell, *self._lower, 0.5 * self.grid.band / self._cell,
                               EDGE / self._cell], dtype=float)
-        return constants, self._owner, self._summed, np.concatenate([self._bounds, self.triples], axis=1)
+        return constants, self._owner, np.concatenate([self._bounds, self.triples], axis=1)
 
     def random_lines(self, count: int, rng: np.random.Generator, steps: int = 40,
                      step: float = 0.1) -> np.ndarray:
@@ -331,59 +338,65 @@ class RegionTable:
         if TABLE_SECTION not in params:
             raise ConfigError(f"{path}: no {TABLE_SECTION!r} section under /**: ros__parameters")
         p = validate(params[TABLE_SECTION], TABLE_SCHEMA, TABLE_SECTION)
-        rows = _squares(p["squares"], f"{TABLE_SECTION}.squares")
+        squares = _squares(p["squares"], f"{TABLE_SECTION}.squares")
         built = p["built_for"]
         if expected is not None:
             for key, value in expected.items():
                 have = np.asarray(built[key], dtype=float)
+                # Within 1e-9 m or rad (np.allclose took 4 times as long, a tenth of the load).
+                close = have.shape == np.shape(value) and np.max(np.abs(have - value), initial=0.0) <= 1e-9
                 require(
-                    have.shape == np.shape(value) and np.allclose(have, value, rtol=0.0, atol=1e-9),
+                    close,
                     f"{TABLE_SECTION}.built_for.{key}",
                     f"the table in {path} was built for {built[key]}, the machine has {value}",
                 )
         grid = Grid(tuple(built["origin"]), built["size"], built["band"])
         return cls(
             grid=grid,
-            index=rows[:, :3].astype(int),
-            triples=rows[:, 3:6],
-            margin=rows[:, 6],
+            index=np.stack([squares["column"], squares["row"], squares["level"]], axis=-1),
+            triples=squares["triple"],
+            margin=squares["margin"],
             built_for=built,
             search=p["search"],
             coverage=p["coverage"],
         )
 
     def dump(self, path: str | Path, header: Sequence[str] = ()) -> None:
-        """Write the table as a ROS parameters file (deterministic text: same table, same bytes)."""
+        """Write the table as a ROS parameters file (deterministic: same table, same bytes)."""
         section = {
             "built_for": {k: _plain(v) for k, v in self.built_for.items()},
             "search": {k: _plain(v) for k, v in self.search.items()},
             "coverage": {k: _plain(v) for k, v in self.coverage.items()},
         }
-        lines = [f"# {line}" if line else "#" for line in header]
-        lines += [
-            "#",
-            "# square (i, j, level)   r (m)          z (m)          theta2  theta3  theta4 (deg)  margin (m)",
-        ]
-        for (i, j, level), t, m in zip(self.index.tolist(), self.triples, self.margin):
-            r, z = self.grid.corner(i, j, level)
-            s = float(self.grid.side(level))
-            deg = [math.degrees(x) for x in t]
-            lines.append(
-                f"# ({i:4d}, {j:4d}, {level})   {r:7.3f}-{r + s:7.3f}  {z:8.3f}-{z + s:8.3f}"
-                f"  {deg[0]:6.1f}  {deg[1]:6.1f}  {deg[2]:6.1f}       {m:.3f}"
-            )
-        text = yaml.safe_dump(
+        text = "".join(f"# {line}\n" if line else "#\n" for line in header)
+        text += yaml.safe_dump(
             {"/**": {"ros__parameters": {TABLE_SECTION: section}}},
             default_flow_style=None,
             sort_keys=False,
             width=100,
         )
         # The squares last, as a literal block (its lines indented under the section's keys).
-        indent = " " * 8
-        text += f"      squares: |  # {' '.join(SQUARE_COLUMNS)}\n"
-        for (i, j, level), t, m in zip(self.index.tolist(), self.triples.tolist(), self.margin.tolist()):
-            text += f"{indent}{i} {j} {level} {t[0]!r} {t[1]!r} {t[2]!r} {round(m, 6)!r}\n"
-        Path(path).write_text("\n".join(lines) + "\n" + text, encoding="utf-8")
+        squares = np.empty(len(self), dtype=SQUARE_DTYPE)
+        squares["column"], squares["row"], squares["level"] = self.index.T
+        squares["triple"], squares["margin"] = self.triples, self.margin
+        encoded = base64.b64encode(squares.tobytes()).decode("ascii")
+        text += f"      squares: |  # base64: {', '.join(SQUARE_DTYPE.names)} (pump_boom_regions --list)\n"
+        for start in range(0, len(encoded), SQUARE_LINE):
+            text += f"        {encoded[start:start + SQUARE_LINE]}\n"
+        Path(path).write_text(text, encoding="utf-8")
+
+    def listing(self) -> list[str]:
+        """The squares as a person reads them: a line each with its extent in r and z (m), its
+        triple (deg) and its margin (m), after a line of column titles."""
+        lines = ["square (i, j, level)  r from, to (m)    z from, to (m)    theta2  theta3  theta4 (deg)"
+                 "  margin (m)"]
+        degrees = np.degrees(self.triples).tolist()
+        for (i, j, level), t, m in zip(self.index.tolist(), degrees, self.margin.tolist()):
+            r, z = (float(c) for c in self.grid.corner(i, j, level))
+            s = float(self.grid.side(level))
+            lines.append(f"({i:4d}, {j:4d}, {level})     {r:7.3f} {r + s:7.3f}  {z:8.3f} {z + s:8.3f}"
+                         f"  {t[0]:6.1f}  {t[1]:6.1f}  {t[2]:6.1f}       {m:.3f}")
+        return lines
 
 
 def _overlap(low: np.ndarray, scale: np.ndarray, shape: tuple[int, int]) -> tuple[int, int]:
@@ -405,46 +418,29 @@ def _overlap(low: np.ndarray, scale: np.ndarray, shape: tuple[int, int]) -> tupl
 
 
 def _squares(text: str, key: str) -> np.ndarray:
-    """The rows (m, 7) of a table file's ``squares`` text (SQUARE_COLUMNS); ConfigError names the
-    key and the first bad line."""
-    tokens = text.split()  # the words of all lines (line breaks are white space)
+    """The squares (m,) (SQUARE_DTYPE) of a table file's ``squares``; ConfigError names the key and
+    the first bad square."""
     try:
-        # The words per line (0: a blank line), each line's list dropped at once: 1460 lists kept
-        # would wake the garbage collector, whose first rounds in a new process took 2-7 ms.
-        if not set(map(len, map(str.split, text.splitlines()))) <= {0, len(SQUARE_COLUMNS)}:
-            raise ValueError
-        # Each distinct word converted once: the triples repeat (a grid of step_deg), 1837 distinct
-        # words of 10,220 for 1460 squares (float() of every word: 2.2 ms, this 1.1 ms).
-        value = {word: float(word) for word in set(tokens)}
-    except ValueError:
-        lines = [line for line in text.splitlines() if line.strip()]
-        bad = next((n for n, line in enumerate(lines)
-                    if len(line.split()) != len(SQUARE_COLUMNS) or not _numbers(line)), 0)
+        data = binascii.a2b_base64(text.replace("\n", ""), strict_mode=True)  # base64.b64decode: a regex
+    except binascii.Error:
+        data = b"?"  # not base64 (a table written before base64 squares, as text: rebuild it)
+    if len(data) % SQUARE_DTYPE.itemsize:
         raise ConfigError(
-            f"{key}, line {bad + 1}: expected {len(SQUARE_COLUMNS)} numbers ({' '.join(SQUARE_COLUMNS)}), "
-            f"got {shown(lines[bad])}"
-        ) from None
-    rows = np.fromiter(map(value.__getitem__, tokens), dtype=float, count=len(tokens))
-    rows = rows.reshape(-1, len(SQUARE_COLUMNS))
-    index = rows[:, :3]
-    bad = ~np.isfinite(rows).all(axis=1) | np.any(index != np.round(index), axis=1)
-    bad |= np.any(np.abs(index[:, :2]) > INDEX_RANGE, axis=1) | (index[:, 2] < 0) | (index[:, 2] > MAX_LEVEL)
+            f"{key}: expected base64 of squares of {SQUARE_DTYPE.itemsize} bytes "
+            f"({', '.join(SQUARE_DTYPE.names)}), got {shown(text)}; a table from an older version: "
+            "rebuild it with pump_boom_regions"
+        )
+    squares = np.frombuffer(data, dtype=SQUARE_DTYPE)
+    bad = ~np.isfinite(squares["triple"]).all(axis=1) | ~np.isfinite(squares["margin"])
+    bad |= (np.abs(squares["column"]) > INDEX_RANGE) | (np.abs(squares["row"]) > INDEX_RANGE)
+    bad |= squares["level"] > MAX_LEVEL
     if bad.any():
         n = int(np.argmax(bad))
-        lines = [line for line in text.splitlines() if line.strip()]
         raise ConfigError(
-            f"{key}, line {n + 1}: need finite numbers, whole column and row within +-{INDEX_RANGE} and a "
-            f"level in [0, {MAX_LEVEL}], got {shown(lines[n])}"
+            f"{key}, square {n + 1}: need finite numbers, column and row within +-{INDEX_RANGE} and a level "
+            f"in [0, {MAX_LEVEL}], got {squares[n]}"
         )
-    return rows
-
-
-def _numbers(line: str) -> bool:
-    try:
-        [float(word) for word in line.split()]
-    except ValueError:
-        return False
-    return True
+    return squares
 
 
 def _plain(value: Any) -> Any:

@@ -3,6 +3,7 @@ region IK round trips over the whole table, bands, envelope, the paper's example
 
 from __future__ import annotations
 
+import base64
 import math
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -10,12 +11,13 @@ from types import ModuleType
 
 import numpy as np
 import pytest
+import yaml
 
 from manipulator_kinematics.compiled import enabled as compiled_enabled
 from manipulator_kinematics.model import IKStatus, RequestError, pose_matrix
 from manipulator_kinematics.params import ConfigError, config_path, load_parameters
 from manipulator_kinematics.time_scaling import ACCELERATION, TIP_SPEED
-from pump_boom_kinematics import build_regions, kinematics
+from pump_boom_kinematics import build_regions, kinematics, regions
 from pump_boom_kinematics.kinematics import Failure, PumpBoom, RegionIK, RegionTableError, compiled_kernel
 from pump_boom_kinematics.pour import ACCELERATION as TIP_ACCELERATION
 from pump_boom_kinematics.pour import (
@@ -398,8 +400,8 @@ def test_solve_ik_protocol(boom: PumpBoom) -> None:
     assert solutions.outcome[1] == IKStatus.UNREACHABLE
     assert "outside the region table" in solutions.note(1)
     np.testing.assert_allclose(boom.tip(solutions.solution[0]), [20.0, 5.0, 17.5], atol=1e-9)
-    single = boom.solve_ik(targets[0], use_orientation=False)
-    np.testing.assert_array_equal(single.solution, solutions.solution[0])
+    single = boom.solve_ik(targets[0], use_orientation=False)  # the kernel: the band's sums in its order
+    np.testing.assert_allclose(single.solution, solutions.solution[0], rtol=0.0, atol=1e-12)
     with pytest.raises(RequestError, match="position only"):
         boom.solve_ik(targets[0])
     with pytest.raises(RequestError, match="unknown IK mode"):
@@ -527,39 +529,61 @@ def test_table_file_matches_the_machine(boom: PumpBoom) -> None:
 
 
 def test_lookup_arrays_are_the_squares_drawn_one_by_one(boom: PumpBoom) -> None:
-    """The cell owners (filled level by level at load) and the summed-area table (built on first
-    use, row by row) against each square drawn on the cells on its own from its corner in metres
-    and numpy's cumsum of that field; first used from four threads at once (a node's executor)."""
+    """The cell owners (filled level by level at load) against each square drawn on the cells on
+    its own from its corner in metres; a new table of the same squares first used from four
+    threads at once (a node's executor) gives the same blends and nearest points."""
     table = boom.table
-    constants, owner, summed, _ = table.lookup
+    constants, owner, _ = table.lookup
     cell, lower = constants[2], constants[3:5]
     drawn = np.full(owner.shape, -1)
-    field = np.zeros(owner.shape + (4,))
     for k, (i, j, level) in enumerate(table.index.tolist()):
         corner = np.array(boom.grid.corner(i, j, level), dtype=float)
         a, b = np.rint((corner - boom.grid.origin) / cell - lower).astype(int)
         n = round(float(boom.grid.side(level)) / cell)
         assert (drawn[a:a + n, b:b + n] == -1).all()
         drawn[a:a + n, b:b + n] = k
-        field[a:a + n, b:b + n] = [*table.triples[k], 1.0]
     np.testing.assert_array_equal(owner, drawn)
     assert (owner >= 0).sum() * cell**2 == pytest.approx(table.covered_area, rel=1e-12)
-    expected = np.zeros(summed.shape)
-    expected[1:, 1:] = field.cumsum(axis=0).cumsum(axis=1)
-    np.testing.assert_array_equal(summed, expected)
-    # A new table built from the same squares: its first blends in bands, lookups and nearest
-    # points from four threads at once give what the boom's table gives.
     fresh = RegionTable(table.grid, table.index, table.triples, table.margin, {}, {}, {})
     rng = np.random.default_rng(31)
     r, z = rng.uniform(0.0, 45.0, 2000), rng.uniform(-30.0, 45.0, 2000)
     blend = table.blend(r, z)[0]
     with ThreadPoolExecutor(4) as pool:
-        results = list(pool.map(lambda _: (fresh.blend(r, z)[0], fresh.lookup[2], fresh.nearest(50.0, 50.0)),
-                                range(8)))
-    for blended, table_sums, near in results:
+        results = list(pool.map(lambda _: (fresh.blend(r, z)[0], fresh.nearest(50.0, 50.0)), range(8)))
+    for blended, near in results:
         np.testing.assert_array_equal(blended, blend)
-        np.testing.assert_array_equal(table_sums, summed)
         assert near == table.nearest(50.0, 50.0)
+
+
+def test_band_mean_is_the_area_weighted_mean_of_the_squares_under_the_window(boom: PumpBoom) -> None:
+    """In the bands of the shipped table (squares of six sizes, gaps) the blend against the mean of
+    the squares' triples weighted by the area each shares with the window, in metres from the
+    squares' corners (no cells); a window over squares of one triple gives that triple exactly."""
+    table = boom.table
+    rng = np.random.default_rng(37)
+    rows = rng.integers(0, len(table), 4000)
+    side = boom.grid.side(table.index[rows, 2])[:, None]
+    corner = np.stack(boom.grid.corner(*table.index[rows].T), axis=-1)
+    plane = corner + side * rng.random((len(rows), 2))
+    triple, inside = table.blend(plane[:, 0], plane[:, 1])
+    assert inside.all()
+    low = np.stack(boom.grid.corner(*table.index.T), axis=-1)
+    high = low + boom.grid.side(table.index[:, 2])[:, None]
+    half = 0.5 * boom.grid.band
+    sides = np.minimum(plane[:, None] + half, high) - np.maximum(plane[:, None] - half, low)
+    overlap = np.prod(np.clip(sides, 0.0, None), axis=-1)  # (points, squares) m^2
+    expected = overlap @ table.triples / overlap.sum(axis=1, keepdims=True)
+    np.testing.assert_allclose(triple, expected, rtol=0.0, atol=1e-12)
+    own = table.own_triple(plane[:, 0], plane[:, 1])
+    blended = np.any(triple != own, axis=-1)
+    one_triple = ((overlap == 0.0) | (table.triples[None] == own[:, None]).all(axis=-1)).all(axis=1)
+    assert blended.sum() > 2000 and one_triple.sum() > 200
+    np.testing.assert_array_equal(blended, ~one_triple)
+    # One point (0-d) in a band: its blend, and the table's triples untouched.
+    before = table.triples.copy()
+    k = int(np.argmax(blended))
+    np.testing.assert_array_equal(table.blend(*plane[k])[0], triple[k])
+    np.testing.assert_array_equal(table.triples, before)
 
 
 def test_overlapping_squares_are_refused_naming_both(boom: PumpBoom) -> None:
@@ -582,23 +606,60 @@ def test_a_truncated_pour_ends_before_a_gap_its_resampled_points_catch(boom: Pum
 
 
 @pytest.mark.parametrize(
-    ("line", "match"),
+    ("field", "value", "match"),
     [
-        ("3 4 0 x 1.0 1.0 0.1", r"squares, line 2: expected 7 numbers"),
-        ("3 4 0 1.0 1.0 0.1", r"squares, line 2: expected 7 numbers"),
-        ("3 4.5 0 1.0 1.0 1.0 0.1", r"squares, line 2: need .* whole column and row"),
-        ("3 4 13 1.0 1.0 1.0 0.1", r"squares, line 2: need .* level in \[0, 12\]"),
-        ("3 4 0 nan 1.0 1.0 0.1", r"squares, line 2: need finite numbers"),
+        ("column", 100_001, r"squares, square 2: need .* column and row within \+-100000"),
+        ("level", 13, r"squares, square 2: need .* level in \[0, 12\]"),
+        ("triple", [np.nan, 1.0, 1.0], r"squares, square 2: need finite numbers"),
+        ("margin", np.inf, r"squares, square 2: need finite numbers"),
+        (None, None, r"squares: expected base64 of squares of 37 bytes"),
     ],
 )
-def test_a_bad_line_of_the_table_file_is_refused_with_its_key(tmp_path, line: str, match: str) -> None:
-    lines = Path(config_path("pump_boom_regions.yaml")).read_text(encoding="utf-8").splitlines()
-    first = next(n for n, text in enumerate(lines) if text.startswith("      squares: |")) + 1
-    lines[first + 1] = " " * 8 + line
+def test_a_bad_square_of_the_table_file_is_refused_with_its_key(tmp_path, field: str | None, value: object,
+                                                                match: str) -> None:
+    text = Path(config_path("pump_boom_regions.yaml")).read_text(encoding="utf-8")
+    start = text.index("      squares: |")
+    squares = regions._squares(yaml.safe_load(text)["/**"]["ros__parameters"]["pump_boom_regions"]["squares"],
+                               "squares").copy()
+    if field is None:
+        data = squares.tobytes()[:-1]  # a byte short
+    else:
+        squares[1][field] = value
+        data = squares.tobytes()
     path = tmp_path / "table.yaml"
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    path.write_text(text[:start] + f"      squares: {base64.b64encode(data).decode()}\n", encoding="utf-8")
     with pytest.raises(ConfigError, match=r"pump_boom_regions\." + match):
         RegionTable.load(path)
+
+
+def test_the_table_file_is_what_dump_writes_and_an_older_one_is_refused(boom: PumpBoom, tmp_path) -> None:
+    # The shipped file is what dump writes of the table read from it.
+    shipped = Path(config_path("pump_boom_regions.yaml"))
+    path = tmp_path / "table.yaml"
+    boom.table.dump(path, build_regions.table_header(boom.table, "pump_boom.yaml"))
+    assert path.read_text(encoding="utf-8") == shipped.read_text(encoding="utf-8")
+    # A table from before the rows were base64 (a line of 7 numbers per square): refused, key named.
+    text = shipped.read_text(encoding="utf-8")
+    old = "".join(" " * 8 + line + "\n" for line in ["0 -85 4 0.0 1.22173 3.0979 0.17", "1 2 0 1 1 1 0.1"])
+    path.write_text(text[:text.index("      squares: |")] + "      squares: |\n" + old, encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"pump_boom_regions\.squares: expected base64 .* rebuild it"):
+        RegionTable.load(path)
+
+
+def test_the_listing_shows_each_square_with_its_extent_and_degrees(boom: PumpBoom, capsys) -> None:
+    assert build_regions.main(["--list"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    table = boom.table
+    assert len(lines) == len(table) + 1 and lines[0].startswith("square (i, j, level)")
+    k = len(table) // 2
+    numbers = [float(word) for word in lines[k + 1].translate(str.maketrans("(),", "   ")).split()]
+    i, j, level = table.index[k]
+    side = float(boom.grid.side(level))
+    r0, z0 = (float(c) for c in boom.grid.corner(i, j, level))
+    assert numbers[:3] == [i, j, level]
+    np.testing.assert_allclose(numbers[3:7], [r0, r0 + side, z0, z0 + side], atol=5e-4)
+    np.testing.assert_allclose(numbers[7:10], np.degrees(table.triples[k]), atol=0.05)
+    assert numbers[10] == pytest.approx(table.margin[k], abs=5e-4)
 
 
 def test_a_changed_geometry_runs_fk_but_no_region_ik_until_its_table_is_built(
