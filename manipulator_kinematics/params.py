@@ -184,6 +184,8 @@ def _check_params_file(path: Path) -> None:
         document = read_document(path)  # the one parse every later reader of the file shares
     except OSError as error:
         raise ConfigError(f"--params-file {path}: {error.strerror}") from None
+    except UnicodeDecodeError as error:  # rcl reads UTF-8 (libyaml)
+        raise ConfigError(f"--params-file {path}: not UTF-8 text (byte {error.start})") from None
     except yaml.YAMLError as error:
         where = getattr(error, "problem_mark", None)
         line = f" (line {where.line + 1})" if where is not None else ""

@@ -87,10 +87,11 @@ def test_unknown_and_invalid_settings_are_refused() -> None:
     ("/**:\n  ros__parameters:\n    scara: {}\n", "scara = {} is not a ROS parameter value"),
     ("/**:\n  ros__parameters:\n    scara: {l1: [1, x]}\n", "scara.l1 = [1, 'x'] is not"),
     ("[1, 2]\n", "expected sections"),
+    (b"/**:\n  ros__parameters:\n    frame: '\xff'\n", "not UTF-8 text (byte 36)"),
 ])
-def test_a_params_file_rcl_cannot_take_is_one_line(tmp_path: Path, text: str, message: str) -> None:
+def test_a_params_file_rcl_cannot_take_is_one_line(tmp_path: Path, text: str | bytes, message: str) -> None:
     path = tmp_path / "bad.yaml"
-    path.write_text(text)
+    path.write_bytes(text if isinstance(text, bytes) else text.encode())
     assert message in start_fails("--params-file", str(path))
 
 
