@@ -291,8 +291,9 @@ class RegionTable:
         cells of no square): built by the first blend in a band. (Not np.unique: its first call
         in a process imports numpy.ma, 20 ms.)"""
         order = np.lexsort(self.triples.T[::-1])
+        ordered = self.triples[order]
         new = np.ones(len(order), dtype=bool)
-        new[1:] = np.any(self.triples[order][1:] != self.triples[order][:-1], axis=1)
+        new[1:] = np.any(ordered[1:] != ordered[:-1], axis=1)
         ids = np.full(len(order) + 1, -1, dtype=np.intp)
         ids[order] = np.cumsum(new) - 1
         return ids
