@@ -118,6 +118,17 @@ class NodeProcess:
 #: reader knows the writer) or on a loaded machine can be lost, and the test would wait for it.
 RELIABLE_INPUTS = ("-p", "input_reliability:=reliable")
 
+#: rclpy's warning when rmw_fastrtps drops a response to a client it has not matched yet; not the
+#: node's fault, and ``Probe.call`` re-sends the request.
+DROPPED_RESPONSE = "failed to send response (timeout): client will not receive response"
+
+
+def runtime_warnings(log: str) -> list[str]:
+    """The ``RuntimeWarning`` lines of a node's log (numpy's overflow or invalid value, say),
+    a dropped response (``DROPPED_RESPONSE``) left out."""
+    return [line for line in log.splitlines() if "RuntimeWarning" in line and DROPPED_RESPONSE not in line]
+
+
 #: The IK/FK services every serial machine's IK server offers.
 IK_FK = ((SolveIK, "solve_ik"), (SolveFK, "solve_fk"))
 
