@@ -2,7 +2,7 @@
 
 Rows: the code and shipped table of each ``--commits`` commit (default 47c33a1: the 55-square
 table before issue #19), unpacked with ``git archive`` into a temporary directory, and this
-checkout with its shipped table (1598 squares). Old and new run in separate processes, with this
+checkout with its shipped table (2470 squares). Old and new run in separate processes, with this
 venv's Python.
 
 * fresh processes (a node's case: one load per process): ``--processes`` processes per row, each

@@ -37,7 +37,15 @@ seam, around the points that need it. Vectorised over all triples at once:
    spacing apart and on every square's edges (off the lattices for small squares); where a point fails or a
    step exceeds ``max_step`` (the blend around gaps between small squares can change faster than
    their own checks saw), the smallest squares under the point's window are dropped and the check
-   runs again, until it passes (``band_failures`` 0, ``largest_step`` <= ``max_step``).
+   runs again, until it passes (``band_failures`` 0, ``largest_step`` <= ``max_step``);
+6. the gaps are filled: every square of the smallest size holding an uncovered positive-envelope
+   point of the coverage lattice is searched again as in steps 3-4, with ``FILL_TRIES``
+   candidates (the front met it with other neighbours, or the final check dropped it; now it has
+   neighbours on every side), then step 5 runs again, up to ``FILLS`` times.
+
+Squares of two shape families (:func:`pump_boom_kinematics.regions.family`) never touch, not even
+at a corner: the band does not blend them, so a line through a shared point would jump. A square
+touching squares of one family takes a triple of that family, one touching two is split.
 
 Coverage (:func:`reachable_area`): the lattice points every 0.1 m of the pour plane in front of
 the slew axis that some joint state inside the limits reaches, and those it reaches in
@@ -63,7 +71,7 @@ from manipulator_kinematics.blocks import in_blocks
 from manipulator_kinematics.params import CONFIG_DIR, config_path, load_parameters
 from manipulator_kinematics.planar import two_link_ik, wrap_angle
 from pump_boom_kinematics.kinematics import CONFIG_FILE, LIMIT_TOL, SECTION, PumpBoom
-from pump_boom_kinematics.regions import Grid, RegionTable
+from pump_boom_kinematics.regions import FOLDED, Grid, RegionTable, family
 
 STEP_DEG = 2.5
 MIN_MARGIN = 0.3  # m
@@ -78,14 +86,15 @@ SCAN = 4  # candidates pre-checked per candidate tried
 MAX_STEP = math.radians(7.5)  # rad per 100 mm of tip motion in any direction, on the check lattice
 #: rad, the smallest theta3 searched (0: every theta3 within the limits).
 MIN_THETA3 = 0.0
-#: rad, section 2 folded back below this theta3 (measured on the default machine: above the root pin
-#: no shape with theta3 in 15-90 deg keeps the envelope near the truck).
-FOLDED = math.radians(15.0)
 #: m, folded shapes are searched only on the squares this close to the points no other shape reaches
 #: (with folded shapes allowed everywhere the front grew them 10 m beyond those points: 97.51 % covered
 #: against 97.84 %, the longer seam lost the rest).
 FOLD_WIDTH = 1.0
 REPAIRS = 30  # passes of the final check that drop the squares around its failures, at most
+#: Fill passes (step 6) at most, and the candidates each gap's square tries: a gap has neighbours on
+#: every side, so more candidates pass alone than fit them.
+FILLS = 3
+FILL_TRIES = 200
 
 
 @dataclass(frozen=True)
@@ -255,6 +264,14 @@ def build_table(
     if not chosen:
         raise RuntimeError("no square of the grid can be covered: check the geometry and limits")
     keys = _repair(boom, grid, sorted(chosen), chosen, triples, check_spacing, max_step, progress)
+    for _ in range(FILLS):
+        added = _fill(boom, grid, area, keys, chosen, triples, margin_of, centre, levels,
+                      (min_margin, check_spacing, max_step))
+        if progress is not None:
+            progress(f"fill: {len(added)} squares of {float(grid.side(levels)):g} m added in the gaps")
+        if not added:
+            break
+        keys = _repair(boom, grid, sorted(keys + added), chosen, triples, check_spacing, max_step, progress)
     draft = _table(grid, keys, chosen, triples)
     search = {
         "step_deg": step_deg,
@@ -315,6 +332,14 @@ def _choose(
     tips = np.stack([points[..., 0], np.zeros(points.shape[:-1]), points[..., 1]], axis=-1)
     best = float(margin.max())
     pool = np.flatnonzero(margin >= min(min_margin, 0.5 * best))
+    # The band never blends two shape families (regions.family), so squares of two families must
+    # not touch, not even at a corner (a line through it would jump): only the family of the
+    # touching neighbours, and a square touching two is split.
+    touching = {family(triples[chosen[k][0]]).item() for k in near if _touch(grid, key, k)}
+    if len(touching) > 1:
+        return False
+    if touching:
+        pool = pool[family(triples[pool]) == touching.pop()]
     if near:
         # The triples the neighbours blend in around the square: prefer a candidate close to them.
         around = _table(grid, near, chosen, triples).blend(points[..., 0], points[..., 1])[0].reshape(-1, 3)
@@ -420,6 +445,45 @@ def _repair(
     return keys
 
 
+def _fill(
+    boom: PumpBoom,
+    grid: Grid,
+    area: Coverage,
+    keys: list[Key],
+    chosen: dict[Key, tuple[int, float]],
+    triples: np.ndarray,
+    margin_of: Callable[[Key], np.ndarray],
+    centre: np.ndarray,
+    level: int,
+    rules: tuple[float, float, float],
+) -> list[Key]:
+    """Step 6 of the module docstring: the squares of ``level`` (the smallest) added in the gaps of
+    the table of ``keys``. Every square of that level holding a positive-envelope lattice point of
+    ``area`` that the table does not cover is searched again (outward from ``centre``, as the
+    front), with FILL_TRIES candidates and the squares around it now on every side; ``rules`` are
+    (min_margin, check_spacing, max_step) of :func:`_choose`. The gaps are those the front left
+    (its neighbours then were others) and those the final check opened."""
+    table = _table(grid, keys, chosen, triples)
+    covered = _plane_ik(boom, area.centres, table)[1]
+    side = float(grid.side(level))
+    cells = np.floor((area.centres[area.envelope & ~covered] - np.asarray(grid.origin)) / side).astype(int)
+    # A cell of the smallest squares is wholly inside one square or in none.
+    gaps = [(int(i), int(j), level) for i, j in sorted(set(map(tuple, cells.tolist())))
+            if table.owner(*grid.corner(i + 0.5, j + 0.5, level)) < 0]
+    gaps.sort(key=lambda key: (_distance(grid, key, centre), key))
+    buckets: dict[tuple[int, int], list[Key]] = {}
+    for key in keys:
+        buckets.setdefault((key[0] >> key[2], key[1] >> key[2]), []).append(key)
+    added = []
+    for key in gaps:
+        chosen.pop(key, None)
+        margin = margin_of(key)
+        if np.any(margin >= 0.0) and _choose(boom, grid, triples, margin, key, chosen, buckets, *rules,
+                                              FILL_TRIES):
+            added.append(key)
+    return added
+
+
 def _fold_distance(boom: PumpBoom, area: Coverage, lowest: float) -> Callable[[float, float], float]:
     """Distance (m) from a plane point to the nearest positive-envelope lattice point of ``area``
     that no shape with theta3 >= ``lowest`` reaches (where section 2 must fold back)."""
@@ -439,6 +503,14 @@ def _fold_distance(boom: PumpBoom, area: Coverage, lowest: float) -> Callable[[f
         return float(distance[a, b])
 
     return at
+
+
+def _touch(grid: Grid, a: Key, b: Key) -> bool:
+    """True if the closed squares ``a`` and ``b`` share a point (an edge or a corner)."""
+    ra, za = (float(c) for c in grid.corner(*a))
+    rb, zb = (float(c) for c in grid.corner(*b))
+    sa, sb = float(grid.side(a[2])), float(grid.side(b[2]))
+    return ra <= rb + sb and rb <= ra + sa and za <= zb + sb and zb <= za + sa
 
 
 def _distance(grid: Grid, key: Key, centre: np.ndarray) -> float:

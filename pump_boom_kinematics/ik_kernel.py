@@ -17,7 +17,7 @@ Same steps and the same order of checks as the numpy path (paper 001, section 2)
 3. the region table at (r, z) (:meth:`pump_boom_kinematics.regions.RegionTable.blend`): the
    square holding the point (closed squares: the four cells within EDGE, above/right first),
    NOT_IN_TABLE if none; its own triple where the band window lies inside the square, else the
-   window mean summed over the cells under the window (RegionTable._window_mean);
+   window mean summed over the cells of its family under the window (RegionTable._window_mean);
 4. theta5, theta6 from the planar 2R of sections 4-5 in closed form (eq. 4, elbow-over branch),
    TWO_LINK where it does not reach;
 5. JOINT_LIMITS outside the limits by more than LIMIT_TOL (joints within it moved onto the
@@ -27,8 +27,8 @@ The machine and the table arrive as numpy arrays, ``RegionTable.lookup`` and
 ``PumpBoom._packed``: the constants (root pin r, z; lengths l1..l5; reach; LIMIT_TOL;
 ENVELOPE_TOL; the lower (6) and upper (6) limits; the grid origin r, z; the lookup cell; the
 lookup arrays' lower cell column, row; half the band in cells; EDGE in cells), the cell owners
-(n_u, n_v) (-1: none) and per square its bounds in cells (low u, low v, high u, high v) and its
-triple (m, 7).
+(n_u, n_v) (-1: none) and per square its bounds in cells (low u, low v, high u, high v), its
+triple and its family (m, 8).
 """
 
 from __future__ import annotations
@@ -47,9 +47,9 @@ _REACH_TOL = 1e-9  # m: region_ik's reach check
 @njit(cache=True, error_model="numpy")
 def _window_mean(owner: np.ndarray, squares: np.ndarray, square: int, u: float, v: float, half: float,
                  q: np.ndarray) -> None:
-    """RegionTable._window_mean of one point in cells into q[1:4] (the same weights; numpy's
-    matrix product adds them in its own order: the same to round-off); the square's own triple
-    where every square under the window holds it."""
+    """RegionTable._window_mean of one point in cells into q[1:4] (the same weights, the squares
+    of the point's family only; numpy's matrix product adds them in its own order: the same to
+    round-off); the square's own triple where every square of its family under the window holds it."""
     n_u, n_v = owner.shape
     span = math.ceil(2.0 * half) + 1
     first_u, first_v = math.floor(u - half), math.floor(v - half)
@@ -63,7 +63,7 @@ def _window_mean(owner: np.ndarray, squares: np.ndarray, square: int, u: float, 
             along_v = max(min(v + half, b + 1.0) - max(v - half, float(b)), 0.0) if 0 <= b < n_v else 0.0
             weight = along_u * along_v
             k = owner[a, b] if weight > 0.0 else -1
-            if k >= 0:
+            if k >= 0 and squares[k, 7] == squares[square, 7]:  # of the point's family
                 for c in range(3):
                     total[c] += weight * squares[k, 4 + c]
                     same = same and squares[k, 4 + c] == squares[square, 4 + c]

@@ -20,10 +20,13 @@ lies inside the point's own square (more than band / 2 from its edges) the tripl
 square's own, unchanged; across a band it changes linearly, and by at most (the spread of the
 triples under the window) / band per metre whatever the squares' sizes; missing squares drop out
 (the mean is over the covered part only), so a square next to a gap keeps its own triple up to
-the edge. The window mean is summed over the cells of the finest squares under the window (at
-most 8 x 8 for a 1 m band on 0.156 m cells), each weighing the window's length in it along r
-times that along z: exact for a piecewise-constant field, and where every square under the
-window holds the point's own triple, that triple unchanged.
+the edge; squares of another shape family than the point's own square drop out the same way
+(:func:`family`: sections folded back or not; a blend of the two is a shape of neither; the
+builder keeps them from touching). The window mean is summed over the cells of the finest
+squares under the window (at most 8 x 8 for a 1 m band on 0.156 m cells), each weighing the
+window's length in it along r times that along z: exact for a piecewise-constant field, and
+where every square of its family under the window holds the point's own triple, that triple
+unchanged.
 
 The table file (``config/pump_boom_regions.yaml``, a ROS parameters file) is written by
 ``pump_boom_regions`` (:mod:`.build_regions`) and records the geometry it was built for; loading
@@ -105,6 +108,20 @@ MAX_LEVEL = 12
 #: A point this close (m) to a square's edge lies on it (closed squares, see the module docstring).
 EDGE = 1e-9
 
+#: rad: a section whose unfolding angle is below this is folded back onto the one before it (the
+#: shape families of :func:`family`).
+FOLDED = math.radians(15.0)
+
+
+def family(triples: ArrayLike) -> np.ndarray:
+    """The shape family (...,) of triples (..., 3): 1 if section 2 is folded back onto section 1
+    (theta3 < FOLDED), plus 2 if section 3 is folded back onto section 2 (theta4 < FOLDED), else 0.
+    Between the families no shape keeps the envelope within the joint limits near the truck (no
+    theta3 in 15-90 deg reaches the points above the root pin in positive envelope), so the band
+    never blends squares of two families: a blend of a folded and an unfolded shape is neither."""
+    t = np.asarray(triples, dtype=float)
+    return (t[..., 1] < FOLDED).astype(np.int8) + 2 * (t[..., 2] < FOLDED).astype(np.int8)
+
 
 @dataclass(frozen=True)
 class Grid:
@@ -176,13 +193,15 @@ class RegionTable:
             raise ValueError(f"region table: square {tuple(index[a].tolist())} overlaps square "
                              f"{tuple(index[b].tolist())}")
         # Per square (triple, 1), and a row of zeros for the cells of no square (owner -1): the
-        # window sums of the blend.
+        # window sums of the blend; per square its family, -1 for no square.
         values = np.zeros((len(index) + 1, 4))
         values[:-1, :3], values[:-1, 3] = triples, 1.0
+        families = np.append(family(triples), -1).astype(np.intp)
         object.__setattr__(self, "_cell", cell)
         object.__setattr__(self, "_lower", lower)
         object.__setattr__(self, "_owner", owner)
         object.__setattr__(self, "_values", values)
+        object.__setattr__(self, "_family", families)
         object.__setattr__(self, "_bounds", np.concatenate([low, low + scale[:, None]], axis=1).astype(float))
 
     # Built on first use, not at load: the squares' extents of the nearest covered point.
@@ -266,8 +285,9 @@ class RegionTable:
         """The mean (n, 3) of the triple field over the covered part of the band windows centred
         on the points (n,) in cells (module docstring), in the squares of rows ``own`` (n,): the
         sum over the cells under the window of the window's length in the cell along r times that
-        along z times (triple, 1) of the cell's square; the square's own triple where every square
-        under the window holds it."""
+        along z times (triple, 1) of the cell's square if it is of the family of the point's own
+        (:func:`family`; the others drop out like missing squares); the square's own triple where
+        every square of its family under the window holds it."""
         half = 0.5 * self.grid.band / self._cell
         span = math.ceil(2.0 * half) + 1  # cells a window covers along an axis, at most
         cells, lengths = [], []
@@ -279,7 +299,8 @@ class RegionTable:
             lengths.append(np.where(outside, 0.0, np.maximum(length, 0.0)))
         weight = (lengths[0][:, :, None] * lengths[1][:, None, :]).reshape(len(u), -1)  # (n, span^2)
         flat = (cells[0][:, :, None] * self._owner.shape[1] + cells[1][:, None, :]).reshape(len(u), -1)
-        owner = np.where(weight > 0.0, self._owner.reshape(-1)[flat], -1)
+        owner = self._owner.reshape(-1)[flat]
+        owner = np.where((weight > 0.0) & (self._family[owner] == self._family[own][:, None]), owner, -1)
         total = (weight[:, None, :] @ self._values[owner])[:, 0]  # (n, 4); owner -1: the row of zeros
         ids = self._triple_ids
         same = ((owner < 0) | (ids[owner] == ids[own][:, None])).all(axis=1)
@@ -303,10 +324,11 @@ class RegionTable:
         """The lookup arrays of :meth:`owner` and :meth:`blend` for the compiled single-point IK
         (:mod:`.ik_kernel`): the constants (grid origin r, z; the cell; the arrays' lower cell
         column, row; half the band and EDGE in cells), the cell owners (int32) and per square its
-        bounds in cells and its triple (m, 7)."""
+        bounds in cells, its triple and its family (m, 8)."""
         constants = np.array([*self.grid.origin, self._cell, *self._lower, 0.5 * self.grid.band / self._cell,
                               EDGE / self._cell], dtype=float)
-        return constants, self._owner, np.concatenate([self._bounds, self.triples], axis=1)
+        return constants, self._owner, np.concatenate([self._bounds, self.triples, self._family[:-1, None]],
+                                                      axis=1)
 
     def random_lines(self, count: int, rng: np.random.Generator, steps: int = 40,
                      step: float = 0.1) -> np.ndarray:

@@ -130,7 +130,8 @@ def test_window_blend_is_the_papers_partition_of_unity_on_equal_squares(boom: Pu
     rng = np.random.default_rng(29)
     grid = boom.grid
     keys = np.array([(i, j) for i in range(8) for j in range(-3, 5) if rng.random() < 0.7])
-    triples = rng.uniform(0.0, 3.0, (len(keys), 3))
+    triples = rng.uniform(0.3, 3.0, (len(keys), 3))  # one shape family (unfolded: 0.3 rad > 15 deg)
+    assert not regions.family(triples).any()
     level0 = RegionTable(grid, np.concatenate([keys, np.zeros((len(keys), 1), int)], axis=1), triples,
                          np.zeros(len(keys)), {}, {}, {})
     quarters = np.array([(2 * i + a, 2 * j + b, 1) for i, j in keys for a in (0, 1) for b in (0, 1)])
@@ -377,7 +378,7 @@ def test_behind_the_slew_axis(boom: PumpBoom, random_q: np.ndarray) -> None:
 
 def test_failures_with_reasons(boom: PumpBoom) -> None:
     points = np.array(
-        [[40.5, 0.0, 12.0], [60.0, 0.0, 3.6], [0.1, 0.0, 10.0], [np.nan, 0.0, 1.0], [0.0, 0.0, 10.0]]
+        [[40.7, 0.0, 12.0], [60.0, 0.0, 3.6], [0.1, 0.0, 10.0], [np.nan, 0.0, 1.0], [0.0, 0.0, 10.0]]
     )
     result = boom.region_ik(points)
     assert list(result.failure) == [
@@ -394,7 +395,7 @@ def test_failures_with_reasons(boom: PumpBoom) -> None:
 
 
 def test_solve_ik_protocol(boom: PumpBoom) -> None:
-    targets = np.stack([pose_matrix(p) for p in ([20.0, 5.0, 17.5], [40.5, 0.0, 12.0])])
+    targets = np.stack([pose_matrix(p) for p in ([20.0, 5.0, 17.5], [40.7, 0.0, 12.0])])
     solutions = boom.solve_ik(targets, use_orientation=False, mode="region")
     assert solutions.q.shape == (2, 1, 6) and list(solutions.selected) == [0, -1]
     assert solutions.outcome[1] == IKStatus.UNREACHABLE
@@ -556,9 +557,10 @@ def test_lookup_arrays_are_the_squares_drawn_one_by_one(boom: PumpBoom) -> None:
 
 
 def test_band_mean_is_the_area_weighted_mean_of_the_squares_under_the_window(boom: PumpBoom) -> None:
-    """In the bands of the shipped table (squares of six sizes, gaps) the blend against the mean of
-    the squares' triples weighted by the area each shares with the window, in metres from the
-    squares' corners (no cells); a window over squares of one triple gives that triple exactly."""
+    """In the bands of the shipped table (squares of six sizes, gaps, shape families) the blend
+    against the mean of the triples of the squares of the point's family weighted by the area each
+    shares with the window, in metres from the squares' corners (no cells); a window over squares
+    of one triple gives that triple exactly."""
     table = boom.table
     rng = np.random.default_rng(37)
     rows = rng.integers(0, len(table), 4000)
@@ -572,6 +574,8 @@ def test_band_mean_is_the_area_weighted_mean_of_the_squares_under_the_window(boo
     half = 0.5 * boom.grid.band
     sides = np.minimum(plane[:, None] + half, high) - np.maximum(plane[:, None] - half, low)
     overlap = np.prod(np.clip(sides, 0.0, None), axis=-1)  # (points, squares) m^2
+    families = regions.family(table.triples)
+    overlap *= families[None] == families[table.owner(plane[:, 0], plane[:, 1])][:, None]
     expected = overlap @ table.triples / overlap.sum(axis=1, keepdims=True)
     np.testing.assert_allclose(triple, expected, rtol=0.0, atol=1e-12)
     own = table.own_triple(plane[:, 0], plane[:, 1])
@@ -584,6 +588,51 @@ def test_band_mean_is_the_area_weighted_mean_of_the_squares_under_the_window(boo
     k = int(np.argmax(blended))
     np.testing.assert_array_equal(table.blend(*plane[k])[0], triple[k])
     np.testing.assert_array_equal(table.triples, before)
+
+
+def test_the_band_never_blends_two_shape_families(boom: PumpBoom) -> None:
+    """A folded square between two unfolded ones: the unfolded squares blend with each other across
+    a gap narrower than the band and keep their own triples at the folded one's edges (it drops out
+    like a missing square), the folded one keeps its own; the compiled kernel the same. In the
+    shipped table every blend keeps the family of its square, and no squares of two families touch
+    (the builder leaves a gap between them: a line through a shared point would jump)."""
+    unfolded, folded = np.radians([60.0, 150.0, 120.0]), np.radians([80.0, 5.0, 120.0])
+    # (48, 30, 4): r 15.25-15.5625, z 9.375-9.6875, under the folded (3, 2) across a 0.3125 m gap.
+    index = np.array([[2, 2, 0], [3, 2, 0], [4, 2, 0], [48, 30, 4]])
+    other = np.radians([62.0, 152.0, 118.0])
+    triples = np.stack([unfolded, folded, unfolded, other])
+    table = RegionTable(boom.grid, index, triples, np.zeros(4), {}, {}, {})
+    assert regions.family(table.triples).tolist() == [0, 1, 0, 0]
+    r = boom.grid.origin[0] + 5.0 * np.array([3.0 - 0.2 / 5, 3.0 + 0.2 / 5, 4.0 - 0.2 / 5, 4.0 + 0.2 / 5])
+    z = np.full(4, 12.5)
+    np.testing.assert_array_equal(table.blend(r, z)[0], np.stack([unfolded, folded, folded, unfolded]))
+    # The window of a point of (2, 2) by its corner next to the folded square reaches (48, 30, 4),
+    # of its own family: a blend (the folded square under the window drops out).
+    corner = np.array([15.25 - 0.1, 10.0 + 0.1])
+    blend = table.blend(*corner)[0]
+    assert np.all(blend != unfolded) and regions.family(blend) == 0
+    shipped = boom.table
+    rng = np.random.default_rng(43)
+    rows = rng.integers(0, len(shipped), 20_000)
+    side = boom.grid.side(shipped.index[rows, 2])[:, None]
+    plane = np.stack(boom.grid.corner(*shipped.index[rows].T), axis=-1) + side * rng.random((len(rows), 2))
+    triple, inside = shipped.blend(plane[:, 0], plane[:, 1])
+    families = regions.family(shipped.triples)
+    assert inside.all() and len(set(families.tolist())) > 1
+    np.testing.assert_array_equal(regions.family(triple), families[rows])
+    low = np.stack(boom.grid.corner(*shipped.index.T), axis=-1)
+    high = low + boom.grid.side(shipped.index[:, 2])[:, None]
+    touch = ((low[:, None] <= high[None]) & (low[None] <= high[:, None])).all(axis=-1)
+    assert not (touch & (families[:, None] != families[None])).any()
+    if compiled_enabled():
+        kernel = compiled_kernel(boom, wait=True)
+        mixed = PumpBoom(boom.root, boom.lengths, boom.limits, boom.grid, table=table)
+        points = np.stack([[*r, corner[0]], np.zeros(5), [*z, corner[1]]], axis=-1)
+        raw = np.full((5, 6), np.nan)
+        for k, point in enumerate(points.tolist()):
+            kernel.region_ik(*mixed._kernel_args, *point, 0.0, False, raw[k])
+        expected = np.stack([*table.blend(r, z)[0], blend])
+        np.testing.assert_allclose(raw[:, 1:4], expected, rtol=0.0, atol=1e-12)
 
 
 def test_overlapping_squares_are_refused_naming_both(boom: PumpBoom) -> None:

@@ -149,7 +149,7 @@ def test_behind_the_slew_axis_the_seed_picks_the_slew_turn(probe: Probe, server,
 
 
 BAD_IK = {
-    "outside the table": (ik_request([40.5, 0.0, 12.0]), Codes.NO_IK_SOLUTION,
+    "outside the table": (ik_request([40.7, 0.0, 12.0]), Codes.NO_IK_SOLUTION,
                           "outside the region table: no square covers it (its 5 m square (8, 2)"),
     "beyond the reach": (ik_request([60.0, 0.0, 3.6]), Codes.NO_IK_SOLUTION, "beyond the boom's reach"),
     "on the slew axis": (ik_request([0.0, 0.0, 10.0]), Codes.NO_IK_SOLUTION, "behind the boom root pin"),
