@@ -467,9 +467,10 @@ def _fill(
     covered = _plane_ik(boom, area.centres, table)[1]
     side = float(grid.side(level))
     cells = np.floor((area.centres[area.envelope & ~covered] - np.asarray(grid.origin)) / side).astype(int)
+    cells = np.unique(cells, axis=0)
     # A cell of the smallest squares is wholly inside one square or in none.
-    gaps = [(int(i), int(j), level) for i, j in sorted(set(map(tuple, cells.tolist())))
-            if table.owner(*grid.corner(i + 0.5, j + 0.5, level)) < 0]
+    uncovered = table.owner(*grid.corner(cells[:, 0] + 0.5, cells[:, 1] + 0.5, level)) < 0
+    gaps = [(i, j, level) for i, j in cells[uncovered].tolist()]
     gaps.sort(key=lambda key: (_distance(grid, key, centre), key))
     buckets: dict[tuple[int, int], list[Key]] = {}
     for key in keys:

@@ -591,9 +591,9 @@ def test_band_mean_is_the_area_weighted_mean_of_the_squares_under_the_window(boo
 
 
 def test_the_band_never_blends_two_shape_families(boom: PumpBoom) -> None:
-    """A folded square between two unfolded ones: the unfolded squares blend with each other across
-    a gap narrower than the band and keep their own triples at the folded one's edges (it drops out
-    like a missing square), the folded one keeps its own; the compiled kernel the same. In the
+    """A folded square between two unfolded ones: these keep their own triples at the folded one's
+    edges (it drops out like a missing square), and it keeps its own; an unfolded square blends
+    with a small unfolded one across a gap narrower than the band; the compiled kernel the same. In the
     shipped table every blend keeps the family of its square, and no squares of two families touch
     (the builder leaves a gap between them: a line through a shared point would jump)."""
     unfolded, folded = np.radians([60.0, 150.0, 120.0]), np.radians([80.0, 5.0, 120.0])
