@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import base64
 import math
+import zlib
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from types import ModuleType
@@ -654,6 +655,14 @@ def test_a_truncated_pour_ends_before_a_gap_its_resampled_points_catch(boom: Pum
     assert boom.region_ik(plan.points).ok.all()
 
 
+def _shipped_squares() -> tuple[str, np.ndarray]:
+    """The shipped table file's text before its squares, and its squares (a copy)."""
+    text = Path(config_path("pump_boom_regions.yaml")).read_text(encoding="utf-8")
+    squares = regions._squares(yaml.safe_load(text)["/**"]["ros__parameters"]["pump_boom_regions"]["squares"],
+                               "squares")
+    return text[:text.index("      squares: |")], squares.copy()
+
+
 @pytest.mark.parametrize(
     ("field", "value", "match"),
     [
@@ -661,36 +670,61 @@ def test_a_truncated_pour_ends_before_a_gap_its_resampled_points_catch(boom: Pum
         ("level", 13, r"squares, square 2: need .* level in \[0, 12\]"),
         ("triple", [np.nan, 1.0, 1.0], r"squares, square 2: need finite numbers"),
         ("margin", np.inf, r"squares, square 2: need finite numbers"),
-        (None, None, r"squares: expected base64 of squares of 37 bytes"),
+        (None, None, r"squares: expected base64 of the zlib-deflated squares of 37 bytes"),
     ],
 )
 def test_a_bad_square_of_the_table_file_is_refused_with_its_key(tmp_path, field: str | None, value: object,
                                                                 match: str) -> None:
-    text = Path(config_path("pump_boom_regions.yaml")).read_text(encoding="utf-8")
-    start = text.index("      squares: |")
-    squares = regions._squares(yaml.safe_load(text)["/**"]["ros__parameters"]["pump_boom_regions"]["squares"],
-                               "squares").copy()
+    head, squares = _shipped_squares()
     if field is None:
         data = squares.tobytes()[:-1]  # a byte short
     else:
         squares[1][field] = value
         data = squares.tobytes()
     path = tmp_path / "table.yaml"
-    path.write_text(text[:start] + f"      squares: {base64.b64encode(data).decode()}\n", encoding="utf-8")
+    block = base64.b64encode(zlib.compress(data)).decode()
+    path.write_text(head + f"      squares: {block}\n", encoding="utf-8")
     with pytest.raises(ConfigError, match=r"pump_boom_regions\." + match):
         RegionTable.load(path)
 
 
+@pytest.mark.parametrize(
+    ("stream", "match"),
+    [
+        (lambda data: data, "expected base64 of the zlib-deflated squares .* rebuild it"),  # not deflated
+        (lambda data: zlib.compress(data)[:-10], "expected base64 of the zlib-deflated squares"),  # cut short
+        (lambda data: zlib.compress(bytes(37_000_037), 9), "more than 1000000 squares"),  # 36 KB -> 37 MB
+    ],
+    ids=["not deflated", "cut short", "inflates too far"],
+)
+def test_a_squares_block_that_is_no_whole_zlib_stream_is_refused(tmp_path, stream, match: str) -> None:
+    head, squares = _shipped_squares()
+    path = tmp_path / "table.yaml"
+    path.write_text(head + f"      squares: {base64.b64encode(stream(squares.tobytes())).decode()}\n",
+                    encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"pump_boom_regions\.squares: " + match):
+        RegionTable.load(path)
+
+
 def test_the_table_file_is_what_dump_writes_and_an_older_one_is_refused(boom: PumpBoom, tmp_path) -> None:
-    # The shipped file is what dump writes of the table read from it.
+    # The shipped file is what dump writes of the table read from it: its text before the squares
+    # the same, and its squares the same bytes once inflated (another zlib, e.g. zlib-ng, may
+    # deflate them to other bytes; with this machine's zlib they are the same).
     shipped = Path(config_path("pump_boom_regions.yaml"))
     path = tmp_path / "table.yaml"
     boom.table.dump(path, build_regions.table_header(boom.table, "pump_boom.yaml"))
-    assert path.read_text(encoding="utf-8") == shipped.read_text(encoding="utf-8")
+    written, text = path.read_text(encoding="utf-8"), shipped.read_text(encoding="utf-8")
+    cut = text.index("      squares: |")
+    assert written[:cut] == text[:cut] and written[cut:].splitlines()[0] == text[cut:].splitlines()[0]
+
+    def squares(document: str) -> bytes:
+        block = yaml.safe_load(document)["/**"]["ros__parameters"]["pump_boom_regions"]["squares"]
+        return zlib.decompress(base64.b64decode(block))
+
+    assert squares(written) == squares(text)
     # A table from before the rows were base64 (a line of 7 numbers per square): refused, key named.
-    text = shipped.read_text(encoding="utf-8")
     old = "".join(" " * 8 + line + "\n" for line in ["0 -85 4 0.0 1.22173 3.0979 0.17", "1 2 0 1 1 1 0.1"])
-    path.write_text(text[:text.index("      squares: |")] + "      squares: |\n" + old, encoding="utf-8")
+    path.write_text(text[:cut] + "      squares: |\n" + old, encoding="utf-8")
     with pytest.raises(ConfigError, match=r"pump_boom_regions\.squares: expected base64 .* rebuild it"):
         RegionTable.load(path)
 
@@ -771,7 +805,11 @@ def test_builder_is_deterministic_and_its_table_serves_a_changed_machine(tmp_pat
     section["regions"]["table_file"] = str(tmp_path / "t0.yaml")
     boom = PumpBoom.from_parameters(section)
     area = build_regions.reachable_area(boom, samples=20_000, cell=1.0)
-    tables = [build_regions.build_table(boom, step_deg=15.0, levels=1, coverage=area) for _ in range(2)]
+    # The check lattice 0.25 m apart (the shipped table's 0.1 m): each final check runs on a sixth
+    # of the points, and the build (its gaps filled and checked again) takes 12 s instead of 90 s;
+    # the test's 0.5 m points lie on that lattice (to 1 um), so the check vouches for every one.
+    tables = [build_regions.build_table(boom, step_deg=15.0, levels=1, coverage=area, check_spacing=0.25)
+              for _ in range(2)]
     for k, table in enumerate(tables):
         table.dump(tmp_path / f"t{k}.yaml")
     assert (tmp_path / "t0.yaml").read_bytes() == (tmp_path / "t1.yaml").read_bytes()
