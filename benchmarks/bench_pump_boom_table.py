@@ -25,7 +25,8 @@ Medians with min-max in ms. Target (issue #19 item 1): the shipped table loads a
 the same code of the first call; against 47c33a1 the first single-point call pays for starting
 issue #22's kernel loader, whatever the table).
 
-Run: .venv/bin/python benchmarks/bench_pump_boom_table.py [--processes 9] [--rounds 15] [--commits 47c33a1 6afd0b1]
+Run: .venv/bin/python benchmarks/bench_pump_boom_table.py [--processes 9] [--rounds 15]
+     [--commits 47c33a1 6afd0b1]
 """
 
 from __future__ import annotations
@@ -112,7 +113,8 @@ for _ in range(int(sys.argv[1])):
     document = timed("YAML parse (libyaml) of the file", lambda: params.load_parameters(path))
     section = timed("schema check", lambda: validate(document[regions.TABLE_SECTION], regions.TABLE_SCHEMA,
                                                      regions.TABLE_SECTION))
-    squares = timed("squares (base64, zlib) -> arrays", lambda: regions._squares(section["squares"], "squares"))
+    squares = timed("squares (base64, zlib) -> arrays",
+                    lambda: regions._squares(section["squares"], "squares"))
     index = np.stack([squares["column"], squares["row"], squares["level"]], axis=-1)
     table = timed("cell owners (RegionTable())", lambda: regions.RegionTable(
         boom.grid, index, squares["triple"], squares["margin"], section["built_for"], {}, {}))

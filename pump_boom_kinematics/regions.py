@@ -108,6 +108,7 @@ SQUARE_LINE = 100
 INDEX_RANGE = 100_000  # |column|, |row| at most this
 MAX_LEVEL = 12
 MAX_SQUARES = 1_000_000
+MAX_CELLS = 1 << 24  # the lookup raster's cells (int32: 64 MB); the shipped table's: 138,240
 
 #: A point this close (m) to a square's edge lies on it (closed squares, see the module docstring).
 EDGE = 1e-9
@@ -185,6 +186,9 @@ class RegionTable:
         top = index[:, :2] >> index[:, 2:]  # the level-0 square holding each square (floor)
         lower0 = top.min(axis=0) if len(index) else np.zeros(2, dtype=int)
         rows, columns = ((top.max(axis=0) - lower0 + 1) << depth).tolist() if len(index) else (0, 0)
+        if rows * columns > MAX_CELLS:  # squares far apart, or a deep level: refused, not a MemoryError
+            raise ValueError(f"region table: the squares span {rows} x {columns} cells of {cell:g} m, "
+                             f"more than {MAX_CELLS} (columns or rows far apart, or levels too deep)")
         owner = np.full((rows, columns), -1, dtype=np.int32)
         for level in range(depth + 1):
             side = 1 << (depth - level)
@@ -380,15 +384,18 @@ class RegionTable:
                     f"the table in {path} was built for {built[key]}, the machine has {value}",
                 )
         grid = Grid(tuple(built["origin"]), built["size"], built["band"])
-        return cls(
-            grid=grid,
-            index=np.stack([squares["column"], squares["row"], squares["level"]], axis=-1),
-            triples=squares["triple"],
-            margin=squares["margin"],
-            built_for=built,
-            search=p["search"],
-            coverage=p["coverage"],
-        )
+        try:
+            return cls(
+                grid=grid,
+                index=np.stack([squares["column"], squares["row"], squares["level"]], axis=-1),
+                triples=squares["triple"],
+                margin=squares["margin"],
+                built_for=built,
+                search=p["search"],
+                coverage=p["coverage"],
+            )
+        except ValueError as error:  # overlapping squares, too large a raster
+            raise ConfigError(f"{TABLE_SECTION}.squares: {error}") from None
 
     def dump(self, path: str | Path, header: Sequence[str] = ()) -> None:
         """Write the table as a ROS parameters file (deterministic: same table, same bytes)."""

@@ -483,6 +483,13 @@ def test_pour_end_outside_is_replaced_by_farthest_reachable_point(boom: PumpBoom
     assert not nothing.ok and nothing.last_waypoint == -1 and len(nothing.q) == 0
 
 
+def _far_column(squares: np.ndarray) -> np.ndarray:
+    """The squares with the last one moved to column 100 000 of its level (about 15 km away)."""
+    squares = squares.copy()
+    squares[-1]["column"] = 100_000
+    return squares
+
+
 @pytest.mark.parametrize(
     ("change", "match"),
     [
@@ -703,6 +710,33 @@ def test_a_squares_block_that_is_no_whole_zlib_stream_is_refused(tmp_path, strea
     path.write_text(head + f"      squares: {base64.b64encode(stream(squares.tobytes())).decode()}\n",
                     encoding="utf-8")
     with pytest.raises(ConfigError, match=r"pump_boom_regions\.squares: " + match):
+        RegionTable.load(path)
+
+
+def _far_column(squares: np.ndarray) -> np.ndarray:
+    """The squares with the last one moved to column 100 000 of its level (about 15 km away)."""
+    squares = squares.copy()
+    squares[-1]["column"] = 100_000
+    return squares
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        (lambda squares: squares[[0, 0, *range(2, len(squares))]],  # square 1 twice
+         r"square \(0, -85, 4\) overlaps square \(0, -85, 4\)"),
+        (lambda squares: np.concatenate([squares, squares[-1:]]),  # the last one twice
+         r"square \(264, 19, 5\) overlaps square \(264, 19, 5\)"),
+        (_far_column, r"the squares span \d+ x \d+ cells of 0.15625 m, more than 16777216"),
+    ],
+    ids=["first twice", "last twice", "a square 15 km away"],
+)
+def test_squares_the_lookup_cannot_hold_are_refused_with_the_key(tmp_path, change, match: str) -> None:
+    head, squares = _shipped_squares()
+    block = base64.b64encode(zlib.compress(change(squares).tobytes())).decode()
+    path = tmp_path / "table.yaml"
+    path.write_text(head + f"      squares: {block}\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"pump_boom_regions\.squares: region table: " + match):
         RegionTable.load(path)
 
 
