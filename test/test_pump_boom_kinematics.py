@@ -483,13 +483,6 @@ def test_pour_end_outside_is_replaced_by_farthest_reachable_point(boom: PumpBoom
     assert not nothing.ok and nothing.last_waypoint == -1 and len(nothing.q) == 0
 
 
-def _far_column(squares: np.ndarray) -> np.ndarray:
-    """The squares with the last one moved to column 100 000 of its level (about 15 km away)."""
-    squares = squares.copy()
-    squares[-1]["column"] = 100_000
-    return squares
-
-
 @pytest.mark.parametrize(
     ("change", "match"),
     [
@@ -662,12 +655,15 @@ def test_a_truncated_pour_ends_before_a_gap_its_resampled_points_catch(boom: Pum
     assert boom.region_ik(plan.points).ok.all()
 
 
+def _squares_block(document: str) -> str:
+    """The ``squares`` block (base64) of a table file's text."""
+    return yaml.safe_load(document)["/**"]["ros__parameters"]["pump_boom_regions"]["squares"]
+
+
 def _shipped_squares() -> tuple[str, np.ndarray]:
     """The shipped table file's text before its squares, and its squares (a copy)."""
     text = Path(config_path("pump_boom_regions.yaml")).read_text(encoding="utf-8")
-    squares = regions._squares(yaml.safe_load(text)["/**"]["ros__parameters"]["pump_boom_regions"]["squares"],
-                               "squares")
-    return text[:text.index("      squares: |")], squares.copy()
+    return text[:text.index("      squares: |")], regions._squares(_squares_block(text), "squares").copy()
 
 
 @pytest.mark.parametrize(
@@ -750,12 +746,8 @@ def test_the_table_file_is_what_dump_writes_and_an_older_one_is_refused(boom: Pu
     written, text = path.read_text(encoding="utf-8"), shipped.read_text(encoding="utf-8")
     cut = text.index("      squares: |")
     assert written[:cut] == text[:cut] and written[cut:].splitlines()[0] == text[cut:].splitlines()[0]
-
-    def squares(document: str) -> bytes:
-        block = yaml.safe_load(document)["/**"]["ros__parameters"]["pump_boom_regions"]["squares"]
-        return zlib.decompress(base64.b64decode(block))
-
-    assert squares(written) == squares(text)
+    inflated = [zlib.decompress(base64.b64decode(_squares_block(document))) for document in (written, text)]
+    assert inflated[0] == inflated[1]
     # A table from before the rows were base64 (a line of 7 numbers per square): refused, key named.
     old = "".join(" " * 8 + line + "\n" for line in ["0 -85 4 0.0 1.22173 3.0979 0.17", "1 2 0 1 1 1 0.1"])
     path.write_text(text[:cut] + "      squares: |\n" + old, encoding="utf-8")
