@@ -324,7 +324,7 @@ def _choose(
     """Steps 3-4 of the module docstring for one square: True (and the square in ``chosen``) if a
     candidate passes the check with the squares chosen so far around it."""
     side = float(grid.side(key[2]))
-    home = (key[0] >> key[2], key[1] >> key[2])
+    home = _home(key)
     near = [
         k for di in (-1, 0, 1) for dj in (-1, 0, 1) for k in buckets.get((home[0] + di, home[1] + dj), ())
     ]
@@ -474,7 +474,7 @@ def _fill(
     gaps.sort(key=lambda key: (_distance(grid, key, centre), key))
     buckets: dict[tuple[int, int], list[Key]] = {}
     for key in keys:
-        buckets.setdefault((key[0] >> key[2], key[1] >> key[2]), []).append(key)
+        buckets.setdefault(_home(key), []).append(key)
     added = []
     for key in gaps:
         chosen.pop(key, None)
@@ -504,6 +504,11 @@ def _fold_distance(boom: PumpBoom, area: Coverage, lowest: float) -> Callable[[f
         return float(distance[a, b])
 
     return at
+
+
+def _home(key: Key) -> tuple[int, int]:
+    """The level-0 square (i, j) holding square ``key``: its bucket of the squares chosen."""
+    return key[0] >> key[2], key[1] >> key[2]
 
 
 def _touch(grid: Grid, a: Key, b: Key) -> bool:

@@ -666,6 +666,14 @@ def _shipped_squares() -> tuple[str, np.ndarray]:
     return text[:text.index("      squares: |")], regions._squares(_squares_block(text), "squares").copy()
 
 
+def _table_file(tmp_path: Path, head: str, stream: bytes) -> Path:
+    """A table file of the shipped file's text before its squares, ``head``, and the squares block
+    ``stream`` in base64."""
+    path = tmp_path / "table.yaml"
+    path.write_text(head + f"      squares: {base64.b64encode(stream).decode()}\n", encoding="utf-8")
+    return path
+
+
 @pytest.mark.parametrize(
     ("field", "value", "match"),
     [
@@ -684,11 +692,8 @@ def test_a_bad_square_of_the_table_file_is_refused_with_its_key(tmp_path, field:
     else:
         squares[1][field] = value
         data = squares.tobytes()
-    path = tmp_path / "table.yaml"
-    block = base64.b64encode(zlib.compress(data)).decode()
-    path.write_text(head + f"      squares: {block}\n", encoding="utf-8")
     with pytest.raises(ConfigError, match=r"pump_boom_regions\." + match):
-        RegionTable.load(path)
+        RegionTable.load(_table_file(tmp_path, head, zlib.compress(data)))
 
 
 @pytest.mark.parametrize(
@@ -702,11 +707,8 @@ def test_a_bad_square_of_the_table_file_is_refused_with_its_key(tmp_path, field:
 )
 def test_a_squares_block_that_is_no_whole_zlib_stream_is_refused(tmp_path, stream, match: str) -> None:
     head, squares = _shipped_squares()
-    path = tmp_path / "table.yaml"
-    path.write_text(head + f"      squares: {base64.b64encode(stream(squares.tobytes())).decode()}\n",
-                    encoding="utf-8")
     with pytest.raises(ConfigError, match=r"pump_boom_regions\.squares: " + match):
-        RegionTable.load(path)
+        RegionTable.load(_table_file(tmp_path, head, stream(squares.tobytes())))
 
 
 def _far_column(squares: np.ndarray) -> np.ndarray:
@@ -729,11 +731,8 @@ def _far_column(squares: np.ndarray) -> np.ndarray:
 )
 def test_squares_the_lookup_cannot_hold_are_refused_with_the_key(tmp_path, change, match: str) -> None:
     head, squares = _shipped_squares()
-    block = base64.b64encode(zlib.compress(change(squares).tobytes())).decode()
-    path = tmp_path / "table.yaml"
-    path.write_text(head + f"      squares: {block}\n", encoding="utf-8")
     with pytest.raises(ConfigError, match=r"pump_boom_regions\.squares: region table: " + match):
-        RegionTable.load(path)
+        RegionTable.load(_table_file(tmp_path, head, zlib.compress(change(squares).tobytes())))
 
 
 def test_the_table_file_is_what_dump_writes_and_an_older_one_is_refused(boom: PumpBoom, tmp_path) -> None:
