@@ -1,0 +1,537 @@
+"""One numpy core for every machine of the hydraulic family (paper 000, eqs. 1-13).
+
+:class:`HydraulicModel` solves a :class:`~manipulator_kinematics.hydraulic.description.Description`
+by its plan: dyads in order (:mod:`manipulator_kinematics.hydraulic.dyads`), each body placed from
+two known pins, each prismatic child slid along its parent. Every pin is carried as a jet: its
+position, its Jacobian d/dD (closed form, the dyads differentiated implicitly) and, along a motion
+(Ddot, Dddot), its velocity and acceleration. From the jets: the main-chain joints theta, K =
+dtheta/dD (eq. 7, not diagonal where a linkage spans two joints, as the loader's Z-bar), the task
+vector Q (eq. 3), JC0 = dQ/dD (eq. 8), Qdot and Qddot (eqs. 10-11); J0 = dQ/dtheta (eqs. 4-5) in
+closed form from the open chain, so that J0 K = JC0 is a check. The inverses: cylinder rates from
+a target task rate (eq. 9), cylinder accelerations (eqs. 12-13), position IK (:meth:`ik`).
+
+Arrays: D (..., m) with m = len(actuator_names) (the swing angle first if the machine swings),
+theta (..., n) (theta1 first if it swings), Q (..., 4) = [x, y, z, alpha] or (..., 3) = [x, y, z].
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from manipulator_kinematics.hydraulic import dyads
+from manipulator_kinematics.hydraulic.description import Description, Dyad, Place, Slide, read
+from manipulator_kinematics.params import ConfigError
+
+__all__ = ["HydraulicModel", "HydraulicState", "IKResult", "RateSolution", "StrokeError"]
+
+
+class StrokeError(ValueError):
+    """A state outside the stroke box, or one the linkage cannot take; the message names the actuator."""
+
+
+@dataclass
+class _Jet:
+    """A value with its Jacobian d/dD (one more axis of length m before the value's own), its
+    velocity and its acceleration along the motion (Ddot, Dddot)."""
+
+    p: np.ndarray
+    J: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+
+
+def _rot(phi: np.ndarray, local: np.ndarray) -> np.ndarray:
+    c, s = np.cos(phi), np.sin(phi)
+    return np.stack((c * local[..., 0] - s * local[..., 1], s * local[..., 0] + c * local[..., 1]), axis=-1)
+
+
+def _wrap(angle: np.ndarray) -> np.ndarray:
+    """Angle wrapped to (-pi, pi]."""
+    return np.pi - np.mod(np.pi - angle, 2.0 * np.pi)
+
+
+class _Body:
+    """A placed body: origin jet (points) and angle jet (scalars)."""
+
+    def __init__(self, origin: _Jet, angle: _Jet) -> None:
+        self.origin, self.angle = origin, angle
+
+    def point(self, local: np.ndarray) -> _Jet:
+        """The jet of the point ``local`` of this body: P = O + R(phi) l."""
+        o, f = self.origin, self.angle
+        w = _rot(f.p, np.broadcast_to(local, o.p.shape))
+        n = dyads.perp(w)
+        return _Jet(
+            o.p + w,
+            o.J + f.J[..., None] * n[..., None, :],
+            o.v + f.v[..., None] * n,
+            o.a + f.a[..., None] * n - (f.v * f.v)[..., None] * w,
+        )
+
+
+@dataclass
+class _Solved:
+    pins: dict[str, _Jet]
+    bodies: dict[str, _Body]
+    margins: np.ndarray  # (..., dyads) rad
+    closure: np.ndarray  # (..., dyads) h^2 of each dyad (<= 0: it does not close)
+    theta: _Jet
+    Q: _Jet
+
+
+@dataclass(frozen=True)
+class HydraulicState:
+    """Forward kinematic state (paper eqs. 3, 7, 8, 10-11); leading axes those of D."""
+
+    theta: np.ndarray  # (..., n) main-chain joints (rad; m for a prismatic joint)
+    theta_dot: np.ndarray
+    theta_ddot: np.ndarray
+    Q: np.ndarray  # (..., nq) [x, y, z(, alpha)]
+    Q_dot: np.ndarray
+    Q_ddot: np.ndarray
+    jc0: np.ndarray  # (..., nq, m), rows in Q's order
+    k: np.ndarray  # (..., n, m) = dtheta/dD
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        return iter((self.theta, self.theta_dot, self.theta_ddot, self.Q, self.Q_dot, self.Q_ddot, self.jc0))
+
+
+@dataclass(frozen=True)
+class RateSolution:
+    """Result of eq. 9: the cylinder rates, the task rates they give and the condition number."""
+
+    D_dot: np.ndarray  # (..., m)
+    Q_dot: np.ndarray  # (..., nq) = JC0 D_dot: every row, the ones not commanded included
+    condition: np.ndarray  # (...,) 2-norm condition number of the commanded rows of JC0 S
+
+
+@dataclass(frozen=True)
+class IKResult:
+    """Position IK: D (..., m) and whether each is a state of the machine (inside the stroke box)."""
+
+    D: np.ndarray
+    valid: np.ndarray  # (...,) bool
+
+
+class HydraulicModel:
+    """The kinematics of one machine of the family (module docstring)."""
+
+    def __init__(self, description: Description) -> None:
+        self.description = description
+        d = description
+        self.actuator_names = d.actuator_names
+        self.joint_names = d.joint_names
+        self.task_names = d.task_names
+        self.lower, self.upper, self.reference = d.lower, d.upper, d.reference
+        self.max_speed = d.max_speed
+        self.m = len(self.actuator_names)
+        self.swing = d.swing is not None
+        self._dyads = [s for s in d.steps if isinstance(s, Dyad)]
+        self.dyad_names = tuple(s.pin for s in self._dyads)
+        self._local = {pin: xz for pins in d.bodies.values() for pin, xz in pins.items()}
+        self._placed_by = self._placing_dyads()
+        self._check_box()
+
+    @classmethod
+    def from_file(cls, path: str | Path, node_name: str = "/**") -> HydraulicModel:
+        """The model of a family machine file (``hydraulic_machine`` section)."""
+        return cls(read(path, node_name))
+
+    # ------------------------------------------------------------------ checks
+    def validate(self, D: Any) -> np.ndarray:
+        """D as a float array (..., m), refused (StrokeError naming the actuator) outside the
+        stroke box (faces included) or not finite."""
+        D = np.asarray(D, dtype=float)
+        if D.ndim == 0 or D.shape[-1] != self.m:
+            raise StrokeError(
+                f"D: expected (..., {self.m}) values [{', '.join(self.actuator_names)}], got shape {D.shape}"
+            )
+        for i, name in enumerate(self.actuator_names):
+            column = D[..., i]
+            bad = ~np.isfinite(column) | (column < self.lower[i]) | (column > self.upper[i])
+            if np.any(bad):
+                value = column[bad].flat[0]
+                raise StrokeError(
+                    f"D[{i}] = {value:.6g} ({name}) is outside its stroke "
+                    f"[{self.lower[i]:.6g}, {self.upper[i]:.6g}]"
+                )
+        return D
+
+    def _placing_dyads(self) -> dict[str, str]:
+        """Body -> the dyad whose solution placed it (the last dyad before its Place step)."""
+        out, last = {}, None
+        for step in self.description.steps:
+            if isinstance(step, Dyad):
+                last = step.pin
+            elif isinstance(step, Place) and last is not None:
+                out[step.body] = last
+            elif isinstance(step, Slide) and step.parent in out:
+                out[step.child] = out[step.parent]
+        return out
+
+    def _check_box(self) -> None:
+        """Refuse a machine file whose linkage does not close, or leaves a joint's limits, over a
+        5-point grid of every cylinder's stroke (swing at its reference): the key named."""
+        axes = [np.linspace(lo, hi, 5) for lo, hi in zip(self.lower, self.upper, strict=True)]
+        if self.swing:
+            axes[0] = np.array([self.reference[0]])
+        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, self.m)
+        states = np.concatenate((self.reference[None], grid))
+        solved = self._solve(states)
+        for k, step in enumerate(self._dyads):
+            open_ = ~(solved.closure[:, k] > 0.0)
+            if np.any(open_):
+                at = states[np.argmax(open_)]
+                raise ConfigError(
+                    f"{self.description.name}: dyads.{step.pin}: does not close at "
+                    f"D = {np.round(at, 6).tolist()} (inside the stroke box)"
+                )
+        theta = solved.theta.p
+        for i, joint in enumerate(self.description.joints):
+            col = theta[:, i + int(self.swing)]
+            out = (col < joint.lower) | (col > joint.upper)
+            if np.any(out):
+                k = int(np.argmax(out))
+                dyad = self._placed_by.get(joint.child)
+                where = "the reference state" if k == 0 else f"D = {np.round(states[k], 6).tolist()}"
+                key = f"dyads.{dyad}.orientation" if dyad and out[0] else f"chain.{joint.name}.limits"
+                raise ConfigError(
+                    f"{self.description.name}: {key}: {joint.name} = {np.degrees(col[k]):.3f} deg "
+                    f"at {where}, outside its limits [{np.degrees(joint.lower):.3f}, "
+                    f"{np.degrees(joint.upper):.3f}] deg"
+                    + (" (is the branch sign right?)" if key.startswith("dyads") else "")
+                )
+
+    # ------------------------------------------------------------------ the solve
+    def _solve(
+        self, D: np.ndarray, D_dot: np.ndarray | None = None, D_ddot: np.ndarray | None = None
+    ) -> _Solved:
+        """Every pin's jet for states D (..., m) (unchecked): the plan of dyads, placements and
+        slides (eqs. 1-2 as dyads), then the main chain's joints and Q (eq. 3)."""
+        shape = D.shape[:-1]
+        m = self.m
+        zero2, zeroJ2 = np.zeros(shape + (2,)), np.zeros(shape + (m, 2))
+        zero, zeroJ = np.zeros(shape), np.zeros(shape + (m,))
+        D_dot = np.zeros(D.shape) if D_dot is None else D_dot
+        D_ddot = np.zeros(D.shape) if D_ddot is None else D_ddot
+        eye = np.eye(m)
+
+        def actuator(i: int, offset: float = 0.0) -> _Jet:
+            return _Jet(
+                D[..., i] + offset, np.broadcast_to(eye[i], shape + (m,)), D_dot[..., i], D_ddot[..., i]
+            )
+
+        def radius(side: Any) -> _Jet:
+            if side.index is None:
+                return _Jet(np.full(shape, side.fixed), zeroJ, zero, zero)
+            return actuator(side.index)
+
+        d = self.description
+        ground = _Body(_Jet(zero2, zeroJ2, zero2, zero2), _Jet(zero, zeroJ, zero, zero))
+        bodies = {d.ground: ground}
+        pins = {pin: ground.point(xz) for pin, xz in d.bodies[d.ground].items()}
+        margins, closure = [], []
+        for step in d.steps:
+            if isinstance(step, Dyad):
+                a, b = pins[step.pivot], pins[step.first]
+                ra, rb = radius(step.pivot_radius), radius(step.first_radius)
+                x, h2 = dyads.intersect(a.p, b.p, ra.p, rb.p, step.orientation)
+                J = dyads.rates(x, a.p, b.p, ra.p, rb.p, a.J, b.J, ra.J, rb.J)
+                v = dyads.rates(x, a.p, b.p, ra.p, rb.p, a.v, b.v, ra.v, rb.v)
+                acc = dyads.second_rates(
+                    x, a.p, b.p, ra.p, rb.p, v, a.v, b.v, ra.v, rb.v, a.a, b.a, ra.a, rb.a
+                )
+                pins[step.pin] = _Jet(x, J, v, acc)
+                margins.append(dyads.margin(x, a.p, b.p))
+                closure.append(h2)
+            elif isinstance(step, Place):
+                body = self._place(
+                    pins[step.one],
+                    pins[step.two],
+                    d.bodies[step.body][step.one],
+                    d.bodies[step.body][step.two],
+                )
+                bodies[step.body] = body
+                for pin, xz in d.bodies[step.body].items():
+                    pins.setdefault(pin, body.point(xz))
+            else:
+                body = self._slide(bodies[step.parent], step, actuator(step.index, step.offset))
+                bodies[step.child] = body
+                for pin, xz in d.bodies[step.child].items():
+                    pins.setdefault(pin, body.point(xz))
+        theta = self._joints(bodies, D, actuator)
+        tool = bodies[d.tool_body].point(d.bodies[d.tool_body][d.tool_pin])
+        Q = self._task(tool, theta, actuator(0) if self.swing else None)
+        return _Solved(pins, bodies, np.stack(margins, axis=-1), np.stack(closure, axis=-1), theta, Q)
+
+    @staticmethod
+    def _place(one: _Jet, two: _Jet, local_one: np.ndarray, local_two: np.ndarray) -> _Body:
+        """The body through two known pins: phi = angle(P2 - P1) - angle(l2 - l1), O = P1 - R(phi) l1."""
+        e = two.p - one.p
+        eJ, ev, ea = two.J - one.J, two.v - one.v, two.a - one.a
+        n2 = np.sum(e * e, axis=-1)
+        dl = local_two - local_one
+        phi = np.arctan2(e[..., 1], e[..., 0]) - np.arctan2(dl[1], dl[0])
+        cross_v = dyads.cross(e, ev)
+        angle = _Jet(
+            phi,
+            dyads.cross(e[..., None, :], eJ) / n2[..., None],
+            cross_v / n2,
+            dyads.cross(e, ea) / n2 - 2.0 * np.sum(e * ev, axis=-1) * cross_v / (n2 * n2),
+        )
+        w = _rot(phi, np.broadcast_to(local_one, e.shape))
+        n = dyads.perp(w)
+        origin = _Jet(
+            one.p - w,
+            one.J - angle.J[..., None] * n[..., None, :],
+            one.v - angle.v[..., None] * n,
+            one.a - angle.a[..., None] * n + (angle.v * angle.v)[..., None] * w,
+        )
+        return _Body(origin, angle)
+
+    @staticmethod
+    def _slide(parent: _Body, slide: Slide, s: _Jet) -> _Body:
+        """The prismatic child: origin = O_p + R(phi_p) (axis_point + (s, 0)), parallel to the parent."""
+        o, f = parent.origin, parent.angle
+        axis = np.asarray(slide.axis_point, dtype=float)
+        local = np.stack((axis[0] + s.p, np.full(s.p.shape, axis[1])), axis=-1)
+        w = _rot(f.p, local)
+        u = np.stack((np.cos(f.p), np.sin(f.p)), axis=-1)
+        n, nu = dyads.perp(w), dyads.perp(u)
+        origin = _Jet(
+            o.p + w,
+            o.J + f.J[..., None] * n[..., None, :] + s.J[..., None] * u[..., None, :],
+            o.v + f.v[..., None] * n + s.v[..., None] * u,
+            o.a
+            + f.a[..., None] * n
+            - (f.v * f.v)[..., None] * w
+            + (2.0 * f.v * s.v)[..., None] * nu
+            + s.a[..., None] * u,
+        )
+        return _Body(origin, f)
+
+    def _joints(self, bodies: dict[str, _Body], D: np.ndarray, actuator: Any) -> _Jet:
+        """theta (..., n): the swing, then theta_j = wrap(phi_child - phi_parent) or d_j = s."""
+        parts = [actuator(0)] if self.swing else []
+        for joint in self.description.joints:
+            if joint.slide is not None:
+                parts.append(actuator(joint.slide.index, joint.slide.offset))
+                continue
+            c, p = bodies[joint.child].angle, bodies[joint.parent].angle
+            parts.append(_Jet(_wrap(c.p - p.p), c.J - p.J, c.v - p.v, c.a - p.a))
+        return _Jet(*(np.stack([getattr(j, f) for j in parts], axis=-1 if f != "J" else -2) for f in "pJva"))
+
+    def _revolute(self) -> list[int]:
+        """Columns of theta that are revolute main-chain joints (alpha is their plain sum)."""
+        return [i + int(self.swing) for i, j in enumerate(self.description.joints) if j.slide is None]
+
+    def _task(self, tool: _Jet, theta: _Jet, swing: _Jet | None) -> _Jet:
+        """Q = [x, y, z(, alpha)] (eq. 3): the boom-plane tool point (r, z) turned by the swing."""
+        r, z = (
+            _Jet(tool.p[..., 0], tool.J[..., 0], tool.v[..., 0], tool.a[..., 0]),
+            _Jet(tool.p[..., 1], tool.J[..., 1], tool.v[..., 1], tool.a[..., 1]),
+        )
+        if swing is None:
+            zero = _Jet(*(np.zeros_like(f) for f in (r.p, r.J, r.v, r.a)))
+            x, y = r, zero
+        else:
+            c, s, w, e = np.cos(swing.p), np.sin(swing.p), swing.v, swing.a
+            x = _Jet(
+                r.p * c,
+                r.J * c[..., None] - (r.p * s)[..., None] * swing.J,
+                r.v * c - r.p * s * w,
+                r.a * c - 2.0 * r.v * s * w - r.p * (c * w * w + s * e),
+            )
+            y = _Jet(
+                r.p * s,
+                r.J * s[..., None] + (r.p * c)[..., None] * swing.J,
+                r.v * s + r.p * c * w,
+                r.a * s + 2.0 * r.v * c * w + r.p * (c * e - s * w * w),
+            )
+        rows = [x, y, z]
+        if self.description.has_angle:
+            cols = self._revolute()
+            rows.append(
+                _Jet(
+                    *(
+                        np.sum(f[..., cols], axis=-1)
+                        if f is not theta.J
+                        else np.sum(f[..., cols, :], axis=-2)
+                        for f in (theta.p, theta.J, theta.v, theta.a)
+                    )
+                )
+            )
+        return _Jet(*(np.stack([getattr(q, f) for q in rows], axis=-1 if f != "J" else -2) for f in "pJva"))
+
+    # ------------------------------------------------------------------ forward API
+    def pose(self, D: Any) -> np.ndarray:
+        """Q (..., nq) for D (eq. 3 through the linkages, eqs. 1-2)."""
+        return self._solve(self.validate(D)).Q.p
+
+    def joints(self, D: Any) -> np.ndarray:
+        """theta (..., n), the main chain's joints for D."""
+        return self._solve(self.validate(D)).theta.p
+
+    def pins(self, D: Any) -> dict[str, np.ndarray]:
+        """Every pin in the base frame (..., 3) under its machine-file name."""
+        D = self.validate(D)
+        solved = self._solve(D)
+        c, s = (np.cos(D[..., 0]), np.sin(D[..., 0])) if self.swing else (1.0, 0.0)
+        out = {}
+        for name, jet in solved.pins.items():
+            r, z = jet.p[..., 0], jet.p[..., 1]
+            out[name] = np.stack((r * c, r * s, z), axis=-1)
+        return out
+
+    def corners(self, D: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Left and right cutting-edge (or tool) corners (..., 3): tool point +- (w/2)(-s1, c1, 0)."""
+        D = self.validate(D)
+        Q = self._solve(D).Q.p
+        t1 = D[..., 0] if self.swing else np.zeros(D.shape[:-1])
+        half = 0.5 * self.description.width * np.stack((-np.sin(t1), np.cos(t1), np.zeros_like(t1)), axis=-1)
+        return Q[..., :3] + half, Q[..., :3] - half
+
+    def margins(self, D: Any) -> np.ndarray:
+        """Dead-centre margin (rad) of every dyad (..., n_dyads), in the order of ``dyad_names``."""
+        return self._solve(self.validate(D)).margins
+
+    def k_matrix(self, D: Any) -> np.ndarray:
+        """K = dtheta/dD (..., n, m) (eq. 7), from the implicitly differentiated dyads."""
+        return self._solve(self.validate(D)).theta.J
+
+    def jc0(self, D: Any) -> np.ndarray:
+        """JC0 = dQ/dD (..., nq, m) (eq. 8), rows in Q's order."""
+        return self._solve(self.validate(D)).Q.J
+
+    def state(self, D: Any, D_dot: Any, D_ddot: Any = None) -> HydraulicState:
+        """theta, Q and their rates and accelerations for cylinder states (eqs. 3, 7, 8, 10-11):
+        Qddot = JC0 Dddot + (d/dt JC0) Ddot (the dyads' second derivatives along the motion)."""
+        D = self.validate(D)
+        D_dot = _finite(D_dot, D.shape, "D_dot")
+        D_ddot = None if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot")
+        s = self._solve(D, D_dot, D_ddot)
+        return HydraulicState(s.theta.p, s.theta.v, s.theta.a, s.Q.p, s.Q.v, s.Q.a, s.Q.J, s.theta.J)
+
+    # ------------------------------------------------------------------ open chain (eqs. 3-5)
+    def _chain_geometry(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per main-chain joint: (the joint's point in the parent frame, its point in the child
+        frame): the hinge pin, or the slide's axis point and the child origin."""
+        d = self.description
+        out = []
+        for joint in d.joints:
+            if joint.slide is None:
+                out.append((d.bodies[joint.parent][joint.pivot], d.bodies[joint.child][joint.pivot]))
+            else:
+                out.append((np.asarray(joint.slide.axis_point, dtype=float), np.zeros(2)))
+        return out
+
+    def _open_chain(
+        self, theta: np.ndarray
+    ) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], np.ndarray]:
+        """Boom-plane tool point (..., 2), each joint's point and its parent's angle, the tool angle."""
+        shape = theta.shape[:-1]
+        origin, phi = np.zeros(shape + (2,)), np.zeros(shape)
+        points, parents = [], []
+        for i, (joint, (in_parent, in_child)) in enumerate(
+            zip(self.description.joints, self._chain_geometry(), strict=True)
+        ):
+            q = theta[..., i + int(self.swing)]
+            if joint.slide is None:
+                point = origin + _rot(phi, np.broadcast_to(in_parent, origin.shape))
+                points.append(point)
+                parents.append(phi)
+                phi = phi + q
+                origin = point - _rot(phi, np.broadcast_to(in_child, origin.shape))
+            else:
+                local = np.stack((in_parent[0] + q, np.full(shape, in_parent[1])), axis=-1)
+                point = origin + _rot(phi, local)
+                points.append(point)
+                parents.append(phi)
+                origin = point
+        d = self.description
+        tool = origin + _rot(phi, np.broadcast_to(d.bodies[d.tool_body][d.tool_pin], origin.shape))
+        return tool, points, parents, phi
+
+    def open_chain_pose(self, theta: Any) -> np.ndarray:
+        """Q from the main chain's joints (eq. 3), no limits."""
+        theta = np.asarray(theta, dtype=float)
+        tool, *_ = self._open_chain(theta)
+        r, z = tool[..., 0], tool[..., 1]
+        t1 = theta[..., 0] if self.swing else np.zeros(r.shape)
+        rows = [r * np.cos(t1), r * np.sin(t1), z]
+        if self.description.has_angle:
+            rows.append(np.sum(theta[..., self._revolute()], axis=-1))
+        return np.stack(rows, axis=-1)
+
+    def j0(self, theta: Any) -> np.ndarray:
+        """J0 = dQ/dtheta (..., nq, n) (eqs. 4-5) in closed form: a revolute joint turns the tool
+        point about its pin, d(r, z) = perp(T - P); a prismatic joint moves it along its parent's
+        x axis; the swing turns (r, 0) about z; alpha gains 1 per revolute joint."""
+        theta = np.asarray(theta, dtype=float)
+        tool, points, parents, _ = self._open_chain(theta)
+        cols = []
+        for joint, point, phi in zip(self.description.joints, points, parents, strict=True):
+            if joint.slide is None:
+                cols.append(dyads.perp(tool - point))
+            else:
+                cols.append(np.stack((np.cos(phi), np.sin(phi)), axis=-1))
+        plane = np.stack(cols, axis=-1)  # (..., 2, n_chain): rows r, z
+        r = tool[..., 0]
+        t1 = theta[..., 0] if self.swing else np.zeros(r.shape)
+        c, s = np.cos(t1)[..., None], np.sin(t1)[..., None]
+        rows = [c * plane[..., 0, :], s * plane[..., 0, :], plane[..., 1, :]]
+        if self.description.has_angle:
+            rows.append(
+                np.array([0.0 if j.slide else 1.0 for j in self.description.joints]) + 0.0 * plane[..., 0, :]
+            )
+        J0 = np.stack(rows, axis=-2)
+        if self.swing:
+            swing = np.zeros(J0.shape[:-1] + (1,))
+            swing[..., 0, 0], swing[..., 1, 0] = -r * np.sin(t1), r * np.cos(t1)
+            J0 = np.concatenate((swing, J0), axis=-1)
+        return J0
+
+    # ------------------------------------------------------------------ inverses (eqs. 9, 12-13)
+    def _solve_rows(self, jc0: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """D-space solution of JC0[rows] x = rhs[rows] in actuator-speed units (x = S u, S =
+        diag(max_speed)): exact where the commanded rows are as many as the actuators and JC0 is
+        regular, least squares where they are more, the smallest ||u|| where fewer (module
+        docstring of docs/hydraulic_family.md: what eq. 9 solves for a non-square JC0)."""
+        rows = list(self.description.velocity_rows)
+        A = jc0[..., rows, :] * self.max_speed
+        u = np.linalg.pinv(A) @ rhs[..., rows, None]
+        return u[..., 0] * self.max_speed, np.linalg.cond(A)
+
+    def cylinder_rates(self, D: Any, Q_dot: Any) -> RateSolution:
+        """Ddot from a target task rate (eq. 9): JC0^-1 Qdot on the rows the machine commands
+        (``tool.velocity_rows``); where JC0 is not square there, the least-squares or smallest
+        (speed-scaled) solution, the task rates it gives returned with it."""
+        D = self.validate(D)
+        Q_dot = _finite(Q_dot, D.shape[:-1] + (len(self.task_names),), "Q_dot")
+        jc0 = self.jc0(D)
+        rates, condition = self._solve_rows(jc0, Q_dot)
+        return RateSolution(rates, (jc0 @ rates[..., None])[..., 0], condition)
+
+    def cylinder_accelerations(self, D: Any, D_dot: Any, Q_ddot: Any) -> np.ndarray:
+        """Dddot = JC0^-1 (Qddot - (d/dt JC0) Ddot) (eqs. 12-13), on the commanded rows as in
+        :meth:`cylinder_rates`."""
+        D = self.validate(D)
+        Q_ddot = _finite(Q_ddot, D.shape[:-1] + (len(self.task_names),), "Q_ddot")
+        free = self.state(D, D_dot)  # Dddot = 0: the velocity-product terms alone
+        return self._solve_rows(free.jc0, Q_ddot - free.Q_ddot)[0]
+
+
+def _finite(values: Any, shape: tuple[int, ...], name: str) -> np.ndarray:
+    array = np.asarray(values, dtype=float)
+    try:
+        array = np.broadcast_to(array, shape)
+    except ValueError:
+        raise StrokeError(f"{name}: expected shape {shape}, got {array.shape}") from None
+    if not np.all(np.isfinite(array)):
+        raise StrokeError(f"{name}: values must be finite")
+    return array
