@@ -156,9 +156,9 @@ class HydraulicModel:
             bad = ~np.isfinite(column) | (column < self.lower[i]) | (column > self.upper[i])
             if np.any(bad):
                 value = column[bad].flat[0]
+                what = "is not finite" if not np.isfinite(value) else "is outside its stroke"
                 raise StrokeError(
-                    f"D[{i}] = {value:.6g} ({name}) is outside its stroke "
-                    f"[{self.lower[i]:.6g}, {self.upper[i]:.6g}]"
+                    f"D[{i}] = {value:.6g} ({name}) {what} [{self.lower[i]:.6g}, {self.upper[i]:.6g}]"
                 )
         return D
 
