@@ -67,8 +67,12 @@ def test_crane_reference_state() -> None:
     jc0 = [[0, 2.406623, 9.705347, 0.707156], [7.092317, 0, 0, 0], [0, 11.338958, 9.706700, -0.707057]]
     np.testing.assert_allclose(CRANE.jc0(D), jc0, atol=1e-6)
     np.testing.assert_allclose(CRANE.k_matrix(D), np.diag([1, 1.657181, 3.347900, 1]), atol=1e-6)
-    reference = {"knuckle_pin": (4.192977, 3.746697), "fold_cyl_rod": (4.150831, 3.332883),
-                 "coupler_pin": (4.488557, 3.618024), "tele_cyl_rod": (6.809455, 1.130584)}
+    reference = {
+        "knuckle_pin": (4.192977, 3.746697),
+        "fold_cyl_rod": (4.150831, 3.332883),
+        "coupler_pin": (4.488557, 3.618024),
+        "tele_cyl_rod": (6.809455, 1.130584),
+    }
     pins = CRANE.pins(D)
     for name, rz in reference.items():
         np.testing.assert_allclose(pins[name][[0, 2]], rz, atol=1e-6, err_msg=name)
@@ -131,7 +135,7 @@ def _closure(model: HydraulicModel, u: np.ndarray, D: np.ndarray, bodies: list[s
     d = model.description
     frames = {d.ground: (np.zeros(2), 0.0)}
     for k, body in enumerate(bodies):
-        frames[body] = (u[3 * k: 3 * k + 2], u[3 * k + 2])
+        frames[body] = (u[3 * k : 3 * k + 2], u[3 * k + 2])
 
     def world(body: str, local: np.ndarray) -> np.ndarray:
         o, phi = frames[body]
@@ -153,7 +157,7 @@ def _closure(model: HydraulicModel, u: np.ndarray, D: np.ndarray, bodies: list[s
     for c in d.cylinders:
         if c.index in slid:
             s = slid[c.index]
-            o, phi = frames[s.parent]
+            phi = frames[s.parent][1]
             axis = np.array([s.axis_point[0] + D[c.index] + s.offset, s.axis_point[1]])
             rows.extend(frames[s.child][0] - world(s.parent, axis))
             rows.append(np.sin(frames[s.child][1] - phi))  # parallel (angles equal modulo 2 pi)
@@ -190,8 +194,12 @@ def test_k_and_jc0_by_the_implicit_function_theorem(name: str) -> None:
         bodies, u = _bodies_of(model, D)
         assert np.max(np.abs(_closure(model, u, D, bodies))) < 1e-12
         h = 1e-30
-        phi_u = np.stack([_closure(model, u + 1j * h * e, D, bodies).imag / h for e in np.eye(len(u))], axis=-1)
-        phi_D = np.stack([_closure(model, u, D + 1j * h * e, bodies).imag / h for e in np.eye(len(D))], axis=-1)
+        phi_u = np.stack(
+            [_closure(model, u + 1j * h * e, D, bodies).imag / h for e in np.eye(len(u))], axis=-1
+        )
+        phi_D = np.stack(
+            [_closure(model, u, D + 1j * h * e, bodies).imag / h for e in np.eye(len(D))], axis=-1
+        )
         assert phi_u.shape[0] == phi_u.shape[1], "as many closures as unknowns"
         du = -np.linalg.solve(phi_u, phi_D)  # (3 bodies, m)
         angle = {d.ground: np.zeros(len(D))} | {b: du[3 * k + 2] for k, b in enumerate(bodies)}
@@ -201,13 +209,15 @@ def test_k_and_jc0_by_the_implicit_function_theorem(name: str) -> None:
             if joint.slide is None:
                 np.testing.assert_allclose(K[row], angle[joint.child] - angle[joint.parent], atol=1e-9)
         k = bodies.index(d.tool_body)
-        o, phi = u[3 * k: 3 * k + 2], u[3 * k + 2]
+        phi = u[3 * k + 2]
         local = d.bodies[d.tool_body][d.tool_pin]
-        w = np.array([np.cos(phi) * local[0] - np.sin(phi) * local[1], np.sin(phi) * local[0] + np.cos(phi) * local[1]])
-        tool = du[3 * k: 3 * k + 2] + np.outer([-w[1], w[0]], du[3 * k + 2])
+        w = np.array(
+            [np.cos(phi) * local[0] - np.sin(phi) * local[1], np.sin(phi) * local[0] + np.cos(phi) * local[1]]
+        )
+        tool = du[3 * k : 3 * k + 2] + np.outer([-w[1], w[0]], du[3 * k + 2])
         jc0 = model.jc0(D)
-        np.testing.assert_allclose(jc0[0, int(model.swing):], tool[0, int(model.swing):], atol=1e-9)
-        np.testing.assert_allclose(jc0[2, int(model.swing):], tool[1, int(model.swing):], atol=1e-9)
+        np.testing.assert_allclose(jc0[0, int(model.swing) :], tool[0, int(model.swing) :], atol=1e-9)
+        np.testing.assert_allclose(jc0[2, int(model.swing) :], tool[1, int(model.swing) :], atol=1e-9)
         if d.has_angle:
             np.testing.assert_allclose(jc0[3], angle[d.tool_body], atol=1e-9)
         if model.swing:  # the swing column: the tool point turns about z at radius r
@@ -229,8 +239,10 @@ def test_accelerations_against_finite_differences(name: str) -> None:
     def at(t: float, f) -> np.ndarray:
         return f(D + rates * t + 0.5 * accelerations * t * t)
 
-    for f, value, first, second in ((model.pose, state.Q, state.Q_dot, state.Q_ddot),
-                                    (model.joints, state.theta, state.theta_dot, state.theta_ddot)):
+    for f, value, first, second in (
+        (model.pose, state.Q, state.Q_dot, state.Q_ddot),
+        (model.joints, state.theta, state.theta_dot, state.theta_ddot),
+    ):
         ahead, here, back = at(h, f), at(0.0, f), at(-h, f)
         np.testing.assert_allclose(value, here, atol=1e-12)
         np.testing.assert_allclose(first, (ahead - back) / (2 * h), atol=1e-6)
@@ -288,8 +300,10 @@ def test_assembly_over_the_stroke_box(name: str, capsys: pytest.CaptureFixture[s
         assert np.max(np.abs(moved - linear)) < 0.05 * np.max(np.abs(moved)) + 1e-12
     low = np.degrees(margins.reshape(-1, margins.shape[-1]).min(axis=0))
     with capsys.disabled():
-        print(f"\n{name}: smallest dead-centre margin per dyad over the box (deg): "
-              + ", ".join(f"{d} {v:.2f}" for d, v in zip(model.dyad_names, low, strict=True)))
+        print(
+            f"\n{name}: smallest dead-centre margin per dyad over the box (deg): "
+            + ", ".join(f"{d} {v:.2f}" for d, v in zip(model.dyad_names, low, strict=True))
+        )
     if name in NOTE_MARGINS:
         assert np.all(low >= np.array(NOTE_MARGINS[name]) - 0.05)
 
@@ -308,9 +322,13 @@ def test_cet200_equals_excavator_kinematics() -> None:
     np.testing.assert_allclose(CET200.k_matrix(D), excavator.k_matrix(D), rtol=0, atol=1e-12)
     ours, theirs = CET200.state(D, rates, accelerations), excavator.state(D, rates, accelerations)
     for field in ("theta", "theta_dot", "theta_ddot", "Q", "Q_dot", "Q_ddot", "jc0"):
-        np.testing.assert_allclose(getattr(ours, field), getattr(theirs, field), rtol=0, atol=1e-12, err_msg=field)
+        np.testing.assert_allclose(
+            getattr(ours, field), getattr(theirs, field), rtol=0, atol=1e-12, err_msg=field
+        )
     one = CET200.state(D[0], rates[0], accelerations[0])
-    np.testing.assert_allclose(one.Q_ddot, excavator.state(D[0], rates[0], accelerations[0]).Q_ddot, atol=1e-12)
+    np.testing.assert_allclose(
+        one.Q_ddot, excavator.state(D[0], rates[0], accelerations[0]).Q_ddot, atol=1e-12
+    )
 
 
 # ------------------------------------------------------------------ inverses (eqs. 9, 12-13)
@@ -327,8 +345,11 @@ def test_cylinder_rates_and_accelerations_invert_the_forward_state(name: str) ->
     np.testing.assert_allclose(solution.Q_dot[..., rows], state.Q_dot[..., rows], atol=1e-10)
     got = model.cylinder_accelerations(D, solution.D_dot, state.Q_ddot)
     free = model.state(D, solution.D_dot, got)
-    np.testing.assert_allclose(free.Q_ddot[..., rows], state.Q_ddot[..., rows] if len(rows) == model.m or
-                               len(rows) < model.m else free.Q_ddot[..., rows], atol=1e-9)
+    np.testing.assert_allclose(
+        free.Q_ddot[..., rows],
+        state.Q_ddot[..., rows] if len(rows) == model.m or len(rows) < model.m else free.Q_ddot[..., rows],
+        atol=1e-9,
+    )
     if len(rows) == model.m:  # square: the very rates and accelerations come back
         np.testing.assert_allclose(solution.D_dot, rates, atol=1e-10)
         np.testing.assert_allclose(got, accelerations, atol=1e-8)
@@ -344,3 +365,92 @@ def test_crane_velocity_ik_is_the_smallest_speed_scaled_solution() -> None:
     null = np.linalg.svd(scaled)[2][-1]
     assert abs(null @ (solution.D_dot / CRANE.max_speed)) < 1e-12
     np.testing.assert_allclose(jc0 @ solution.D_dot, [0.1, -0.2, 0.3], atol=1e-12)
+
+
+# ------------------------------------------------------------------ malformed machine files
+def _loader_section() -> dict:
+    import copy
+
+    from manipulator_kinematics.params import load_parameters
+
+    return copy.deepcopy(load_parameters(config_path("wheel_loader_wl20.yaml"))["hydraulic_machine"])
+
+
+def _edit(section: dict, path: str, value: object) -> None:
+    *keys, last = path.split(".")
+    for key in keys:
+        section = section[key]
+    if value is None:
+        del section[last]
+    else:
+        section[last] = value
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "message"),
+    [
+        # a dyad that never closes: the tilt link far too long for the bucket's link pin
+        ("links.tilt_link.length", 3.0, r"dyads\.tilt_link_bucket_pin: does not close at D = "),
+        # the lift cylinder's rod on the other side: the lift arm swings behind, below the machine
+        (
+            "dyads.lift_cyl_rod.orientation",
+            -1,
+            r"dyads\.lift_cyl_rod\.orientation: theta2 = .* at the reference state, outside its limits",
+        ),
+        ("dyads.tilt_link_bucket_pin.orientation", 1, r"dyads\.tilt_link_bucket_pin\.orientation: theta3"),
+        # a pin named twice: the arm pivot listed again on the bell crank
+        (
+            "bodies.bell_crank.pins.lift_arm_pivot",
+            [0.1, 0.1],
+            r"bodies\.bell_crank\.pins\.lift_arm_pivot: pin 'lift_arm_pivot' named twice",
+        ),
+        # a loop left open: no body joins the arm pivot and the bucket's link pin
+        (
+            "dyads.tilt_link_bucket_pin.pivot",
+            "lift_arm_pivot",
+            r"dyads\.tilt_link_bucket_pin\.pivot: loop left open: no body or cylinder joins",
+        ),
+        # a body never placed
+        (
+            "bodies.counterweight",
+            {"pins": {"cw_a": [0.0, 0.0], "cw_b": [1.0, 0.0]}},
+            r"bodies\.counterweight: never placed",
+        ),
+        (
+            "dyads.tilt_cyl_rod.pivot",
+            "cutting_edge",
+            r"dyads\.tilt_cyl_rod\.pivot: pin 'cutting_edge' is not known",
+        ),
+        (
+            "assembly",
+            ["tilt_cyl_rod", "lift_cyl_rod", "tilt_link_bucket_pin"],
+            r"dyads\.tilt_cyl_rod\.pivot: pin 'bell_crank_pivot' is not known at this step",
+        ),
+        (
+            "dyads.lift_cyl_rod.orientaton",
+            1,
+            r"dyads\.lift_cyl_rod\.orientaton: unknown key \(did you mean 'orientation'",
+        ),
+        ("cylinders.tilt_cylinder.max_speed", None, r"cylinders\.tilt_cylinder\.max_speed: missing"),
+        ("cylinders.tilt_cylinder.min_length", 2.1, r"cylinders\.tilt_cylinder\.max_length: must exceed"),
+        ("tool.width", "wide", r"tool\.width: expected a number"),
+        ("tool.velocity_rows", ["z", "beta"], r"tool\.velocity_rows: 'beta' is not one of"),
+        ("tooll", {}, r"hydraulic_machine\.tooll: unknown key \(did you mean 'tool'"),
+        ("chain.theta3.parent", "front_frame", r"chain\.theta3\.parent: must be 'lift_arm'"),
+        ("chain.theta2.limits", [-0.6, 0.6], r"chain\.theta2\.limits: theta2 = .* at D = "),
+        (
+            "bodies.lift_arm.pins.bucket_hinge",
+            [3.176, "0"],
+            r"bodies\.lift_arm\.pins\.bucket_hinge\[1\]: expected a number",
+        ),
+    ],
+)
+def test_malformed_machine_file_refused_with_the_key(path: str, value: object, message: str) -> None:
+    from manipulator_kinematics.hydraulic import parse
+    from manipulator_kinematics.params import ConfigError
+
+    section = _loader_section()
+    _edit(section, path, value)
+    with pytest.raises(ConfigError, match=message) as error:
+        HydraulicModel(parse(section))
+    assert "\n" not in str(error.value)

@@ -228,11 +228,13 @@ def parse(section: Any, prefix: str = SECTION) -> Description:
         for pin in pins:
             owners.setdefault(pin, []).append(body)
     for pin, names in owners.items():
-        require(
-            len(names) <= 2,
-            f"{prefix}.bodies",
-            f"pin {pin!r} named on {len(names)} bodies ({', '.join(names)}): a hinge joins two",
-        )
+        if len(names) > 2:
+            third = names[2]
+            where = f"links.{third}" if third in section.get("links", {}) else f"bodies.{third}.pins.{pin}"
+            raise ConfigError(
+                f"{prefix}.{where}: pin {pin!r} named twice: already the hinge of {names[0]} and "
+                f"{names[1]} (a hinge joins two bodies)"
+            )
 
     swing = None
     if "swing" in section:

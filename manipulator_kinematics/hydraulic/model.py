@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from manipulator_kinematics.hydraulic import dyads
-from manipulator_kinematics.hydraulic.description import Description, Dyad, Place, Slide, read
+from manipulator_kinematics.hydraulic.description import SECTION, Description, Dyad, Place, Slide, read
 from manipulator_kinematics.params import ConfigError
 
 __all__ = ["HydraulicModel", "HydraulicState", "IKResult", "RateSolution", "StrokeError"]
@@ -183,29 +183,37 @@ class HydraulicModel:
         grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, self.m)
         states = np.concatenate((self.reference[None], grid))
         solved = self._solve(states)
+        theta = solved.theta.p
+        # In solve order: a dyad that does not close, then the joints its solution placed (a
+        # wrong branch sign shows there first, before the dyads after it fail to close).
         for k, step in enumerate(self._dyads):
             open_ = ~(solved.closure[:, k] > 0.0)
             if np.any(open_):
                 at = states[np.argmax(open_)]
                 raise ConfigError(
-                    f"{self.description.name}: dyads.{step.pin}: does not close at "
+                    f"{SECTION}.dyads.{step.pin}: does not close at "
                     f"D = {np.round(at, 6).tolist()} (inside the stroke box)"
                 )
-        theta = solved.theta.p
-        for i, joint in enumerate(self.description.joints):
-            col = theta[:, i + int(self.swing)]
-            out = (col < joint.lower) | (col > joint.upper)
-            if np.any(out):
-                k = int(np.argmax(out))
-                dyad = self._placed_by.get(joint.child)
-                where = "the reference state" if k == 0 else f"D = {np.round(states[k], 6).tolist()}"
-                key = f"dyads.{dyad}.orientation" if dyad and out[0] else f"chain.{joint.name}.limits"
-                raise ConfigError(
-                    f"{self.description.name}: {key}: {joint.name} = {np.degrees(col[k]):.3f} deg "
-                    f"at {where}, outside its limits [{np.degrees(joint.lower):.3f}, "
-                    f"{np.degrees(joint.upper):.3f}] deg"
-                    + (" (is the branch sign right?)" if key.startswith("dyads") else "")
-                )
+            for i, joint in enumerate(self.description.joints):
+                if self._placed_by.get(joint.child) == step.pin:
+                    blame = step.pin if joint.slide is None else None
+                    self._check_limits(joint, theta[:, i + int(self.swing)], states, blame)
+        for i, joint in enumerate(self.description.joints):  # the rest, and the prismatic joints
+            self._check_limits(joint, theta[:, i + int(self.swing)], states, None)
+
+    def _check_limits(self, joint: Any, values: np.ndarray, states: np.ndarray, dyad: str | None) -> None:
+        out = (values < joint.lower) | (values > joint.upper)
+        if not np.any(out):
+            return
+        k = int(np.argmax(out))
+        where = "the reference state" if k == 0 else f"D = {np.round(states[k], 6).tolist()}"
+        blame = out[0] and dyad is not None
+        key = f"dyads.{dyad}.orientation" if blame else f"chain.{joint.name}.limits"
+        hint = " (is the branch sign right?)" if blame else ""
+        raise ConfigError(
+            f"{SECTION}.{key}: {joint.name} = {np.degrees(values[k]):.3f} deg at {where}, "
+            f"outside its limits [{np.degrees(joint.lower):.3f}, {np.degrees(joint.upper):.3f}] deg{hint}"
+        )
 
     # ------------------------------------------------------------------ the solve
     def _solve(
