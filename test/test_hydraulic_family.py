@@ -454,3 +454,39 @@ def test_malformed_machine_file_refused_with_the_key(path: str, value: object, m
     with pytest.raises(ConfigError, match=message) as error:
         HydraulicModel(parse(section))
     assert "\n" not in str(error.value)
+
+
+# ------------------------------------------------------------------ position IK (closed form)
+@pytest.mark.parametrize("name", MODELS)
+def test_fk_ik_round_trip(name: str) -> None:
+    model = MODELS[name]
+    D = RNG.uniform(model.lower, model.upper, size=(300, model.m))
+    Q = model.pose(D)
+    result = model.ik(Q, seed=D)
+    assert np.all(result.valid)
+    np.testing.assert_allclose(result.D, D, atol=1e-10)
+    position = model.position_ik(Q[..., :3], seed=D)
+    assert np.all(position.valid)
+    np.testing.assert_allclose(position.D, D, atol=1e-10)
+    # without a seed: any D of the box that reaches Q (the CET200 also reaches a tool behind the
+    # swing axis turned by pi; the crane holds the reference extension, so not every Q)
+    free = model.ik(Q)
+    assert np.mean(free.valid) > 0.7
+    np.testing.assert_allclose(model.pose(free.D[free.valid]), Q[free.valid], atol=1e-10)
+
+
+def test_loader_ik_refuses_what_two_cylinders_cannot_reach() -> None:
+    Q = LOADER.pose([1.8, 1.7])
+    assert LOADER.ik(Q).valid
+    assert not LOADER.ik(Q + [0.05, 0, 0, 0]).valid  # (x, z, alpha): three values, two actuators
+    assert not LOADER.ik(Q + [0, 0, 3.0, 0]).valid  # beyond the lift
+    np.testing.assert_allclose(LOADER.position_ik(Q[:3]).D, [1.8, 1.7], atol=1e-10)
+
+
+def test_crane_position_ik_keeps_the_seed_extension() -> None:
+    seed = np.array([0.3, 2.0, 2.0, 3.9])
+    target = CRANE.pose([0.5, 2.2, 2.3, 3.9])
+    result = CRANE.position_ik(target, seed=seed)
+    assert result.valid
+    np.testing.assert_allclose(result.D, [0.5, 2.2, 2.3, 3.9], atol=1e-10)
+    assert not CRANE.position_ik([30.0, 0.0, 1.0]).valid

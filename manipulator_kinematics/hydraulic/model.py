@@ -136,6 +136,7 @@ class HydraulicModel:
         self._local = {pin: xz for pins in d.bodies.values() for pin, xz in pins.items()}
         self._placed_by = self._placing_dyads()
         self._check_box()
+        self._inverse = self._inverse_plan()
 
     @classmethod
     def from_file(cls, path: str | Path, node_name: str = "/**") -> HydraulicModel:
@@ -440,10 +441,12 @@ class HydraulicModel:
 
     def _open_chain(
         self, theta: np.ndarray
-    ) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], np.ndarray]:
-        """Boom-plane tool point (..., 2), each joint's point and its parent's angle, the tool angle."""
+    ) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], dict[str, tuple[np.ndarray, np.ndarray]]]:
+        """Boom-plane tool point (..., 2), each joint's point and its parent's angle, and each
+        chain body's frame (origin, angle): eq. 3 for any chain of the family."""
         shape = theta.shape[:-1]
         origin, phi = np.zeros(shape + (2,)), np.zeros(shape)
+        frames = {self.description.ground: (origin, phi)}
         points, parents = [], []
         for i, (joint, (in_parent, in_child)) in enumerate(
             zip(self.description.joints, self._chain_geometry(), strict=True)
@@ -461,9 +464,10 @@ class HydraulicModel:
                 points.append(point)
                 parents.append(phi)
                 origin = point
+            frames[joint.child] = (origin, phi)
         d = self.description
         tool = origin + _rot(phi, np.broadcast_to(d.bodies[d.tool_body][d.tool_pin], origin.shape))
-        return tool, points, parents, phi
+        return tool, points, parents, frames
 
     def open_chain_pose(self, theta: Any) -> np.ndarray:
         """Q from the main chain's joints (eq. 3), no limits."""
@@ -532,6 +536,196 @@ class HydraulicModel:
         Q_ddot = _finite(Q_ddot, D.shape[:-1] + (len(self.task_names),), "Q_ddot")
         free = self.state(D, D_dot)  # Dddot = 0: the velocity-product terms alone
         return self._solve_rows(free.jc0, Q_ddot - free.Q_ddot)[0]
+
+    # ------------------------------------------------------------------ position IK
+    def _inverse_plan(self) -> list[tuple[str, str, str, float, float, int]] | None:
+        """The linkage inverse: with the main chain's bodies placed from theta, every other body
+        placed from two known pins (body, pin, pin, 0, 0, 0) and every other pin solved as a dyad
+        (X, A, B, r_A, r_B, branch) of pins already known, each side a fixed distance on one
+        body (paper eqs. 1-2 inverted: given the joint angle, a cylinder's length is the distance
+        of two known pins). Branches from the reference state. None where no such order exists
+        (no closed form)."""
+        d = self.description
+        placed = {d.ground} | {j.child for j in d.joints}
+        known = {p for b in placed for p in d.bodies[b]}
+        pins = self._solve(self.reference).pins
+        plan = []
+        while len(placed) < len(d.bodies):
+            progress = False
+            for body in d.bodies:
+                have = [p for p in d.bodies[body] if p in known]
+                if body not in placed and len(have) >= 2:
+                    plan.append((body, have[0], have[1], 0.0, 0.0, 0))
+                    placed.add(body)
+                    known.update(d.bodies[body])
+                    progress = True
+            for body in d.bodies:
+                if body in placed or progress:
+                    continue
+                for x in d.bodies[body]:
+                    centres = [
+                        (a, float(np.linalg.norm(d.bodies[b][x] - d.bodies[b][a])))
+                        for b in d.bodies
+                        if x in d.bodies[b]
+                        for a in d.bodies[b]
+                        if a != x and a in known
+                    ]
+                    if x not in known and len(centres) >= 2:
+                        (a, ra), (b, rb) = centres[:2]
+                        pa, pb, px = pins[a].p, pins[b].p, pins[x].p
+                        plan.append((x, a, b, ra, rb, int(np.sign(dyads.cross(pb - pa, px - pa)))))
+                        known.add(x)
+                        progress = True
+                        break
+            if not progress:
+                return None
+        return plan
+
+    def _cylinders_from_theta(self, theta: np.ndarray) -> np.ndarray:
+        """D (..., m) from the main chain's joints: chain bodies placed (eq. 3), the linkage
+        inverse (:meth:`_inverse_plan`), each cylinder's length the distance of its pins."""
+        d = self.description
+        *_, frames = self._open_chain(theta)
+        known = {}
+        for body, (origin, phi) in frames.items():
+            for pin, local in d.bodies[body].items():
+                known[pin] = origin + _rot(phi, np.broadcast_to(local, origin.shape))
+        for x, a, b, ra, rb, branch in self._inverse:
+            if branch:
+                known[x] = dyads.intersect(known[a], known[b], ra, rb, branch)[0]
+                continue
+            one, two = d.bodies[x][a], d.bodies[x][b]  # place body x through its pins a and b
+            e, local = known[b] - known[a], two - one
+            phi = np.arctan2(e[..., 1], e[..., 0]) - np.arctan2(local[1], local[0])
+            for pin, xz in d.bodies[x].items():
+                known.setdefault(pin, known[a] + _rot(phi, np.broadcast_to(xz - one, e.shape)))
+        columns = [theta[..., 0]] if self.swing else []
+        for c in d.cylinders:
+            slide = next((j.slide for j in d.joints if j.slide and j.slide.index == c.index), None)
+            if slide is not None:  # the telescope: its length is the joint itself
+                i = d.joints.index(next(j for j in d.joints if j.slide is slide)) + int(self.swing)
+                columns.append(theta[..., i] - slide.offset)
+            else:
+                columns.append(np.linalg.norm(known[c.rod] - known[c.base], axis=-1))
+        return np.stack(columns, axis=-1)
+
+    def ik(self, Q: Any, seed: Any = None) -> IKResult:
+        """D for a task vector Q (..., nq), closed form: the swing from (x, y); the main chain as a
+        dyad (two revolute joints: the second pivot at the first link's length from the first
+        pivot and at the second link's from the wrist), both elbow branches tried; the wrist from
+        alpha where a third revolute joint follows, the extension of ``seed`` (default: the
+        reference) where a prismatic joint follows; then the linkage inverse. The branch inside
+        the stroke box and nearest ``seed`` wins; ``valid`` is False where none is, or where Q is
+        not reachable (the loader: (x, z, alpha) with two actuators). No numerical fallback: a
+        machine whose chain or linkage has no such closed form raises NotImplementedError."""
+        Q = np.asarray(Q, dtype=float)
+        nq = len(self.task_names)
+        if Q.ndim == 0 or Q.shape[-1] != nq:
+            raise StrokeError(f"Q: expected (..., {nq}) values [{', '.join(self.task_names)}], got {Q.shape}")
+        seed = np.broadcast_to(
+            self.reference if seed is None else np.asarray(seed, dtype=float), Q.shape[:-1] + (self.m,)
+        )
+        return self._ik(Q, seed)
+
+    def position_ik(self, position: Any, seed: Any = None) -> IKResult:
+        """D for a tool point (..., 3): :meth:`ik` with the tool angle of ``seed`` held (default:
+        the reference state) where Q has one; the loader's two joints are fixed by (x, z) alone."""
+        position = np.asarray(position, dtype=float)
+        seed = np.broadcast_to(
+            self.reference if seed is None else np.asarray(seed, dtype=float), position.shape[:-1] + (self.m,)
+        )
+        if not self.description.has_angle:
+            return self.ik(position, seed)
+        revolute = sum(j.slide is None for j in self.description.joints)
+        alpha = self._solve(self.validate(seed)).Q.p[..., 3]
+        return self._ik(np.concatenate((position, alpha[..., None]), axis=-1), seed, use_alpha=revolute > 2)
+
+    def _ik(self, Q: np.ndarray, seed: np.ndarray, use_alpha: bool = True) -> IKResult:
+        d = self.description
+        joints = d.joints
+        if self._inverse is None or len(joints) < 2 or joints[0].slide or joints[1].slide or len(joints) > 3:
+            raise NotImplementedError(f"{d.name}: no closed-form IK for this chain or linkage")
+        x, y, z = Q[..., 0], Q[..., 1], Q[..., 2]
+        seed_theta = self._solve(self.validate(seed)).theta.p
+        best_D = np.full(Q.shape[:-1] + (self.m,), np.nan)
+        best_cost = np.full(Q.shape[:-1], np.inf)
+        # The swing: (x, y) = r (cos theta1, sin theta1) with r of either sign (a tool behind the
+        # swing axis) and theta1 in any turn its limits allow; without swing, r = x.
+        if self.swing:
+            turns = [(np.arctan2(y, x) + k * np.pi, (-1) ** k * np.hypot(x, y)) for k in (-2, -1, 0, 1, 2)]
+        else:
+            turns = [(None, x)]
+        for theta1, r in turns:
+            self._ik_plane(
+                Q, seed, seed_theta, theta1, np.stack((r, z), axis=-1), use_alpha, best_D, best_cost
+            )
+        return IKResult(best_D, np.isfinite(best_cost))
+
+    def _ik_plane(
+        self,
+        Q: np.ndarray,
+        seed: np.ndarray,
+        seed_theta: np.ndarray,
+        theta1: np.ndarray | None,
+        target: np.ndarray,
+        use_alpha: bool,
+        best_D: np.ndarray,
+        best_cost: np.ndarray,
+    ) -> None:
+        """The main chain for one swing candidate, both elbow branches; ``best_D``/``best_cost``
+        updated in place where a valid D is nearer the seed (stroke-scaled)."""
+        d = self.description
+        ja, jb, rest = d.joints[0], d.joints[1], d.joints[2:]
+        A, B = d.bodies[ja.child], d.bodies[jb.child]
+        tool_local = d.bodies[d.tool_body][d.tool_pin]
+        if not rest:
+            w_local, wrist = tool_local, target
+        elif rest[0].slide is not None:
+            i = 2 + int(self.swing)
+            s = seed_theta[..., i]
+            axis = np.asarray(rest[0].slide.axis_point)
+            w_local = np.stack(
+                (axis[0] + s + tool_local[0], np.full(s.shape, axis[1] + tool_local[1])), axis=-1
+            )
+            wrist = target
+        else:
+            if not d.has_angle:
+                raise NotImplementedError(f"{d.name}: three revolute joints need the tool angle")
+            tool_body = d.bodies[rest[0].child]
+            w_local = B[rest[0].pivot]
+            back = tool_local - tool_body[rest[0].pivot]
+            wrist = target - _rot(Q[..., 3], np.broadcast_to(back, target.shape))
+        pa = np.broadcast_to(d.bodies[d.ground][ja.pivot], target.shape)
+        l1 = float(np.linalg.norm(A[jb.pivot] - A[ja.pivot]))
+        arm = np.broadcast_to(w_local - B[jb.pivot], target.shape)
+        l2 = np.linalg.norm(arm, axis=-1)
+        link = A[jb.pivot] - A[ja.pivot]
+        for branch in (1, -1):
+            pb, h2 = dyads.intersect(pa, wrist, l1, l2, branch)
+            phi_a = np.arctan2(pb[..., 1] - pa[..., 1], pb[..., 0] - pa[..., 0]) - np.arctan2(
+                link[1], link[0]
+            )
+            phi_b = np.arctan2(wrist[..., 1] - pb[..., 1], wrist[..., 0] - pb[..., 0]) - np.arctan2(
+                arm[..., 1], arm[..., 0]
+            )
+            cols = [theta1] if theta1 is not None else []
+            cols += [_wrap(phi_a), _wrap(phi_b - phi_a)]
+            if rest and rest[0].slide is not None:
+                cols.append(seed_theta[..., 2 + int(self.swing)])
+            elif rest:
+                cols.append(_wrap(Q[..., 3] - phi_b))
+            theta = np.stack(cols, axis=-1)
+            with np.errstate(invalid="ignore"):
+                D = self._cylinders_from_theta(theta)
+                inside = np.all((self.lower <= D) & (self.upper >= D), axis=-1) & (h2 > 0)
+                # FK of the D found (not of theta): a linkage inverse off its branch shows here
+                reached = self._solve(np.where(inside[..., None], D, self.reference)).Q.p
+                rows = slice(None) if use_alpha else slice(0, 3)
+                ok = inside & np.all(np.abs(reached[..., rows] - Q[..., rows]) < 1e-9, axis=-1)
+            cost = np.where(ok, np.sum(((D - seed) / (self.upper - self.lower)) ** 2, axis=-1), np.inf)
+            better = cost < best_cost
+            best_D[...] = np.where(better[..., None], D, best_D)
+            best_cost[...] = np.where(better, cost, best_cost)
 
 
 def _finite(values: Any, shape: tuple[int, ...], name: str) -> np.ndarray:
