@@ -54,6 +54,7 @@ setup(
             "mk_evaluate = manipulator_kinematics.bag.evaluate:main",
             "machine_markers = manipulator_kinematics.nodes.markers:main",
             "mk_urdf = manipulator_kinematics.urdf:main",
+            "mk_machine_check = manipulator_kinematics.hydraulic.check:main",
             "excavator_working_ranges = excavator_kinematics.working_ranges:main",
         ],
         # The machine registry (manipulator_kinematics.registry): one Machine per machine package.
