@@ -512,8 +512,8 @@ class HydraulicModel:
     def _solve_rows(self, jc0: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """D-space solution of JC0[rows] x = rhs[rows] in actuator-speed units (x = S u, S =
         diag(max_speed)): exact where the commanded rows are as many as the actuators and JC0 is
-        regular, least squares where they are more, the smallest ||u|| where fewer (module
-        docstring of docs/hydraulic_family.md: what eq. 9 solves for a non-square JC0)."""
+        regular, least squares where they are more, the smallest ||u|| where fewer
+        (docs/hydraulic_family.md: what eq. 9 solves for a non-square JC0)."""
         rows = list(self.description.velocity_rows)
         A = jc0[..., rows, :] * self.max_speed
         u = np.linalg.pinv(A) @ rhs[..., rows, None]
