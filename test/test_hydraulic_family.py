@@ -516,3 +516,18 @@ def test_machine_check_refuses_a_bad_file_in_one_line(tmp_path, capsys: pytest.C
     assert main([str(path), "--no-png"]) == 1
     error = capsys.readouterr().err.strip()
     assert "dyads.tilt_link_bucket_pin: does not close" in error and "\n" not in error
+
+
+def test_old_excavator_file_converts_to_the_family_form() -> None:
+    """config/excavator_cet200.yaml (old form) converted equals the family file of the CET200."""
+    from manipulator_kinematics.hydraulic import parse
+    from manipulator_kinematics.hydraulic.convert import from_excavator_section
+    from manipulator_kinematics.params import load_parameters
+
+    old = load_parameters(config_path("excavator_cet200.yaml"))["excavator"]
+    converted = HydraulicModel(parse(from_excavator_section(old)))
+    D = inside(CET200, 50, margin=0.0)
+    np.testing.assert_allclose(converted.pose(D), CET200.pose(D), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(converted.jc0(D), CET200.jc0(D), rtol=0, atol=1e-12)
+    assert converted.actuator_names == CET200.actuator_names
+    assert converted.description.width == CET200.description.width
