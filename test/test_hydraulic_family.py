@@ -460,7 +460,7 @@ def test_malformed_machine_file_refused_with_the_key(path: str, value: object, m
 @pytest.mark.parametrize("name", MODELS)
 def test_fk_ik_round_trip(name: str) -> None:
     model = MODELS[name]
-    D = RNG.uniform(model.lower, model.upper, size=(300, model.m))
+    D = RNG.uniform(model.lower, model.upper, size=(100, model.m))
     Q = model.pose(D)
     result = model.ik(Q, seed=D)
     assert np.all(result.valid)
@@ -494,28 +494,6 @@ def test_crane_position_ik_keeps_the_seed_extension() -> None:
     assert result.valid
     np.testing.assert_allclose(result.D, [0.5, 2.2, 2.3, 3.9], atol=1e-10)
     assert not CRANE.position_ik([30.0, 0.0, 1.0]).valid
-
-
-# ------------------------------------------------------------------ mk_machine_check
-def test_machine_check_prints_margins_ranges_and_draws(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
-    from manipulator_kinematics.hydraulic.check import main
-
-    png = tmp_path / "loader.png"
-    assert main([str(config_path("wheel_loader_wl20.yaml")), "--grid", "11", "--png", str(png)]) == 0
-    text = capsys.readouterr().out
-    assert "tilt_link_bucket_pin" in text and "theta3" in text and "limits [-102.000, 60.000]" in text
-    assert png.stat().st_size > 10_000
-
-
-def test_machine_check_refuses_a_bad_file_in_one_line(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
-    from manipulator_kinematics.hydraulic.check import main
-
-    text = config_path("wheel_loader_wl20.yaml").read_text().replace("length: 0.868", "length: 3.0")
-    path = tmp_path / "bad.yaml"
-    path.write_text(text)
-    assert main([str(path), "--no-png"]) == 1
-    error = capsys.readouterr().err.strip()
-    assert "dyads.tilt_link_bucket_pin: does not close" in error and "\n" not in error
 
 
 def test_old_excavator_file_converts_to_the_family_form() -> None:
