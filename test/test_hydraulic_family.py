@@ -225,6 +225,66 @@ def test_k_and_jc0_by_the_implicit_function_theorem(name: str) -> None:
         assert np.linalg.cond(phi_u) < 1e4
 
 
+def _directional(
+    model: HydraulicModel,
+    bodies: list[str],
+    u: np.ndarray,
+    u_dot: np.ndarray,
+    D: np.ndarray,
+    rates: np.ndarray,
+    h: float = 1e-30,
+) -> np.ndarray:
+    """d/ds Phi(u + s u_dot, D + s rates) at s = 0, by complex step."""
+    return _closure(model, u + 1j * h * u_dot, D + 1j * h * rates, bodies).imag / h
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_accelerations_by_the_implicit_function_theorem(name: str) -> None:
+    """Phi(u(t), D(t)) = 0 differentiated twice: Phi_u uddot = -(Phi_D Dddot + the second
+    directional derivative of Phi along (udot, Ddot)), the latter a central difference of
+    complex-step directional derivatives; the angles and the tool point of u give theta_ddot and
+    the boom-plane rows of Q_ddot (swing held: its rate and acceleration 0)."""
+    model = MODELS[name]
+    d = model.description
+    h, eps = 1e-30, 1e-5
+    for D in inside(model, 3, margin=0.05):
+        rates = RNG.uniform(-1, 1, D.shape) * model.max_speed
+        accelerations = RNG.uniform(-1, 1, D.shape) * model.max_speed
+        if model.swing:
+            D[0] = rates[0] = accelerations[0] = 0.0
+        bodies, u = _bodies_of(model, D)
+        phi_u = np.stack(
+            [_closure(model, u + 1j * h * e, D, bodies).imag / h for e in np.eye(len(u))], axis=-1
+        )
+        phi_D = np.stack(
+            [_closure(model, u, D + 1j * h * e, bodies).imag / h for e in np.eye(len(D))], axis=-1
+        )
+        u_dot = -np.linalg.solve(phi_u, phi_D @ rates)
+
+        ahead, back = (
+            _directional(model, bodies, u + t * u_dot, u_dot, D + t * rates, rates) for t in (eps, -eps)
+        )
+        second = (ahead - back) / (2 * eps)
+        u_ddot = -np.linalg.solve(phi_u, second + phi_D @ accelerations)
+        state = model.state(D, rates, accelerations)
+        angle = {d.ground: (0.0, 0.0)} | {
+            b: (u_dot[3 * k + 2], u_ddot[3 * k + 2]) for k, b in enumerate(bodies)
+        }
+        for i, joint in enumerate(d.joints):
+            if joint.slide is None:
+                expected = angle[joint.child][1] - angle[joint.parent][1]
+                assert abs(state.theta_ddot[i + int(model.swing)] - expected) < 1e-5
+        k = bodies.index(d.tool_body)
+        phi, phi_dot, phi_ddot = u[3 * k + 2], u_dot[3 * k + 2], u_ddot[3 * k + 2]
+        local = d.bodies[d.tool_body][d.tool_pin]
+        c, s = np.cos(phi), np.sin(phi)
+        w = np.array([c * local[0] - s * local[1], s * local[0] + c * local[1]])
+        tool = u_ddot[3 * k : 3 * k + 2] + phi_ddot * np.array([-w[1], w[0]]) - phi_dot**2 * w
+        np.testing.assert_allclose(state.Q_ddot[[0, 2]], tool, atol=1e-5)
+        if d.has_angle:
+            assert abs(state.Q_ddot[3] - phi_ddot) < 1e-5
+
+
 @pytest.mark.parametrize("name", MODELS)
 def test_accelerations_against_finite_differences(name: str) -> None:
     """Q along D(t) = D + Ddot t + Dddot t^2 / 2: central first and second differences of pose()
