@@ -81,18 +81,12 @@ def rates(
 ) -> np.ndarray:
     """Xdot from the once-differentiated closures (module docstring). With Jacobians (a_dot (...,
     m, 2), r_a_dot (..., m)) it gives dX/dD (..., m, 2): the same linear map per column."""
-    wide = np.ndim(a_dot) > np.ndim(x)
-    u, v = (x - a, x - b) if not wide else ((x - a)[..., None, :], (x - b)[..., None, :])
-    rhs_a = (
-        np.sum(u * a_dot, axis=-1) + r_a * r_a_dot
-        if not wide
-        else (np.sum(u * a_dot, axis=-1) + np.asarray(r_a)[..., None] * r_a_dot)
-    )
-    rhs_b = (
-        np.sum(v * b_dot, axis=-1) + r_b * r_b_dot
-        if not wide
-        else (np.sum(v * b_dot, axis=-1) + np.asarray(r_b)[..., None] * r_b_dot)
-    )
+    u, v = x - a, x - b
+    if np.ndim(a_dot) > np.ndim(x):  # Jacobian columns: one more axis before the point's
+        u, v = u[..., None, :], v[..., None, :]
+        r_a, r_b = np.asarray(r_a)[..., None], np.asarray(r_b)[..., None]
+    rhs_a = np.sum(u * a_dot, axis=-1) + r_a * r_a_dot
+    rhs_b = np.sum(v * b_dot, axis=-1) + r_b * r_b_dot
     return _solve(x, a, b, rhs_a, rhs_b)
 
 
