@@ -368,6 +368,36 @@ def test_assembly_over_the_stroke_box(name: str, capsys: pytest.CaptureFixture[s
         assert np.all(low >= np.array(NOTE_MARGINS[name]) - 0.05)
 
 
+#: K entries over the box, from the note: (row theta_i, column D_j) -> (min, max), rounded.
+NOTE_K = {
+    "WL20": {(0, 0): (0.98, 1.90), (1, 1): (1.39, 4.52), (1, 0): (-2.99, -0.84)},
+    "KC100": {(1, 1): (1.64, 2.77), (2, 2): (2.90, 4.43)},
+}
+
+
+@pytest.mark.parametrize("name", NOTE_K)
+def test_k_ranges_and_reach_over_the_box(name: str) -> None:
+    """Each driven K entry keeps one sign over the box, within the note's ranges; and the note's
+    reach and heights (loader hinge 0.340 .. 4.019 m, crane reach 10.049 m, -5.07 .. 11.89 m)."""
+    model = MODELS[name]
+    n = 41
+    axes = [np.linspace(lo, hi, n) for lo, hi in zip(model.lower, model.upper, strict=True)]
+    if model.swing:
+        axes[0] = np.array([0.0])
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, model.m)
+    K = model.k_matrix(grid)
+    for (i, j), (low, high) in NOTE_K[name].items():
+        assert low - 0.006 <= K[:, i, j].min() <= low + 0.006, (i, j, K[:, i, j].min())
+        assert high - 0.006 <= K[:, i, j].max() <= high + 0.006, (i, j, K[:, i, j].max())
+    Q = model.pose(grid)
+    if name == "WL20":
+        hinge = model.pins(grid)["bucket_hinge"][:, 2]
+        assert abs(hinge.min() - 0.340) < 5e-4 and abs(hinge.max() - 4.019) < 5e-4
+    else:
+        assert abs(Q[:, 0].max() - 10.049) < 5e-4
+        assert abs(Q[:, 2].min() - -5.07) < 5e-3 and abs(Q[:, 2].max() - 11.89) < 5e-3
+
+
 # ------------------------------------------------------------------ the CET200 equals today's model
 def test_cet200_equals_excavator_kinematics() -> None:
     from excavator_kinematics.kinematics import Excavator
