@@ -14,7 +14,8 @@ each sample: its two corners ``left`` and ``right`` (N, 3), in time order.
   than ``max_step`` (default 1 cm, or half a cell if smaller; 3-D distance) the motion is filled in with edges
   interpolated linearly between the two samples, so a fast sweep leaves no unvisited cells
   between samples and a cell's value comes within about ``max_step`` times the sheet's slope of its
-  lowest point there (a grazing pass can otherwise stand for a deep one). At 100 Hz a bucket's edge moves about 1 cm a sample: nothing is filled in.
+  lowest point there (a grazing pass can otherwise stand for a deep one). At 100 Hz a
+  bucket's edge moves about 1 cm a sample: little or nothing is filled in.
 * Grids are aligned to multiples of the cell size from the site origin, so grids of several runs
   (a fleet, several bags of one site) combine cell by cell: :meth:`AsBuilt.merge` keeps the lower
   value.
@@ -137,7 +138,9 @@ def _pieces(a: np.ndarray, b: np.ndarray, x0: float, y0: float, cell: float) -> 
     return cell_i.ravel(), cell_j.ravel(), z_low.ravel()
 
 
-def lowest_elevation(left: ArrayLike, right: ArrayLike, cell: float, max_step: float | None = None) -> AsBuilt:
+def lowest_elevation(
+    left: ArrayLike, right: ArrayLike, cell: float, max_step: float | None = None
+) -> AsBuilt:
     """The as-built grid of an edge's run (module docstring): ``left``, ``right`` (N, 3) the
     corners in the site frame in time order, ``cell`` the cell size (m), ``max_step`` the largest
     corner move between two edges used (default 1 cm or ``cell / 2``). Rows with a non-finite value are
