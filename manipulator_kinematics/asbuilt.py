@@ -34,6 +34,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike
 
+from manipulator_kinematics.landxml import write_tin
+
 #: Segments cut into cell pieces at once: bounds the temporaries (pieces x crossings x 8 bytes).
 _CHUNK = 8192
 
@@ -86,6 +88,24 @@ class AsBuilt:
         placed = [g.on(x0, y0, (ny, nx)) for g in grids]
         z = np.fmin.reduce([p.z for p in placed])
         return AsBuilt(x0, y0, cell, z, np.sum([p.hits for p in placed], axis=0))
+
+    def triangles(self) -> tuple[np.ndarray, np.ndarray]:
+        """A TIN through the reached cells' centres: vertices (V, 3) as :meth:`points`, faces
+        (F, 3), two triangles over every square of four reached neighbouring centres."""
+        reached = np.isfinite(self.z)
+        number = np.full(self.z.shape, -1)
+        number[reached] = np.arange(int(reached.sum()))
+        a, b = number[:-1, :-1], number[:-1, 1:]  # (j, i), (j, i+1)
+        c, d = number[1:, :-1], number[1:, 1:]  # (j+1, i), (j+1, i+1)
+        full = (a >= 0) & (b >= 0) & (c >= 0) & (d >= 0)
+        faces = np.vstack([np.column_stack([a[full], b[full], d[full]]),
+                           np.column_stack([a[full], d[full], c[full]])])
+        return self.points(), faces
+
+    def write_landxml(self, path: str | Path, name: str = "as-built") -> None:
+        """The reached cells as a LandXML 1.2 TIN surface (:meth:`triangles`)."""
+        vertices, faces = self.triangles()
+        write_tin(path, vertices, faces, name)
 
     def write_csv(self, path: str | Path) -> None:
         """``x,y,z`` of every reached cell's centre (site frame, m): a point cloud GIS tools import."""

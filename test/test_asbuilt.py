@@ -103,3 +103,22 @@ def test_gaps_in_the_record_and_bad_cells_are_handled() -> None:
         lowest_elevation(left, right, 0.0)
     empty = lowest_elevation(np.full((3, 3), np.nan), np.full((3, 3), np.nan), 0.2)
     assert empty.z.size == 0
+
+
+def test_the_landxml_surface_reads_back_with_the_design_reader(tmp_path) -> None:
+    from excavator_kinematics.design_surface import read_landxml
+
+    left, right = sweep(301, 3.0)
+    grid = lowest_elevation(left, right, 0.25)
+    grid.write_landxml(tmp_path / "asbuilt.xml")
+    tin = read_landxml(tmp_path / "asbuilt.xml")
+    vertices, faces = grid.triangles()
+    assert len(tin.faces) == len(faces) > 0
+    # At every reached centre that a face uses, the surface passes through the cell's value.
+    used = np.unique(faces)
+    heights = tin.heights(vertices[used])
+    assert np.all(heights.inside)
+    np.testing.assert_allclose(heights.height, 0.0, atol=2e-6)  # 6 decimals in the file
+    grid.write_csv(tmp_path / "asbuilt.csv")
+    table = np.loadtxt(tmp_path / "asbuilt.csv", delimiter=",", skiprows=1)
+    np.testing.assert_allclose(table, grid.points(), atol=1e-4)
