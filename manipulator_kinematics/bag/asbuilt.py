@@ -229,7 +229,7 @@ def run_fleet(paths: Sequence[Path], output: Path, params: Sequence[Path], cell:
             return client.gather(futures)
     from dask.diagnostics import ProgressBar
 
-    with ProgressBar(out=sys.stderr):
+    with ProgressBar(dt=1.0, out=sys.stderr):
         return list(dask.compute(*tasks, scheduler="processes", num_workers=workers))
 
 
