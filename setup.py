@@ -52,6 +52,7 @@ setup(
             "mk_record = manipulator_kinematics.bag.record:main",
             "mk_replay = manipulator_kinematics.bag.replay:main",
             "mk_evaluate = manipulator_kinematics.bag.evaluate:main",
+            "mk_asbuilt = manipulator_kinematics.bag.asbuilt:main",
             "machine_markers = manipulator_kinematics.nodes.markers:main",
             "mk_urdf = manipulator_kinematics.urdf:main",
             "mk_machine_check = manipulator_kinematics.hydraulic.check:main",

@@ -36,6 +36,7 @@ from matplotlib.tri import TrapezoidMapTriFinder, Triangulation
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
+from manipulator_kinematics.landxml import write_tin
 from manipulator_kinematics.params import ConfigError
 
 #: LandXML linearUnit values -> metres (LandXML 1.2 schema, enumerations metLinear and impLinear).
@@ -200,21 +201,7 @@ def read_landxml(path: str | Path, surface: str = "") -> Tin:
 
 def write_landxml(path: str | Path, tin: Tin, application: str = "manipulator_kinematics") -> None:
     """``tin`` as a LandXML 1.2 file (metres, points "northing easting elevation")."""
-    ns = "http://www.landxml.org/schema/LandXML-1.2"
-    root = ET.Element("LandXML", {"xmlns": ns, "version": "1.2", "date": "2026-01-01", "time": "00:00:00"})
-    ET.SubElement(ET.SubElement(root, "Units"), "Metric", {
-        "areaUnit": "squareMeter", "linearUnit": "meter", "volumeUnit": "cubicMeter",
-        "temperatureUnit": "celsius", "pressureUnit": "milliBars"})
-    ET.SubElement(root, "Application", {"name": application, "version": "1"})
-    surface = ET.SubElement(ET.SubElement(root, "Surfaces"), "Surface", {"name": tin.name or "design"})
-    definition = ET.SubElement(surface, "Definition", {"surfType": "TIN"})
-    pnts, faces = ET.SubElement(definition, "Pnts"), ET.SubElement(definition, "Faces")
-    for i, (x, y, z) in enumerate(tin.vertices.tolist(), start=1):
-        ET.SubElement(pnts, "P", {"id": str(i)}).text = f"{y:.6f} {x:.6f} {z:.6f}"
-    for a, b, c in (tin.faces + 1).tolist():
-        ET.SubElement(faces, "F").text = f"{a} {b} {c}"
-    ET.indent(root)
-    ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
+    write_tin(path, tin.vertices, tin.faces, tin.name or "design", application)
 
 
 def _local(tag: str) -> str:

@@ -26,7 +26,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
+from excavator_kinematics.design_surface import SitePose, cutting_edge, read_landxml
 from excavator_kinematics.display import DesignPlane, urdf_joint_states
 from excavator_kinematics.imu import base_up, level_rotation
 from excavator_kinematics.kinematics import (
@@ -353,3 +355,76 @@ def analyse(
         report["tracking"] = _tracking(target, achieved, m, t0, plots, prefix)
     report["actuators"] = _actuators(data, exc, t0, plots, prefix)
     return report, plots
+
+
+#: Units of the per-sample table's columns (docs/asbuilt.md), by name or name prefix.
+SAMPLE_UNITS = {
+    "stamp_ns": "ns", "swing_joint": "rad", "swing_joint_rate": "rad/s", "alpha": "rad",
+    "published": "bool", "grade_": "m (height above the design surface, + = cut)",
+}
+
+
+def samples(data: dict[str, TopicArrays], exc: Excavator,
+            context: AnalysisContext) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    """The excavator's ``samples`` hook: one row per input the forward node accepted (the same
+    rule as :func:`analyse`), in stamp order: the actuators and their rates, the tip Q (eq. 3;
+    base frame), both cutting-edge corners in the base and the site frame, the grade heights
+    where a design surface or plane is set, and whether the node published a pose for it.
+    Returns the columns and their units. No rows (empty columns) without both input topics."""
+    m = _Settings.of(context)
+    forward = context.node_settings["excavator_forward"]
+    inputs = None
+    if "cylinder_lengths" in data and "joint_states" in data:
+        inputs = _inputs(data["cylinder_lengths"], data["joint_states"], exc, m)
+    n = 0 if inputs is None else len(inputs.stamp)
+    D = np.empty((0, 4)) if inputs is None else inputs.D
+    D_dot = np.empty((0, 4)) if inputs is None else inputs.D_dot
+    Q = np.empty((0, 4)) if inputs is None else inputs.state.Q
+    edge = cutting_edge(Q[:, :3], D[:, 0], exc.bucket_width)  # (n, 3: tip, left, right, 3)
+    stamp = np.empty(0, np.int64) if inputs is None else inputs.stamp
+    site = _site_points(data, forward["design_surface"], stamp, edge)
+    columns: dict[str, np.ndarray] = {"stamp_ns": stamp}
+    units = dict(SAMPLE_UNITS)
+    for j, name in enumerate((SWING, *CYLINDERS)):
+        columns[name], columns[f"{name}_rate"] = D[:, j], D_dot[:, j]
+        if j:
+            units[name], units[f"{name}_rate"] = "m", "m/s"
+    columns["alpha"] = Q[:, 3]
+    for frame, points, unit in (("", edge, "m (base frame)"), ("_site", site, "m (site frame)")):
+        for k, point in enumerate(("tip", "left", "right")):
+            for j, axis in enumerate("xyz"):
+                columns[f"{point}{frame}_{axis}"] = points[:, k, j]
+                units[f"{point}{frame}_{axis}"] = unit
+    surface = forward["design_surface"]
+    if surface.get("file"):
+        tin = read_landxml(surface["file"], surface["surface"])
+        for k, point in enumerate(("tip", "left", "right")):
+            columns[f"grade_{point}"] = tin.heights(site[:, k]).height
+    elif m.grade is not None:
+        columns["grade_tip"] = m.grade.height(Q[:, :3])
+    poses = data.get("bucket_pose")
+    columns["published"] = (np.zeros(n, bool) if poses is None or not n
+                            else match_exact(stamp, poses.stamp_ns()) >= 0)
+    return columns, units
+
+
+def _site_points(data: dict[str, TopicArrays], surface: dict[str, Any], stamp: np.ndarray,
+                 points: np.ndarray) -> np.ndarray:
+    """``points`` (n, k, 3) of the base frame in the site frame, as the forward node places the
+    machine (``design_surface.site_pose_source``): a fixed pose, or the latest recorded
+    ``site_pose`` at most ``site_pose_max_age`` old (NaN where there is none)."""
+    if surface["site_pose_source"] != "topic":
+        return SitePose.from_rpy(surface["site_position"], surface["site_rpy"]).apply(points)
+    out = np.full(points.shape, np.nan)
+    poses = data.get("site_pose")
+    if poses is None or not len(poses) or not len(stamp):
+        return out
+    j = match_latest(stamp, poses.stamp_ns())
+    age = np.where(j >= 0, (stamp - poses.stamp_ns()[j]) * 1e-9, np.inf)
+    ok = age <= float(surface["site_pose_max_age"])
+    if ok.any():
+        position = vectors(poses, "pose.position")[j[ok]]
+        quaternion = np.column_stack([poses[f"pose.orientation.{a}"] for a in "xyzw"])[j[ok]]
+        pose = SitePose(Rotation.from_quat(quaternion).as_matrix(), position[:, None, :])
+        out[ok] = pose.apply(points[ok])
+    return out

@@ -64,6 +64,7 @@ MACHINE = Machine(
     limits=_limits,
     analyse=Hook("excavator_kinematics.evaluation:analyse"),
     synthesize=Hook("excavator_kinematics.synthetic:excavator_bag"),
+    samples=Hook("excavator_kinematics.evaluation:samples"),
     forward_node="excavator_forward",
     urdf=Hook("excavator_kinematics.urdf_joints:excavator_urdf"),
     scene=Hook("excavator_kinematics.scene:excavator_scene"),

@@ -37,6 +37,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import yaml
 from scipy.spatial.transform import Rotation
 
 from excavator_kinematics.design_surface import SitePose, Tin, cutting_edge, read_landxml, write_landxml
@@ -109,6 +110,7 @@ def heights(exc: Excavator, tin: Tin, site: SitePose, D: np.ndarray) -> np.ndarr
 
 def run(output: Path, seconds: float = 8.0, rate: float = 50.0, seed: int = 21) -> dict[str, float]:
     """The whole example; returns the RMS and max height error of the IMU estimate (m)."""
+    from manipulator_kinematics.bag.asbuilt import process_bag
     from manipulator_kinematics.bag.synthetic import Topic, write_bag
     from manipulator_kinematics.bag.visual import LEVEL_FRAME, add_visuals
     from manipulator_kinematics.codec.packed import serialize_unpadded
@@ -141,6 +143,14 @@ def run(output: Path, seconds: float = 8.0, rate: float = 50.0, seed: int = 21) 
     add_visuals(output / "bag", output / "bag", extra_static=[(SITE_FRAME, LEVEL_FRAME, heading)])
     tip_x = exc.pose(D)[:, 0]
     _plot(output / "grade_heights.png", tip_x[0] - tip_x, true, got)
+    # What the bucket dug: mk_asbuilt's tables and surfaces, with the forward node's settings for
+    # this site (the design and where the machine stands) in a params file beside the bag.
+    settings = output / "asbuilt_params.yaml"
+    settings.write_text(yaml.safe_dump({"/**/excavator_forward": {"ros__parameters": {"design_surface": {
+        "file": str(output / "ditch.xml"), "site_position": SITE.tolist(), "site_rpy": list(tilt)}}}}))
+    asbuilt = process_bag(output / "bag", output / "asbuilt", [settings], cell=0.1)
+    if asbuilt.error:
+        raise RuntimeError(f"as-built of the example's own bag: {asbuilt.error}")
     return {"rms_m": float(np.sqrt(np.mean(error**2))), "max_m": float(np.max(np.abs(error))),
             "samples": len(t)}
 

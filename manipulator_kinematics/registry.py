@@ -28,6 +28,11 @@ The bag hooks (None where a machine has none):
   smooth motion and the outputs it must publish for them (``scripts/make_golden_bags.py`` writes
   ``test/data/<name>_forward_golden``). Serial machines use
   :func:`manipulator_kinematics.bag.synthetic.serial_bag`.
+* ``samples(data, model, context) -> (columns, units)``: one row per input the machine's
+  forward node accepted, as ``{name: (N,) array}`` with ``stamp_ns`` first, and each column's
+  unit; the as-built tools (``mk_asbuilt``) write it as a Parquet table and map the cutting
+  edge from the columns ``left_site_x/y/z`` and ``right_site_x/y/z`` where a machine has them
+  (docs/asbuilt.md).
 * ``forward_node``: console script (= node name) of the machine's forward node; the golden-bag
   replay test (test/test_bag_ros.py) runs it on the golden bag, which must exist.
 
@@ -103,7 +108,7 @@ class Machine:
 
     ``factory`` builds the model from the validated parameter section; ``topics`` maps each
     topic its nodes use (relative name) to its message type (``pkg/msg/Type``); ``analyse``,
-    ``synthesize`` and ``forward_node`` are the bag hooks (module docstring), None where the
+    ``synthesize``, ``samples`` and ``forward_node`` are the bag hooks (module docstring), None where the
     machine has none; ``urdf`` builds the machine's URDF from a model (module docstring);
     ``scene`` draws it (module docstring).
     """
@@ -119,6 +124,7 @@ class Machine:
     limits: Callable[[Any], JointLimits] = _limits
     analyse: Callable[..., Any] | None = None
     synthesize: Callable[..., Any] | None = None
+    samples: Callable[..., Any] | None = None
     forward_node: str | None = None
     urdf: Callable[[Any], str] | None = None
     scene: Callable[[Any, Any], Any] | None = None  # (model, state array) -> scene.Scene

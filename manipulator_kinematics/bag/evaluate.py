@@ -156,11 +156,9 @@ def machines_in(data: Mapping[str, TopicArrays], setup: Setup) -> list[Machine]:
     return found
 
 
-def evaluate_bag(bag: BagReader, setup: Setup | None = None) -> tuple[dict[str, Any], list[Plot]]:
-    """The whole report (JSON-ready) and its plots; ``setup`` default: the shipped machines."""
-    setup = Setup() if setup is None else setup
-    if bag.message_count == 0:
-        raise BagError(f"{bag.path}: the bag holds no messages")
+def group_topics(bag: BagReader) -> dict[str, dict[str, str]]:
+    """The package's topics with messages in ``bag``: namespace -> package topic name -> recorded
+    topic; BagError when a topic has another type than the package's or none has messages."""
     ours = package_topics()
     grouped: dict[str, dict[str, str]] = {}
     for topic, info in bag.topics.items():
@@ -178,6 +176,15 @@ def evaluate_bag(bag: BagReader, setup: Setup | None = None) -> tuple[dict[str, 
             f"{bag.path}: none of the package's topics ({', '.join(sorted(ours))}) has messages "
             f"in the bag (it has {', '.join(bag.topics) or 'no topics'})"
         )
+    return grouped
+
+
+def evaluate_bag(bag: BagReader, setup: Setup | None = None) -> tuple[dict[str, Any], list[Plot]]:
+    """The whole report (JSON-ready) and its plots; ``setup`` default: the shipped machines."""
+    setup = Setup() if setup is None else setup
+    if bag.message_count == 0:
+        raise BagError(f"{bag.path}: the bag holds no messages")
+    grouped = group_topics(bag)
     arrays = bag.arrays([topic for names in grouped.values() for topic in names.values()])
     t0 = min(int(bag.log_times(t)[0]) for t, info in bag.topics.items() if info.count)
     end = max(int(bag.log_times(t)[-1]) for t, info in bag.topics.items() if info.count)

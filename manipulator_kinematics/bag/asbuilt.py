@@ -1,0 +1,330 @@
+"""mk_asbuilt: what the machines dug, from recorded bags: per-sample Parquet tables, as-built surfaces.
+
+    mk_asbuilt BAG [BAG ...] -o DIR [--cell M] [--params FILE ...] [--recover]
+    mk_asbuilt --fleet DIR_OR_GLOB -o DIR [--workers N | --scheduler ADDRESS] [...]
+
+For every machine found in a bag (as ``mk_evaluate`` finds them) whose package has a ``samples``
+hook (:mod:`manipulator_kinematics.registry`), writes ``DIR/<bag>/<namespace>_<machine>.parquet``:
+one row per input its forward node accepted (stamp, actuators, tool pose, cutting-edge corners in
+the base and site frame, grade heights where a design is set, status), units in the schema's
+metadata (docs/asbuilt.md). From the cutting edge's sweeps (:mod:`manipulator_kinematics.asbuilt`)
+it writes the as-built surface, the lowest elevation the edge reached per cell of the site frame:
+``asbuilt.xml`` (LandXML 1.2 TIN), ``asbuilt.csv`` (x, y, z per cell) and ``asbuilt.png`` (the
+elevation and, where a design surface is set, the lowest height above it reached: cut/fill).
+
+``--fleet`` evaluates every bag under a folder (or matching a glob) in parallel with Dask: local
+processes by default (``--workers``), a running Dask cluster with ``--scheduler``. It writes the
+per-bag outputs, one merged table ``fleet.parquet`` (columns ``bag``, ``namespace`` and
+``machine`` added), one merged as-built surface and ``fleet.json``: per bag, per machine, per
+day. A bag that cannot be read is reported and skipped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import glob
+import json
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from manipulator_kinematics.asbuilt import AsBuilt, lowest_elevation
+from manipulator_kinematics.bag.analysis import AnalysisContext
+from manipulator_kinematics.bag.cli import guarded
+from manipulator_kinematics.bag.evaluate import Setup, group_topics, load_setup, machines_in
+from manipulator_kinematics.bag.reader import BagReader
+from manipulator_kinematics.bag.types import BagError
+
+NAME = "mk_asbuilt"
+EDGE = ("left_site_x", "left_site_y", "left_site_z", "right_site_x", "right_site_y", "right_site_z")
+GRADE = ("grade_left", "grade_right")
+
+
+def parse_args(argv: Sequence[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog=NAME, description=__doc__.split("\n\n")[0])
+    parser.add_argument("bags", nargs="*", type=Path, help="bag folders (rosbag2: metadata.yaml + files)")
+    parser.add_argument("--fleet", metavar="DIR_OR_GLOB",
+                        help="every bag under this folder, or matching this glob, in parallel")
+    parser.add_argument("-o", "--output", type=Path, required=True, help="output folder")
+    parser.add_argument("--cell", type=float, default=0.25, help="as-built cell size, m (default 0.25)")
+    parser.add_argument("--params", nargs="+", type=Path, default=[], metavar="FILE",
+                        help="ROS parameter files with machines and node settings (as mk_evaluate)")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="--fleet: local worker processes (default: one per core)")
+    parser.add_argument("--scheduler", metavar="ADDRESS",
+                        help="--fleet: a running Dask scheduler (tcp://host:8786) instead of local processes")
+    parser.add_argument("--recover", action="store_true", help="read mcap bags whose recorder was killed")
+    args = parser.parse_args(argv)
+    if bool(args.bags) == bool(args.fleet):
+        parser.error("give bags or --fleet, not both and not neither")
+    if not (np.isfinite(args.cell) and 0.01 <= args.cell <= 100.0):
+        parser.error(f"--cell must be between 0.01 and 100 m, got {args.cell}")
+    if args.workers is not None and not 1 <= args.workers <= 256:
+        parser.error(f"--workers must be between 1 and 256, got {args.workers}")
+    return args
+
+
+@dataclass
+class BagResult:
+    """What one bag gave: its tables (path, rows, machine, namespace), as-built grids by machine
+    key, a summary for the fleet report, or the error that made it unreadable."""
+
+    bag: str
+    tables: list[dict[str, Any]] = field(default_factory=list)
+    grids: dict[str, AsBuilt] = field(default_factory=dict)
+    grade_grids: dict[str, AsBuilt] = field(default_factory=dict)
+    error: str | None = None
+
+
+@cache
+def _setup(params: tuple[Path, ...]) -> Setup:
+    """Models and node settings of ``params``, once per process (a fleet's workers build their
+    own: a model is not sent between processes)."""
+    return load_setup(params)
+
+
+def process_bag(path: Path, output: Path, params: Sequence[Path], cell: float,
+                recover: bool = False) -> BagResult:
+    """One bag's tables and as-built surfaces into ``output/<bag name>``, with the machines and
+    node settings of ``params`` (as mk_evaluate --params); a bag that cannot be read gives a
+    result with ``error`` set and writes nothing."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    setup = _setup(tuple(params))
+
+    result = BagResult(str(path))
+    try:
+        bag = BagReader(path, recover=recover)
+        if bag.message_count == 0:
+            raise BagError(f"{path}: the bag holds no messages")
+        grouped = group_topics(bag)
+        arrays = bag.arrays([topic for names in grouped.values() for topic in names.values()])
+    except BagError as error:
+        result.error = " ".join(str(error).split())
+        return result
+    folder = output / path.name
+    for namespace, names in sorted(grouped.items()):
+        data = {name: arrays[topic] for name, topic in names.items()}
+        prefix = "" if namespace == "/" else namespace.strip("/").replace("/", "_") + "_"
+        for machine in machines_in(data, setup):
+            if machine.samples is None:
+                continue
+            context = AnalysisContext(0, f"{prefix}{machine.name}_", setup.node_settings)
+            own = {topic: data[topic] for topic in machine.topics if topic in data}
+            with np.errstate(all="ignore"):  # a damaged record's 1e300 is a value, not a warning
+                columns, units = machine.samples(own, setup.model(machine), context)
+            key = f"{prefix}{machine.name}"
+            table = pa.table(columns)
+            metadata = {"units": json.dumps(_units(list(columns), units)), "machine": machine.name,
+                        "namespace": namespace, "bag": str(path)}
+            table = table.replace_schema_metadata(metadata)
+            folder.mkdir(parents=True, exist_ok=True)
+            file = folder / f"{key}.parquet"
+            pq.write_table(table, file)
+            stamps = np.asarray(columns["stamp_ns"])
+            result.tables.append({"file": str(file), "machine": machine.name, "namespace": namespace,
+                                  "rows": len(stamps), "days": _days(stamps)})
+            if all(c in columns for c in EDGE) and len(stamps):
+                left = np.column_stack([columns[c] for c in EDGE[:3]])
+                right = np.column_stack([columns[c] for c in EDGE[3:]])
+                grid = lowest_elevation(left, right, cell)
+                result.grids[key] = grid
+                _write_surface(grid, folder / f"{key}_asbuilt", f"{path.name} {key}")
+                if all(c in columns for c in GRADE):
+                    grade = lowest_elevation(np.column_stack([left[:, :2], columns[GRADE[0]]]),
+                                             np.column_stack([right[:, :2], columns[GRADE[1]]]), cell)
+                    result.grade_grids[key] = grade
+                _write_map(grid, result.grade_grids.get(key), folder / f"{key}_asbuilt.png",
+                           f"as-built: {path.name} {key}")
+    return result
+
+
+def _units(names: list[str], units: dict[str, str]) -> dict[str, str]:
+    """Each column's unit: its own entry, else the longest prefix entry (``grade_``)."""
+    out = {}
+    for name in names:
+        prefixes = [p for p in units if name.startswith(p)]
+        out[name] = units.get(name) or (units[max(prefixes, key=len)] if prefixes else "")
+    return out
+
+
+def _days(stamps: np.ndarray) -> dict[str, int]:
+    """Rows per UTC day of their stamps."""
+    if not len(stamps):
+        return {}
+    days, counts = np.unique(stamps // 86_400_000_000_000, return_counts=True)
+    return {str(datetime.date(1970, 1, 1) + datetime.timedelta(days=int(d))): int(c)
+            for d, c in zip(days, counts, strict=True)}
+
+
+def _write_surface(grid: AsBuilt, stem: Path, name: str) -> None:
+    grid.write_landxml(stem.with_suffix(".xml"), name)
+    grid.write_csv(stem.with_suffix(".csv"))
+
+
+def _write_map(grid: AsBuilt, grade: AsBuilt | None, path: Path, title: str) -> None:
+    """Elevation map and, with a design, the lowest height above it reached (cut/fill)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = 1 if grade is None else 2
+    figure, axes = plt.subplots(1, panels, figsize=(6.5 * panels, 5.8), squeeze=False)
+    extent = (0.0, grid.z.shape[1] * grid.cell, 0.0, grid.z.shape[0] * grid.cell)
+    image = axes[0, 0].imshow(grid.z, origin="lower", extent=extent, cmap="terrain")
+    figure.colorbar(image, ax=axes[0, 0], label="lowest edge elevation (m)")
+    axes[0, 0].set_title("as-built elevation")
+    if grade is not None:
+        placed = grade.on(grid.x0, grid.y0, grid.z.shape)
+        limit = max(float(np.nanmax(np.abs(placed.z))) if np.isfinite(placed.z).any() else 0.0, 0.01)
+        image = axes[0, 1].imshow(placed.z, origin="lower", extent=extent, cmap="RdBu_r",
+                                  vmin=-limit, vmax=limit)
+        figure.colorbar(image, ax=axes[0, 1], label="lowest height above design (m): + to cut, - over-dug")
+        axes[0, 1].set_title("cut / fill against the design")
+    for ax in axes[0]:
+        ax.set_xlabel(f"easting - {grid.x0:.2f} (m)")
+        ax.set_ylabel(f"northing - {grid.y0:.2f} (m)")
+        ax.set_aspect("equal")
+    figure.suptitle(f"{title} (cell {grid.cell:g} m)")
+    figure.tight_layout()
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+
+
+def fleet_bags(pattern: str) -> list[Path]:
+    """The bag folders (holding a metadata.yaml) under a folder or matching a glob, sorted."""
+    root = Path(pattern)
+    if root.is_dir():
+        found = {p.parent for p in root.rglob("metadata.yaml")}
+    else:
+        found = {Path(p) for p in glob.glob(pattern, recursive=True) if Path(p, "metadata.yaml").is_file()}
+    if not found:
+        raise BagError(f"--fleet {pattern}: no bag (a folder with metadata.yaml) found")
+    return sorted(found)
+
+
+def run_fleet(paths: Sequence[Path], output: Path, params: Sequence[Path], cell: float,
+              workers: int | None = None, scheduler: str | None = None,
+              recover: bool = False) -> list[BagResult]:
+    """Every bag processed by Dask (local processes, or the cluster at ``scheduler``), with a
+    progress bar on stderr; the results in the order of ``paths``."""
+    import dask
+    from dask import delayed
+
+    tasks = [delayed(process_bag)(p, output, tuple(params), cell, recover) for p in paths]
+    if scheduler:
+        from distributed import Client, progress
+
+        with Client(scheduler) as client:
+            futures = client.compute(tasks)
+            progress(futures)
+            return client.gather(futures)
+    from dask.diagnostics import ProgressBar
+
+    with ProgressBar(dt=1.0, out=sys.stderr):
+        return list(dask.compute(*tasks, scheduler="processes", num_workers=workers))
+
+
+def merge_tables(results: Sequence[BagResult], path: Path) -> int:
+    """One Parquet file of every table, with ``bag``, ``namespace`` and ``machine`` columns;
+    written table by table (one in memory at a time). Returns the rows."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    entries = [(r.bag, t) for r in results for t in r.tables]
+    if not entries:
+        return 0
+    schemas = [pq.read_schema(t["file"]).remove_metadata() for _, t in entries]
+    key = pa.schema([("bag", pa.string()), ("namespace", pa.string()), ("machine", pa.string())])
+    schema = pa.unify_schemas([key, *schemas])
+    rows = 0
+    with pq.ParquetWriter(path, schema) as writer:
+        for bag, entry in entries:
+            table = pq.read_table(entry["file"])
+            n = table.num_rows
+            columns = {"bag": pa.array([bag] * n, pa.string()),
+                       "namespace": pa.array([entry["namespace"]] * n, pa.string()),
+                       "machine": pa.array([entry["machine"]] * n, pa.string())}
+            for name in schema.names[3:]:
+                columns[name] = (table[name] if name in table.column_names
+                                 else pa.nulls(n, schema.field(name).type))
+            writer.write_table(pa.table(columns, schema=schema))
+            rows += n
+    return rows
+
+
+def fleet_report(results: Sequence[BagResult]) -> dict[str, Any]:
+    """Per bag (rows, machines, or its error), per machine kind and per day (rows, bags)."""
+    per_machine: dict[str, dict[str, Any]] = {}
+    per_day: dict[str, dict[str, Any]] = {}
+    bags = []
+    for r in results:
+        if r.error:
+            bags.append({"bag": r.bag, "error": r.error})
+            continue
+        bags.append({"bag": r.bag, "rows": sum(t["rows"] for t in r.tables),
+                     "machines": [f"{t['namespace']} {t['machine']}" for t in r.tables]})
+        for t in r.tables:
+            m = per_machine.setdefault(t["machine"], {"rows": 0, "bags": 0})
+            m["rows"] += t["rows"]
+            m["bags"] += 1
+            for day, count in t["days"].items():
+                d = per_day.setdefault(day, {"rows": 0, "bags": set()})
+                d["rows"] += count
+                d["bags"].add(r.bag)
+    return {"bags": bags, "skipped": sum(1 for r in results if r.error),
+            "machines": per_machine,
+            "days": {day: {"rows": d["rows"], "bags": len(d["bags"])} for day, d in sorted(per_day.items())}}
+
+
+def run_asbuilt(argv: Sequence[str]) -> int:
+    args = parse_args(argv)
+    _setup(tuple(args.params))  # a bad --params file stops here, before any bag is read
+    try:
+        args.output.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise BagError(f"cannot write to {args.output}: {error}") from None
+    if args.fleet:
+        paths = fleet_bags(args.fleet)
+        print(f"{NAME}: {len(paths)} bags", file=sys.stderr)
+        results = run_fleet(paths, args.output, args.params, args.cell, args.workers, args.scheduler,
+                            args.recover)
+    else:
+        results = [process_bag(p, args.output, args.params, args.cell, args.recover) for p in args.bags]
+    for r in results:
+        if r.error:
+            print(f"{NAME}: skipped {r.bag}: {r.error}", file=sys.stderr)
+        for t in r.tables:
+            print(f"{t['file']}: {t['rows']} rows ({t['namespace']} {t['machine']})")
+    report = fleet_report(results)
+    grids = [g for r in results for g in r.grids.values()]
+    if args.fleet:
+        rows = merge_tables(results, args.output / "fleet.parquet")
+        report["rows"] = rows
+        print(f"{args.output / 'fleet.parquet'}: {rows} rows from {len(results) - report['skipped']} bags")
+        if grids:
+            merged = AsBuilt.merge(grids)
+            grades = [g for r in results for g in r.grade_grids.values()]
+            _write_surface(merged, args.output / "fleet_asbuilt", "fleet as-built")
+            _write_map(merged, AsBuilt.merge(grades) if grades else None,
+                       args.output / "fleet_asbuilt.png", "fleet as-built")
+        (args.output / "fleet.json").write_text(json.dumps(report, indent=2), encoding="utf-8")
+    if all(r.error for r in results):
+        raise BagError("no bag could be read")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return guarded(NAME, run_asbuilt, argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
