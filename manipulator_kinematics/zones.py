@@ -1,0 +1,250 @@
+"""Avoidance zones: where no monitored point of a machine may go, and how fast it may approach.
+
+A zone file (YAML, read by the package's one safe loader) names zones under ``zones:``, each with
+a ``kind``, a ``frame`` (``base``: base_link; ``site``: x easting, y northing, z up, placed by the
+machine's site pose as the grade outputs are) and a ``margin`` (m) kept from its boundary:
+
+* ``ceiling`` (``height``): nothing above it (a power line); ``floor`` (``height``): nothing below;
+* ``wall``: a vertical half-plane through ``point`` [x, y] with the horizontal ``normal`` [nx, ny]
+  pointing into the forbidden side (a trench edge, a road);
+* ``box``: the axis-aligned box ``min`` [x, y, z] .. ``max`` (a building, a parked truck);
+* ``sector``: swing angles ``from`` .. ``to`` (rad, counter-clockwise from base x, base frame
+  only): the points' bearings about the swing axis (the machine's own tail side, a road);
+* ``surface``: a LandXML TIN (``file``, ``surface``: its name, "" = the only one) with ``side:
+  below`` (nothing below it: a buried service's protective surface) or ``above``.
+
+**Clearance** of a point is its signed distance from the zone grown by the margin: positive
+outside, zero on the boundary plus margin, negative inside; with it the direction ``g`` in which
+it grows (vertical for ceilings, floors and surfaces, the wall's normal, the box's outward
+direction, the tangent of the swing for sectors, at the point's radius).
+
+**Speed scale.** A command moves each point at velocity ``v`` (at full command); it approaches a
+zone at ``u = -g . v``. Scaled by ``s``, the point needs ``s u dt`` until the next command can
+react (``dt``, the control period) and ``s^2 u T / 2`` to stop, where ``T = max_i |Ddot_i| /
+a_i`` is the time the actuators need to stop the unscaled command at their deceleration limits
+``a_i`` (every actuator slows in proportion, so the motion keeps its direction and the point
+decelerates along it). The largest ``s`` in [0, 1] with ``s u dt + s^2 u T / 2 <= c`` for every
+approaching (point, zone) pair is the command's scale; a pair with ``u <= 0`` (moving away or
+along) never limits it, so a machine inside a zone may only move out. The velocity IK applies this
+one factor to its whole command: it slows approaching a zone and stops at it, never bent.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from manipulator_kinematics.config import Number, Numbers, Schema, Text, require, validate
+from manipulator_kinematics.params import ConfigError, read_document
+
+KINDS = ("ceiling", "floor", "wall", "box", "sector", "surface")
+FRAMES = ("base", "site")
+#: Zones in one file at the most (each adds its pairs to every command's check).
+MAX_ZONES = 64
+
+_COMMON: Schema = {
+    "kind": Text(choices=KINDS, doc="what the zone is"),
+    "frame": Text(choices=FRAMES, default="base", doc="base (base_link) or site"),
+    "margin": Number(min=0.0, max=100.0, unit="m", default=0.0, doc="distance kept from the boundary"),
+}
+_COORD = Number(min=-1e7, max=1e7, unit="m")
+SCHEMAS: dict[str, Schema] = {
+    "ceiling": {**_COMMON, "height": Number(min=-1e4, max=1e4, unit="m")},
+    "floor": {**_COMMON, "height": Number(min=-1e4, max=1e4, unit="m")},
+    "wall": {**_COMMON, "point": Numbers(2, _COORD), "normal": Numbers(2, Number(min=-1e3, max=1e3))},
+    "box": {**_COMMON, "min": Numbers(3, _COORD), "max": Numbers(3, _COORD)},
+    "sector": {**_COMMON, "from": Number(min=-2 * math.pi, max=2 * math.pi, unit="rad"),
+               "to": Number(min=-2 * math.pi, max=2 * math.pi, unit="rad")},
+    "surface": {**_COMMON, "file": Text(empty=False), "surface": Text(default=""),
+                "side": Text(choices=("below", "above"))},
+}
+
+
+class Surface(Protocol):
+    """A TIN's heights: ``heights(points (..., 3)).height`` (..., ) above it, NaN outside it."""
+
+    def heights(self, points: Any) -> Any: ...
+
+
+@dataclass(frozen=True)
+class Zone:
+    """One zone (module docstring); ``values`` as validated, ``surface`` for ``kind: surface``."""
+
+    name: str
+    kind: str
+    frame: str
+    margin: float
+    values: Mapping[str, Any]
+    surface: Surface | None = None
+
+    def clearance(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Clearance (..., P) of points (..., P, 3) in the zone's frame, and its direction g
+        (..., P, 3) (unit, or zero where it has none)."""
+        p = np.asarray(points, dtype=float)
+        g = np.zeros_like(p)
+        v, m = self.values, self.margin
+        if self.kind in ("ceiling", "floor"):
+            up = 1.0 if self.kind == "floor" else -1.0
+            g[..., 2] = up
+            return up * (p[..., 2] - v["height"]) - m, g
+        if self.kind == "wall":
+            n = np.asarray(v["normal"], float) / np.linalg.norm(v["normal"])
+            g[..., :2] = -n
+            return -((p[..., :2] - v["point"]) @ n) - m, g
+        if self.kind == "box":
+            lo, hi = np.asarray(v["min"], float), np.asarray(v["max"], float)
+            centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+            d = p - centre
+            q = np.abs(d) - half
+            outside = np.maximum(q, 0.0)
+            distance = np.linalg.norm(outside, axis=-1)
+            inside = np.minimum(np.max(q, axis=-1), 0.0)
+            out_g = outside * np.sign(d) / np.where(distance > 0, distance, 1.0)[..., None]
+            axis = np.argmax(q, axis=-1)
+            in_g = np.sign(np.take_along_axis(d, axis[..., None], -1)) * (np.arange(3) == axis[..., None])
+            return distance + inside - m, np.where((distance > 0)[..., None], out_g, in_g)
+        if self.kind == "sector":
+            return _sector(p, v["from"], v["to"], m, g)
+        assert self.surface is not None
+        sign = 1.0 if v["side"] == "below" else -1.0
+        h = np.asarray(self.surface.heights(p).height, dtype=float)
+        g[..., 2] = np.where(np.isfinite(h), sign, 0.0)
+        return np.where(np.isfinite(h), sign * h - m, np.inf), g
+
+
+def _sector(p: np.ndarray, start: float, end: float, margin: float,
+            g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Clearance from the swing sector [start, end] (ccw), as arc length at each point's radius."""
+    r = np.hypot(p[..., 0], p[..., 1])
+    bearing = np.arctan2(p[..., 1], p[..., 0])
+    width = np.mod(end - start, 2 * np.pi)
+    into = np.mod(bearing - start, 2 * np.pi)  # ccw angle from the sector's start
+    inside = into <= width
+    past_end = into - width  # ccw beyond the end
+    before_start = 2 * np.pi - into  # cw before the start
+    nearer_end = np.where(inside, width - into < into, past_end < before_start)
+    angle = np.where(inside, -np.minimum(into, width - into), np.minimum(past_end, before_start))
+    tangent = np.stack((-np.sin(bearing), np.cos(bearing), np.zeros_like(bearing)), axis=-1)
+    # Away from the sector: ccw past its end, cw before its start (and the same way out from inside).
+    g[...] = np.where(nearer_end[..., None], tangent, -tangent) * (r > 1e-9)[..., None]
+    return np.where(r > 1e-9, r * angle - margin, np.inf), g
+
+
+def load_zones(path: str | Path, read_surface: Callable[[str, str], Surface] | None = None) -> list[Zone]:
+    """The zones of a zone file (module docstring), in file order; ConfigError naming the key
+    (``zones.<name>.<key>``) for anything malformed. ``read_surface(file, name)`` reads a TIN
+    (a relative ``file`` is relative to the zone file); ``surface`` zones need it."""
+    path = Path(path)
+    document = read_document(path)
+    require(isinstance(document, Mapping) and set(document) == {"zones"}, "zones",
+            f"{path}: expected one top-level key 'zones' (a mapping of zone names to zones)")
+    entries = document["zones"]
+    require(isinstance(entries, Mapping) and entries, "zones", "expected a mapping of zone names to zones")
+    require(len(entries) <= MAX_ZONES, "zones", f"{len(entries)} zones; at most {MAX_ZONES}")
+    zones = []
+    for name, entry in entries.items():
+        key = f"zones.{name}"
+        require(isinstance(entry, Mapping) and "kind" in entry, key, "expected a mapping with a 'kind'")
+        kind = entry["kind"]
+        require(kind in SCHEMAS, f"{key}.kind", f"expected one of {', '.join(KINDS)}, got {kind!r}")
+        values = validate(entry, SCHEMAS[kind], key)
+        surface = None
+        if kind == "wall":
+            require(math.hypot(*values["normal"]) > 1e-9, f"{key}.normal", "must not be zero")
+        elif kind == "box":
+            require(all(a < b for a, b in zip(values["min"], values["max"], strict=True)), f"{key}.max",
+                    "every coordinate must be above min's")
+        elif kind == "sector":
+            require(values["frame"] == "base", f"{key}.frame", "a swing sector is in the base frame")
+            require(np.mod(values["to"] - values["from"], 2 * np.pi) > 0.0, f"{key}.to",
+                    "must differ from 'from' (the sector runs counter-clockwise from 'from' to 'to')")
+        elif kind == "surface":
+            require(read_surface is not None, key, "surface zones are not supported by this machine")
+            file = Path(values["file"])
+            file = file if file.is_absolute() else path.parent / file
+            try:
+                surface = read_surface(str(file), values["surface"])  # type: ignore[misc]
+            except (OSError, ValueError) as error:
+                raise ConfigError(f"{key}.file: {' '.join(str(error).split())}") from None
+        zones.append(Zone(str(name), kind, values["frame"], values["margin"], values, surface))
+    return zones
+
+
+@dataclass(frozen=True)
+class Check:
+    """One command checked: ``scale`` in [0, 1], the limiting zone and point (None where no zone
+    limits it), and per zone the smallest clearance and the point that has it."""
+
+    scale: float
+    zone: str | None
+    point: str | None
+    clearance: dict[str, tuple[float, str]]
+
+    @property
+    def violated(self) -> list[str]:
+        """Zones some monitored point is inside (clearance < 0)."""
+        return [name for name, (c, _) in self.clearance.items() if c < 0.0]
+
+
+def scale_for(clearance: np.ndarray, approach: np.ndarray, stop_time: float, period: float) -> np.ndarray:
+    """Largest scale s in [0, 1] per pair with ``s u period + s^2 u T / 2 <= c`` (module
+    docstring); 1 where the pair is not approaching (u <= 0), 0 where it approaches at c <= 0."""
+    c, u = np.asarray(clearance, float), np.asarray(approach, float)
+    s = np.ones(np.broadcast(c, u).shape)
+    near = u > 0.0
+    c, u = np.broadcast_to(c, s.shape)[near], np.broadcast_to(u, s.shape)[near]
+    a, b = 0.5 * u * stop_time, u * period
+    with np.errstate(divide="ignore", invalid="ignore"):
+        root = np.where(a > 0.0, (np.sqrt(b * b + 4.0 * a * np.maximum(c, 0.0)) - b) / (2.0 * a),
+                        np.maximum(c, 0.0) / b)
+    s[near] = np.clip(np.where(c > 0.0, root, 0.0), 0.0, 1.0)
+    return s
+
+
+class Monitor:
+    """The zones of a machine and its monitored points (by name), checked per command."""
+
+    def __init__(self, zones: Sequence[Zone], points: Sequence[str]) -> None:
+        self.zones, self.points = list(zones), list(points)
+
+    def check(self, positions: np.ndarray, velocities: np.ndarray, stop_time: float, period: float,
+              site: tuple[np.ndarray, np.ndarray] | None = None) -> Check:
+        """``positions``, ``velocities`` (P, 3) of the monitored points in the base frame (the
+        velocities at full command); ``stop_time`` T and ``period`` dt (module docstring);
+        ``site`` = (R, t) with p_site = R p + t, needed by site-frame zones (without it they are
+        reported at clearance -inf and stop every approach: no pose, no motion toward them)."""
+        p, v = np.asarray(positions, float), np.asarray(velocities, float)
+        scale, limit_zone, limit_point = 1.0, None, None
+        clearance: dict[str, tuple[float, str]] = {}
+        for zone in self.zones:
+            if zone.frame == "site":
+                if site is None:
+                    clearance[zone.name] = (-math.inf, "")
+                    scale, limit_zone, limit_point = 0.0, zone.name, None
+                    continue
+                R, t = site
+                zp, zv = p @ np.asarray(R).T + t, v @ np.asarray(R).T
+            else:
+                zp, zv = p, v
+            c, g = zone.clearance(zp)
+            u = -np.sum(g * zv, axis=-1)
+            k = int(np.argmin(c))
+            clearance[zone.name] = (float(c[k]), self.points[k])
+            s = scale_for(c, u, stop_time, period)
+            j = int(np.argmin(s))
+            if s[j] < scale:
+                scale, limit_zone, limit_point = float(s[j]), zone.name, self.points[j]
+        return Check(scale, limit_zone, limit_point, clearance)
+
+
+def stop_time(rates: np.ndarray, decelerations: np.ndarray) -> float:
+    """T = max_i |Ddot_i| / a_i: how long the actuators need to stop a command at their limits."""
+    return float(np.max(np.abs(np.asarray(rates, float)) / np.asarray(decelerations, float), initial=0.0))
+
+
+__all__ = ["KINDS", "Check", "Monitor", "Zone", "load_zones", "scale_for", "stop_time"]
