@@ -141,3 +141,79 @@ def test_a_malformed_zone_file_is_refused_naming_the_key(tmp_path: Path, text: s
     with pytest.raises(ConfigError) as error:
         load_zones(write(tmp_path, text))
     assert str(error.value).split(":")[0] == key
+
+
+@pytest.mark.parametrize("name", ["excavator_cet200_family.yaml", "wheel_loader_wl20.yaml",
+                                  "knuckle_crane_kc100.yaml"])
+def test_monitored_points_move_as_their_positions_differentiate(name: str) -> None:
+    from manipulator_kinematics.hydraulic import HydraulicModel
+    from manipulator_kinematics.params import config_path
+
+    model = HydraulicModel.from_file(config_path(name))
+    D = model.lower + RNG.uniform(0.2, 0.8, (5, model.m)) * (model.upper - model.lower)
+    D_dot = RNG.uniform(-1, 1, (5, model.m)) * np.asarray(model.max_speed)
+    names, p, v = model.monitored(D, D_dot)
+    pins = model.pins(D)
+    assert names[-2:] == ["left_corner", "right_corner"] and set(names[:-2]) == set(pins)
+    np.testing.assert_allclose(p[:, 0], pins[names[0]], atol=1e-12)
+    left, right = model.corners(D)
+    np.testing.assert_allclose(p[:, -2], left, atol=1e-12)
+    np.testing.assert_allclose(p[:, -1], right, atol=1e-12)
+    h = 1e-6  # central differences of the positions along the motion
+    ahead, behind = model.monitored(D + h * D_dot, D_dot)[1], model.monitored(D - h * D_dot, D_dot)[1]
+    np.testing.assert_allclose(v, (ahead - behind) / (2 * h), atol=1e-6)
+
+
+def drive(model, monitor: Monitor, D: np.ndarray, twist, seconds: float, period: float = 0.05,
+          decel_time: float = 0.3):
+    """Closed loop as the velocity IK runs it: the target twist's rates (eq. 9) capped at the
+    actuators' speeds in their own direction, scaled by the zones; the actuators slow at most at
+    max_speed / decel_time. Returns the smallest clearance per step and the states."""
+    a = np.asarray(model.max_speed) / decel_time
+    rate = np.zeros(model.m)
+    clearances, states = [], []
+    for k in range(int(seconds / period)):
+        target = model.cylinder_rates(D, twist(k * period)).D_dot
+        target = target / max(1.0, float(np.max(np.abs(target) / model.max_speed)))
+        _, p, v = model.monitored(D, target)
+        check = monitor.check(p, v, stop_time(target, a), period)
+        wanted = check.scale * target
+        rate = np.clip(wanted, rate - a * period, rate + a * period)
+        D_next = D + rate * period
+        if np.any(D_next < model.lower) or np.any(D_next > model.upper):  # a stroke end: stop there
+            rate[:] = 0.0
+            D_next = D
+        D = D_next
+        clearances.append(min(c for c, _ in check.clearance.values()))
+        states.append(D.copy())
+    _, p, _ = model.monitored(D, np.zeros(model.m))
+    final = min(z.clearance(p)[0].min() for z in monitor.zones)
+    return np.array(clearances), np.array(states), final
+
+
+@pytest.mark.parametrize("name", ["excavator_cet200_family.yaml", "wheel_loader_wl20.yaml",
+                                  "knuckle_crane_kc100.yaml"])
+def test_random_commands_never_cross_a_ceiling_and_still_reach_it(name: str) -> None:
+    from manipulator_kinematics.hydraulic import HydraulicModel
+    from manipulator_kinematics.params import config_path
+
+    model = HydraulicModel.from_file(config_path(name))
+    D0 = np.asarray(model.reference, float)
+    names, p, _ = model.monitored(D0, np.zeros(model.m))
+    height = float(p[:, 2].max()) + 1.0  # 1 m above the highest point at the reference state
+    monitor = Monitor([zone("ceiling", 0.2, height=height)], names)
+    rng = np.random.default_rng(7)
+    nq = len(model.task_names)
+    for trial in range(3):
+        direction = rng.normal(size=nq)
+        direction[2] = abs(direction[2]) + 1.0  # upward on the whole
+        clear, states, final = drive(model, monitor, D0.copy(), lambda t, d=direction: 0.6 * d, 6.0)
+        assert clear.min() >= -1e-6, f"trial {trial}: a point crossed the ceiling plus margin"
+    # Straight up at full speed: the machine rises until a point stops at the ceiling, near it.
+    up = np.zeros(nq)
+    up[2] = 1.0
+    clear, states, final = drive(model, monitor, D0.copy(), lambda t: up, 15.0)
+    assert clear.min() >= -1e-6
+    moved = np.ptp(states, axis=0).max()
+    assert moved > 0.05
+    assert final < 0.05 or np.any(np.isclose(states[-1], model.upper) | np.isclose(states[-1], model.lower))

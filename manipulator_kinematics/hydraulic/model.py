@@ -405,6 +405,32 @@ class HydraulicModel:
         half = 0.5 * self.description.width * np.stack((-np.sin(t1), np.cos(t1), np.zeros_like(t1)), axis=-1)
         return Q[..., :3] + half, Q[..., :3] - half
 
+    def monitored(self, D: Any, D_dot: Any) -> tuple[list[str], np.ndarray, np.ndarray]:
+        """Every pin and both tool corners in the base frame with their velocities for actuator
+        rates ``D_dot``: names, positions (..., P, 3), velocities (..., P, 3) (the points an
+        avoidance zone watches, :mod:`manipulator_kinematics.zones`)."""
+        D = self.validate(D)
+        D_dot = _finite(D_dot, D.shape, "D_dot")
+        solved = self._solve(D, D_dot)
+        names = [*solved.pins, "left_corner", "right_corner"]
+        r = np.stack([jet.p[..., 0] for jet in solved.pins.values()], axis=-1)
+        z = np.stack([jet.p[..., 1] for jet in solved.pins.values()], axis=-1)
+        r_dot = np.stack([jet.v[..., 0] for jet in solved.pins.values()], axis=-1)
+        z_dot = np.stack([jet.v[..., 1] for jet in solved.pins.values()], axis=-1)
+        t1 = D[..., 0:1] if self.swing else np.zeros(D.shape[:-1] + (1,))
+        w = D_dot[..., 0:1] if self.swing else np.zeros(D.shape[:-1] + (1,))
+        c, s = np.cos(t1), np.sin(t1)
+        p = np.stack((r * c, r * s, z), axis=-1)
+        v = np.stack((r_dot * c - r * s * w, r_dot * s + r * c * w, z_dot), axis=-1)
+        Q = solved.Q
+        half = 0.5 * self.description.width
+        across = half * np.concatenate((-s, c, np.zeros_like(c)), axis=-1)
+        turning = half * np.concatenate((-c * w, -s * w, np.zeros_like(c)), axis=-1)
+        tool, tool_v = Q.p[..., :3], Q.v[..., :3]
+        p = np.concatenate((p, (tool + across)[..., None, :], (tool - across)[..., None, :]), axis=-2)
+        v = np.concatenate((v, (tool_v + turning)[..., None, :], (tool_v - turning)[..., None, :]), axis=-2)
+        return names, p, v
+
     def margins(self, D: Any) -> np.ndarray:
         """Dead-centre margin (rad) of every dyad (..., n_dyads), in the order of ``dyad_names``."""
         return self._solve(self.validate(D)).margins
