@@ -196,6 +196,29 @@ def test_cylinder_speed_and_stroke_statistics(tmp_path: Path) -> None:
     assert machine["accepted_inputs"] == 98
 
 
+def test_non_finite_cylinder_values_are_counted_per_field_not_dropped(tmp_path: Path) -> None:
+    """A cylinder whose recorded values are all NaN keeps its row, with its NaN count (the fuzzer's
+    bag had the boom cylinder vanish from the report); partly NaN fields are counted too."""
+    topics = excavator_bag(EXC, 100, RATE)
+
+    def spoil(f: dict[str, np.ndarray]) -> None:
+        f["position"][:, 0] = np.nan  # boom length: every message
+        f["velocity"][[2, 3, 4], 1] = np.inf  # arm speed: 3 messages
+
+    topics["/cylinder_lengths"] = changed(topics["/cylinder_lengths"], spoil)
+    write_bag(tmp_path / "bag", topics)
+    result = evaluate_cli(str(tmp_path / "bag"), "-o", str(tmp_path / "out"), "--no-plots")
+    assert result.returncode == 0, result.stderr
+    actuators = json.loads((tmp_path / "out" / "report.json").read_text())["machines"][0]["actuators"]
+    boom, arm, bucket = (actuators[name] for name in CYLINDERS)
+    assert boom["samples"] == 100 and boom["non_finite_length"] == 100 and boom["length_max_m"] is None
+    assert arm["non_finite_speed"] == 3 and arm["non_finite_length"] == 0 and arm["speed_max_mps"] is not None
+    assert bucket["non_finite_length"] == bucket["non_finite_speed"] == 0
+    row = next(line for line in result.stdout.splitlines() if line.startswith(CYLINDERS[0]))
+    assert row.split()[-2:] == ["100", "0"], row
+    assert f"{CYLINDERS[0]} length 100 of 100, {CYLINDERS[1]} speed 3 of 100" in result.stdout, result.stdout
+
+
 def test_machines_are_found_per_namespace(tmp_path: Path) -> None:
     named = {f"/site/exc1{t}": v for t, v in excavator_bag(EXC, 60, RATE).items()}
     named |= {f"/arm{t}": v for t, v in serial_bag(Scara.default(), 60, RATE).items()}
