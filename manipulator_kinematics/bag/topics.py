@@ -77,7 +77,8 @@ def node_settings() -> dict[str, dict[str, Any]]:
 
 def encode_recorded_settings(settings: dict[str, dict[str, Any]]) -> str:
     """``custom_data[SETTINGS_KEY]`` of a bag: full node name (``/ns/node``) -> parameters (nested)."""
-    return json.dumps(settings, sort_keys=True, separators=(",", ":"))
+    # default=str: a byte-array parameter's bytes (nothing an analysis reads) as text.
+    return json.dumps(settings, sort_keys=True, separators=(",", ":"), default=str)
 
 
 def decode_recorded_settings(text: str) -> dict[str, dict[str, Any]]:
