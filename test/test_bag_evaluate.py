@@ -5,6 +5,7 @@ registered machine found in its own synthetic bag (and no other), and readable f
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from collections.abc import Callable
@@ -27,6 +28,7 @@ from manipulator_kinematics.bag.synthetic import (
     serial_bag,
     write_bag,
 )
+from manipulator_kinematics.bag.topics import SETTINGS_KEY, encode_recorded_settings
 from manipulator_kinematics.bag.types import BagError, decode_messages, encode_messages
 from manipulator_kinematics.bag.writer import BagWriter
 from manipulator_kinematics.params import config_path
@@ -383,3 +385,62 @@ def test_params_files_with_a_bad_machine_section_are_refused(tmp_path: Path, tex
     with pytest.raises(BagError, match="--params") as error:
         load_setup([path])
     assert words in str(error.value)
+
+
+def with_settings(bag: Path, settings: dict) -> Path:
+    """``bag`` with node settings in its metadata's custom_data, as ``mk_record`` stores them."""
+    meta = bag / "metadata.yaml"
+    info = yaml.safe_load(meta.read_text(encoding="utf-8"))
+    info["rosbag2_bagfile_information"]["custom_data"] = {SETTINGS_KEY: encode_recorded_settings(settings)}
+    meta.write_text(yaml.safe_dump(info), encoding="utf-8")
+    return bag
+
+
+def test_node_settings_come_from_the_bag_else_are_named_as_assumed(tmp_path: Path) -> None:
+    """Without settings in the bag the report says it assumed the package's defaults; with them
+    (a filtered acceleration, as the demo runs) it uses them; ``--params`` wins over the bag."""
+    result = evaluate_cli(str(DATA / "excavator_forward_golden"), "-o", str(tmp_path / "a"), "--no-plots")
+    assert ("node settings of excavator_forward, excavator_velocity_ik: not in the bag, assumed the "
+            "package's defaults") in result.stdout, result.stdout
+    assert "excavator_forward.acceleration_time_constant 0," in result.stdout, result.stdout
+
+    shutil.copytree(DATA / "excavator_forward_golden", tmp_path / "bag")
+    bag = with_settings(tmp_path / "bag", {
+        "/excavator_forward": {"acceleration_time_constant": 0.03, "grade": {"enabled": False}},
+        "/elsewhere/excavator_forward": {"acceleration_time_constant": 7.0},  # another namespace
+    })
+    report, _ = evaluate_bag(BagReader(bag), SETUP)
+    machine = only(report, "excavator")
+    assert machine["settings_sources"] == {
+        "excavator_forward": "recorded in the bag",
+        "excavator_velocity_ik": "not in the bag, assumed the package's defaults",
+    }
+    assert "acceleration_time_constant 0.03 s" in machine["consistency"]["bucket_accel"]["not_compared"]
+    assert machine["settings_used"]["excavator_forward.swing_max_age"] == 0.1  # the rest from the package
+
+    params = tmp_path / "params.yaml"
+    params.write_text("/**/excavator_forward:\n  ros__parameters:\n    acceleration_time_constant: 0.0\n")
+    report, _ = evaluate_bag(BagReader(bag), load_setup([params]))
+    machine = only(report, "excavator")
+    assert machine["settings_sources"]["excavator_forward"] == "recorded in the bag, --params"
+    assert machine["consistency"]["bucket_accel"]["linear_mps2"]["max"] < 1e-12
+
+
+def test_inputs_without_outputs_are_counted_and_a_shortfall_flagged(tmp_path: Path) -> None:
+    """The fuzzer's bag had 1491 cylinder_lengths and 1163 bucket_pose unflagged. Outputs lost in
+    the middle are missing; the first ones (before the recorder had the output topic) are not."""
+    topics = excavator_bag(EXC, 100, RATE)
+    pose = topics["/bucket_pose"]
+    keep = np.r_[3:40, 45:100]  # 3 at the start (recording not yet there), 5 lost in the middle
+    topics["/bucket_pose"] = Topic(pose.msgtype, pose.log_time[keep], [pose.raw[i] for i in keep])
+    write_bag(tmp_path / "bag", topics)
+    result = evaluate_cli(str(tmp_path / "bag"), "-o", str(tmp_path / "out"), "--no-plots")
+    assert result.returncode == 0, result.stderr
+    machine = json.loads((tmp_path / "out" / "report.json").read_text())["machines"][0]
+    counts = machine["inputs_to_outputs"]
+    assert counts["bucket_pose"] == {
+        "recorded": 100, "accepted": 100, "due": 97, "answered": 92, "missing": 5, "outside_recording": 3
+    }
+    assert counts["bucket_twist"]["missing"] == 0 and counts["bucket_accel"]["due"] == 99
+    assert "SHORTFALL: 5 of 97 due inputs have no bucket_pose" in result.stdout, result.stdout
+    assert result.stdout.count("SHORTFALL") == 1

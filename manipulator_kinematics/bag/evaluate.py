@@ -48,6 +48,7 @@ from manipulator_kinematics.registry import Machine, by_section, machines
 NAME = "mk_evaluate"
 # Points per curve in a plot: each bin keeps its min and max, so spikes stay visible.
 PLOT_BINS = 2000
+ASSUMED = "not in the bag, assumed the package's defaults"
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
@@ -110,8 +111,8 @@ class Setup:
         for name in dict.fromkeys([*self.node_settings, *here]):
             layers = (self.node_settings.get(name, {}), here.get(name, {}), self.given.get(name, {}))
             settings[name] = merge(*layers)
-            origin = ["recorded in the bag"] if name in here else ["not in the bag: the package's defaults"]
-            sources[name] = ", ".join(origin + ["--params"] * (name in self.given))
+            origin = "recorded in the bag" if name in here else ASSUMED
+            sources[name] = origin + ", --params" * (name in self.given)
         return settings, sources
 
 
@@ -329,11 +330,12 @@ def render(report: dict[str, Any]) -> str:
     ]
     for machine in report["machines"]:
         out += ["", f"{machine['kind']} in namespace {machine['namespace']}"]
-        if machine["settings_sources"]:
-            where = "; ".join(f"{node}: {source}" for node, source in machine["settings_sources"].items())
-            used = machine.get("settings_used", {})
-            values = ", ".join(f"{key} {_setting(value)}" for key, value in used.items())
-            out.append(f"node settings ({where})" + (f": {values}" if values else ""))
+        by_source: dict[str, list[str]] = {}
+        for node, source in machine["settings_sources"].items():
+            by_source.setdefault(source, []).append(node)
+        out += [f"node settings of {', '.join(nodes)}: {source}" for source, nodes in by_source.items()]
+        if used := machine.get("settings_used"):
+            out.append("  used: " + ", ".join(f"{key} {_setting(value)}" for key, value in used.items()))
         errors = []
         for topic, entry in machine.get("consistency", {}).items():
             for quantity, stats in entry.items():
