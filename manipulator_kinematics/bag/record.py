@@ -142,6 +142,9 @@ class Recorder:
         # Nodes whose parameters are still to be asked for: full name -> when first seen.
         self._asking: dict[str, float | None] = {}
         self._clients: dict[str, Any] = {}
+        # Done callbacks of service calls run in the executor, outside executor.spin's guard.
+        self._on_listed = guarded_callback(self._listed, self._log, "a node's parameter names")
+        self._on_got = guarded_callback(self._got, self._log, "a node's parameters")
 
     def pending(self) -> list[str]:
         return [t for t in self.wanted if t not in self.counts and t not in self.refused]
@@ -174,10 +177,9 @@ class Recorder:
         """Ask every node that publishes a recorded topic for its parameters, once; store them in
         the bag's metadata (``custom_data[SETTINGS_KEY]``) when they come (the discovery timer).
 
-        rosbag2's metadata ``custom_data`` is what rosbag2 (``StorageOptions.custom_data``) and
-        rosbags read and write; a topic would be published again by every replay. What ``evaluate``
-        needs is the settings the nodes ran with, which only the nodes know: their launch may have
-        used any params files and ``-p`` overrides."""
+        Asked of the nodes, not read from params files: their launch may have used any files and
+        ``-p`` overrides. In ``custom_data``, which rosbag2 (``StorageOptions.custom_data``) and
+        rosbags keep: a topic would be published again by every replay."""
         for topic in self.counts:
             for info in self.node.get_publishers_info_by_topic(topic):
                 name = f"{info.node_namespace.rstrip('/')}/{info.node_name}"
@@ -187,14 +189,16 @@ class Recorder:
             if since is None:
                 continue  # answer pending
             lister = self._client(ListParameters, f"{name}/list_parameters")
-            if not lister.service_is_ready():
+            # Both services matched first: a request to an unmatched server can be lost.
+            getter = self._client(GetParameters, f"{name}/get_parameters")
+            if not (lister.service_is_ready() and getter.service_is_ready()):
                 if time.monotonic() - since > SETTINGS_TIMEOUT:
                     del self._asking[name]
                     say(f"{name} offers no parameter services: its settings are not in the bag")
                 continue
             self._asking[name] = None
             lister.call_async(ListParameters.Request()).add_done_callback(
-                lambda future, name=name: self._listed(name, future.result())
+                lambda future, name=name: self._on_listed(name, future.result())
             )
 
     def _client(self, kind: type, service: str) -> Any:
@@ -205,10 +209,8 @@ class Recorder:
     def _listed(self, name: str, response: Any) -> None:
         names = list(response.result.names) if response is not None else []
         getter = self._client(GetParameters, f"{name}/get_parameters")
-        request = GetParameters.Request(names=names)
-        getter.call_async(request).add_done_callback(
-            lambda future: self._got(name, names, future.result())
-        )
+        future = getter.call_async(GetParameters.Request(names=names))
+        future.add_done_callback(lambda done: self._on_got(name, names, done.result()))
 
     def _got(self, name: str, names: list[str], response: Any) -> None:
         values = [] if response is None else [parameter_value_to_python(v) for v in response.values]
