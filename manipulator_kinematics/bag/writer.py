@@ -101,7 +101,8 @@ class BagWriter:
     def set_custom_data(self, key: str, value: str) -> None:
         """One entry of rosbag2's metadata ``custom_data`` (text -> text), kept by rosbag2 and rosbags."""
         self._writer.set_custom_data(key, value)
-        self._write_metadata()
+        # A flush, not only the metadata: metadata.yaml's counts must not claim unflushed messages.
+        self.flush()
 
     def write(self, topic: str, stamp_ns: int, raw: bytes | memoryview) -> None:
         """Store one serialised message (CDR bytes exactly as received) at record time ``stamp_ns``."""
