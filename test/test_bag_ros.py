@@ -623,6 +623,8 @@ def test_demo_bag_replays_skipping_tf_and_the_recorded_settings_reach_evaluate(
         probe.node.create_subscription(
             replay.message_class(info.msgtype), topic, lambda _, t=topic: heard.update({t: heard[t] + 1}), qos
         )
+    poses: list[PoseStamped] = []
+    probe.node.create_subscription(PoseStamped, "/bucket_pose", poses.append, QOS)
     settings = {"/**/excavator_forward": {"ros__parameters": {"acceleration_time_constant": 0.03}}}
     recorded = tmp_path / "recorded"
     # Publishers of the inputs before the recorder: it subscribes to them at once, not when the
@@ -645,10 +647,18 @@ def test_demo_bag_replays_skipping_tf_and_the_recorded_settings_reach_evaluate(
                 capture_output=True, text=True, timeout=2 * TIMEOUT,
             )
             assert player.returncode == 0, player.stderr
-            probe.wait_until(lambda: all(heard[t] >= i.count for t, i in playable.items()), TIMEOUT,
-                             "every playable message")
-            probe.wait_until(lambda: recorded_count(recorded, "/bucket_pose") >= 100, TIMEOUT,
-                             "the forward node's poses recorded")
+            try:
+                probe.wait_until(lambda: all(heard[t] >= i.count for t, i in playable.items()), TIMEOUT,
+                                 "every playable message")
+                # The node may reject the first input (its swing message not there yet): 99 or 100 poses.
+                probe.wait_until(
+                    lambda: recorded_count(recorded, "/cylinder_lengths") == 100
+                    and recorded_count(recorded, "/bucket_pose") == len(poses) >= 99,
+                    TIMEOUT, "the inputs and the forward node's poses recorded")
+            except TimeoutError as error:
+                counts = {t: recorded_count(recorded, t) for t in ("/cylinder_lengths", "/bucket_pose")}
+                raise AssertionError(f"{error}: heard {heard}, {len(poses)} poses, recorded {counts}\n"
+                                     f"{player.stderr}\n{recorder.log()}\n{node.log()}") from None
         finally:
             log = recorder.stop()
     skipped = [line for line in player.stderr.splitlines() if "skipping" in line]
