@@ -56,6 +56,8 @@ DRAIN_LIMIT = 1.0
 # How long the recorder waits for a publishing node's parameter services (s): a node that offers
 # none (not an rclpy/rclcpp node, or started with parameter services off) is not waited for.
 SETTINGS_TIMEOUT = 10.0
+# rmw's node name of an endpoint whose participant's node list has not been discovered yet.
+UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
 
 
 def message_class(msgtype: str) -> type:
@@ -182,6 +184,8 @@ class Recorder:
         rosbags keep: a topic would be published again by every replay."""
         for topic in self.counts:
             for info in self.node.get_publishers_info_by_topic(topic):
+                if info.node_name == UNKNOWN_NODE:
+                    continue  # its participant's node names are not discovered yet: next time
                 name = f"{info.node_namespace.rstrip('/')}/{info.node_name}"
                 if name not in self.settings and name not in self._asking:
                     self._asking[name] = time.monotonic()
