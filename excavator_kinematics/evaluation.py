@@ -58,6 +58,8 @@ from manipulator_kinematics.bag.analysis import (
 from manipulator_kinematics.bag.reader import TopicArrays
 
 SWING = JOINTS[0]
+# Outputs the forward node publishes for every accepted input.
+EVERY_INPUT = ("bucket_pose", "bucket_twist", "open_chain_joint_states", "grade_height")
 # Share of the stroke at either end that counts as "near the end".
 NEAR_END = 0.01
 # A command at or above this share of the speed limit counts as saturated.
@@ -72,6 +74,7 @@ class _Settings:
     acceleration_max_gap: float
     acceleration_time_constant: float
     command_timeout: float
+    urdf_joint_states_rate: float
     grade: DesignPlane | None
 
     @classmethod
@@ -84,8 +87,20 @@ class _Settings:
             float(forward["acceleration_max_gap"]),
             float(forward["acceleration_time_constant"]),
             float(ik["command_timeout"]),
+            float(forward["urdf_joint_states_rate"]),
             DesignPlane.from_settings(grade) if grade.get("enabled") else None,
         )
+
+    def used(self) -> dict[str, Any]:
+        """The settings the recomputation mirrors, by their parameter names (for the report)."""
+        return {
+            "excavator_forward.swing_max_age": self.swing_max_age,
+            "excavator_forward.acceleration_max_gap": self.acceleration_max_gap,
+            "excavator_forward.acceleration_time_constant": self.acceleration_time_constant,
+            "excavator_forward.urdf_joint_states_rate": self.urdf_joint_states_rate,
+            "excavator_forward.grade.enabled": self.grade is not None,
+            "excavator_velocity_ik.command_timeout": self.command_timeout,
+        }
 
 
 @dataclass
@@ -98,6 +113,7 @@ class _ExcavatorInputs:
     known_ddot: np.ndarray
     theta1: np.ndarray
     state: Any
+    recorded: int
 
 
 def _inputs(
@@ -142,7 +158,7 @@ def _inputs(
     D_ddot = np.column_stack([swing_ddot[j], cylinder_ddot])
     known = np.all(np.isfinite(D_ddot), axis=1)
     state = exc.state(D, D_dot, np.where(known[:, None], D_ddot, 0.0))
-    return _ExcavatorInputs(stamp, D, D_dot, known, D[:, 0], state)
+    return _ExcavatorInputs(stamp, D, D_dot, known, D[:, 0], state, len(cylinders))
 
 
 def _consistency(
@@ -153,10 +169,18 @@ def _consistency(
     t0: int,
     plots: list[Plot],
     prefix: str,
+    answered: dict[str, Any],
 ) -> dict[str, Any]:
+    """The errors of the outputs against the recomputation; in ``answered`` the counts of inputs
+    and outputs per output topic (:func:`_answered`)."""
     s = inputs.state
     out: dict[str, Any] = {}
     curves: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+
+    # Which accepted inputs the node answers on each output (the rest it skips by its settings).
+    expected = {topic: np.ones(len(inputs.stamp), bool) for topic in EVERY_INPUT}
+    expected["bucket_accel"] = inputs.known_ddot
+    expected["urdf_joint_states"] = _urdf_due(inputs.stamp, m.urdf_joint_states_rate)
 
     def matched(topic: str) -> tuple[TopicArrays, np.ndarray, np.ndarray, dict[str, Any]] | None:
         if topic not in data:
@@ -165,6 +189,8 @@ def _consistency(
         k = match_exact(arrays.stamp_ns(), inputs.stamp)
         rows = np.flatnonzero(k >= 0)
         entry = {"matched": int(rows.size), "unmatched": int(len(k) - rows.size)}
+        if topic in expected:
+            answered[topic] = _answered(inputs, expected[topic], k[rows])
         out[topic] = entry
         return arrays, rows, k[rows], entry
 
@@ -231,6 +257,40 @@ def _consistency(
     return out
 
 
+def _urdf_due(stamp: np.ndarray, rate: float) -> np.ndarray:
+    """The accepted inputs (stamp order) the forward node answers on ``urdf_joint_states``: at most
+    ``rate`` per second of input stamps, as its rate limit decides (0 Hz: every one)."""
+    period = int(1e9 / rate) if rate > 0 else 0
+    due, last = np.zeros(len(stamp), bool), None
+    for i, t in enumerate(stamp.tolist()):
+        if last is None or not 0 <= t - last < period:
+            due[i], last = True, t
+    return due
+
+
+def _answered(inputs: _ExcavatorInputs, expected: np.ndarray, k: np.ndarray) -> dict[str, Any]:
+    """Inputs against the outputs of one topic: how many were recorded, accepted (by the node's
+    settings: swing age, strokes, finite values), due an output (the node's rate limits), and due
+    ones without an output. Only inputs between the first and the last answered one count as
+    missing: the recorder subscribes to each topic when its publisher appears and stops all at
+    once, so the edges say nothing about the node."""
+    answered = np.zeros(len(inputs.stamp), bool)
+    answered[k] = True
+    hit = np.flatnonzero(answered)
+    inside = np.zeros(len(answered), bool)
+    if hit.size:
+        inside[hit[0] : hit[-1] + 1] = True
+    due = expected & inside
+    return {
+        "recorded": inputs.recorded,
+        "accepted": len(answered),
+        "due": int(due.sum()),
+        "answered": int(hit.size),
+        "missing": int(np.sum(due & ~answered)),
+        "outside_recording": int(np.sum(expected & ~inside)),
+    }
+
+
 def _tracking(
     target: TopicArrays, achieved: TopicArrays, m: _Settings, t0: int, plots: list[Plot], prefix: str
 ) -> dict[str, Any]:
@@ -269,19 +329,21 @@ def _actuators(
         for i, name in enumerate(CYLINDERS):
             low, high, limit = lim.stroke_min[i], lim.stroke_max[i], lim.max_cylinder_speed[i]
             d, v = lengths[:, i], rates[:, i]
-            have = np.isfinite(d)
-            if not have.any():
-                continue
+            have, d = np.isfinite(d), d[np.isfinite(d)]
             near = NEAR_END * (high - low)
+            at_end = (d <= low + near) | (d >= high - near)
             speed = np.abs(v[np.isfinite(v)])
+            # A cylinder whose values are all NaN keeps its row (with its NaN counts): a field that
+            # is missing from the report would look like one that was never recorded.
             out[name] = {
-                "length_min_m": float(d[have].min()),
-                "length_max_m": float(d[have].max()),
-                "stroke_used": float((d[have].max() - d[have].min()) / (high - low)),
-                "near_end_fraction": float(np.mean((d[have] <= low + near) | (d[have] >= high - near))),
-                "beyond_end": int(
-                    np.sum((d[have] < low - STROKE_TOLERANCE) | (d[have] > high + STROKE_TOLERANCE))
-                ),
+                "samples": len(have),
+                "non_finite_length": int(np.sum(~have)),
+                "non_finite_speed": int(len(v) - speed.size),
+                "length_min_m": float(d.min()) if d.size else None,
+                "length_max_m": float(d.max()) if d.size else None,
+                "stroke_used": float((d.max() - d.min()) / (high - low)) if d.size else None,
+                "near_end_fraction": float(np.mean(at_end)) if d.size else None,
+                "beyond_end": int(np.sum((d < low - STROKE_TOLERANCE) | (d > high + STROKE_TOLERANCE))),
                 "speed_max_mps": float(speed.max()) if speed.size else None,
                 "speed_limit_mps": float(limit),
                 "over_speed": int(np.sum(speed > limit * (1 + 1e-9))),
@@ -311,15 +373,19 @@ def _actuators(
     if "joint_states" in data:
         js = data["joint_states"]
         angle, rate = js.by_name("position", [SWING])[:, 0], js.by_name("velocity", [SWING])[:, 0]
-        if np.isfinite(angle).any():
-            speed = np.abs(rate[np.isfinite(rate)])
-            out[SWING] = {
-                "angle_min_rad": float(np.nanmin(angle)),
-                "angle_max_rad": float(np.nanmax(angle)),
-                "speed_max_radps": float(speed.max()) if speed.size else None,
-                "speed_limit_radps": float(lim.max_swing_speed),
-                "over_speed": int(np.sum(speed > lim.max_swing_speed * (1 + 1e-9))),
-            }
+        # A message without the swing joint reads as NaN too: counted with the non-finite ones.
+        finite = angle[np.isfinite(angle)]
+        speed = np.abs(rate[np.isfinite(rate)])
+        out[SWING] = {
+            "samples": len(angle),
+            "non_finite_angle": int(len(angle) - finite.size),
+            "non_finite_speed": int(len(rate) - speed.size),
+            "angle_min_rad": float(finite.min()) if finite.size else None,
+            "angle_max_rad": float(finite.max()) if finite.size else None,
+            "speed_max_radps": float(speed.max()) if speed.size else None,
+            "speed_limit_radps": float(lim.max_swing_speed),
+            "over_speed": int(np.sum(speed > lim.max_swing_speed * (1 + 1e-9))),
+        }
     if "cylinder_rate_commands" in data:
         commands = data["cylinder_rate_commands"].by_name("velocity", [*CYLINDERS, SWING])
         limits = np.concatenate([lim.max_cylinder_speed, [lim.max_swing_speed]])
@@ -343,13 +409,16 @@ def analyse(
     arrays) and its plots (module docstring)."""
     m = _Settings.of(context)
     t0, prefix = context.t0, context.prefix
-    report: dict[str, Any] = {}
+    report: dict[str, Any] = {"settings_used": m.used()}
     plots: list[Plot] = []
     if "cylinder_lengths" in data and "joint_states" in data:
         inputs = _inputs(data["cylinder_lengths"], data["joint_states"], exc, m)
         if inputs is not None:
             report["accepted_inputs"] = len(inputs.stamp)
-            report["consistency"] = _consistency(data, exc, inputs, m, t0, plots, prefix)
+            report["inputs_to_outputs"] = {}
+            report["consistency"] = _consistency(
+                data, exc, inputs, m, t0, plots, prefix, report["inputs_to_outputs"]
+            )
     if "target_bucket_twist" in data and "bucket_twist" in data:
         target, achieved = data["target_bucket_twist"], data["bucket_twist"]
         report["tracking"] = _tracking(target, achieved, m, t0, plots, prefix)

@@ -176,3 +176,29 @@ def test_console_scripts_fail_in_one_line_on_damaged_bags(tmp_path: Path) -> Non
         check(name, kind, True, process.returncode, stderr, [])
         assert contents(bags[kind][0]) == bags[kind][1]
         assert not (bags[kind][0].parent / "report").exists()
+
+
+@pytest.mark.parametrize("where", ["absolute", "parent"])
+def test_metadata_naming_a_file_outside_the_bag_is_refused(tmp_path: Path, where: str) -> None:
+    """A metadata.yaml whose relative_file_paths leads out of the bag directory (absolute, or
+    ``../../x``) is refused in one line naming the key, by both tools; the file it names (a
+    readable bag file, so a reader that opened it would succeed) is not read."""
+    outside = tmp_path / "elsewhere" / "x.mcap"
+    outside.parent.mkdir()
+    shutil.copyfile(data_file(GOLDEN[0]), outside)
+    bag = tmp_path / "a" / "b" / "bag"
+    shutil.copytree(GOLDEN[0], bag)
+    data_file(bag).unlink()
+    name = str(outside) if where == "absolute" else "../../../elsewhere/x.mcap"
+    assert (bag / name).resolve() == outside.resolve()
+    meta = bag / "metadata.yaml"
+    info = yaml.safe_load(meta.read_text(encoding="utf-8"))
+    info["rosbag2_bagfile_information"]["relative_file_paths"] = [name]
+    meta.write_text(yaml.safe_dump(info), encoding="utf-8")
+    for tool, main, argv in (
+        ("mk_evaluate", evaluate.main, [str(bag), "-o", str(tmp_path / "report"), "--no-plots"]),
+        ("mk_replay", lambda argv: guarded("mk_replay", read_for_replay, argv), [str(bag)]),
+    ):
+        status, stderr, shown = run_in_process(main, argv)
+        check(tool, f"relative_file_paths {name}", True, status, stderr, shown)
+        assert status == 1 and "relative_file_paths" in stderr and name in stderr, stderr

@@ -5,6 +5,7 @@ registered machine found in its own synthetic bag (and no other), and readable f
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from collections.abc import Callable
@@ -27,6 +28,7 @@ from manipulator_kinematics.bag.synthetic import (
     serial_bag,
     write_bag,
 )
+from manipulator_kinematics.bag.topics import SETTINGS_KEY, encode_recorded_settings
 from manipulator_kinematics.bag.types import BagError, decode_messages, encode_messages
 from manipulator_kinematics.bag.writer import BagWriter
 from manipulator_kinematics.params import config_path
@@ -196,6 +198,29 @@ def test_cylinder_speed_and_stroke_statistics(tmp_path: Path) -> None:
     assert machine["accepted_inputs"] == 98
 
 
+def test_non_finite_cylinder_values_are_counted_per_field_not_dropped(tmp_path: Path) -> None:
+    """A cylinder whose recorded values are all NaN keeps its row, with its NaN count (the fuzzer's
+    bag had the boom cylinder vanish from the report); partly NaN fields are counted too."""
+    topics = excavator_bag(EXC, 100, RATE)
+
+    def spoil(f: dict[str, np.ndarray]) -> None:
+        f["position"][:, 0] = np.nan  # boom length: every message
+        f["velocity"][[2, 3, 4], 1] = np.inf  # arm speed: 3 messages
+
+    topics["/cylinder_lengths"] = changed(topics["/cylinder_lengths"], spoil)
+    write_bag(tmp_path / "bag", topics)
+    result = evaluate_cli(str(tmp_path / "bag"), "-o", str(tmp_path / "out"), "--no-plots")
+    assert result.returncode == 0, result.stderr
+    actuators = json.loads((tmp_path / "out" / "report.json").read_text())["machines"][0]["actuators"]
+    boom, arm, bucket = (actuators[name] for name in CYLINDERS)
+    assert boom["samples"] == 100 and boom["non_finite_length"] == 100 and boom["length_max_m"] is None
+    assert arm["non_finite_speed"] == 3 and arm["non_finite_length"] == 0 and arm["speed_max_mps"] is not None
+    assert bucket["non_finite_length"] == bucket["non_finite_speed"] == 0
+    row = next(line for line in result.stdout.splitlines() if line.startswith(CYLINDERS[0]))
+    assert row.split()[-2:] == ["100", "0"], row
+    assert f"{CYLINDERS[0]} length 100 of 100, {CYLINDERS[1]} speed 3 of 100" in result.stdout, result.stdout
+
+
 def test_machines_are_found_per_namespace(tmp_path: Path) -> None:
     named = {f"/site/exc1{t}": v for t, v in excavator_bag(EXC, 60, RATE).items()}
     named |= {f"/arm{t}": v for t, v in serial_bag(Scara.default(), 60, RATE).items()}
@@ -360,3 +385,62 @@ def test_params_files_with_a_bad_machine_section_are_refused(tmp_path: Path, tex
     with pytest.raises(BagError, match="--params") as error:
         load_setup([path])
     assert words in str(error.value)
+
+
+def with_settings(bag: Path, settings: dict) -> Path:
+    """``bag`` with node settings in its metadata's custom_data, as ``mk_record`` stores them."""
+    meta = bag / "metadata.yaml"
+    info = yaml.safe_load(meta.read_text(encoding="utf-8"))
+    info["rosbag2_bagfile_information"]["custom_data"] = {SETTINGS_KEY: encode_recorded_settings(settings)}
+    meta.write_text(yaml.safe_dump(info), encoding="utf-8")
+    return bag
+
+
+def test_node_settings_come_from_the_bag_else_are_named_as_assumed(tmp_path: Path) -> None:
+    """Without settings in the bag the report says it assumed the package's defaults; with them
+    (a filtered acceleration, as the demo runs) it uses them; ``--params`` wins over the bag."""
+    result = evaluate_cli(str(DATA / "excavator_forward_golden"), "-o", str(tmp_path / "a"), "--no-plots")
+    assert ("node settings of excavator_forward, excavator_velocity_ik: not in the bag, assumed the "
+            "package's defaults") in result.stdout, result.stdout
+    assert "excavator_forward.acceleration_time_constant 0," in result.stdout, result.stdout
+
+    shutil.copytree(DATA / "excavator_forward_golden", tmp_path / "bag")
+    bag = with_settings(tmp_path / "bag", {
+        "/excavator_forward": {"acceleration_time_constant": 0.03, "grade": {"enabled": False}},
+        "/elsewhere/excavator_forward": {"acceleration_time_constant": 7.0},  # another namespace
+    })
+    report, _ = evaluate_bag(BagReader(bag), SETUP)
+    machine = only(report, "excavator")
+    assert machine["settings_sources"] == {
+        "excavator_forward": "recorded in the bag",
+        "excavator_velocity_ik": "not in the bag, assumed the package's defaults",
+    }
+    assert "acceleration_time_constant 0.03 s" in machine["consistency"]["bucket_accel"]["not_compared"]
+    assert machine["settings_used"]["excavator_forward.swing_max_age"] == 0.1  # the rest from the package
+
+    params = tmp_path / "params.yaml"
+    params.write_text("/**/excavator_forward:\n  ros__parameters:\n    acceleration_time_constant: 0.0\n")
+    report, _ = evaluate_bag(BagReader(bag), load_setup([params]))
+    machine = only(report, "excavator")
+    assert machine["settings_sources"]["excavator_forward"] == "recorded in the bag, --params"
+    assert machine["consistency"]["bucket_accel"]["linear_mps2"]["max"] < 1e-12
+
+
+def test_inputs_without_outputs_are_counted_and_a_shortfall_flagged(tmp_path: Path) -> None:
+    """The fuzzer's bag had 1491 cylinder_lengths and 1163 bucket_pose unflagged. Outputs lost in
+    the middle are missing; the first ones (before the recorder had the output topic) are not."""
+    topics = excavator_bag(EXC, 100, RATE)
+    pose = topics["/bucket_pose"]
+    keep = np.r_[3:40, 45:100]  # 3 at the start (recording not yet there), 5 lost in the middle
+    topics["/bucket_pose"] = Topic(pose.msgtype, pose.log_time[keep], [pose.raw[i] for i in keep])
+    write_bag(tmp_path / "bag", topics)
+    result = evaluate_cli(str(tmp_path / "bag"), "-o", str(tmp_path / "out"), "--no-plots")
+    assert result.returncode == 0, result.stderr
+    machine = json.loads((tmp_path / "out" / "report.json").read_text())["machines"][0]
+    counts = machine["inputs_to_outputs"]
+    assert counts["bucket_pose"] == {
+        "recorded": 100, "accepted": 100, "due": 97, "answered": 92, "missing": 5, "outside_recording": 3
+    }
+    assert counts["bucket_twist"]["missing"] == 0 and counts["bucket_accel"]["due"] == 99
+    assert "SHORTFALL: 5 of 97 due inputs have no bucket_pose" in result.stdout, result.stdout
+    assert result.stdout.count("SHORTFALL") == 1

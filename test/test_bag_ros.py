@@ -6,6 +6,7 @@ a condition with a timeout."""
 
 from __future__ import annotations
 
+import importlib.util
 import struct
 import subprocess
 import time
@@ -24,6 +25,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Int64
 
 from manipulator_kinematics.bag import replay
+from manipulator_kinematics.bag.evaluate import Setup, evaluate_bag
 from manipulator_kinematics.bag.reader import BagReader, TopicArrays
 from manipulator_kinematics.bag.synthetic import (
     GOLDEN_RATE_HZ,
@@ -34,8 +36,9 @@ from manipulator_kinematics.bag.synthetic import (
     stamp_fields,
     write_bag,
 )
-from manipulator_kinematics.bag.topics import package_topics
+from manipulator_kinematics.bag.topics import SETTINGS_KEY, decode_recorded_settings, package_topics
 from manipulator_kinematics.bag.types import BagError, decode_messages, encode_messages
+from manipulator_kinematics.bag.visual import add_visuals
 from manipulator_kinematics.bag.writer import BagWriter
 from manipulator_kinematics.node_util import console_script
 from manipulator_kinematics.params import flatten, unflatten
@@ -537,6 +540,21 @@ def test_replay_refuses_what_it_cannot_play(tmp_path: Path) -> None:
         )
 
 
+@pytest.mark.skipif(importlib.util.find_spec("tf2_msgs") is not None, reason="tf2_msgs is installed here")
+def test_replay_refuses_a_chosen_topic_whose_type_it_cannot_publish(tmp_path: Path) -> None:
+    """Skipping is for topics nobody chose: one named in --topics is an error, and so is a bag
+    with nothing playable."""
+    with BagWriter(tmp_path / "bag") as writer:
+        writer.add_topic("/tf", "tf2_msgs/msg/TFMessage")
+    for args, words in (
+        (["--topics", "tf"], "cannot publish /tf [tf2_msgs/msg/TFMessage]: no Python message module"),
+        ([], "no topic of the bag has a type this ROS installation can publish"),
+    ):
+        with pytest.raises(BagError) as error:
+            replay.load(replay.parse_args([str(tmp_path / "bag"), *args]))
+        assert words in str(error.value), error.value
+
+
 def test_replay_takes_bag_topics_with_or_without_the_leading_slash(tmp_path: Path) -> None:
     """The README's command: bags store absolute names; ``joint_states`` means ``/joint_states``,
     and a remap target keeps its form (a relative one is resolved in the replayer's namespace)."""
@@ -553,3 +571,120 @@ def test_replay_takes_bag_topics_with_or_without_the_leading_slash(tmp_path: Pat
         assert {topic for topic, _, _ in playlist.messages} == {"/cylinder_lengths", "/joint_states"}
     playlist = replay.load(replay.parse_args([str(tmp_path / "run1"), "--remap", "bucket_pose:=pose"]))
     assert playlist.names["/bucket_pose"] == "pose" and len(playlist.messages) == 15
+
+
+# ------------------------------------------------------------------------- demo bag, node settings
+
+
+def recorded_count(bag: Path, topic: str) -> int:
+    """Messages of ``topic`` the recorder has flushed (its metadata.yaml), -1 before it is there."""
+    try:
+        info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+        counts = {t["topic_metadata"]["name"]: t["message_count"] for t in info["topics_with_message_count"]}
+    except (OSError, TypeError, KeyError, yaml.YAMLError):
+        return -1
+    return counts.get(topic, -1)
+
+
+def demo_like_bag(path: Path) -> Path:
+    """The golden excavator inputs with the visual topics ``record --visuals`` adds, as the demo's
+    bag has them: /tf and /tf_static (tf2_msgs, which rclpy here cannot publish), /robot_description,
+    machine_markers. Made in about 2 s."""
+    golden_bag = BagReader(golden("excavator"))
+    chosen = ["/cylinder_lengths", "/joint_states"]
+    messages = list(golden_bag.messages(chosen))
+    write_bag(path.parent / "inputs", {
+        topic: Topic(
+            golden_bag.topics[topic].msgtype,
+            np.array([t for name, t, _ in messages if name == topic]),
+            [raw for name, _, raw in messages if name == topic],
+        )
+        for topic in chosen
+    })
+    add_visuals(path.parent / "inputs", path)
+    return path
+
+
+def test_demo_bag_replays_skipping_tf_and_the_recorded_settings_reach_evaluate(
+    probe: Probe, tmp_path: Path
+) -> None:
+    """Issue 28: ``mk_replay`` of a bag with /tf plays every other topic and names the skipped ones
+    in one line; ``mk_record`` stores the forward node's settings (a filtered acceleration, as the
+    demo runs it) in the bag and ``evaluate`` uses them without ``--params``."""
+    demo = demo_like_bag(tmp_path / "demo")
+    topics = BagReader(demo).topics
+    assert topics["/tf"].msgtype == "tf2_msgs/msg/TFMessage"
+    # tf2_msgs has no PyPI wheel: in the venv /tf and /tf_static are skipped; on a ROS install played.
+    tf_here = importlib.util.find_spec("tf2_msgs") is not None
+    playable = {t: i for t, i in topics.items() if tf_here or i.msgtype != "tf2_msgs/msg/TFMessage"}
+    heard: dict[str, int] = dict.fromkeys(playable, 0)
+    for topic, info in playable.items():
+        qos = replay.publisher_qos(info.qos)
+        probe.node.create_subscription(
+            replay.message_class(info.msgtype), topic, lambda _, t=topic: heard.update({t: heard[t] + 1}), qos
+        )
+    last = int(BagReader(demo).arrays(["/cylinder_lengths"])["/cylinder_lengths"].stamp_ns()[-1])
+    poses: list[PoseStamped] = []
+    probe.node.create_subscription(PoseStamped, "/bucket_pose", poses.append, QOS)
+    settings = {"/**/excavator_forward": {"ros__parameters": {"acceleration_time_constant": 0.03}}}
+    recorded = tmp_path / "recorded"
+    # Publishers of the inputs before the recorder: it subscribes to them at once, not when the
+    # replay's publishers appear (and would then miss the first messages).
+    inputs = ("/cylinder_lengths", "/joint_states")
+    stand_ins = [probe.node.create_publisher(JointState, topic, QOS) for topic in inputs]
+    chosen = ("cylinder_lengths", "joint_states", "bucket_pose", "bucket_accel")
+    with NodeProcess("excavator_forward", *RELIABLE_INPUTS, params=settings) as node:
+        probe.wait_until(lambda: probe.node.count_publishers("/bucket_accel") > 0 or not node.alive(),
+                         TIMEOUT, "the forward node")
+        recorder = NodeProcess("mk_record", args=("-o", str(recorded), "--topics", *chosen))
+        try:
+            probe.wait_until(
+                # This probe, the forward node and the recorder.
+                lambda: ("parameters of /excavator_forward" in recorder.log()
+                         and all(p.get_subscription_count() >= 3 for p in stand_ins)) or not recorder.alive(),
+                TIMEOUT, "the recorder's subscriptions and the forward node's settings")
+            player = subprocess.run(
+                [console_script("mk_replay"), str(demo), "--wait-for-subscribers", "30"],
+                capture_output=True, text=True, timeout=2 * TIMEOUT,
+            )
+            assert player.returncode == 0, player.stderr
+            try:
+                probe.wait_until(lambda: all(heard[t] >= i.count for t, i in playable.items()), TIMEOUT,
+                                 "every playable message")
+                # The replay waits for one subscriber per topic (this probe): on a loaded machine the
+                # forward node may match the replayer later and miss the first inputs. Its outputs
+                # come in order: the last input's pose is the last one.
+                probe.wait_until(lambda: poses and stamp_ns(poses[-1]) == last, TIMEOUT, "the last pose")
+                probe.wait_until(lambda: recorded_count(recorded, "/bucket_pose") == len(poses), TIMEOUT,
+                                 "the forward node's poses recorded")
+            except TimeoutError as error:
+                counts = {t: recorded_count(recorded, t) for t in ("/cylinder_lengths", "/bucket_pose")}
+                raise AssertionError(f"{error}: heard {heard}, {len(poses)} poses, recorded {counts}\n"
+                                     f"{player.stderr}\n{recorder.log()}\n{node.log()}") from None
+        finally:
+            log = recorder.stop()
+    skipped = [line for line in player.stderr.splitlines() if "skipping" in line]
+    tf = "tf2_msgs/msg/TFMessage"
+    assert skipped == [] if tf_here else [
+        f"mk_replay: skipping /tf [{tf}], /tf_static [{tf}]: no Python message module for its type here"
+    ], player.stderr
+    assert f"published {sum(i.count for i in playable.values())} messages on {len(playable)} topics" in (
+        player.stderr
+    )
+    assert heard == {t: i.count for t, i in playable.items()}, heard
+    assert "stored the" in log and "Traceback" not in log, log
+
+    bag = BagReader(recorded)
+    stored = decode_recorded_settings(bag.custom_data[SETTINGS_KEY])["/excavator_forward"]
+    assert stored["acceleration_time_constant"] == pytest.approx(0.03)
+    assert stored["grade"]["enabled"] is False  # nested as in the params files
+    report, _ = evaluate_bag(bag, Setup())
+    (machine,) = report["machines"]
+    assert machine["settings_sources"]["excavator_forward"] == "recorded in the bag"
+    assert machine["settings_used"]["excavator_forward.acceleration_time_constant"] == pytest.approx(0.03)
+    assert "acceleration_time_constant 0.03 s" in machine["consistency"]["bucket_accel"]["not_compared"]
+    assert machine["consistency"]["bucket_pose"]["position_m"]["max"] < 1e-9
+    pose = machine["inputs_to_outputs"]["bucket_pose"]
+    # Every recorded pose is an answer to a recorded input (or to one the recorder had not matched).
+    unmatched = machine["consistency"]["bucket_pose"]["unmatched"]
+    assert pose["missing"] == 0 and pose["answered"] + unmatched == len(poses), (pose, unmatched)

@@ -37,7 +37,13 @@ import numpy as np
 from manipulator_kinematics.asbuilt import AsBuilt, lowest_elevation
 from manipulator_kinematics.bag.analysis import AnalysisContext
 from manipulator_kinematics.bag.cli import guarded
-from manipulator_kinematics.bag.evaluate import Setup, group_topics, load_setup, machines_in
+from manipulator_kinematics.bag.evaluate import (
+    Setup,
+    group_topics,
+    load_setup,
+    machines_in,
+    recorded_settings,
+)
 from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.bag.types import BagError
 
@@ -105,6 +111,7 @@ def process_bag(path: Path, output: Path, params: Sequence[Path], cell: float,
         if bag.message_count == 0:
             raise BagError(f"{path}: the bag holds no messages")
         grouped = group_topics(bag)
+        recorded = recorded_settings(bag)
         arrays = bag.arrays([topic for names in grouped.values() for topic in names.values()])
     except BagError as error:
         result.error = " ".join(str(error).split())
@@ -113,10 +120,11 @@ def process_bag(path: Path, output: Path, params: Sequence[Path], cell: float,
     for namespace, names in sorted(grouped.items()):
         data = {name: arrays[topic] for name, topic in names.items()}
         prefix = "" if namespace == "/" else namespace.strip("/").replace("/", "_") + "_"
+        settings, _ = setup.settings_in(namespace, recorded)  # as mk_evaluate: the bag's, --params over
         for machine in machines_in(data, setup):
             if machine.samples is None:
                 continue
-            context = AnalysisContext(0, f"{prefix}{machine.name}_", setup.node_settings)
+            context = AnalysisContext(0, f"{prefix}{machine.name}_", settings)
             own = {topic: data[topic] for topic in machine.topics if topic in data}
             with np.errstate(all="ignore"):  # a damaged record's 1e300 is a value, not a warning
                 columns, units = machine.samples(own, setup.model(machine), context)

@@ -21,7 +21,7 @@ import difflib
 import json
 import math
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -35,6 +35,8 @@ from manipulator_kinematics.bag.cli import guarded
 from manipulator_kinematics.bag.reader import BagReader, TopicArrays
 from manipulator_kinematics.bag.topics import (
     JOINT_STATE,
+    SETTINGS_KEY,
+    decode_recorded_settings,
     node_sections,
     node_settings,
     package_topics,
@@ -46,6 +48,7 @@ from manipulator_kinematics.registry import Machine, by_section, machines
 NAME = "mk_evaluate"
 # Points per curve in a plot: each bin keeps its min and max, so spikes stay visible.
 PLOT_BINS = 2000
+ASSUMED = "not in the bag, assumed the package's defaults"
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
@@ -83,15 +86,51 @@ def split_topic(topic: str, names: Sequence[str]) -> tuple[str, str] | None:
 @dataclass
 class Setup:
     """What evaluate recomputes with: models by machine name (the default model of a machine not
-    given is built when first needed) and node name -> settings (:class:`AnalysisContext`)."""
+    given is built when first needed), node name -> settings (:class:`AnalysisContext`: the
+    package's, with ``given`` over them) and ``given``: the node settings of ``--params`` files,
+    which also win over the settings recorded in a bag."""
 
     models: dict[str, Any] = field(default_factory=dict)
     node_settings: Mapping[str, Mapping[str, Any]] = field(default_factory=node_settings)
+    given: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
     def model(self, machine: Machine) -> Any:
         if machine.name not in self.models:
             self.models[machine.name] = machine.model()
         return self.models[machine.name]
+
+    def settings_in(
+        self, namespace: str, recorded: Mapping[str, Mapping[str, Any]]
+    ) -> tuple[dict[str, dict[str, Any]], dict[str, str]]:
+        """Node name -> settings for the nodes of ``namespace`` (the package's, then what the bag
+        recorded for ``<namespace>/<node>``, then ``--params``), and node name -> where they came from."""
+        prefix = namespace.rstrip("/") + "/"
+        here = {node[len(prefix):]: values for node, values in recorded.items()
+                if node.startswith(prefix) and "/" not in node[len(prefix):]}
+        settings, sources = {}, {}
+        for name in dict.fromkeys([*self.node_settings, *here]):
+            layers = (self.node_settings.get(name, {}), here.get(name, {}), self.given.get(name, {}))
+            settings[name] = merge(*layers)
+            origin = "recorded in the bag" if name in here else ASSUMED
+            sources[name] = origin + ", --params" * (name in self.given)
+        return settings, sources
+
+
+class _Consulted(Mapping[str, Any]):
+    """Node settings that remember which nodes' settings an analysis looked at."""
+
+    def __init__(self, settings: Mapping[str, Any]) -> None:
+        self.settings, self.seen = settings, set()
+
+    def __getitem__(self, node: str) -> Any:
+        self.seen.add(node)
+        return self.settings[node]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.settings)
+
+    def __len__(self) -> int:
+        return len(self.settings)
 
 
 def load_setup(files: Sequence[Path]) -> Setup:
@@ -121,7 +160,7 @@ def load_setup(files: Sequence[Path]) -> Setup:
                                f"known: {', '.join(known)}")
         defaults = node_settings()
         settings = {name: merge(defaults.get(name, {}), nodes.get(name, {})) for name in defaults | nodes}
-        return Setup(models, settings)
+        return Setup(models, settings, nodes)
     except (ValueError, yaml.YAMLError) as error:  # ConfigError (a key named) or a model's refusal
         raise BagError(f"--params: {error}") from None
 
@@ -179,6 +218,15 @@ def group_topics(bag: BagReader) -> dict[str, dict[str, str]]:
     return grouped
 
 
+def recorded_settings(bag: BagReader) -> dict[str, dict[str, Any]]:
+    """Full node name -> settings that ``mk_record`` stored in the bag's metadata (none: {})."""
+    try:
+        text = bag.custom_data.get(SETTINGS_KEY)
+        return {} if text is None else decode_recorded_settings(text)
+    except ValueError as error:
+        raise BagError(f"{bag.path}: metadata.yaml: {error}") from None
+
+
 def evaluate_bag(bag: BagReader, setup: Setup | None = None) -> tuple[dict[str, Any], list[Plot]]:
     """The whole report (JSON-ready) and its plots; ``setup`` default: the shipped machines."""
     setup = Setup() if setup is None else setup
@@ -208,14 +256,21 @@ def evaluate_bag(bag: BagReader, setup: Setup | None = None) -> tuple[dict[str, 
         (int(a.stamp_ns().min()) for a in arrays.values() if len(a) and "header.stamp.sec" in a.fields),
         default=t0,
     )
+    recorded = recorded_settings(bag)
+    report["recorded_node_settings"] = sorted(recorded)
     for namespace, names in sorted(grouped.items()):
         data: dict[str, TopicArrays] = {name: arrays[topic] for name, topic in names.items()}
         prefix = "" if namespace == "/" else namespace.strip("/").replace("/", "_") + "_"
+        settings, sources = setup.settings_in(namespace, recorded)
         for machine in machines_in(data, setup):
-            context = AnalysisContext(stamp0, f"{prefix}{machine.name}_", setup.node_settings)
+            consulted = _Consulted(settings)
+            context = AnalysisContext(stamp0, f"{prefix}{machine.name}_", consulted)
             own = {topic: data[topic] for topic in machine.topics if topic in data}
             section, figures = machine.analyse(own, setup.model(machine), context)
-            report["machines"].append({"kind": machine.name, "namespace": namespace, **section})
+            used = {node: sources[node] for node in sorted(consulted.seen)}
+            report["machines"].append(
+                {"kind": machine.name, "namespace": namespace, "settings_sources": used, **section}
+            )
             plots += figures
     return report, plots
 
@@ -282,6 +337,12 @@ def render(report: dict[str, Any]) -> str:
     ]
     for machine in report["machines"]:
         out += ["", f"{machine['kind']} in namespace {machine['namespace']}"]
+        by_source: dict[str, list[str]] = {}
+        for node, source in machine["settings_sources"].items():
+            by_source.setdefault(source, []).append(node)
+        out += [f"node settings of {', '.join(nodes)}: {source}" for source, nodes in by_source.items()]
+        if used := machine.get("settings_used"):
+            out.append("  used: " + ", ".join(f"{key} {_setting(value)}" for key, value in used.items()))
         errors = []
         for topic, entry in machine.get("consistency", {}).items():
             for quantity, stats in entry.items():
@@ -304,6 +365,24 @@ def render(report: dict[str, Any]) -> str:
                 f"  {topic}: {entry['not_compared']}"
                 for topic, entry in machine.get("consistency", {}).items()
                 if "not_compared" in entry
+            ]
+        pairs = [
+            [f"cylinder_lengths -> {topic}", c["recorded"], c["accepted"], c["due"], c["answered"],
+             c["missing"], c["outside_recording"]]
+            for topic, c in machine.get("inputs_to_outputs", {}).items()
+        ]
+        if pairs:
+            out += [
+                "inputs and outputs (due: accepted and not skipped by a rate limit; missing: due, "
+                "no output, within the recording of the output)",
+                _table(["input -> output", "recorded", "accepted", "due", "answered", "missing",
+                        "outside recording"], pairs),
+            ]
+            out += [
+                f"  SHORTFALL: {row[5]} of {row[3]} due inputs have no {row[0].split(' -> ')[1]}, more "
+                "than the node's settings explain"
+                for row in pairs
+                if row[5]
             ]
         if "tracking" in machine:
             tr = machine["tracking"]
@@ -329,6 +408,8 @@ def render(report: dict[str, Any]) -> str:
                 a["speed_max_mps"],
                 a["speed_limit_mps"],
                 a["over_speed"],
+                a["non_finite_length"],
+                a["non_finite_speed"],
             ]
             for name, a in actuators.items()
             if "length_min_m" in a
@@ -347,10 +428,20 @@ def render(report: dict[str, Any]) -> str:
                         "max speed m/s",
                         "limit",
                         "over speed",
+                        "NaN/inf length",
+                        "NaN/inf speed",
                     ],
                     cylinders,
                 ),
             ]
+        non_finite = [
+            f"{name} {key.removeprefix('non_finite_')} {count} of {a['samples']}"
+            for name, a in actuators.items()
+            for key, count in a.items()
+            if key.startswith("non_finite_") and count
+        ]
+        if non_finite:
+            out.append(f"non-finite samples (not in the statistics): {', '.join(non_finite)}")
         if "commands" in actuators:
             out += [
                 "rate commands",
@@ -368,6 +459,10 @@ def render(report: dict[str, Any]) -> str:
                 f"{machine['outside_limits']}"
             )
     return "\n".join(out)
+
+
+def _setting(value: Any) -> str:
+    return str(value).lower() if isinstance(value, bool) else _number(value)
 
 
 def _jsonable(value: Any) -> Any:

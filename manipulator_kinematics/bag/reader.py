@@ -247,6 +247,8 @@ class BagReader:
     def __init__(self, path: str | os.PathLike[str], recover: bool = False) -> None:
         self.path = Path(path)
         self.recovered: str | None = None
+        #: rosbag2's ``custom_data`` of metadata.yaml (key -> text); empty for a bag without one.
+        self.custom_data: dict[str, str] = {}
         index = _Index()
         try:
             files, self.storage = self._files()
@@ -352,10 +354,16 @@ class BagReader:
             try:
                 info = yaml.safe_load(meta.read_text(encoding="utf-8"))["rosbag2_bagfile_information"]
                 storage = str(info.get("storage_identifier") or "")
-                files = [path / name for name in info["relative_file_paths"]]
+                files = [_inside(path, meta, name) for name in info["relative_file_paths"]]
             # Whatever the YAML holds: a damaged file parses to other types as easily as it fails.
             except (yaml.YAMLError, KeyError, TypeError, AttributeError, UnicodeDecodeError) as error:
                 raise BagError(f"{meta}: not rosbag2 metadata ({type(error).__name__}: {error})") from None
+            custom = info.get("custom_data") or {}
+            if not isinstance(custom, dict) or not all(
+                isinstance(k, str) and isinstance(v, str) for k, v in custom.items()
+            ):
+                raise BagError(f"{meta}: custom_data: not a mapping of text to text")
+            self.custom_data = custom
             if info.get("compression_mode"):
                 raise BagError(
                     f"{path}: compressed bags ({info['compression_mode']} "
@@ -395,6 +403,16 @@ class BagReader:
                 f"--recover reads the {found} messages before byte {end}"
             )
         self.recovered = f"{path}: {problem}; read the {found} messages before byte {end}"
+
+
+def _inside(bag: Path, meta: Path, name: object) -> Path:
+    """A data file named in ``relative_file_paths``: a path below the bag directory only, so a
+    damaged or crafted metadata.yaml cannot make a reader open a file elsewhere (an absolute path,
+    ``../../x``)."""
+    relative = Path(name) if isinstance(name, str) else None
+    if relative is None or relative.is_absolute() or ".." in relative.parts or not relative.parts:
+        raise BagError(f"{meta}: relative_file_paths: {name!r} is not a path inside the bag directory")
+    return bag / relative
 
 
 def _storage_of(path: Path) -> str:

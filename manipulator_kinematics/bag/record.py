@@ -27,20 +27,23 @@ import time
 from collections.abc import Mapping, Sequence
 from datetime import datetime
 from pathlib import Path
+from typing import Any
 
 import rclpy
+from rcl_interfaces.srv import GetParameters, ListParameters
 from rclpy.node import Node
+from rclpy.parameter import parameter_value_to_python
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
 from manipulator_kinematics import stopping
 from manipulator_kinematics.bag.cli import guarded, parse_assignments, split_ros_args
-from manipulator_kinematics.bag.topics import package_topics
+from manipulator_kinematics.bag.topics import SETTINGS_KEY, encode_recorded_settings, package_topics
 from manipulator_kinematics.bag.types import BagError, TopicQos
 from manipulator_kinematics.bag.writer import STORAGES, BagWriter
 from manipulator_kinematics.executor import ERROR_LOG_PERIOD, executor_name, spin
 from manipulator_kinematics.executor import guarded as guarded_callback
-from manipulator_kinematics.params import ConfigError
+from manipulator_kinematics.params import ConfigError, unflatten
 from manipulator_kinematics.throttle import ThrottledLog
 
 NAME = "mk_record"
@@ -50,6 +53,11 @@ QUEUE_DEPTH = 1000
 DISCOVERY_PERIOD = 0.2
 STOP_LATENCY = 0.1
 DRAIN_LIMIT = 1.0
+# How long the recorder waits for a publishing node's parameter services (s): a node that offers
+# none (not an rclpy/rclcpp node, or started with parameter services off) is not waited for.
+SETTINGS_TIMEOUT = 10.0
+# rmw's node name of an endpoint whose participant's node list has not been discovered yet.
+UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
 
 
 def message_class(msgtype: str) -> type:
@@ -131,6 +139,14 @@ class Recorder:
         self._log = ThrottledLog(node, ERROR_LOG_PERIOD)
         self._counted = -1
         self._stopped_at: float | None = None
+        #: Full node name -> its parameters (nested), of every node that publishes a recorded topic.
+        self.settings: dict[str, dict] = {}
+        # Nodes whose parameters are still to be asked for: full name -> when first seen.
+        self._asking: dict[str, float | None] = {}
+        self._clients: dict[str, Any] = {}
+        # Done callbacks of service calls run in the executor, outside executor.spin's guard.
+        self._on_listed = guarded_callback(self._listed, self._log, "a node's parameter names")
+        self._on_got = guarded_callback(self._got, self._log, "a node's parameters")
 
     def pending(self) -> list[str]:
         return [t for t in self.wanted if t not in self.counts and t not in self.refused]
@@ -159,6 +175,57 @@ class Recorder:
                 self.refused.add(topic)
                 say(f"not recording {topic}: {' '.join(str(error).split())}")
 
+    def ask_settings(self) -> None:
+        """Ask every node that publishes a recorded topic for its parameters, once; store them in
+        the bag's metadata (``custom_data[SETTINGS_KEY]``) when they come (the discovery timer).
+
+        Asked of the nodes, not read from params files: their launch may have used any files and
+        ``-p`` overrides. In ``custom_data``, which rosbag2 (``StorageOptions.custom_data``) and
+        rosbags keep: a topic would be published again by every replay."""
+        for topic in self.counts:
+            for info in self.node.get_publishers_info_by_topic(topic):
+                if info.node_name == UNKNOWN_NODE:
+                    continue  # its participant's node names are not discovered yet: next time
+                name = f"{info.node_namespace.rstrip('/')}/{info.node_name}"
+                if name not in self.settings and name not in self._asking:
+                    self._asking[name] = time.monotonic()
+        for name, since in list(self._asking.items()):
+            if since is None:
+                continue  # answer pending
+            lister = self._client(ListParameters, f"{name}/list_parameters")
+            # Both services matched first: a request to an unmatched server can be lost.
+            getter = self._client(GetParameters, f"{name}/get_parameters")
+            if not (lister.service_is_ready() and getter.service_is_ready()):
+                if time.monotonic() - since > SETTINGS_TIMEOUT:
+                    del self._asking[name]
+                    say(f"{name} offers no parameter services: its settings are not in the bag")
+                continue
+            self._asking[name] = None
+            lister.call_async(ListParameters.Request()).add_done_callback(
+                lambda future, name=name: self._on_listed(name, future.result())
+            )
+
+    def _client(self, kind: type, service: str) -> Any:
+        if service not in self._clients:
+            self._clients[service] = self.node.create_client(kind, service)
+        return self._clients[service]
+
+    def _listed(self, name: str, response: Any) -> None:
+        names = list(response.result.names) if response is not None else []
+        getter = self._client(GetParameters, f"{name}/get_parameters")
+        future = getter.call_async(GetParameters.Request(names=names))
+        future.add_done_callback(lambda done: self._on_got(name, names, done.result()))
+
+    def _got(self, name: str, names: list[str], response: Any) -> None:
+        values = [] if response is None else [parameter_value_to_python(v) for v in response.values]
+        # Array parameters come as array.array or lists: JSON takes lists.
+        flat = {key: v if isinstance(v, (str, bool, int, float)) or v is None else list(v)
+                for key, v in zip(names, values)}
+        self.settings[name] = unflatten(flat)
+        self._asking.pop(name, None)
+        self.writer.set_custom_data(SETTINGS_KEY, encode_recorded_settings(self.settings))
+        say(f"stored the {len(flat)} parameters of {name} in the bag's metadata")
+
     def subscribe(self, topic: str, msgtype: str, offered: Sequence[TopicQos]) -> None:
         msg_class = message_class(msgtype)
         self.writer.add_topic(topic, msgtype, offered[0] if offered else None)
@@ -182,6 +249,7 @@ class Recorder:
         self.node.create_timer(self.writer.flush_interval, self.writer.flush_if_due)
         self.discover()
         self.node.create_timer(DISCOVERY_PERIOD, self.discover)
+        self.node.create_timer(DISCOVERY_PERIOD, self.ask_settings)
 
         def done() -> bool:
             now = time.monotonic()

@@ -162,8 +162,23 @@ def load(args: argparse.Namespace) -> Playlist:
     strangers = sorted(set(remap) - set(bag.topics))
     if strangers:
         raise BagError(f"--remap of {', '.join(strangers)}: not in the bag (it has {', '.join(bag.topics)})")
+    classes, unknown = {}, {}
+    for topic in topics:
+        try:
+            classes[topic] = message_class(bag.topics[topic].msgtype)
+        except BagError:
+            unknown[topic] = bag.topics[topic].msgtype
+    if unknown and args.topics is not None:
+        raise BagError(f"cannot publish {_listed(unknown)}: no Python message module for its type here")
+    if unknown:
+        # The package's own bags carry /tf and /tf_static (tf2_msgs) for Foxglove, and rclpy can
+        # publish only types whose generated Python module is installed: the rest still plays.
+        print(f"{NAME}: skipping {_listed(unknown)}: no Python message module for its type here",
+              file=sys.stderr)
+        topics = [topic for topic in topics if topic in classes]
+        if not topics:
+            raise BagError(f"{args.bag}: no topic of the bag has a type this ROS installation can publish")
     messages = list(bag.messages(topics))
-    classes = {topic: message_class(bag.topics[topic].msgtype) for topic in topics}
     if not messages:
         raise BagError(f"{args.bag}: no messages to play on {', '.join(topics)}")
     start = messages[0][1] + int(args.start_offset * 1e9)
@@ -180,6 +195,10 @@ def load(args: argparse.Namespace) -> Playlist:
         {topic: bag.topics[topic].qos for topic in topics},
         {topic: remap.get(topic, topic) for topic in topics},
     )
+
+
+def _listed(topics: dict[str, str]) -> str:
+    return ", ".join(f"{topic} [{msgtype}]" for topic, msgtype in topics.items())
 
 
 def schedule(messages: Sequence[tuple[str, int, bytes]], start: int, args: argparse.Namespace) -> list[int]:

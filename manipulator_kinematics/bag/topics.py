@@ -8,6 +8,7 @@ node settings (sections ``/**/<node>`` of ``config/*.yaml``) are what an analysi
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +16,9 @@ from manipulator_kinematics.params import CONFIG_DIR, ConfigError, config_path, 
 from manipulator_kinematics.registry import machines
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
+#: The key of rosbag2's metadata ``custom_data`` under which ``record`` stores the settings of the
+#: nodes that published the recorded topics: JSON, full node name -> its parameters (nested).
+SETTINGS_KEY = "manipulator_kinematics.node_settings"
 POSE = "geometry_msgs/msg/PoseStamped"
 TWIST = "geometry_msgs/msg/TwistStamped"
 ACCEL = "geometry_msgs/msg/AccelStamped"
@@ -69,3 +73,23 @@ def node_settings() -> dict[str, dict[str, Any]]:
         for node, parameters in node_sections(path).items():
             out[node] = merge(out.get(node, {}), parameters)
     return out
+
+
+def encode_recorded_settings(settings: dict[str, dict[str, Any]]) -> str:
+    """``custom_data[SETTINGS_KEY]`` of a bag: full node name (``/ns/node``) -> parameters (nested)."""
+    # default=str: a byte-array parameter's bytes (nothing an analysis reads) as text.
+    return json.dumps(settings, sort_keys=True, separators=(",", ":"), default=str)
+
+
+def decode_recorded_settings(text: str) -> dict[str, dict[str, Any]]:
+    """Inverse of :func:`encode_recorded_settings`; ValueError naming the key if it is not that."""
+    try:
+        settings = json.loads(text)
+    except (ValueError, RecursionError) as error:
+        raise ValueError(f"custom_data: {SETTINGS_KEY}: not JSON ({error})") from None
+    if not isinstance(settings, dict) or not all(
+        isinstance(node, str) and node.startswith("/") and isinstance(values, dict)
+        for node, values in settings.items()
+    ):
+        raise ValueError(f"custom_data: {SETTINGS_KEY}: not a mapping of node names to parameters")
+    return settings

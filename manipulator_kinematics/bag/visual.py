@@ -406,6 +406,8 @@ def add_visuals(
         shutil.rmtree(scratch)
     target = scratch / output.name if in_place else output
     with BagWriter(target, storage or bag.storage, overwrite=overwrite or in_place) as writer:
+        for key, value in bag.custom_data.items():  # the recorded node settings among them
+            writer.set_custom_data(key, value)
         for topic, info in bag.topics.items():
             writer.add_topic(topic, info.msgtype, info.qos)
         for topic, (msgtype, qos, _, _) in merged.items():

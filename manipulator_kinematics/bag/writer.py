@@ -98,6 +98,12 @@ class BagWriter:
         )
         self._write_metadata()
 
+    def set_custom_data(self, key: str, value: str) -> None:
+        """One entry of rosbag2's metadata ``custom_data`` (text -> text), kept by rosbag2 and rosbags."""
+        self._writer.set_custom_data(key, value)
+        # A flush, not only the metadata: metadata.yaml's counts must not claim unflushed messages.
+        self.flush()
+
     def write(self, topic: str, stamp_ns: int, raw: bytes | memoryview) -> None:
         """Store one serialised message (CDR bytes exactly as received) at record time ``stamp_ns``."""
         try:
@@ -172,7 +178,7 @@ class BagWriter:
                     "message_count": count,
                 }
             ],
-            "custom_data": None,
+            "custom_data": dict(w.custom_data) or None,
             "ros_distro": "rosbags",
         }
         tmp = self.path / "metadata.yaml.tmp"
