@@ -45,7 +45,8 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -545,18 +546,28 @@ def run_cycle(
                     [p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in points],
                     [list(p.positions) for p in points], [list(p.velocities) for p in points])
                 say(f"plan_path back to the start: {answer.message}")
+                shown = [0.0]
+
+                def show_move() -> None:
+                    if mover.clock.t >= shown[0] + PROGRESS_PERIOD:
+                        shown[0] += PROGRESS_PERIOD
+                        say(f"planned move at {mover.clock.t:.1f} of {mover.trajectory.duration:.1f} s")
+
                 failure = spin_until(
                     lambda: mover.arrived is not None,
                     timeout,
                     lambda: (f"the planned move to finish (at {mover.clock.t:.1f} of "
                              f"{mover.trajectory.duration:.1f} s)"),
+                    show_move,
                 )
         return failure, driver, mover
     finally:
         executor.shutdown()
         node.destroy_node()
         rclpy.shutdown(context=context)
+        say("stopping the nodes (the recorder then adds the visual topics to the bag)")
         stop_processes(processes)
+        say("nodes stopped")
 
 
 def move_report(output: Path, exc: Excavator, mover: Mover) -> str:
@@ -610,6 +621,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--timeout", type=float, default=90.0, help="give up after this many seconds of cycle"
     )
     args = parser.parse_args(argv)
+    began = time.monotonic()
+
+    @contextmanager
+    def step(what: str) -> Iterator[None]:
+        # Every step that takes more than a few seconds says so when it starts and ends, so the
+        # demo is never silent for long (the cycle and the planned move print every 5 s).
+        print(f"excavator_demo: {what} ...", flush=True)
+        yield
+        print(f"excavator_demo: {what}: done ({time.monotonic() - began:.1f} s)", flush=True)
+
     os.environ.setdefault("MPLBACKEND", "Agg")
     from excavator_kinematics.cycle_report import report  # matplotlib only once the backend is set
 
@@ -626,9 +647,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"excavator_demo: FAILED: {failure}", file=sys.stderr)
         return 1
     start_ns, end_ns = driver.clock.start_ns, driver.clock.last_ns
-    summary = report(args.output / "bag", args.output, exc, path, start_ns, end_ns)
+    with step("reading the bag, plotting figs. 11 and 12"):
+        summary = report(args.output / "bag", args.output, exc, path, start_ns, end_ns)
     print(summary.text)
-    gif = animation(args.output / "bag", args.output / ANIMATION, exc, start_ns, end_ns)
+    with step("drawing the animation"):
+        gif = animation(args.output / "bag", args.output / ANIMATION, exc, start_ns, end_ns)
     print(f"  animation: {gif} ({gif.stat().st_size / 1e6:.2f} MB); Foxglove: open {args.output / 'bag'} "
           f"(docs/visualisation.md)")
     delay = 1e3 * np.percentile(driver.delays, [50, 99])
@@ -637,8 +660,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"{driver.skipped} of {len(driver.delays)} older than {MAX_POSE_AGE:g} s not acted on; "
         f"cycle clock held {driver.clock.held:.2f} s over gaps longer than {MAX_CLOCK_STEP:g} s"
     )
-    moved = move_report(args.output, exc, mover)
+    with step("plotting the planned move"):
+        moved = move_report(args.output, exc, mover)
     print(moved)
+    print(f"excavator_demo: finished in {time.monotonic() - began:.1f} s", flush=True)
     if not mover.arrived.ok:
         print(f"excavator_demo: FAILED: the planned move did not arrive at the start "
               f"({moved.splitlines()[-1].strip()})", file=sys.stderr)
