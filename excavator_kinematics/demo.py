@@ -126,6 +126,7 @@ PLAN_TIMEOUT = 30.0  # s for the plan_path answer (imports and a plan on a loade
 PLANNED_MOVE = "excavator_planned_move.png"
 ANIMATION = "excavator_digging.gif"
 ANIMATION_SPEED = 2.0  # x real time: a 40 s cycle in 20 s (200 frames at 10 fps)
+ANIMATION_SIZE = (11.0, 5.0)  # inches at 90 dpi: 990 x 450 px, both views side by side
 RECORDED = {
     "cylinder_lengths": "sensor_msgs/msg/JointState",
     "joint_states": "sensor_msgs/msg/JointState",
@@ -142,10 +143,11 @@ RECORDED = {
 
 
 def animation(bag: Path, gif: Path, exc: Excavator, start_ns: int, end_ns: int) -> Path:
-    """Side view (boom plane) of the whole linkage through the recorded cycle (stamps ``start_ns``
-    to ``end_ns``), with the reference path and the bucket-tip trace, as an animated GIF
-    (:func:`manipulator_kinematics.animation.animate`)."""
-    from manipulator_kinematics.animation import View, animate, boom_plane
+    """Side view (boom plane) and top view of the whole linkage through the recorded cycle (stamps
+    ``start_ns`` to ``end_ns``), with the reference path and the bucket-tip trace, as an animated
+    GIF (:func:`manipulator_kinematics.animation.animate`); the top view shows the swing to the
+    truck, which the side view of the turning boom plane cannot."""
+    from manipulator_kinematics.animation import View, animate, boom_plane, view_xy
     from manipulator_kinematics.bag.visual import gather_states
 
     machine = registry.machine("excavator")
@@ -155,9 +157,11 @@ def animation(bag: Path, gif: Path, exc: Excavator, start_ns: int, end_ns: int) 
     reference = arrays["/reference_bucket_pose"]
     points = np.stack([reference[f"pose.position.{c}"] for c in "xyz"], axis=-1)
     return animate(
-        machine.scene(exc, D[cycle]), gif, [View(boom_plane(D[cycle, 0]), "r (m)", "z (m)")],
+        machine.scene(exc, D[cycle]), gif,
+        [View(boom_plane(D[cycle, 0]), "r (m)", "z (m)", "side view of the boom plane"),
+         View(view_xy, "x (m)", "y (m)", "top view: the swing to the truck")],
         times=(stamp[cycle] - start_ns) * 1e-9, reference=points, ground=0.0, speed=ANIMATION_SPEED,
-        title=f"{exc.name}: digging cycle, side view of the boom plane ({ANIMATION_SPEED:g}x speed)",
+        title=f"{exc.name}: digging cycle ({ANIMATION_SPEED:g}x speed)", size=ANIMATION_SIZE, dpi=90,
     )
 
 

@@ -139,9 +139,9 @@ def animate(
                            c=[COLORS[s.kind] for s in spheres], zorder=3, linewidths=0)
         (trace,) = ax.plot([], [], color="tab:red", linewidth=1.0, label="tool trace", zorder=4)
         if reference is not None:
-            ax.legend(loc="best", fontsize=7, framealpha=0.6)
+            ax.legend(loc="best", fontsize=9, framealpha=0.6)
         artists.append((view, lines, discs, trace))
-    clock = fig.text(0.01, 0.01, "", fontsize=8)
+    clock = fig.text(0.01, 0.01, "", fontsize=9)
 
     def draw(k: int) -> list:
         i = int(shown[k])
