@@ -142,7 +142,8 @@ RECORDED = {
 }
 
 
-def animation(bag: Path, gif: Path, exc: Excavator, start_ns: int, end_ns: int) -> Path:
+def animation(bag: Path, gif: Path, exc: Excavator, start_ns: int, end_ns: int,
+              progress: Callable[[int, int], None] | None = None) -> Path:
     """Side view (boom plane) and top view of the whole linkage through the recorded cycle (stamps
     ``start_ns`` to ``end_ns``), with the reference path and the bucket-tip trace, as an animated
     GIF (:func:`manipulator_kinematics.animation.animate`); the top view shows the swing to the
@@ -162,6 +163,7 @@ def animation(bag: Path, gif: Path, exc: Excavator, start_ns: int, end_ns: int) 
          View(view_xy, "x (m)", "y (m)", "top view: the swing to the truck")],
         times=(stamp[cycle] - start_ns) * 1e-9, reference=points, ground=0.0, speed=ANIMATION_SPEED,
         title=f"{exc.name}: digging cycle ({ANIMATION_SPEED:g}x speed)", size=ANIMATION_SIZE, dpi=90,
+        progress=progress,
     )
 
 
@@ -375,10 +377,15 @@ def stop_processes(processes: list[tuple[str, subprocess.Popen]]) -> None:
         if process.poll() is None:
             process.send_signal(signal.SIGINT)
     for name, process in processes:
-        try:
-            # The recorder adds the visual topics after it stops (a few seconds for the cycle).
-            process.wait(RECORD_STOP_TIMEOUT if name == "record" else 10.0)
-        except subprocess.TimeoutExpired:
+        # The recorder adds the visual topics after it stops (a few seconds for the cycle, more on
+        # a busy machine): a line every PROGRESS_PERIOD s while it works.
+        deadline = time.monotonic() + (RECORD_STOP_TIMEOUT if name == "record" else 10.0)
+        while process.poll() is None and time.monotonic() < deadline:
+            try:
+                process.wait(min(PROGRESS_PERIOD, max(deadline - time.monotonic(), 0.0)))
+            except subprocess.TimeoutExpired:
+                print(f"    waiting for {name} to finish", flush=True)
+        if process.poll() is None:
             process.kill()
             process.wait()
 
@@ -654,8 +661,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     with step("reading the bag, plotting figs. 11 and 12"):
         summary = report(args.output / "bag", args.output, exc, path, start_ns, end_ns)
     print(summary.text)
+    said = [time.monotonic()]
+
+    def frames(frame: int, total: int) -> None:
+        if time.monotonic() - said[0] >= PROGRESS_PERIOD:
+            said[0] = time.monotonic()
+            print(f"    frame {frame + 1} / {total} ({said[0] - began:.1f} s)", flush=True)
+
     with step("drawing the animation"):
-        gif = animation(args.output / "bag", args.output / ANIMATION, exc, start_ns, end_ns)
+        gif = animation(args.output / "bag", args.output / ANIMATION, exc, start_ns, end_ns, frames)
     print(f"  animation: {gif} ({gif.stat().st_size / 1e6:.2f} MB); Foxglove: open {args.output / 'bag'} "
           f"(docs/visualisation.md)")
     delay = 1e3 * np.percentile(driver.delays, [50, 99])

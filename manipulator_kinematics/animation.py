@@ -83,12 +83,14 @@ def animate(
     size: tuple[float, float] = (6.0, 4.0),
     dpi: int = 80,
     ground: float | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> Path:
     """Write an animated GIF of ``scene`` (N states) to ``path`` and return it.
 
     ``times`` (N,) s of the states (default: 1 s apart), played ``speed`` times real time at
     ``fps``; ``reference`` (M, 3) a path drawn dashed (base frame); ``ground`` a z drawn as the
-    ground line in views whose vertical axis is z."""
+    ground line in views whose vertical axis is z; ``progress(frame, frames)`` is called as each
+    frame is written (a long GIF takes minutes on a busy machine)."""
     path = Path(path)
     count = scene.shape[0]
     times = np.arange(count, dtype=float) if times is None else np.asarray(times, dtype=float)
@@ -159,7 +161,7 @@ def animate(
 
     animation = FuncAnimation(fig, draw, frames=len(shown), blit=False)
     path.parent.mkdir(parents=True, exist_ok=True)
-    animation.save(path, writer=PillowWriter(fps=fps))
+    animation.save(path, writer=PillowWriter(fps=fps), progress_callback=progress)
     plt.close(fig)
     return path
 
