@@ -45,7 +45,8 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -125,6 +126,7 @@ PLAN_TIMEOUT = 30.0  # s for the plan_path answer (imports and a plan on a loade
 PLANNED_MOVE = "excavator_planned_move.png"
 ANIMATION = "excavator_digging.gif"
 ANIMATION_SPEED = 2.0  # x real time: a 40 s cycle in 20 s (200 frames at 10 fps)
+ANIMATION_SIZE = (11.0, 5.0)  # inches at 90 dpi: 990 x 450 px, both views side by side
 RECORDED = {
     "cylinder_lengths": "sensor_msgs/msg/JointState",
     "joint_states": "sensor_msgs/msg/JointState",
@@ -140,11 +142,13 @@ RECORDED = {
 }
 
 
-def animation(bag: Path, gif: Path, exc: Excavator, start_ns: int, end_ns: int) -> Path:
-    """Side view (boom plane) of the whole linkage through the recorded cycle (stamps ``start_ns``
-    to ``end_ns``), with the reference path and the bucket-tip trace, as an animated GIF
-    (:func:`manipulator_kinematics.animation.animate`)."""
-    from manipulator_kinematics.animation import View, animate, boom_plane
+def animation(bag: Path, gif: Path, exc: Excavator, start_ns: int, end_ns: int,
+              progress: Callable[[int, int], None] | None = None) -> Path:
+    """Side view (boom plane) and top view of the whole linkage through the recorded cycle (stamps
+    ``start_ns`` to ``end_ns``), with the reference path and the bucket-tip trace, as an animated
+    GIF (:func:`manipulator_kinematics.animation.animate`); the top view shows the swing to the
+    truck, which the side view of the turning boom plane cannot."""
+    from manipulator_kinematics.animation import View, animate, boom_plane, view_xy
     from manipulator_kinematics.bag.visual import gather_states
 
     machine = registry.machine("excavator")
@@ -154,9 +158,12 @@ def animation(bag: Path, gif: Path, exc: Excavator, start_ns: int, end_ns: int) 
     reference = arrays["/reference_bucket_pose"]
     points = np.stack([reference[f"pose.position.{c}"] for c in "xyz"], axis=-1)
     return animate(
-        machine.scene(exc, D[cycle]), gif, [View(boom_plane(D[cycle, 0]), "r (m)", "z (m)")],
+        machine.scene(exc, D[cycle]), gif,
+        [View(boom_plane(D[cycle, 0]), "r (m)", "z (m)", "side view of the boom plane"),
+         View(view_xy, "x (m)", "y (m)", "top view: the swing to the truck")],
         times=(stamp[cycle] - start_ns) * 1e-9, reference=points, ground=0.0, speed=ANIMATION_SPEED,
-        title=f"{exc.name}: digging cycle, side view of the boom plane ({ANIMATION_SPEED:g}x speed)",
+        title=f"{exc.name}: digging cycle ({ANIMATION_SPEED:g}x speed)", size=ANIMATION_SIZE, dpi=90,
+        progress=progress,
     )
 
 
@@ -370,10 +377,15 @@ def stop_processes(processes: list[tuple[str, subprocess.Popen]]) -> None:
         if process.poll() is None:
             process.send_signal(signal.SIGINT)
     for name, process in processes:
-        try:
-            # The recorder adds the visual topics after it stops (a few seconds for the cycle).
-            process.wait(RECORD_STOP_TIMEOUT if name == "record" else 10.0)
-        except subprocess.TimeoutExpired:
+        # The recorder adds the visual topics after it stops (a few seconds for the cycle, more on
+        # a busy machine): a line every PROGRESS_PERIOD s while it works.
+        deadline = time.monotonic() + (RECORD_STOP_TIMEOUT if name == "record" else 10.0)
+        while process.poll() is None and time.monotonic() < deadline:
+            try:
+                process.wait(min(PROGRESS_PERIOD, max(deadline - time.monotonic(), 0.0)))
+            except subprocess.TimeoutExpired:
+                print(f"    waiting for {name} to finish", flush=True)
+        if process.poll() is None:
             process.kill()
             process.wait()
 
@@ -545,18 +557,28 @@ def run_cycle(
                     [p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in points],
                     [list(p.positions) for p in points], [list(p.velocities) for p in points])
                 say(f"plan_path back to the start: {answer.message}")
+                shown = [0.0]
+
+                def show_move() -> None:
+                    if mover.clock.t >= shown[0] + PROGRESS_PERIOD:
+                        shown[0] += PROGRESS_PERIOD
+                        say(f"planned move at {mover.clock.t:.1f} of {mover.trajectory.duration:.1f} s")
+
                 failure = spin_until(
                     lambda: mover.arrived is not None,
                     timeout,
                     lambda: (f"the planned move to finish (at {mover.clock.t:.1f} of "
                              f"{mover.trajectory.duration:.1f} s)"),
+                    show_move,
                 )
         return failure, driver, mover
     finally:
         executor.shutdown()
         node.destroy_node()
         rclpy.shutdown(context=context)
+        say("stopping the nodes (the recorder then adds the visual topics to the bag)")
         stop_processes(processes)
+        say("nodes stopped")
 
 
 def move_report(output: Path, exc: Excavator, mover: Mover) -> str:
@@ -610,6 +632,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--timeout", type=float, default=90.0, help="give up after this many seconds of cycle"
     )
     args = parser.parse_args(argv)
+    began = time.monotonic()
+
+    @contextmanager
+    def step(what: str) -> Iterator[None]:
+        # Every step that takes more than a few seconds says so when it starts and ends, so the
+        # demo is never silent for long (the cycle and the planned move print every 5 s).
+        print(f"excavator_demo: {what} ...", flush=True)
+        yield
+        print(f"excavator_demo: {what}: done ({time.monotonic() - began:.1f} s)", flush=True)
+
     os.environ.setdefault("MPLBACKEND", "Agg")
     from excavator_kinematics.cycle_report import report  # matplotlib only once the backend is set
 
@@ -626,9 +658,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"excavator_demo: FAILED: {failure}", file=sys.stderr)
         return 1
     start_ns, end_ns = driver.clock.start_ns, driver.clock.last_ns
-    summary = report(args.output / "bag", args.output, exc, path, start_ns, end_ns)
+    with step("reading the bag, plotting figs. 11 and 12"):
+        summary = report(args.output / "bag", args.output, exc, path, start_ns, end_ns)
     print(summary.text)
-    gif = animation(args.output / "bag", args.output / ANIMATION, exc, start_ns, end_ns)
+    said = [time.monotonic()]
+
+    def frames(frame: int, total: int) -> None:
+        if time.monotonic() - said[0] >= PROGRESS_PERIOD:
+            said[0] = time.monotonic()
+            print(f"    frame {frame + 1} / {total} ({said[0] - began:.1f} s)", flush=True)
+
+    with step("drawing the animation"):
+        gif = animation(args.output / "bag", args.output / ANIMATION, exc, start_ns, end_ns, frames)
     print(f"  animation: {gif} ({gif.stat().st_size / 1e6:.2f} MB); Foxglove: open {args.output / 'bag'} "
           f"(docs/visualisation.md)")
     delay = 1e3 * np.percentile(driver.delays, [50, 99])
@@ -637,8 +678,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"{driver.skipped} of {len(driver.delays)} older than {MAX_POSE_AGE:g} s not acted on; "
         f"cycle clock held {driver.clock.held:.2f} s over gaps longer than {MAX_CLOCK_STEP:g} s"
     )
-    moved = move_report(args.output, exc, mover)
+    with step("plotting the planned move"):
+        moved = move_report(args.output, exc, mover)
     print(moved)
+    print(f"excavator_demo: finished in {time.monotonic() - began:.1f} s", flush=True)
     if not mover.arrived.ok:
         print(f"excavator_demo: FAILED: the planned move did not arrive at the start "
               f"({moved.splitlines()[-1].strip()})", file=sys.stderr)

@@ -52,7 +52,7 @@ from excavator_kinematics.kinematics import (
 )
 from excavator_kinematics.level_pose import LevelPose
 from excavator_kinematics.node_settings import FORWARD, NODES_CONFIG
-from excavator_kinematics.state_input import Plausible, RateDifferentiator, SwingHold
+from excavator_kinematics.state_input import Plausible, RateDifferentiator, StaleInput, SwingHold
 from excavator_kinematics.surface_grade import SurfaceGrade
 from excavator_kinematics.urdf_joints import URDF_JOINTS
 from manipulator_kinematics.codec.packed import PackedMessage
@@ -86,6 +86,7 @@ class ForwardKinematics(MachineNode):
         self.swing_acceleration = RateDifferentiator(tau, gap)
         self.plausible = Plausible(ACTUATORS, self.exc.limits.max_rates.tolist())
         self.log = ThrottledLog(self, settings["warning_period"])
+        self.outputs_sent = self.waiting_said = False
 
         qos = QoSProfile(depth=settings["qos_depth"], reliability=ReliabilityPolicy.RELIABLE)
         topic = settings["topics"]
@@ -160,6 +161,15 @@ class ForwardKinematics(MachineNode):
             stamp_ns = msg.stamp_ns
             theta1, theta1_dot, theta1_ddot = self.swing.at(stamp_ns)
             D = self.exc.validate([theta1, *lengths])
+        except StaleInput as error:
+            # Transient (start-up, a loaded machine): one info line until the first output, then
+            # throttled warnings. ERROR is kept for inputs that need a person.
+            if self.outputs_sent:
+                self.log("warning", f"rejected cylinder_lengths: {error}")
+            elif not self.waiting_said:
+                self.waiting_said = True
+                self.get_logger().info(f"waiting for inputs that belong together: {error}")
+            return
         except (InputError, StrokeError) as error:
             self.log("error", f"rejected cylinder_lengths: {error}")
             return
@@ -189,6 +199,7 @@ class ForwardKinematics(MachineNode):
                      f"D_dot = {[theta1_dot, *rates.tolist()]}: not finite")
             return
         sec_nanosec = (msg.sec, msg.nanosec)
+        self.outputs_sent = True
         self.pose_pub.publish(self.pose.pack((*sec_nanosec, *pose)))
         self.twist_pub.publish(self.twist.pack((*sec_nanosec, *twist)))
         if known:

@@ -44,6 +44,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
+from excavator_kinematics.parameters import wrap_swing
 from manipulator_kinematics.blocks import BLOCK, in_blocks
 from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.model import (
@@ -381,8 +382,15 @@ def _pin_reach(model: Excavator, Q: np.ndarray, D: np.ndarray) -> str:
             f"[{abs(model.l2 - model.l3):.6g}, {model.l2 + model.l3:.6g}] m")
 
 
-def _seed(seed: ArrayLike | None) -> np.ndarray | None:
-    return None if seed is None else np.asarray(seed, dtype=float)
+def _seed(seed: ArrayLike | None, model: Excavator) -> np.ndarray | None:
+    """The seed as floats, a continuous swing's angle wrapped into the candidates' (-pi, pi]."""
+    if seed is None:
+        return None
+    seed = np.asarray(seed, dtype=float)
+    if model.limits.continuous_swing and seed.shape[-1:] == (4,):
+        seed = seed.copy()
+        seed[..., 0] = wrap_swing(seed[..., 0])
+    return seed
 
 
 def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
@@ -433,10 +441,11 @@ def solve_pose(model: Excavator, Q: ArrayLike, seed: ArrayLike | None = None,
         raise ValueError(f"expected Q = [x, y, z, alpha] of shape (..., 4), got shape {Q.shape}")
     kernel = compiled_kernel(model) if Q.shape == (4,) and compiled else None
     if kernel is not None:
-        return _solve_one(kernel, model, Q[:3], np.full(4, Q[3]), bool(np.isfinite(Q).all()), _seed(seed),
-                          index)
+        return _solve_one(kernel, model, Q[:3], np.full(4, Q[3]), bool(np.isfinite(Q).all()),
+                          _seed(seed, model), index)
     D, reach, judged = candidates(model, Q)
-    return _solutions(model, np.broadcast_to(Q[..., None, :], D.shape), D, reach, judged, _seed(seed), index)
+    return _solutions(model, np.broadcast_to(Q[..., None, :], D.shape), D, reach, judged, _seed(seed, model),
+                      index)
 
 
 def seed_bucket_angle(model: Excavator, seed: ArrayLike) -> np.ndarray:
@@ -512,7 +521,7 @@ def solve_position(model: Excavator, position: ArrayLike, seed: ArrayLike | None
     if position.shape[-1:] != (3,):
         raise ValueError(f"expected a position [x, y, z] of shape (..., 3), got shape {position.shape}")
     flat = position.reshape(-1, 3)
-    seed = _seed(seed)
+    seed = _seed(seed, model)
     kernel = compiled_kernel(model) if position.shape == (3,) and compiled else None
     if seed is not None:
         alpha = np.broadcast_to(seed_bucket_angle(model, seed), position.shape[:-1]).reshape(-1, 1)
@@ -608,7 +617,7 @@ def solve_ik(model: Excavator, target: ArrayLike, *, use_orientation: bool = Tru
     judged[rolled | off_plane] = _UNREACHABLE
     judged[~finite] = _INVALID
     solutions = _solutions(model, np.broadcast_to(Q[..., None, :], D.shape), D, reach, judged,
-                           _seed(seed), index, other_heading=True)
+                           _seed(seed, model), index, other_heading=True)
 
     def explain(result: IKSolutions, where: tuple[int, ...]) -> str:
         if not finite[where]:

@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from excavator_kinematics import inverse
-from excavator_kinematics.parameters import CYLINDERS, SECTION, Description, parse
+from excavator_kinematics.parameters import CYLINDERS, SECTION, Description, parse, wrap_swing
 from manipulator_kinematics.blocks import BLOCK, in_blocks
 from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.model import IKSolutions
@@ -251,12 +251,19 @@ class Excavator:
 
         self.limits = g.limits
         # The limits of D as the shared IK pieces read them (cylinder values are lengths, m).
-        self.joint_limits = JointLimits(ACTUATORS, self.limits.d_min, self.limits.d_max,
-                                        prismatic=(False, True, True, True))
-        # The limits with the stroke tolerance applied (what validate accepts).
-        self._lo = self.limits.d_min - STROKE_TOLERANCE
-        self._hi = self.limits.d_max + STROKE_TOLERANCE
+        # A continuous swing's angles are wrapped to (-pi, pi]: the IK answers in that range, and a
+        # state outside it takes validate's slow path, which wraps it.
+        lower, upper = self.limits.d_min, self.limits.d_max
+        if self.limits.continuous_swing:
+            lower, upper = np.concatenate(([-math.pi], lower[1:])), np.concatenate(([math.pi], upper[1:]))
+        self.joint_limits = JointLimits(ACTUATORS, lower, upper, prismatic=(False, True, True, True))
+        # The limits with the stroke tolerance applied (what validate and the kernel accept).
+        self._lo = lower - STROKE_TOLERANCE
+        self._hi = upper + STROKE_TOLERANCE
+        if self.limits.continuous_swing:  # exactly (-pi, pi]: -pi goes the slow way, to pi
+            self._lo[0], self._hi[0] = np.nextafter(-math.pi, 0.0), math.pi
         self._check_whole_stroke()
+        self._check_branches()
         self._ik = inverse.Constants.of(self)
         # The constants of the compiled single call (state_kernel): l0..l4, the boom, arm and
         # side-link triangles (7 each, _Triangle.constants), R's pivot from the bucket pin (2),
@@ -279,6 +286,43 @@ class Excavator:
                 f"{SECTION}.{CYLINDERS[i]}: the stroke [{self.limits.stroke_min[i]:g}, "
                 f"{self.limits.stroke_max[i]:g}] m cannot be assembled with these pins and links: {error}"
             ) from None
+
+    def _check_branches(self) -> None:
+        """What a wrong assembly branch (an orientation's sign) does, refused naming the key: each
+        cylinder must move its joint the documented way over its whole stroke (a backhoe's:
+        extending the boom cylinder raises the boom, theta2 up; the arm and bucket cylinders curl
+        the arm and the bucket in, theta3 and theta4 down; docs/excavator.md), the bucket's
+        four-bar must not be crossed (the H-link pin and the side-link pivot on either side of the
+        line from the bucket pin to the rod pin) and at the reference state the tip must be in
+        front of the swing axis. A flipped boom cylinder orientation otherwise loads as a boom
+        hanging down behind the machine (theta2 = -164 deg, tip at r = -3.4 m)."""
+        samples = np.linspace(self.limits.stroke_min, self.limits.stroke_max, 2001)
+        k, _ = self.k_entries(samples)
+        for i, (name, sign, joint, what) in enumerate((
+            ("boom_cylinder", 1.0, "theta2", "raise the boom"),
+            ("arm_cylinder", -1.0, "theta3", "curl the arm in"),
+            ("bucket_cylinder", -1.0, "theta4", "curl the bucket in"),
+        )):
+            wrong = k[:, i] * sign <= 0.0
+            if np.any(wrong):
+                at = samples[np.argmax(wrong), i]
+                raise ConfigError(
+                    f"{SECTION}.{name}.orientation: extending the cylinder must {what} ({joint} "
+                    f"{'up' if sign > 0 else 'down'}), this branch turns it the other way "
+                    f"(d{joint}/dd = {k[np.argmax(wrong), i]:.3g} rad/m at {at:.4g} m): flip the sign")
+        reference = self.limits.reference
+        (ex, ey), (hx, hy) = (np.ravel(v) for v in self._linkages(*(reference[1:, None]))[4])
+        fx, fy = self._pivot_from_bucket_pin
+        if (ex * hy - ey * hx) * (ex * fy - ey * fx) >= 0.0:
+            raise ConfigError(
+                f"{SECTION}.h_link.orientation: this branch crosses the bucket linkage (the H-link "
+                "pin on the side-link pivot's side of the line bucket pin -> rod pin): flip the sign")
+        r = self.open_chain_pose(np.concatenate(([0.0], self.joint_angles(reference[1:]))))[0]
+        if r <= 0.0:
+            raise ConfigError(
+                f"{SECTION}.boom_cylinder.reference_length: at the reference lengths the bucket tip "
+                f"is {-r:.3g} m behind the swing axis (r = {r:.3g} m); a backhoe's tool is in front: "
+                "check the pins")
 
     @classmethod
     def from_file(cls, path: str | Path, node_name: str = "/**") -> Excavator:
@@ -341,7 +385,8 @@ class Excavator:
 
     # ------------------------------------------------------------------ validation
     def validate(self, D: Any) -> np.ndarray:
-        """D as a float array of shape (4,) or (N, 4); raises StrokeError naming what is wrong."""
+        """D as a float array of shape (4,) or (N, 4) (a continuous swing's angle wrapped to
+        (-pi, pi]); raises StrokeError naming what is wrong."""
         D = np.asarray(D, dtype=float)
         if D.shape != (4,) and (D.ndim != 2 or D.shape[1] != 4):
             raise ValueError(
@@ -355,6 +400,10 @@ class Excavator:
         swing = D[..., 0]
         if not np.all(np.isfinite(swing)):
             raise StrokeError(f"swing_joint angle is not finite: {_first_bad(swing, np.isfinite(swing))}")
+        if self.limits.continuous_swing:
+            D = D.copy()
+            D[..., 0] = wrap_swing(swing)
+            return D
         lo, hi = self.limits.swing_min - STROKE_TOLERANCE, self.limits.swing_max + STROKE_TOLERANCE
         inside = (swing >= lo) & (swing <= hi)
         if not np.all(inside):

@@ -34,8 +34,16 @@ _POINT = Numbers(2, item=_COORDINATE)
 _ORIENTATION = Number(min=-1.0, max=1.0, integer=True)
 _RPY = Numbers(3, item=Number(min=-2.0 * math.pi, max=2.0 * math.pi, unit="rad"))
 _CYLINDER_SPEED = Number(min=0.0, max=5.0, unit="m/s", exclusive_min=True)
-# A swing range of up to a full turn either way of the reference heading.
+# A swing range of up to a full turn either way of the reference heading, or open at both ends
+# (-.inf, .inf): a continuous swing, its angles wrapped to (-pi, pi].
 _SWING_ANGLE = Number(min=-2.0 * math.pi, max=2.0 * math.pi, unit="rad")
+_SWING_LIMIT = Number(min=-2.0 * math.pi, max=2.0 * math.pi, unit="rad", open=True,
+                      doc="swing stop; -.inf (min) and .inf (max) together: continuous swing")
+
+
+def wrap_swing(angle: Any) -> Any:
+    """Swing angle(s) wrapped to (-pi, pi], the range of a continuous swing."""
+    return math.pi - np.mod(math.pi - np.asarray(angle, dtype=float), 2.0 * math.pi)
 
 
 def _cylinder(**pins: Any) -> dict[str, Any]:
@@ -75,8 +83,8 @@ SCHEMA = {
         "bucket_linkage": {"body": Text(choices=("h_link", "bucket")), "rotation_rpy": _RPY},
     },
     "swing": {
-        "min_angle": _SWING_ANGLE,
-        "max_angle": _SWING_ANGLE,
+        "min_angle": _SWING_LIMIT,
+        "max_angle": _SWING_LIMIT,
         "reference_angle": _SWING_ANGLE,
         "max_speed": Number(min=0.0, max=10.0, unit="rad/s", exclusive_min=True),
     },
@@ -94,6 +102,11 @@ class Limits:
     max_cylinder_speed: np.ndarray  # (3,) m/s
     max_swing_speed: float  # rad/s
     reference: np.ndarray  # (4,) D of the reference state [theta1, d2, d3, d4]
+
+    @property
+    def continuous_swing(self) -> bool:
+        """Open swing limits (-inf, inf): the swing turns without end, angles wrapped to (-pi, pi]."""
+        return math.isinf(self.swing_max)
 
     @property
     def d_min(self) -> np.ndarray:
@@ -142,6 +155,14 @@ def describe(params: Mapping[str, Any], prefix: str = SECTION) -> Description:
     """The description of a section already checked by ``validate(section, SCHEMA, prefix)``;
     ConfigError naming the key when two keys disagree."""
     swing = params["swing"]
+    lower, upper = math.isinf(swing["min_angle"]), math.isinf(swing["max_angle"])
+    if lower or upper:
+        require(lower and upper and swing["min_angle"] < 0.0 < swing["max_angle"],
+                f"{prefix}.swing.{'max_angle' if lower else 'min_angle'}",
+                "a continuous swing has both limits open (min_angle: -.inf, max_angle: .inf), got "
+                f"[{swing['min_angle']}, {swing['max_angle']}] rad")
+        require(-math.pi < swing["reference_angle"] <= math.pi, f"{prefix}.swing.reference_angle",
+                f"{swing['reference_angle']} rad: a continuous swing's angles are in (-pi, pi]")
     require(swing["min_angle"] < swing["max_angle"], f"{prefix}.swing.max_angle",
             f"{swing['max_angle']} must be above min_angle {swing['min_angle']}")
     require(swing["min_angle"] <= swing["reference_angle"] <= swing["max_angle"],

@@ -105,7 +105,8 @@ def plot(png: Path, exc: Excavator, t: np.ndarray, d: np.ndarray, d_dot: np.ndar
         top.plot(plan.t, plan.q[:, i], "--", color="tab:gray", label="planned")
         top.plot(t, d[:, i], color="tab:blue", label="simulated")
         for bound in (lim.d_min[i], lim.d_max[i]):
-            top.axhline(bound, color="tab:red", lw=0.8)
+            if np.isfinite(bound):  # a continuous swing has none
+                top.axhline(bound, color="tab:red", lw=0.8)
         top.set_title(name)
         top.set_ylabel(f"position ({units[i]})")
         bottom.plot(plan.t, plan.qd[:, i], "--", color="tab:gray", label="planned")

@@ -1,5 +1,6 @@
 """Simulated excavator actuators: swing and the three cylinders follow rate commands within their
-speed limits and stroke ends. Numpy only; the simulator node wires it to ROS.
+speed limits and stroke ends (a continuous swing turns on, its angle wrapped to (-pi, pi]). Numpy
+only; the simulator node wires it to ROS.
 
 Each actuator saturates at its own maximum speed (a valve opens no further), follows the commanded
 rate with a first-order lag of ``time_constant`` seconds (0 = ideal), and stops at its stroke end.
@@ -11,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from excavator_kinematics.parameters import Limits
+from excavator_kinematics.parameters import Limits, wrap_swing
 from manipulator_kinematics.params import ConfigError
 
 
@@ -58,5 +59,7 @@ class Plant:
         d = self.d + travel
         stopped = (d <= self.limits.d_min) & (d_dot <= 0.0) | (d >= self.limits.d_max) & (d_dot >= 0.0)
         self.d = np.clip(d, self.limits.d_min, self.limits.d_max)
+        if self.limits.continuous_swing:
+            self.d[0] = wrap_swing(self.d[0])
         # In reals the lag cannot overshoot its target; the clip makes that so in floats too.
         self.d_dot = np.where(stopped, 0.0, np.clip(d_dot, -self.limits.max_rates, self.limits.max_rates))

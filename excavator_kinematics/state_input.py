@@ -63,6 +63,12 @@ def _check(names: Sequence[str], values: Sequence[float], bounds: dict[str, floa
             )
 
 
+class StaleInput(InputError):
+    """An input that is late or not there yet: transient on a loaded machine and at start-up (the
+    topics start at different moments), not a fault that needs a person. Nodes log it as a
+    warning (throttled), before their first output as one info line."""
+
+
 class SwingHold:
     """The latest swing state (angle, rate, acceleration), read at a cylinder message's stamp."""
 
@@ -76,12 +82,12 @@ class SwingHold:
         self._stamp_ns, self._angle, self._rate, self._acceleration = stamp_ns, angle, rate, acceleration
 
     def at(self, stamp_ns: int) -> tuple[float, float, float | None]:
-        """(angle, rate, acceleration or None) at ``stamp_ns``; InputError when missing or too old."""
+        """(angle, rate, acceleration or None) at ``stamp_ns``; StaleInput when missing or too old."""
         if self._stamp_ns is None:
-            raise InputError("no swing state received yet (joint_states with swing_joint)")
+            raise StaleInput("no swing state received yet (joint_states with swing_joint)")
         gap_ns = stamp_ns - self._stamp_ns
         if abs(gap_ns) > self.max_age_ns:
-            raise InputError(
+            raise StaleInput(
                 f"swing state is {gap_ns * 1e-9:+.3f} s from the cylinder stamp "
                 f"(max age {self.max_age_ns * 1e-9:g} s)"
             )

@@ -94,7 +94,7 @@ def joint_ranges(model: Excavator) -> tuple[np.ndarray, np.ndarray]:
     only, so min/max over a dense sample of that stroke, widened by the largest change between
     neighbouring samples (the extremum between two samples cannot lie further out than that).
     """
-    lo, hi = model.limits.d_min, model.limits.d_max
+    lo, hi = model.joint_limits.lower, model.joint_limits.upper  # a continuous swing: (-pi, pi]
     D = np.linspace(lo, hi, _RANGE_SAMPLES)
     D[:, 0] = 0.0
     values = joint_positions(model, D)
@@ -174,8 +174,11 @@ def excavator_urdf(model: Excavator) -> str:
     def turn(joint: str, parent: str, child: str, origin: np.ndarray) -> None:
         robot.joint(joint, "revolute", parent, child, origin, axis=_AXIS, limits=limits[joint])
 
-    robot.joint("swing_joint", "revolute", "base_link", "upper_structure", axis=(0.0, 0.0, 1.0),
-                limits=limits["swing_joint"])
+    if model.limits.continuous_swing:  # open limits: URDF's joint without limits
+        robot.joint("swing_joint", "continuous", "base_link", "upper_structure", axis=(0.0, 0.0, 1.0))
+    else:
+        robot.joint("swing_joint", "revolute", "base_link", "upper_structure", axis=(0.0, 0.0, 1.0),
+                    limits=limits["swing_joint"])
     turn("boom_joint", "upper_structure", "boom", _at(*g["boom_foot"]))
     turn("arm_joint", "boom", "arm", _at(*g["arm_pin"]))
     turn("bucket_joint", "arm", "bucket", _at(*g["bucket_pin"]))

@@ -44,7 +44,7 @@ from excavator_kinematics import messages
 from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
 from excavator_kinematics.node_settings import NODES_CONFIG, VELOCITY_IK
 from excavator_kinematics.rate_command import SLOWED, STOPPED, TRACKING, describe, rate_command, toward_line
-from excavator_kinematics.state_input import PLAUSIBILITY_FACTOR, InputError, Plausible, SwingHold
+from excavator_kinematics.state_input import PLAUSIBILITY_FACTOR, InputError, Plausible, StaleInput, SwingHold
 from excavator_kinematics.twist import split_twist
 from manipulator_kinematics.joint_state import joint_values
 from manipulator_kinematics.node_util import ThrottledLog
@@ -56,6 +56,8 @@ NODE = "excavator_velocity_ik"
 # Status levels: tracking is OK; slowed or stopped is a warning (the machine does what it can, in
 # the commanded direction); a target or state that cannot be used is an error.
 LEVELS = {TRACKING: DiagnosticStatus.OK, SLOWED: DiagnosticStatus.WARN, STOPPED: DiagnosticStatus.WARN}
+# Status of a stop per log severity: an input that needs a person (ERROR) or a late one (WARN).
+STOP_LEVELS = {"error": DiagnosticStatus.ERROR, "warning": DiagnosticStatus.WARN}
 
 
 class VelocityIk(MachineNode):
@@ -172,16 +174,16 @@ class VelocityIk(MachineNode):
 
     def on_timer(self) -> None:
         if self.target is not None and self.now_ns() - self.target[0] > self.command_timeout_ns:
-            self.stop(f"no target_bucket_twist for {self.command_timeout_ns * 1e-9:g} s", severity="warning")
+            self.stop(f"no target_bucket_twist for {self.command_timeout_ns * 1e-9:g} s", "info", idle=True)
 
     def state(self) -> np.ndarray:
-        """D = [theta1, d2, d3, d4] now; InputError when missing or stale."""
+        """D = [theta1, d2, d3, d4] now; StaleInput when missing or late, InputError when wrong."""
         if self.cylinders is None:
-            raise InputError("no cylinder_lengths received yet")
+            raise StaleInput("no cylinder_lengths received yet")
         stamp_ns, received_ns, lengths = self.cylinders
         age = self.now_ns() - received_ns
         if age > self.state_timeout_ns:
-            raise InputError(
+            raise StaleInput(
                 f"cylinder_lengths is {age * 1e-9:.3f} s old "
                 f"(state_timeout {self.state_timeout_ns * 1e-9:g} s)"
             )
@@ -225,7 +227,9 @@ class VelocityIk(MachineNode):
                 self.bucket_angle_gives_way,
             )
         except ValueError as error:  # InputError, StrokeError, an overflowing target
-            self.stop(f"cannot command: {error}")
+            # A late state (StaleInput: start-up, a loaded machine) stops the motion as any other
+            # reason does, but it is transient: a warning, not an error that needs a person.
+            self.stop(f"cannot command: {error}", "warning" if isinstance(error, StaleInput) else "error")
             return
         if rates.damping > 0.0:
             self.log(
@@ -263,16 +267,17 @@ class VelocityIk(MachineNode):
         )
         self.status_pub.publish(DiagnosticArray(header=Header(stamp=stamp), status=[status]))
 
-    def stop(self, reason: str, severity: str = "error") -> None:
-        """Log ``reason``; drop the target and publish zero rates once if a motion may be in force."""
+    def stop(self, reason: str, severity: str = "error", idle: bool = False) -> None:
+        """Log ``reason`` at ``severity``; drop the target and publish zero rates once if a motion
+        may be in force. ``idle``: no target any more, an OK status, not a stop."""
         self.log(severity, reason)
         self.target = None
         now = self.get_clock().now().to_msg()
         if self.moving:
             self.publish(now, np.zeros(4))
             self.moving = False
-        level = DiagnosticStatus.ERROR if severity == "error" else DiagnosticStatus.OK
-        message = f"{STOPPED}: {reason}" if severity == "error" else f"idle: {reason}"
+        level = DiagnosticStatus.OK if idle else STOP_LEVELS[severity]
+        message = f"idle: {reason}" if idle else f"{STOPPED}: {reason}"
         self.report(now, level, message, log=False)  # logged just above
 
     def publish(self, stamp: Time, d_dot: np.ndarray) -> None:

@@ -264,11 +264,14 @@ def draw(ranges: WorkingRanges, table: dict[str, dict[str, Range]], path: Path, 
         heights = [pins[start][2] + ranges.base_height, pins[end][2] + ranges.base_height]
         ax.plot([pins[start][0], pins[end][0]], heights, "-", color="0.55", linewidth=1)
     ax.plot([0, 0], [0, 1.2 * ranges.model.l0], "k-.", linewidth=1, label="swing axis")
+    # A shape per quantity, each smaller than the one before and drawn over it: quantities at the
+    # same point (the digging depth and the vertical wall's on the CET200) both stay visible.
     for n, (key, label) in enumerate(QUANTITIES.items()):
         best = table[key]["optimum"]
         tip = ranges.tip(best.state[1:])
         point = tip if key != "min_front_swing_radius" else (best.value, tip[1])
-        ax.plot(*point, "s", color=f"C{n + 1}", markersize=8, label=f"{label}: {best.value:.3f} m")
+        ax.plot(*point, _MARKERS[n % len(_MARKERS)], color=f"C{n + 1}", markersize=14 - n,
+                markeredgecolor="white", markeredgewidth=1.0, label=f"{label}: {best.value:.3f} m")
     ax.set_xlabel("r: horizontal distance from the swing axis (m)")
     ax.set_ylabel("height above ground (m)")
     ax.set_title(f"{ranges.model.name}: working ranges from the geometry (optimum over the stroke box)")
@@ -278,6 +281,9 @@ def draw(ranges: WorkingRanges, table: dict[str, dict[str, Range]], path: Path, 
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
+
+
+_MARKERS = ("s", "o", "D", "^", "v", "P", "X")
 
 
 def main(argv: list[str] | None = None) -> int:

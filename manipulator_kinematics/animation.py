@@ -83,12 +83,14 @@ def animate(
     size: tuple[float, float] = (6.0, 4.0),
     dpi: int = 80,
     ground: float | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> Path:
     """Write an animated GIF of ``scene`` (N states) to ``path`` and return it.
 
     ``times`` (N,) s of the states (default: 1 s apart), played ``speed`` times real time at
     ``fps``; ``reference`` (M, 3) a path drawn dashed (base frame); ``ground`` a z drawn as the
-    ground line in views whose vertical axis is z."""
+    ground line in views whose vertical axis is z; ``progress(frame, frames)`` is called as each
+    frame is written (a long GIF takes minutes on a busy machine)."""
     path = Path(path)
     count = scene.shape[0]
     times = np.arange(count, dtype=float) if times is None else np.asarray(times, dtype=float)
@@ -139,9 +141,9 @@ def animate(
                            c=[COLORS[s.kind] for s in spheres], zorder=3, linewidths=0)
         (trace,) = ax.plot([], [], color="tab:red", linewidth=1.0, label="tool trace", zorder=4)
         if reference is not None:
-            ax.legend(loc="best", fontsize=7, framealpha=0.6)
+            ax.legend(loc="best", fontsize=9, framealpha=0.6)
         artists.append((view, lines, discs, trace))
-    clock = fig.text(0.01, 0.01, "", fontsize=8)
+    clock = fig.text(0.01, 0.01, "", fontsize=9)
 
     def draw(k: int) -> list:
         i = int(shown[k])
@@ -159,7 +161,7 @@ def animate(
 
     animation = FuncAnimation(fig, draw, frames=len(shown), blit=False)
     path.parent.mkdir(parents=True, exist_ok=True)
-    animation.save(path, writer=PillowWriter(fps=fps))
+    animation.save(path, writer=PillowWriter(fps=fps), progress_callback=progress)
     plt.close(fig)
     return path
 

@@ -48,7 +48,8 @@ REQUIRED: Any = object()
 
 @dataclass(frozen=True)
 class Number:
-    """A finite real number in [min, max] (``integer`` for whole numbers)."""
+    """A finite real number in [min, max] (``integer`` for whole numbers); ``open``: -inf and inf
+    are taken too (an open limit: YAML ``.inf``, ``-.inf``)."""
 
     min: float = -math.inf
     max: float = math.inf
@@ -57,12 +58,16 @@ class Number:
     default: Any = REQUIRED
     exclusive_min: bool = False
     doc: str = ""
+    open: bool = False
 
     def check(self, value: Any, key: str) -> float | int:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{key}: expected a number{_unit(self.unit)}, got {shown(value)}")
+        if self.open and math.isinf(value):
+            return float(value)
         if not math.isfinite(value):
-            raise ConfigError(f"{key}: expected a finite number, got {shown(value)}")
+            what = "a finite number or -.inf/.inf (open)" if self.open else "a finite number"
+            raise ConfigError(f"{key}: expected {what}, got {shown(value)}")
         if self.integer and float(value) != int(value):
             raise ConfigError(f"{key}: expected a whole number, got {shown(value)}")
         below = value <= self.min if self.exclusive_min else value < self.min
@@ -76,7 +81,7 @@ class Number:
         """What the field takes, for ``ros2 param describe`` and ``--help``: kind, range and unit."""
         low = "(" if self.exclusive_min else "["
         kind = f"{'whole ' if self.integer else ''}number in {low}{self.min:g}, {self.max:g}]"
-        return kind + (f" {self.unit}" if self.unit else "")
+        return kind + (f" {self.unit}" if self.unit else "") + (", or -inf/inf (open)" if self.open else "")
 
 
 @dataclass(frozen=True)

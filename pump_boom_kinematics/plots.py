@@ -23,6 +23,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.colors import ListedColormap
+from matplotlib.lines import Line2D
 from matplotlib.patches import Rectangle
 
 from pump_boom_kinematics.build_regions import Coverage, reachable_area
@@ -75,9 +76,9 @@ def plot_regions(boom: PumpBoom, out: Path, area: Coverage | None = None) -> Pat
     levels, counts = np.unique(table.index[:, 2], return_counts=True)
     sizes = ", ".join(f"{n} x {float(table.grid.side(level)):g} m" for level, n in zip(levels, counts))
     ax.set_title(
-        f"Region table: {len(table)} squares ({sizes}), {c['covered_area']:.0f} m²\n"
-        f"green: covered, {100 * c['covered_share']:.1f} % of the {c['envelope_area']:.0f} m² reachable in "
-        "positive envelope; red: not covered;\ngrey: reachable only outside positive envelope. "
+        f"Region table: {len(table)} squares, {c['covered_area']:.0f} m²\n({sizes})\n"
+        f"green: covered, {100 * c['covered_share']:.1f} % of the {c['envelope_area']:.0f} m² reachable "
+        "in positive envelope;\nred: not covered; grey: reachable only outside positive envelope;\n"
         f"5 m squares: θ2/θ3/θ4 (deg), dotted: {table.grid.band:g} m bands",
         fontsize=10,
     )
@@ -110,7 +111,11 @@ def plot_example_area(boom: PumpBoom, out: Path) -> Path:
         "θ5 = 160-240, θ6 = 30-170 deg; grey: 5 m squares aligned at (0, 0)",
         fontsize=9,
     )
-    ax.legend(markerscale=30, loc="lower right")
+    # The tips are drawn as single pixels: the legend gets markers of its own (markerscale does
+    # not scale the pixel marker).
+    ax.legend(handles=[Line2D([], [], ls="", marker="s", ms=9, color=c, label=label) for c, label in
+                       (("tab:blue", "positive envelope"), ("tab:orange", "not positive envelope"))],
+              loc="lower right")
     ax.set_xlabel("r (m)")
     ax.set_ylabel("z (m)")
     ax.set_aspect("equal")

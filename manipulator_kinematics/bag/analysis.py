@@ -151,7 +151,7 @@ def since(t_ns: np.ndarray, t0: int) -> np.ndarray:
 def consistency_plot(plots: list[Plot], name: str, curves: dict[str, tuple[np.ndarray, np.ndarray]]) -> None:
     """The |error| curves of a machine's outputs against the recomputed kinematics, if any."""
     if curves:
-        panel = Panel("|error|", curves, log=True)
+        panel = Panel("|published - recomputed|\n(unit per curve: legend)", curves, log=True)
         plots.append(Plot(name, "Published outputs vs recomputed kinematics", [panel]))
 
 

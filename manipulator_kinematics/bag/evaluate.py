@@ -490,6 +490,16 @@ def _decimate(t: np.ndarray, y: np.ndarray, bins: int = PLOT_BINS) -> tuple[np.n
     return np.repeat(mid, 2), np.column_stack([low, high]).ravel()
 
 
+def _decade_ticks(ax: Any) -> None:
+    """At most 7 labelled decades on a log |error| axis (0 and every k-th power of ten): one label
+    per decade over 13 decades crowded into each other."""
+    low, high = ax.get_ylim()
+    top = math.ceil(math.log10(max(high, 1e-12)))
+    bottom = max(-12, math.floor(math.log10(max(low, 1e-12))))
+    step = max(1, math.ceil((top - bottom) / 6))
+    ax.set_yticks([0.0, *(10.0 ** k for k in range(top, bottom - 1, -step))])
+
+
 def write_plots(plots: Sequence[Plot], directory: Path) -> list[Path]:
     import matplotlib
 
@@ -504,7 +514,8 @@ def write_plots(plots: Sequence[Plot], directory: Path) -> list[Path]:
         height = 1.2 + 2.2 * len(panels)
         figure, axes = plt.subplots(len(panels), 1, sharex=True, squeeze=False, figsize=(10, height))
         # Fixed margins: tight_layout measures every tick label and costs seconds per figure.
-        figure.subplots_adjust(left=0.1, right=0.98, top=1 - 0.45 / height, bottom=0.55 / height, hspace=0.15)
+        figure.subplots_adjust(left=0.11, right=0.98, top=1 - 0.45 / height, bottom=0.55 / height,
+                               hspace=0.15)
         for ax, panel in zip(axes[:, 0], panels):
             for label, (t, y) in panel.curves.items():
                 y = np.abs(y) if panel.log else y
@@ -513,6 +524,7 @@ def write_plots(plots: Sequence[Plot], directory: Path) -> list[Path]:
                 ax.axhline(value, color="grey", linestyle="--", linewidth=0.7)
             if panel.log:
                 ax.set_yscale("symlog", linthresh=1e-12)
+                _decade_ticks(ax)
             ax.set_ylabel(panel.ylabel)
             ax.grid(True, alpha=0.3)
             ax.legend(fontsize="small", loc="upper right")

@@ -121,7 +121,8 @@ def declare(node: Node, values: Mapping[str, Any], schema: Schema, prefix: str =
         if value is not None:  # an optional setting left out: nothing to declare
             spec = _field(schema, name.split("."))
             bounds = None
-            if isinstance(spec, Number) and math.isfinite(spec.min) and math.isfinite(spec.max):
+            # An open limit (-inf or inf) is a value outside any range: no range for those.
+            if isinstance(spec, Number) and not spec.open and math.isfinite(spec.min + spec.max):
                 bounds = (spec.min, spec.max)
             kind = spec.describe()
             param(node, f"{prefix}.{name}" if prefix else name, value, spec.doc or kind, bounds, kind)
