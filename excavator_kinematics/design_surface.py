@@ -36,7 +36,7 @@ from matplotlib.tri import TrapezoidMapTriFinder, Triangulation
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
-from manipulator_kinematics.params import ConfigError
+from manipulator_kinematics.params import ConfigError, open_input
 
 #: LandXML linearUnit values -> metres (LandXML 1.2 schema, enumerations metLinear and impLinear).
 LINEAR_UNITS = {
@@ -50,6 +50,21 @@ LINEAR_UNITS = {
     "inch": 0.0254,
     "mile": 1609.344,
 }
+
+
+#: Bounds of a design surface, checked before the work they bound: the file's size before it is
+#: read; while it is read, its elements (points, faces and all others), before the whole tree is
+#: built. A TIN of 10^6 faces took 50 s and 1.9 GB to load; one of 2 x 10^5 (about 20 MB of
+#: LandXML) loads in about 10 s (docs/excavator_nodes.md), and a site's design surface has far fewer.
+MAX_FILE_BYTES = 32 << 20
+MAX_FACES = 200_000
+MAX_POINTS = 200_000
+MAX_ELEMENTS = MAX_FACES + MAX_POINTS + 10_000
+#: Largest horizontal distance of a point from the coordinate system's origin (m): 2.5 times the
+#: Earth's circumference, beyond any projected grid (UTM northings reach 10^7 m); and largest
+#: elevation above or below its datum (m). A coordinate beyond either is no place on a site.
+MAX_HORIZONTAL = 1e8
+MAX_ELEVATION = 1e5
 
 
 class SurfaceHeights(NamedTuple):
@@ -81,8 +96,17 @@ class Tin:
                              f"got shapes {vertices.shape} and {faces.shape}")
         if len(faces) == 0:
             raise ConfigError(f"{what}: no (visible) faces")
+        if len(faces) > MAX_FACES or len(vertices) > MAX_POINTS:
+            raise ConfigError(f"{what}: {len(faces)} faces and {len(vertices)} points, more than the "
+                              f"{MAX_FACES} faces or {MAX_POINTS} points a surface may have")
         if not np.all(np.isfinite(vertices)):
             raise ConfigError(f"{what}: a vertex coordinate is not finite")
+        # Before any arithmetic on them: 1e300 overflowed the cross products below.
+        far = np.any(np.abs(vertices) > [MAX_HORIZONTAL, MAX_HORIZONTAL, MAX_ELEVATION], axis=1)
+        if np.any(far):
+            k = int(np.argmax(far))
+            raise ConfigError(f"{what}: vertex {k} at {vertices[k].tolist()} m is no place on a site "
+                              f"(|x|, |y| <= {MAX_HORIZONTAL:g} m, |z| <= {MAX_ELEVATION:g} m)")
         if faces.min() < 0 or faces.max() >= len(vertices):
             raise ConfigError(f"{what}: a face refers to a vertex index outside 0..{len(vertices) - 1}")
         faces = faces.astype(np.int32)
@@ -102,9 +126,14 @@ class Tin:
         flat = np.abs(normal[:, 2]) <= 1e-12 * scale * scale
         if np.any(flat):
             raise ConfigError(f"{what}: face {int(np.argmax(flat))} has no area in plan view (degenerate)")
+        _refuse_overlaps(faces, normal[:, 2] > 0.0, what)
         a, b = -normal[:, 0] / normal[:, 2], -normal[:, 1] / normal[:, 2]
         planes = np.column_stack([a, b, p0[:, 2] - a * p0[:, 0] - b * p0[:, 1]])
-        finder = TrapezoidMapTriFinder(Triangulation(local[:, 0], local[:, 1], faces))
+        try:
+            finder = TrapezoidMapTriFinder(Triangulation(local[:, 0], local[:, 1], faces))
+        except (RuntimeError, ValueError):  # matplotlib: "Triangulation is invalid"
+            raise ConfigError(f"{what}: faces overlap in plan view (edges of two faces cross), so a point "
+                              "would lie on two of them") from None
         for name, value in (("vertices", vertices), ("faces", faces), ("origin", origin),
                             ("planes", planes), ("_finder", finder)):
             object.__setattr__(self, name, value)
@@ -143,17 +172,33 @@ class Tin:
         return np.where(hit.any(axis=-1), np.argmax(hit, axis=-1), -1)
 
 
+def _refuse_overlaps(faces: np.ndarray, counterclockwise: np.ndarray, what: str) -> None:
+    """ConfigError naming two faces on the same side of an edge: turned counterclockwise in plan
+    view, the faces of a surface that does not fold over itself use each directed edge once (a
+    shared edge in opposite directions), so a duplicate face or one folded over its neighbour
+    uses one twice. (Faces that overlap without a shared edge have crossing edges, which the
+    trapezoid map refuses.)"""
+    turned = np.where(counterclockwise[:, None], faces, faces[:, ::-1])
+    edges = np.concatenate([turned[:, [0, 1]], turned[:, [1, 2]], turned[:, [2, 0]]])  # row k: face k % F
+    _, inverse, counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.ravel()
+    twice = np.flatnonzero(counts[inverse] > 1)
+    if len(twice):
+        one, other = sorted(twice[inverse[twice] == inverse[twice[0]]][:2] % len(faces))
+        raise ConfigError(f"{what}: faces {one} and {other} lie on the same side of their edge "
+                          f"{edges[twice[0]].tolist()}: they overlap (a duplicate face or a fold)")
+
+
 def read_landxml(path: str | Path, surface: str = "") -> Tin:
     """The TIN named ``surface`` of a LandXML 1.2 file (``""``: the file's only surface).
 
-    ConfigError naming the file and what is wrong: not XML, no such surface (the names found are
-    listed), not a TIN, a point or face that does not parse, an unknown linear unit.
+    ConfigError naming the file and what is wrong: not a regular file or larger than
+    MAX_FILE_BYTES, more than MAX_ELEMENTS elements (refused while reading, before the tree is
+    whole), not XML, no such surface (the names found are listed), not a TIN, a point or face
+    that does not parse, an unknown linear unit, or what :class:`Tin` refuses.
     """
     path = Path(path)
-    try:
-        root = ET.parse(path).getroot()
-    except (OSError, ET.ParseError) as error:
-        raise ConfigError(f"{path}: cannot read a LandXML file: {error}") from None
+    root = _parse_bounded(path)
     if _local(root.tag) != "LandXML":
         raise ConfigError(f"{path}: the root element is {_local(root.tag)!r}, not LandXML")
     metres = _linear_unit(root, path)
@@ -215,6 +260,21 @@ def write_landxml(path: str | Path, tin: Tin, application: str = "manipulator_ki
         ET.SubElement(faces, "F").text = f"{a} {b} {c}"
     ET.indent(root)
     ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
+
+
+def _parse_bounded(path: Path) -> ET.Element:
+    """The root element of the XML file ``path``, read within MAX_FILE_BYTES and MAX_ELEMENTS."""
+    with open_input(path, MAX_FILE_BYTES) as stream:
+        try:
+            events = ET.iterparse(stream, events=("start",))
+            _, root = next(events)
+            for count, _ in enumerate(events, start=2):
+                if count > MAX_ELEMENTS:
+                    raise ConfigError(f"{path}: more than the {MAX_ELEMENTS} XML elements a design "
+                                      f"surface file may have ({MAX_FACES} faces, {MAX_POINTS} points)")
+        except (ET.ParseError, StopIteration) as error:
+            raise ConfigError(f"{path}: cannot read a LandXML file: {error or 'empty'}") from None
+    return root
 
 
 def _local(tag: str) -> str:

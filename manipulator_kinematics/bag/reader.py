@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from mcap.exceptions import InvalidMagic, RecordLengthLimitExceeded
 from mcap.records import Channel, Chunk, Header, McapRecord, Message, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
@@ -27,6 +26,7 @@ from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 from manipulator_kinematics.bag.types import BagError, MessageTypes, TopicQos
 from manipulator_kinematics.bag.writer import STORAGES
 from manipulator_kinematics.codec import cdr
+from manipulator_kinematics.params import ConfigError, read_document
 
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
 # ROS 2 times are int64 nanoseconds; MCAP stores uint64, so anything above is a damaged record.
@@ -350,11 +350,13 @@ class BagReader:
         meta = path / "metadata.yaml"
         if meta.is_file():
             try:
-                info = yaml.safe_load(meta.read_text(encoding="utf-8"))["rosbag2_bagfile_information"]
+                info = read_document(meta)["rosbag2_bagfile_information"]
                 storage = str(info.get("storage_identifier") or "")
                 files = [path / name for name in info["relative_file_paths"]]
+            except ConfigError as error:  # not YAML, or what no YAML file may hold: the line says it
+                raise BagError(f"not rosbag2 metadata: {error}") from None
             # Whatever the YAML holds: a damaged file parses to other types as easily as it fails.
-            except (yaml.YAMLError, KeyError, TypeError, AttributeError, UnicodeDecodeError) as error:
+            except (KeyError, TypeError, AttributeError) as error:
                 raise BagError(f"{meta}: not rosbag2 metadata ({type(error).__name__}: {error})") from None
             if info.get("compression_mode"):
                 raise BagError(
