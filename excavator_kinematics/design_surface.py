@@ -36,7 +36,7 @@ from matplotlib.tri import TrapezoidMapTriFinder, Triangulation
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
-from manipulator_kinematics.params import ConfigError, open_input
+from manipulator_kinematics.params import ConfigError, open_input, shown
 
 #: LandXML linearUnit values -> metres (LandXML 1.2 schema, enumerations metLinear and impLinear).
 LINEAR_UNITS = {
@@ -90,7 +90,7 @@ class Tin:
     def __post_init__(self) -> None:
         vertices = np.asarray(self.vertices, dtype=float)
         faces = np.asarray(self.faces)
-        what = f"surface {self.name!r}" if self.name else "surface"
+        what = f"surface {shown(self.name)}" if self.name else "surface"
         if vertices.ndim != 2 or vertices.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3:
             raise ValueError(f"{what}: expected vertices of shape (V, 3) and faces (F, 3), "
                              f"got shapes {vertices.shape} and {faces.shape}")
@@ -176,8 +176,8 @@ def _refuse_overlaps(faces: np.ndarray, counterclockwise: np.ndarray, what: str)
     """ConfigError naming two faces on the same side of an edge: turned counterclockwise in plan
     view, the faces of a surface that does not fold over itself use each directed edge once (a
     shared edge in opposite directions), so a duplicate face or one folded over its neighbour
-    uses one twice. (Faces that overlap without a shared edge have crossing edges, which the
-    trapezoid map refuses.)"""
+    uses one twice. (Faces that overlap without a shared edge mostly have crossing edges, which
+    the trapezoid map refuses; a face wholly inside another, sharing no edge, is not found.)"""
     turned = np.where(counterclockwise[:, None], faces, faces[:, ::-1])
     edges = np.concatenate([turned[:, [0, 1]], turned[:, [1, 2]], turned[:, [2, 0]]])  # row k: face k % F
     _, inverse, counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
@@ -200,16 +200,16 @@ def read_landxml(path: str | Path, surface: str = "") -> Tin:
     path = Path(path)
     root = _parse_bounded(path)
     if _local(root.tag) != "LandXML":
-        raise ConfigError(f"{path}: the root element is {_local(root.tag)!r}, not LandXML")
+        raise ConfigError(f"{path}: the root element is {shown(_local(root.tag))}, not LandXML")
     metres = _linear_unit(root, path)
     surfaces = [s for s in _children(root, "Surfaces") for s in _children(s, "Surface")]
     names = [s.get("name", "") for s in surfaces]
     if surface:
         chosen = [s for s in surfaces if s.get("name", "") == surface]
         if not chosen:
-            raise ConfigError(f"{path}: no Surface named {surface!r} (surfaces: {names})")
+            raise ConfigError(f"{path}: no Surface named {shown(surface)} (surfaces: {shown(names)})")
     elif len(surfaces) != 1:
-        raise ConfigError(f"{path}: {len(surfaces)} surfaces {names}: name the one to use")
+        raise ConfigError(f"{path}: {len(surfaces)} surfaces {shown(names)}: name the one to use")
     else:
         chosen = surfaces
     element = chosen[0]
@@ -217,15 +217,16 @@ def read_landxml(path: str | Path, surface: str = "") -> Tin:
     definitions = _children(element, "Definition")
     if not definitions or definitions[0].get("surfType", "").upper() != "TIN":
         kind = definitions[0].get("surfType") if definitions else None
-        raise ConfigError(f"{path}: surface {name!r} has no Definition with surfType=\"TIN\" (got {kind!r})")
+        raise ConfigError(f"{path}: surface {shown(name)} has no Definition with surfType=\"TIN\" "
+                          f"(got {shown(kind)})")
     definition = definitions[0]
     ids, coordinates = [], []
     for p in (p for pnts in _children(definition, "Pnts") for p in _children(pnts, "P")):
         ids.append(p.get("id", ""))
-        coordinates.append(_numbers(p.text, 3, f"{path}: surface {name!r} point id={ids[-1]!r}"))
+        coordinates.append(_numbers(p.text, 3, f"{path}: surface {shown(name)} point id={shown(ids[-1])}"))
     index = {pid: i for i, pid in enumerate(ids)}
     if len(index) != len(ids):
-        raise ConfigError(f"{path}: surface {name!r}: point ids are not unique")
+        raise ConfigError(f"{path}: surface {shown(name)}: point ids are not unique")
     faces = []
     for f in (f for fs in _children(definition, "Faces") for f in _children(fs, "F")):
         if f.get("i", "0") == "1":  # invisible: a hole in the surface
@@ -233,14 +234,17 @@ def read_landxml(path: str | Path, surface: str = "") -> Tin:
         corners = (f.text or "").split()
         missing = [c for c in corners if c not in index]
         if len(corners) != 3 or missing:
-            raise ConfigError(f"{path}: surface {name!r}: face {f.text!r} is not three point ids "
-                              f"of its Pnts{f' (unknown: {missing})' if missing else ''}")
+            raise ConfigError(f"{path}: surface {shown(name)}: face {shown(f.text)} is not three point ids "
+                              f"of its Pnts{f' (unknown: {shown(missing)})' if missing else ''}")
         faces.append([index[c] for c in corners])
     if not coordinates or not faces:
-        raise ConfigError(f"{path}: surface {name!r} has no points or no faces")
+        raise ConfigError(f"{path}: surface {shown(name)} has no points or no faces")
     northing_easting_elevation = np.array(coordinates) * metres
     vertices = northing_easting_elevation[:, [1, 0, 2]]
-    return Tin(vertices, np.array(faces), name)
+    try:
+        return Tin(vertices, np.array(faces), name)
+    except ConfigError as error:
+        raise ConfigError(f"{path}: {error}") from None
 
 
 def write_landxml(path: str | Path, tin: Tin, application: str = "manipulator_kinematics") -> None:
@@ -292,7 +296,8 @@ def _linear_unit(root: ET.Element, path: Path) -> float:
             unit = system.get("linearUnit")
             if unit is not None:
                 if unit not in LINEAR_UNITS:
-                    raise ConfigError(f"{path}: linearUnit {unit!r} is not one of {sorted(LINEAR_UNITS)}")
+                    raise ConfigError(f"{path}: linearUnit {shown(unit)} is not one of "
+                                      f"{sorted(LINEAR_UNITS)}")
                 return LINEAR_UNITS[unit]
     return 1.0  # LandXML without Units: metres, as every metric exporter writes
 
@@ -303,7 +308,7 @@ def _numbers(text: str | None, count: int, what: str) -> list[float]:
     except ValueError:
         values = []
     if len(values) != count or not all(np.isfinite(values)):
-        raise ConfigError(f"{what}: expected {count} numbers, got {text!r}")
+        raise ConfigError(f"{what}: expected {count} numbers, got {shown(text)}")
     return values
 
 

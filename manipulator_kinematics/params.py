@@ -233,13 +233,13 @@ def open_input(path: str | Path, max_bytes: int) -> BinaryIO:
 def _open(path: str | Path, max_bytes: int) -> BinaryIO:
     # Opened without blocking (a FIFO) and checked on the open file (it may have been replaced
     # since a stat).
-    stream = os.fdopen(os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC), "rb")
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
     try:
-        _check_file(os.fstat(stream.fileno()), max_bytes)
+        _check_file(os.fstat(fd), max_bytes)
     except ConfigError:
-        stream.close()
+        os.close(fd)
         raise
-    return stream
+    return os.fdopen(fd, "rb")
 
 
 def _check_file(status: os.stat_result, max_bytes: int) -> None:
@@ -250,11 +250,8 @@ def _check_file(status: os.stat_result, max_bytes: int) -> None:
         kind = next((name for test, name in kinds if test(status.st_mode)), "something")
         raise ConfigError(f"{kind}, not a regular file")
     if status.st_size > max_bytes:
-        raise ConfigError(f"{_size(status.st_size)}, more than the {_size(max_bytes)} such a file may have")
-
-
-def _size(count: int) -> str:
-    return f"{count / 2**20:.1f} MiB" if count % 2**20 else f"{count >> 20} MiB"
+        raise ConfigError(f"{status.st_size / 2**20:.1f} MiB, more than the {max_bytes >> 20} MiB "
+                          "such a file may have")
 
 
 @lru_cache(maxsize=64)
@@ -262,7 +259,7 @@ def _parse(path: str, mtime_ns: int, size: int) -> Any:
     with _open(path, MAX_FILE_BYTES) as stream:
         data = stream.read(MAX_FILE_BYTES + 1)
     if len(data) > MAX_FILE_BYTES:  # grew since the check
-        raise ConfigError(f"more than the {_size(MAX_FILE_BYTES)} such a file may have")
+        raise ConfigError(f"more than the {MAX_FILE_BYTES >> 20} MiB such a file may have")
     return parse_yaml(data)
 
 
