@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from ros_harness import IK_FK, start_with_services
+from sensor_msgs.msg import JointState
 
 from excavator_kinematics.design_surface import MAX_ELEMENTS, read_landxml
 from manipulator_kinematics.bag.evaluate import load_setup
@@ -29,6 +31,7 @@ from manipulator_kinematics.bag.types import BagError
 from manipulator_kinematics.node_util import console_script
 from manipulator_kinematics.params import MAX_DEPTH, ConfigError, check_ros_arguments, config_path
 from manipulator_kinematics.registry import machine
+from manipulator_kinematics_interfaces.srv import SolveFK, SolveIK
 from pump_boom_kinematics import build_regions
 from pump_boom_kinematics.kinematics import PumpBoom
 from pump_boom_kinematics.regions import RegionTable
@@ -302,3 +305,26 @@ def test_pump_boom_regions_lists_a_table_that_is_not_yaml_in_one_line(tmp_path: 
     path.write_bytes(b"\x89PNG\r\n\x1a\n not a table")
     line = one_line([console_script("pump_boom_regions"), "--list", "--output", str(path)])
     assert f"{path}: not UTF-8 text (byte 0)" in line, line
+
+
+def test_pump_boom_ik_server_given_a_table_that_is_not_yaml_serves_fk(tmp_path: Path, probe) -> None:
+    """The table is read at start-up: a warning naming the file and its reason, no traceback; FK
+    serves, IK answers failure with that reason (kinematics.PumpBoom.table)."""
+    table = tmp_path / "table.yaml"
+    table.write_bytes(b"\x89PNG\r\n\x1a\n not a table")
+    process, (ik, fk) = start_with_services(probe, "pump_boom_ik_server", "-p",
+                                            f"pump_boom.regions.table_file:={table}", services=IK_FK,
+                                            timeout=20.0)
+    try:
+        request = SolveIK.Request()
+        request.target.pose.position.x, request.target.pose.position.z = 20.0, 17.5
+        answer = probe.call(ik, request, 20.0)
+        assert not answer.success and f"{table}: not UTF-8 text (byte 0)" in answer.message, answer.message
+        boom = PumpBoom.default()
+        joints = JointState(name=list(boom.limits.names), position=[0.4, 1.0, 2.5, 2.8, 3.3, 2.6])
+        answer = probe.call(fk, SolveFK.Request(joint_state=joints), 20.0)
+        assert answer.success, answer.message
+        assert process.alive()
+    finally:
+        log = process.stop()
+    assert "solve_ik and plan_path will fail" in log and "Traceback" not in log, log
