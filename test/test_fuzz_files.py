@@ -26,7 +26,7 @@ from sensor_msgs.msg import JointState
 
 from excavator_kinematics.design_surface import MAX_ELEMENTS, read_landxml
 from manipulator_kinematics.bag.evaluate import load_setup
-from manipulator_kinematics.bag.reader import BagReader
+from manipulator_kinematics.bag.reader import MAX_BAG_BYTES, BagReader
 from manipulator_kinematics.bag.types import BagError
 from manipulator_kinematics.node_util import console_script
 from manipulator_kinematics.params import MAX_DEPTH, ConfigError, check_ros_arguments, config_path
@@ -328,3 +328,12 @@ def test_pump_boom_ik_server_given_a_table_that_is_not_yaml_serves_fk(tmp_path: 
     finally:
         log = process.stop()
     assert "solve_ik and plan_path will fail" in log and "Traceback" not in log, log
+
+
+def test_a_bag_larger_than_its_bound_is_refused_before_it_is_read(tmp_path: Path) -> None:
+    path = tmp_path / "big.mcap"
+    with path.open("wb") as stream:  # sparse: the size without the disk space
+        stream.write(b"\x89MCAP0\r\n")
+        stream.truncate(MAX_BAG_BYTES + 1)
+    line = read_or_refuse("big bag", path, lambda: BagReader(path), (BagError,))
+    assert line is not None and "2.0 GiB of data files, more than the 2 GiB" in line, line

@@ -31,6 +31,9 @@ from manipulator_kinematics.params import ConfigError, read_document
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
 # ROS 2 times are int64 nanoseconds; MCAP stores uint64, so anything above is a damaged record.
 _MAX_TIME = np.iinfo(np.int64).max
+#: Largest total size of a bag's data files (bytes), checked before any is read: the reader holds
+#: every message in memory (about the file's size again as arrays).
+MAX_BAG_BYTES = 2 << 30
 # Messages gathered before they are turned into arrays: bounds the Python objects alive at once.
 _BATCH = 1 << 16
 _LOG_TIME, _CHANNEL, _DATA = attrgetter("log_time"), attrgetter("channel_id"), attrgetter("data")
@@ -250,6 +253,10 @@ class BagReader:
         index = _Index()
         try:
             files, self.storage = self._files()
+            total = sum(file.stat().st_size for file in files)
+            if total > MAX_BAG_BYTES:
+                raise BagError(f"{self.path}: {total / 2**30:.1f} GiB of data files, more than the "
+                               f"{MAX_BAG_BYTES >> 30} GiB a bag may have (it is read into memory)")
             for file in files:
                 if self.storage == "mcap":
                     self._scan_mcap(file, index, recover)
