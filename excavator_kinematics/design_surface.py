@@ -54,8 +54,9 @@ LINEAR_UNITS = {
 
 #: Bounds of a design surface, checked before the work they bound: the file's size before it is
 #: read; while it is read, its elements (points, faces and all others), before the whole tree is
-#: built. A TIN of 10^6 faces took 50 s and 1.9 GB to load; one of 2 x 10^5 (about 20 MB of
-#: LandXML) loads in about 10 s (docs/excavator_nodes.md), and a site's design surface has far fewer.
+#: built. A TIN of 10^6 faces took 50 s and 1.9 GB to load (issue 29); 2 x 10^5 faces (13.6 MB of
+#: LandXML) took 43 s and 0.8 GB, 10^5 faces 17 s, on 2 cores shared by 8 busy processes, most of it
+#: the index (Tin); a site's design surface has far fewer.
 MAX_FILE_BYTES = 32 << 20
 MAX_FACES = 200_000
 MAX_POINTS = 200_000
@@ -178,15 +179,16 @@ def _refuse_overlaps(faces: np.ndarray, counterclockwise: np.ndarray, what: str)
     shared edge in opposite directions), so a duplicate face or one folded over its neighbour
     uses one twice. (Faces that overlap without a shared edge mostly have crossing edges, which
     the trapezoid map refuses; a face wholly inside another, sharing no edge, is not found.)"""
-    turned = np.where(counterclockwise[:, None], faces, faces[:, ::-1])
+    turned = np.where(counterclockwise[:, None], faces, faces[:, ::-1]).astype(np.int64)
     edges = np.concatenate([turned[:, [0, 1]], turned[:, [1, 2]], turned[:, [2, 0]]])  # row k: face k % F
-    _, inverse, counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
-    inverse = inverse.ravel()
-    twice = np.flatnonzero(counts[inverse] > 1)
+    key = edges[:, 0] * (int(edges.max()) + 1) + edges[:, 1]  # one integer per directed edge
+    order = np.argsort(key, kind="stable")
+    twice = np.flatnonzero(key[order[1:]] == key[order[:-1]])
     if len(twice):
-        one, other = sorted(twice[inverse[twice] == inverse[twice[0]]][:2] % len(faces))
-        raise ConfigError(f"{what}: faces {one} and {other} lie on the same side of their edge "
-                          f"{edges[twice[0]].tolist()}: they overlap (a duplicate face or a fold)")
+        first, second = order[twice[0]], order[twice[0] + 1]
+        raise ConfigError(f"{what}: faces {first % len(faces)} and {second % len(faces)} lie on the same "
+                          f"side of their edge {edges[first].tolist()}: they overlap (a duplicate face or "
+                          "a fold)")
 
 
 def read_landxml(path: str | Path, surface: str = "") -> Tin:
