@@ -37,7 +37,7 @@ from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from manipulator_kinematics.landxml import write_tin
-from manipulator_kinematics.params import ConfigError
+from manipulator_kinematics.params import ConfigError, open_input, shown
 
 #: LandXML linearUnit values -> metres (LandXML 1.2 schema, enumerations metLinear and impLinear).
 LINEAR_UNITS = {
@@ -51,6 +51,22 @@ LINEAR_UNITS = {
     "inch": 0.0254,
     "mile": 1609.344,
 }
+
+
+#: Bounds of a design surface, checked before the work they bound: the file's size before it is
+#: read; while it is read, its elements (points, faces and all others), before the whole tree is
+#: built. A TIN of 10^6 faces took 50 s and 1.9 GB to load (issue 29); 2 x 10^5 faces (13.6 MB of
+#: LandXML) took 43 s and 0.8 GB, 10^5 faces 17 s, on 2 cores shared by 8 busy processes, most of it
+#: the index (Tin); a site's design surface has far fewer.
+MAX_FILE_BYTES = 32 << 20
+MAX_FACES = 200_000
+MAX_POINTS = 200_000
+MAX_ELEMENTS = MAX_FACES + MAX_POINTS + 10_000
+#: Largest horizontal distance of a point from the coordinate system's origin (m): 2.5 times the
+#: Earth's circumference, beyond any projected grid (UTM northings reach 10^7 m); and largest
+#: elevation above or below its datum (m). A coordinate beyond either is no place on a site.
+MAX_HORIZONTAL = 1e8
+MAX_ELEVATION = 1e5
 
 
 class SurfaceHeights(NamedTuple):
@@ -76,14 +92,23 @@ class Tin:
     def __post_init__(self) -> None:
         vertices = np.asarray(self.vertices, dtype=float)
         faces = np.asarray(self.faces)
-        what = f"surface {self.name!r}" if self.name else "surface"
+        what = f"surface {shown(self.name)}" if self.name else "surface"
         if vertices.ndim != 2 or vertices.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3:
             raise ValueError(f"{what}: expected vertices of shape (V, 3) and faces (F, 3), "
                              f"got shapes {vertices.shape} and {faces.shape}")
         if len(faces) == 0:
             raise ConfigError(f"{what}: no (visible) faces")
+        if len(faces) > MAX_FACES or len(vertices) > MAX_POINTS:
+            raise ConfigError(f"{what}: {len(faces)} faces and {len(vertices)} points, more than the "
+                              f"{MAX_FACES} faces or {MAX_POINTS} points a surface may have")
         if not np.all(np.isfinite(vertices)):
             raise ConfigError(f"{what}: a vertex coordinate is not finite")
+        # Before any arithmetic on them: 1e300 overflowed the cross products below.
+        far = np.any(np.abs(vertices) > [MAX_HORIZONTAL, MAX_HORIZONTAL, MAX_ELEVATION], axis=1)
+        if np.any(far):
+            k = int(np.argmax(far))
+            raise ConfigError(f"{what}: vertex {k} at {vertices[k].tolist()} m is no place on a site "
+                              f"(|x|, |y| <= {MAX_HORIZONTAL:g} m, |z| <= {MAX_ELEVATION:g} m)")
         if faces.min() < 0 or faces.max() >= len(vertices):
             raise ConfigError(f"{what}: a face refers to a vertex index outside 0..{len(vertices) - 1}")
         faces = faces.astype(np.int32)
@@ -103,9 +128,14 @@ class Tin:
         flat = np.abs(normal[:, 2]) <= 1e-12 * scale * scale
         if np.any(flat):
             raise ConfigError(f"{what}: face {int(np.argmax(flat))} has no area in plan view (degenerate)")
+        _refuse_overlaps(faces, normal[:, 2] > 0.0, what)
         a, b = -normal[:, 0] / normal[:, 2], -normal[:, 1] / normal[:, 2]
         planes = np.column_stack([a, b, p0[:, 2] - a * p0[:, 0] - b * p0[:, 1]])
-        finder = TrapezoidMapTriFinder(Triangulation(local[:, 0], local[:, 1], faces))
+        try:
+            finder = TrapezoidMapTriFinder(Triangulation(local[:, 0], local[:, 1], faces))
+        except (RuntimeError, ValueError):  # matplotlib: "Triangulation is invalid"
+            raise ConfigError(f"{what}: faces overlap in plan view (edges of two faces cross), so a point "
+                              "would lie on two of them") from None
         for name, value in (("vertices", vertices), ("faces", faces), ("origin", origin),
                             ("planes", planes), ("_finder", finder)):
             object.__setattr__(self, name, value)
@@ -144,28 +174,45 @@ class Tin:
         return np.where(hit.any(axis=-1), np.argmax(hit, axis=-1), -1)
 
 
+def _refuse_overlaps(faces: np.ndarray, counterclockwise: np.ndarray, what: str) -> None:
+    """ConfigError naming two faces on the same side of an edge: turned counterclockwise in plan
+    view, the faces of a surface that does not fold over itself use each directed edge once (a
+    shared edge in opposite directions), so a duplicate face or one folded over its neighbour
+    uses one twice. (Faces that overlap without a shared edge mostly have crossing edges, which
+    the trapezoid map refuses; a face wholly inside another, sharing no edge, is not found.)"""
+    turned = np.where(counterclockwise[:, None], faces, faces[:, ::-1]).astype(np.int64)
+    edges = np.concatenate([turned[:, [0, 1]], turned[:, [1, 2]], turned[:, [2, 0]]])  # row k: face k % F
+    key = edges[:, 0] * (int(edges.max()) + 1) + edges[:, 1]  # one integer per directed edge
+    order = np.argsort(key, kind="stable")
+    twice = np.flatnonzero(key[order[1:]] == key[order[:-1]])
+    if len(twice):
+        first, second = order[twice[0]], order[twice[0] + 1]
+        raise ConfigError(f"{what}: faces {first % len(faces)} and {second % len(faces)} lie on the same "
+                          f"side of their edge {edges[first].tolist()}: they overlap (a duplicate face or "
+                          "a fold)")
+
+
 def read_landxml(path: str | Path, surface: str = "") -> Tin:
     """The TIN named ``surface`` of a LandXML 1.2 file (``""``: the file's only surface).
 
-    ConfigError naming the file and what is wrong: not XML, no such surface (the names found are
-    listed), not a TIN, a point or face that does not parse, an unknown linear unit.
+    ConfigError naming the file and what is wrong: not a regular file or larger than
+    MAX_FILE_BYTES, more than MAX_ELEMENTS elements (refused while reading, before the tree is
+    whole), not XML, no such surface (the names found are listed), not a TIN, a point or face
+    that does not parse, an unknown linear unit, or what :class:`Tin` refuses.
     """
     path = Path(path)
-    try:
-        root = ET.parse(path).getroot()
-    except (OSError, ET.ParseError) as error:
-        raise ConfigError(f"{path}: cannot read a LandXML file: {error}") from None
+    root = _parse_bounded(path)
     if _local(root.tag) != "LandXML":
-        raise ConfigError(f"{path}: the root element is {_local(root.tag)!r}, not LandXML")
+        raise ConfigError(f"{path}: the root element is {shown(_local(root.tag))}, not LandXML")
     metres = _linear_unit(root, path)
     surfaces = [s for s in _children(root, "Surfaces") for s in _children(s, "Surface")]
     names = [s.get("name", "") for s in surfaces]
     if surface:
         chosen = [s for s in surfaces if s.get("name", "") == surface]
         if not chosen:
-            raise ConfigError(f"{path}: no Surface named {surface!r} (surfaces: {names})")
+            raise ConfigError(f"{path}: no Surface named {shown(surface)} (surfaces: {shown(names)})")
     elif len(surfaces) != 1:
-        raise ConfigError(f"{path}: {len(surfaces)} surfaces {names}: name the one to use")
+        raise ConfigError(f"{path}: {len(surfaces)} surfaces {shown(names)}: name the one to use")
     else:
         chosen = surfaces
     element = chosen[0]
@@ -173,15 +220,16 @@ def read_landxml(path: str | Path, surface: str = "") -> Tin:
     definitions = _children(element, "Definition")
     if not definitions or definitions[0].get("surfType", "").upper() != "TIN":
         kind = definitions[0].get("surfType") if definitions else None
-        raise ConfigError(f"{path}: surface {name!r} has no Definition with surfType=\"TIN\" (got {kind!r})")
+        raise ConfigError(f"{path}: surface {shown(name)} has no Definition with surfType=\"TIN\" "
+                          f"(got {shown(kind)})")
     definition = definitions[0]
     ids, coordinates = [], []
     for p in (p for pnts in _children(definition, "Pnts") for p in _children(pnts, "P")):
         ids.append(p.get("id", ""))
-        coordinates.append(_numbers(p.text, 3, f"{path}: surface {name!r} point id={ids[-1]!r}"))
+        coordinates.append(_numbers(p.text, 3, f"{path}: surface {shown(name)} point id={shown(ids[-1])}"))
     index = {pid: i for i, pid in enumerate(ids)}
     if len(index) != len(ids):
-        raise ConfigError(f"{path}: surface {name!r}: point ids are not unique")
+        raise ConfigError(f"{path}: surface {shown(name)}: point ids are not unique")
     faces = []
     for f in (f for fs in _children(definition, "Faces") for f in _children(fs, "F")):
         if f.get("i", "0") == "1":  # invisible: a hole in the surface
@@ -189,19 +237,37 @@ def read_landxml(path: str | Path, surface: str = "") -> Tin:
         corners = (f.text or "").split()
         missing = [c for c in corners if c not in index]
         if len(corners) != 3 or missing:
-            raise ConfigError(f"{path}: surface {name!r}: face {f.text!r} is not three point ids "
-                              f"of its Pnts{f' (unknown: {missing})' if missing else ''}")
+            raise ConfigError(f"{path}: surface {shown(name)}: face {shown(f.text)} is not three point ids "
+                              f"of its Pnts{f' (unknown: {shown(missing)})' if missing else ''}")
         faces.append([index[c] for c in corners])
     if not coordinates or not faces:
-        raise ConfigError(f"{path}: surface {name!r} has no points or no faces")
+        raise ConfigError(f"{path}: surface {shown(name)} has no points or no faces")
     northing_easting_elevation = np.array(coordinates) * metres
     vertices = northing_easting_elevation[:, [1, 0, 2]]
-    return Tin(vertices, np.array(faces), name)
+    try:
+        return Tin(vertices, np.array(faces), name)
+    except ConfigError as error:
+        raise ConfigError(f"{path}: {error}") from None
 
 
 def write_landxml(path: str | Path, tin: Tin, application: str = "manipulator_kinematics") -> None:
     """``tin`` as a LandXML 1.2 file (metres, points "northing easting elevation")."""
     write_tin(path, tin.vertices, tin.faces, tin.name or "design", application)
+
+
+def _parse_bounded(path: Path) -> ET.Element:
+    """The root element of the XML file ``path``, read within MAX_FILE_BYTES and MAX_ELEMENTS."""
+    with open_input(path, MAX_FILE_BYTES) as stream:
+        try:
+            events = ET.iterparse(stream, events=("start",))
+            _, root = next(events)
+            for count, _ in enumerate(events, start=2):
+                if count > MAX_ELEMENTS:
+                    raise ConfigError(f"{path}: more than the {MAX_ELEMENTS} XML elements a design "
+                                      f"surface file may have ({MAX_FACES} faces, {MAX_POINTS} points)")
+        except (ET.ParseError, StopIteration) as error:
+            raise ConfigError(f"{path}: cannot read a LandXML file: {error or 'empty'}") from None
+    return root
 
 
 def _local(tag: str) -> str:
@@ -219,7 +285,8 @@ def _linear_unit(root: ET.Element, path: Path) -> float:
             unit = system.get("linearUnit")
             if unit is not None:
                 if unit not in LINEAR_UNITS:
-                    raise ConfigError(f"{path}: linearUnit {unit!r} is not one of {sorted(LINEAR_UNITS)}")
+                    raise ConfigError(f"{path}: linearUnit {shown(unit)} is not one of "
+                                      f"{sorted(LINEAR_UNITS)}")
                 return LINEAR_UNITS[unit]
     return 1.0  # LandXML without Units: metres, as every metric exporter writes
 
@@ -230,7 +297,7 @@ def _numbers(text: str | None, count: int, what: str) -> list[float]:
     except ValueError:
         values = []
     if len(values) != count or not all(np.isfinite(values)):
-        raise ConfigError(f"{what}: expected {count} numbers, got {text!r}")
+        raise ConfigError(f"{what}: expected {count} numbers, got {shown(text)}")
     return values
 
 

@@ -7,31 +7,107 @@ Each file is parsed once per process (:func:`read_document`, kept while the file
 start-up check of the command line (:func:`check_ros_arguments`), the node's values
 (:func:`given_parameters`, :func:`load_parameters`), the machine and settings readers and the bag
 tools all read that one document. Dicts are merged by one function, :func:`merge`.
+
+:func:`read_document` is also the one safe reader of every YAML file of the package (parameters
+and machine files, region tables, bag metadata): a file that is not a regular file, larger than
+MAX_FILE_BYTES, not UTF-8 or not YAML, or that holds an alias or anchor, a tag outside the core
+schema, collections nested deeper than MAX_DEPTH or of more than MAX_ITEMS items is refused with
+one line naming the file and the reason, before anything is built from it (docs/architecture.md,
+"Files the package reads"). :func:`open_input` opens every other file input by the same rule.
 """
 
 from __future__ import annotations
 
+import os
 import re
+import stat
 from collections.abc import Mapping, Sequence
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import yaml
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "config"
 #: Longest text of one value in an error line (characters): longer ones are cut with "...".
 SHOWN = 100
-#: Most items of a list in a parameters file, and its largest size: no parameter of this package
-#: comes near either, and rcl takes seconds to parse a 100,000-element list (refused before it).
-MAX_ITEMS = 10_000
+#: Bounds of every YAML file the package reads (:func:`read_document`), checked before anything is
+#: built from it: its size, the items of one list or mapping, the nesting of its collections. No
+#: file of the package comes near any (the largest, the pump boom's region table, has 36 KB, 8
+#: levels), and rcl takes seconds to parse a 100,000-element list (refused before it).
 MAX_FILE_BYTES = 4 << 20
+MAX_ITEMS = 10_000
+MAX_DEPTH = 32
+#: The tags a file may give explicitly, YAML's core schema: ``!!python/object`` and every other
+#: one are refused by name (rcl knows none but ``!!str``).
+CORE_TAGS = ("str", "int", "float", "bool", "null", "seq", "map")
+_TAGS = frozenset([None, "!", *(f"tag:yaml.org,2002:{kind}" for kind in CORE_TAGS)])
+
+
+class _Refused(yaml.MarkedYAMLError):
+    """YAML that :func:`parse_yaml` refuses: ``where`` (the key, "" for none) and the problem."""
+
+    def __init__(self, where: str, problem: str, mark: yaml.Mark) -> None:
+        super().__init__(problem=problem, problem_mark=mark)
+        self.where = where
+
+
+class _CheckedComposer(yaml.composer.Composer):
+    """PyYAML's composer with the bounds of every file (:func:`parse_yaml`), checked on each event
+    before a node is built from it, so what follows a refused node is never read. (libyaml's own
+    composer cannot be checked: it builds a whole document, nine levels of aliases included.)"""
+
+    _path: list[Any]  # the mapping key of each node being composed (None: a list item, the root)
+
+    def compose_document(self) -> yaml.Node:
+        self._path = []
+        return super().compose_document()
+
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node:
+        event = self.peek_event()
+        problem = ""
+        items = (index if isinstance(parent, yaml.SequenceNode) else
+                 len(parent.value) if isinstance(parent, yaml.MappingNode) and index is None else 0)
+        if items >= MAX_ITEMS:
+            problem = f"more than the {MAX_ITEMS} items a list or mapping may have"
+        elif isinstance(event, yaml.AliasEvent):
+            problem = f"alias *{shown(event.anchor, 40)[1:-1]}: aliases are refused (as rcl refuses them)"
+        elif event.anchor is not None:
+            problem = f"anchor &{shown(event.anchor, 40)[1:-1]}: anchors are refused (as rcl refuses aliases)"
+        elif event.tag not in _TAGS:
+            problem = f"tag {shown(event.tag, 60)}: only YAML's core tags ({', '.join(CORE_TAGS)})"
+        elif isinstance(event, yaml.CollectionStartEvent) and len(self._path) >= MAX_DEPTH:
+            problem = f"nested deeper than the {MAX_DEPTH} levels a file may have"
+        key = index.value if isinstance(index, yaml.ScalarNode) else None
+        if problem:
+            raise _Refused(self._where(key), problem, event.start_mark)
+        self._path.append(key)
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self._path.pop()
+
+    def _where(self, key: Any) -> str:
+        """``<section>: <dotted key>`` of the node being composed (``key``: its own key), a
+        parameters file's ``ros__parameters`` left out of the name (``/**: scara.l1``)."""
+        keys = [shown(str(k), 40)[1:-1] for k in (*self._path, key) if k is not None]
+        if keys[1:2] == ["ros__parameters"]:
+            return f"{keys[0]}: {'.'.join(keys[2:])}" if keys[2:] else keys[0]
+        return ".".join(keys)
 
 
 # libyaml's parser where PyYAML has it: the pure-Python one takes 3.5 s for a 1.2 MB file, this 0.4 s.
-class RosLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
+_Base = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+class RosLoader(_CheckedComposer, _Base):
     """YAML as rcl reads a parameter: a plain ``1e3`` is a number (YAML 1.2), as rcl's parser
-    takes it, not the string PyYAML's YAML 1.1 rules make of it; quoted values stay strings."""
+    takes it, not the string PyYAML's YAML 1.1 rules make of it; quoted values stay strings.
+    Refuses (a YAMLError) what :func:`parse_yaml` says."""
+
+    def __init__(self, stream: bytes | str) -> None:
+        _Base.__init__(self, stream)
+        yaml.composer.Composer.__init__(self)
 
 
 RosLoader.add_implicit_resolver(
@@ -122,18 +198,96 @@ def merge(*layers: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def read_document(path: str | Path) -> Any:
-    """The parsed YAML of ``path`` (RosLoader), parsed once per process while the file keeps its size
-    and modification time. Shared by every caller: read it, do not change it (:func:`merge` copies)."""
-    status = Path(path).stat()
-    return _parse(str(Path(path).resolve()), status.st_mtime_ns, status.st_size)
+    """The parsed YAML of ``path``: the one reader of every YAML file of the package (parameters and
+    machine files, node settings, region tables, bag metadata). Parsed once per process while the
+    file keeps its size and modification time; shared by every caller: read it, do not change it
+    (:func:`merge` copies).
+
+    ConfigError ``<path>: <reason>``, one line, before anything is built from the file: it is
+    missing or not a regular file (a directory, FIFO or device: nothing blocks on it or reads it
+    without end), larger than MAX_FILE_BYTES, or :func:`parse_yaml` refuses what it holds.
+    """
+    try:
+        status = os.stat(path)
+        _check_file(status, MAX_FILE_BYTES)
+        return _parse(str(Path(path).resolve()), status.st_mtime_ns, status.st_size)
+    except OSError as error:
+        raise ConfigError(f"{path}: {error.strerror or error}") from None
+    except ConfigError as error:
+        raise ConfigError(f"{path}: {error}") from None
+
+
+def open_input(path: str | Path, max_bytes: int) -> BinaryIO:
+    """``path`` opened for reading bytes, the rule of every file input of the package: ConfigError
+    ``<path>: <reason>`` if it is missing, not a regular file (a FIFO would block the reader, a
+    device such as /dev/zero never end) or larger than ``max_bytes``. Read at most
+    ``max_bytes + 1`` from it (a file can grow after the check)."""
+    try:
+        return _open(path, max_bytes)
+    except OSError as error:
+        raise ConfigError(f"{path}: {error.strerror or error}") from None
+    except ConfigError as error:
+        raise ConfigError(f"{path}: {error}") from None
+
+
+def _open(path: str | Path, max_bytes: int) -> BinaryIO:
+    # Opened without blocking (a FIFO) and checked on the open file (it may have been replaced
+    # since a stat).
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    try:
+        _check_file(os.fstat(fd), max_bytes)
+    except ConfigError:
+        os.close(fd)
+        raise
+    return os.fdopen(fd, "rb")
+
+
+def _check_file(status: os.stat_result, max_bytes: int) -> None:
+    if not stat.S_ISREG(status.st_mode):
+        kinds = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"),
+                 (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                 (stat.S_ISSOCK, "a socket"))
+        kind = next((name for test, name in kinds if test(status.st_mode)), "something")
+        raise ConfigError(f"{kind}, not a regular file")
+    if status.st_size > max_bytes:
+        raise ConfigError(f"{status.st_size / 2**20:.1f} MiB, more than the {max_bytes >> 20} MiB "
+                          "such a file may have")
 
 
 @lru_cache(maxsize=64)
 def _parse(path: str, mtime_ns: int, size: int) -> Any:
-    # The bytes: libyaml decodes them itself (UTF-8), 0.9 ms for the pump boom's 130 KB region
-    # table against 1.5 ms from a text stream (read in chunks through Python) and 1.7 from a str.
-    with open(path, "rb") as stream:
-        return yaml.load(stream.read(), Loader=RosLoader)
+    with _open(path, MAX_FILE_BYTES) as stream:
+        data = stream.read(MAX_FILE_BYTES + 1)
+    if len(data) > MAX_FILE_BYTES:  # grew since the check
+        raise ConfigError(f"more than the {MAX_FILE_BYTES >> 20} MiB such a file may have")
+    return parse_yaml(data)
+
+
+def parse_yaml(data: bytes | str) -> Any:
+    """YAML as rcl reads it (:class:`RosLoader`), refused with ConfigError (one line, the reason)
+    before anything is built when it is not UTF-8 or not YAML, or holds what rcl refuses or no file
+    of the package needs: an alias or anchor (nine levels of aliases in 1.4 KB had the code that
+    walks PyYAML's output expand them to gigabytes), a tag outside YAML's core schema
+    (``!!python/object``, ``!!binary``, ...), collections nested deeper than MAX_DEPTH (a
+    RecursionError in the code that walks them), a list or mapping of more than MAX_ITEMS items.
+    Bytes go to libyaml as they are: it decodes UTF-8 itself, faster than from a str."""
+    try:
+        if isinstance(data, bytes):
+            data.decode("utf-8")
+        return yaml.load(data, Loader=RosLoader)
+    except UnicodeDecodeError as error:  # rcl reads UTF-8 (libyaml)
+        raise ConfigError(f"not UTF-8 text (byte {error.start})") from None
+    except _Refused as error:
+        line = f"line {error.problem_mark.line + 1}"
+        raise ConfigError(f"{error.where} ({line}): {error.problem}" if error.where else
+                          f"{line}: {error.problem}") from None
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        line = f" (line {mark.line + 1})" if mark is not None else ""
+        problem = getattr(error, "problem", None) or str(error).splitlines()[0]
+        raise ConfigError(f"not valid YAML{line}: {shown(problem, 60)[1:-1]}") from None
+    except ValueError as error:  # a value the constructor cannot build (an int of 5,000 digits)
+        raise ConfigError(f"a value cannot be read: {shown(str(error), 80)[1:-1]}") from None
 
 
 def ros_arguments(argv: Sequence[str]) -> list[tuple[str, str | None]]:
@@ -175,21 +329,9 @@ def check_ros_arguments(argv: Sequence[str]) -> None:
 
 def _check_params_file(path: Path) -> None:
     try:
-        size = path.stat().st_size
-        if size > MAX_FILE_BYTES:
-            raise ConfigError(f"--params-file {path}: {size / 2**20:.1f} MiB, more than the "
-                              f"{MAX_FILE_BYTES >> 20} MiB a parameters file may have")
-        with open(path, encoding="utf-8") as stream:
-            _refuse_long_lists(path, stream)
         document = read_document(path)  # the one parse every later reader of the file shares
-    except OSError as error:
-        raise ConfigError(f"--params-file {path}: {error.strerror}") from None
-    except UnicodeDecodeError as error:  # rcl reads UTF-8 (libyaml)
-        raise ConfigError(f"--params-file {path}: not UTF-8 text (byte {error.start})") from None
-    except yaml.YAMLError as error:
-        where = getattr(error, "problem_mark", None)
-        line = f" (line {where.line + 1})" if where is not None else ""
-        raise ConfigError(f"--params-file {path}: not valid YAML{line}") from None
+    except ConfigError as error:
+        raise ConfigError(f"--params-file {error}") from None
     if not isinstance(document, dict) or not document:
         raise ConfigError(f"--params-file {path}: expected sections {{node: {{ros__parameters: {{...}}}}}}")
     for node, section in document.items():
@@ -199,32 +341,6 @@ def _check_params_file(path: Path) -> None:
             if not _parameter_value(value):
                 raise ConfigError(f"--params-file {path}: {node}: {name} = {shown(value)} is not a ROS "
                                   "parameter value (a number, string, bool, or a list of one of those)")
-
-
-def _refuse_long_lists(path: Path, stream: Any) -> None:
-    """ConfigError naming the first list of more than MAX_ITEMS items, read as YAML events up to
-    its item MAX_ITEMS + 1: a 100,000-element list is refused in milliseconds, before PyYAML
-    builds it (0.4 s) and rcl parses it (2 s)."""
-    stack: list[list[Any]] = []  # per open collection: [is_mapping, next_is_key, items, key]
-    for event in yaml.parse(stream, Loader=RosLoader):
-        if isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
-            stack.pop()
-            continue
-        if not isinstance(event, (yaml.NodeEvent, yaml.CollectionStartEvent)):
-            continue
-        if stack and not stack[-1][0]:  # an item of a list
-            stack[-1][2] += 1
-            if stack[-1][2] > MAX_ITEMS:
-                keys = [str(c[3])[:SHOWN] for c in stack if c[0]]
-                name = ".".join(keys[2:] if keys[1:2] == ["ros__parameters"] else keys[1:])
-                raise ConfigError(f"--params-file {path}: {keys[0] if keys else ''}: {name} has more "
-                                  f"than the {MAX_ITEMS} items a parameter may have")
-        elif stack:  # a key of a mapping, or its value
-            if stack[-1][1]:
-                stack[-1][3] = getattr(event, "value", "?")
-            stack[-1][1] = not stack[-1][1]
-        if isinstance(event, yaml.CollectionStartEvent):
-            stack.append([isinstance(event, yaml.MappingStartEvent), True, 0, None])
 
 
 def _leaves(nested: dict[str, Any], prefix: str = "") -> list[tuple[str, Any]]:

@@ -60,6 +60,7 @@ from __future__ import annotations
 import argparse
 import heapq
 import math
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -68,7 +69,7 @@ import numpy as np
 from scipy import ndimage
 
 from manipulator_kinematics.blocks import in_blocks
-from manipulator_kinematics.params import CONFIG_DIR, config_path, load_parameters
+from manipulator_kinematics.params import CONFIG_DIR, ConfigError, config_path, load_parameters
 from manipulator_kinematics.planar import two_link_ik, wrap_angle
 from pump_boom_kinematics.kinematics import CONFIG_FILE, LIMIT_TOL, SECTION, PumpBoom
 from pump_boom_kinematics.regions import FOLDED, Grid, RegionTable, family
@@ -771,14 +772,18 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="print the squares of the table file (--output) and exit, building nothing")
     args = parser.parse_args(argv)
     config = args.config if args.config is not None else config_path(CONFIG_FILE)
-    section = load_parameters(config).get(SECTION, {})
-    boom = PumpBoom.from_parameters(section)
-    output = args.output
-    if output is None:
-        output = CONFIG_DIR / section["regions"]["table_file"]
-    if args.list:
-        print("\n".join(RegionTable.load(output, boom.table_key()).listing()))
-        return 0
+    try:
+        section = load_parameters(config).get(SECTION, {})
+        boom = PumpBoom.from_parameters(section)
+        output = args.output
+        if output is None:
+            output = CONFIG_DIR / section["regions"]["table_file"]
+        if args.list:
+            print("\n".join(RegionTable.load(output, boom.table_key()).listing()))
+            return 0
+    except ConfigError as error:  # the machine file or the table: one line naming the key
+        print(f"pump_boom_regions: {error}", file=sys.stderr)
+        return 2
     area = reachable_area(boom)
     table = build_table(
         boom,

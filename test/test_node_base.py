@@ -137,12 +137,12 @@ def test_an_oversized_params_value_is_refused_before_anything_parses_it(tmp_path
     items = ", ".join(["0.2"] * 100_000)
     path.write_text(f"/**:\n  ros__parameters:\n    scara:\n      l2: 0.3\n      l1: [{items}]\n    x: [\n")
     line = start_fails("--params-file", str(path))
-    assert "/**: scara.l1 has more than the 10000 items a parameter may have" in line, line
+    assert "/**: scara.l1 (line 5): more than the 10000 items a list or mapping may have" in line, line
     assert len(line) < 300, line
     huge = tmp_path / "huge.yaml"
     huge.write_text("#" * (5 << 20) + "\n/**:\n  ros__parameters: {}\n")
     line = start_fails("--params-file", str(huge))
-    assert "5.0 MiB, more than the 4 MiB a parameters file may have" in line, line
+    assert "5.0 MiB, more than the 4 MiB such a file may have" in line, line
 
 
 @pytest.mark.parametrize(("value", "message"), [

@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from mcap.exceptions import InvalidMagic, RecordLengthLimitExceeded
 from mcap.records import Channel, Chunk, Header, McapRecord, Message, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
@@ -27,10 +26,14 @@ from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 from manipulator_kinematics.bag.types import BagError, MessageTypes, TopicQos
 from manipulator_kinematics.bag.writer import STORAGES
 from manipulator_kinematics.codec import cdr
+from manipulator_kinematics.params import ConfigError, read_document
 
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
 # ROS 2 times are int64 nanoseconds; MCAP stores uint64, so anything above is a damaged record.
 _MAX_TIME = np.iinfo(np.int64).max
+#: Largest total size of a bag's data files (bytes), checked before any is read: the reader holds
+#: every message in memory (about the file's size again as arrays).
+MAX_BAG_BYTES = 2 << 30
 # Messages gathered before they are turned into arrays: bounds the Python objects alive at once.
 _BATCH = 1 << 16
 _LOG_TIME, _CHANNEL, _DATA = attrgetter("log_time"), attrgetter("channel_id"), attrgetter("data")
@@ -252,6 +255,10 @@ class BagReader:
         index = _Index()
         try:
             files, self.storage = self._files()
+            total = sum(file.stat().st_size for file in files)
+            if total > MAX_BAG_BYTES:
+                raise BagError(f"{self.path}: {total / 2**30:.1f} GiB of data files, more than the "
+                               f"{MAX_BAG_BYTES >> 30} GiB a bag may have (it is read into memory)")
             for file in files:
                 if self.storage == "mcap":
                     self._scan_mcap(file, index, recover)
@@ -352,11 +359,13 @@ class BagReader:
         meta = path / "metadata.yaml"
         if meta.is_file():
             try:
-                info = yaml.safe_load(meta.read_text(encoding="utf-8"))["rosbag2_bagfile_information"]
+                info = read_document(meta)["rosbag2_bagfile_information"]
                 storage = str(info.get("storage_identifier") or "")
                 files = [_inside(path, meta, name) for name in info["relative_file_paths"]]
+            except ConfigError as error:  # not YAML, or what no YAML file may hold: the line says it
+                raise BagError(f"not rosbag2 metadata: {error}") from None
             # Whatever the YAML holds: a damaged file parses to other types as easily as it fails.
-            except (yaml.YAMLError, KeyError, TypeError, AttributeError, UnicodeDecodeError) as error:
+            except (KeyError, TypeError, AttributeError) as error:
                 raise BagError(f"{meta}: not rosbag2 metadata ({type(error).__name__}: {error})") from None
             custom = info.get("custom_data") or {}
             if not isinstance(custom, dict) or not all(
