@@ -441,3 +441,27 @@ def test_every_node_and_mk_tool_is_named_in_its_package_init_and_importing_leave
          "print(signal.getsignal(signal.SIGTERM))"],
         capture_output=True, text=True, timeout=TIMEOUT, check=True)
     assert imported.stdout.strip() == str(signal.SIG_DFL), imported.stdout
+
+
+@pytest.mark.parametrize("exe", ["pump_boom_ik_server", "tool_changer_ik_server"])
+def test_a_node_compiling_its_kernel_on_a_cold_cache_stops_within_2_s_of_sigint(
+    probe: Probe, exe: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The first run after an install (an empty numba cache): the compile runs in a child that
+    the node kills when signalled, instead of finishing it first (launch SIGKILLed both 5 s after
+    SIGINT; issue 28 item 2)."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    process = NodeProcess(exe, "-r", f"__ns:=/cold_{exe}")
+    try:
+        probe.wait_until(lambda: child_pids(process.process.pid) or not process.alive(), TIMEOUT,
+                         f"the kernel compile of {exe}")
+        compiling = child_pids(process.process.pid)
+        assert process.alive(), process.log()
+        process.process.send_signal(signal.SIGINT)
+        signalled = time.monotonic()
+        probe.wait_until(lambda: not process.alive(), TIMEOUT, f"the end of {exe}")
+        assert time.monotonic() - signalled < 2.0, process.log()
+        assert process.process.returncode == 0, process.log()
+        assert not [pid for pid in compiling if running(pid)], compiling
+    finally:
+        process.stop()
