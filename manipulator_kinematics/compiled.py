@@ -17,16 +17,18 @@ every call takes the numpy path, so a node's first output never waits for numba.
 Exit and signals (issue 28 item 2: a process stops within 2 s at any moment):
 
 * a cold cache (no index of the module in numba's cache, or one older than its source) is
-  filled by a child process (``python -c``, the warm function and its sample pickled to it): the
-  compile (5-30 s on 2 cores) can then be abandoned: the child is killed when the main thread
-  ends or SIGINT/SIGTERM arrives (:mod:`manipulator_kinematics.stopping`), and the numpy path
-  goes on answering;
-* from a warm cache the module is loaded in this process (0.5-1.2 s, numba's import) by a thread
-  that is not a daemon, so a process ends after that load, never during it: a daemon thread
-  still running Python when the interpreter finalizes is ended inside whatever it calls, and in
-  rclpy's handle destructors (its garbage collection) that aborted a signalled node (exit -6,
-  c84e331). No compile runs in this process unless the guess of a warm cache was wrong (another
-  CPU, numba's own invalidation) or ``wait`` asks for the kernel now.
+  filled by a child process (``python -c``, the warm function and its sample pickled to it), so
+  the compile (5-30 s on 2 cores) can be abandoned: the child is killed when the process ends
+  (:func:`abandon`, at exit or from :func:`manipulator_kinematics.node_util.run`) and ends
+  itself if its parent vanishes; the numpy path goes on answering;
+* from a warm cache the module is loaded in this process (0.5-1.2 s, up to 5 s on a loaded
+  machine: numba's import) by a daemon thread, which a process that ends does not wait for.
+  A daemon thread still running Python while the interpreter finalizes is ended inside whatever
+  it calls, and in rclpy's handle destructors (its garbage collection) that aborted a signalled
+  node (exit -6, c84e331). So where rclpy is imported the process either leaves without
+  finalizing (``node_util.run``: ``os._exit`` with its exit code after rclpy's clean shutdown,
+  when a load is still running) or, for any other program, waits for the load at exit (an
+  ``atexit`` hook, before finalization). A process without rclpy just ends.
 
 The cache is numba's (``cache=True``): ``__pycache__`` beside the kernel module where that is
 writable (the editable tree; an install by its owner, e.g. colcon's ``install/``), else numba's
@@ -38,6 +40,7 @@ which compiles every kernel of the package, so a user's first run finds the cach
 
 from __future__ import annotations
 
+import atexit
 import hashlib
 import importlib
 import importlib.util
@@ -114,6 +117,7 @@ class Kernel:
             return True
         child = subprocess.Popen([sys.executable, "-c", _CHILD], stdin=subprocess.PIPE,
                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        _COMPILING.append(child)
         try:
             child.stdin.write(job)
             child.stdin.close()
@@ -135,17 +139,57 @@ class Kernel:
         if self.ready is None and enabled():
             with self._lock:
                 if self._thread is None:
-                    # Not a daemon (module docstring): a compile runs in a child, abandoned at
-                    # exit; a process waits for a load from the cache only. ``wait``: compile
-                    # here (set-up, tests), no child to pickle the sample to.
+                    # A daemon (module docstring): a compile runs in a child, abandoned at exit;
+                    # a load from the cache is awaited at exit only where rclpy is imported.
+                    # ``wait``: compile here (set-up, tests), no child to pickle the sample to.
                     self._thread = threading.Thread(target=self._load, args=(sample, not wait),
-                                                    daemon=False, name=f"kernel {self.module}")
+                                                    daemon=True, name=f"kernel {self.module}")
+                    _LOADERS.append(self._thread)
                     self._thread.start()
             if wait:
                 self._thread.join()
                 if self.error is not None:
                     raise RuntimeError(f"kernel {self.module} did not load") from self.error
         return self.ready
+
+
+# The loader threads and compiling children of this process.
+_LOADERS: list[threading.Thread] = []
+_COMPILING: list[subprocess.Popen] = []
+
+
+def loading() -> bool:
+    """Whether a kernel load or compile is still running in this process."""
+    return any(thread.is_alive() for thread in _LOADERS)
+
+
+def abandon() -> None:
+    """Kill the children compiling a kernel (their loaders then end without it)."""
+    for child in _COMPILING:
+        if child.poll() is None:
+            child.kill()
+            child.wait()
+
+
+@atexit.register
+def _at_exit() -> None:
+    """Before finalization: no compile left running; where rclpy is imported, the loads from the
+    cache finished (module docstring)."""
+    abandon()
+    if "rclpy" in sys.modules:
+        for thread in _LOADERS:
+            thread.join()
+
+
+def exit_now_if_loading(code: int) -> None:
+    """End the process with ``code`` at once, without finalizing, if a kernel is still loading:
+    for a program whose rclpy is shut down cleanly and that has nothing else to finalize (a
+    node after :func:`manipulator_kinematics.node_util.run`)."""
+    if loading():
+        abandon()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
 
 
 def _ending() -> bool:
