@@ -34,8 +34,9 @@ The cache is numba's (``cache=True``): ``__pycache__`` beside the kernel module 
 writable (the editable tree; an install by its owner, e.g. colcon's ``install/``), else numba's
 user-wide directory (``~/.cache/numba``, ``$XDG_CACHE_HOME``), or ``NUMBA_CACHE_DIR`` when set.
 ``scripts/bootstrap.sh`` runs ``scripts/warm_kernels.py`` (run it after ``colcon build`` too),
-which compiles every kernel of the package, so a user's first run finds the cache warm (README,
-"Compiled kernels"). ``MK_COMPILED=0`` keeps every call on the numpy path.
+which compiles every kernel of the package, so a user's first run finds the cache warm
+(docs/architecture.md, "Compiled kernels, set-up and exit"). ``MK_COMPILED=0`` keeps every call
+on the numpy path.
 """
 
 from __future__ import annotations
@@ -97,6 +98,8 @@ class Kernel:
 
     def _load(self, sample: tuple[Any, ...], in_child: bool) -> None:
         try:
+            if _ending():
+                return
             if in_child and cache_is_cold(self.module) and not self._compile_in_child(sample):
                 return  # abandoned: the process is ending
             if _ending():
