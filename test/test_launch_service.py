@@ -137,17 +137,20 @@ class Launch:
         with log.open("w") as out:
             self.process = subprocess.Popen(
                 [sys.executable, "-c", RUN_LAUNCH, str(REPO / "launch" / file), f"namespace:={namespace}",
-                 *args], stdout=out, stderr=subprocess.STDOUT, env=env)
+                 *args], stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True)
 
     def log(self) -> str:
         return self.log_path.read_text(errors="replace")
 
     def stop(self, probe: Probe) -> int:
-        """SIGINT, as Ctrl-C to ros2 launch; the exit code once launch and every node ended."""
+        """SIGINT to the launch and its nodes, as Ctrl-C in a terminal (its process group: launch
+        then sends none itself); the exit code once launch and every node ended. No node may
+        have needed launch's SIGTERM (5 s after SIGINT)."""
         if self.process.poll() is None:
-            self.process.send_signal(signal.SIGINT)
+            os.killpg(self.process.pid, signal.SIGINT)
         probe.wait_until(lambda: self.process.poll() is not None and not processes_of(self.namespace),
                          TIMEOUT, f"the end of the launch in {self.namespace}")
+        assert "failed to terminate" not in self.log(), self.log()
         return self.process.returncode
 
 
