@@ -70,7 +70,7 @@ from excavator_kinematics.bucket_path import (
 )
 from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
 from excavator_kinematics.twist import bucket_angles, twist_from_q_dot
-from manipulator_kinematics import registry
+from manipulator_kinematics import registry, stopping
 from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.node_util import console_script
 from manipulator_kinematics.params import config_path
@@ -368,7 +368,8 @@ def start_processes(output: Path) -> list[tuple[str, subprocess.Popen]]:
     processes = []
     for name, command in commands.items():
         log = open(output / f"{name}.log", "w", encoding="utf-8")  # noqa: SIM115 - the child writes it
-        processes.append((name, subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)))
+        process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
+        processes.append((name, stopping.adopt(process)))  # a signal to the demo ends them too
     return processes
 
 

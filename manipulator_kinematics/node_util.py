@@ -20,7 +20,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from manipulator_kinematics import executor, stopping
+from manipulator_kinematics import compiled, executor, stopping
 from manipulator_kinematics.params import ConfigError, check_ros_arguments
 from manipulator_kinematics.throttle import ThrottledLog
 
@@ -103,17 +103,17 @@ def run(
         print(f"invalid ROS arguments: {str(error).splitlines()[0]}", file=sys.stderr)
         return 2
     node = None
+    code = 0
     try:
-        if stopping.requested():  # during rclpy.init, before its handlers were in
-            return 0
-        name = executor.executor_name()
-        node = node_factory()
-        if refuse_parameter_changes:
-            refuse_runtime_changes(node)
-        executor.spin(node, name)
+        if not stopping.requested():  # else: during rclpy.init, before its handlers were in
+            name = executor.executor_name()
+            node = node_factory()
+            if refuse_parameter_changes:
+                refuse_runtime_changes(node)
+            executor.spin(node, name)
     except ConfigError as error:
         print(f"configuration error: {error}", file=sys.stderr)
-        return 2
+        code = 2
     except Exception:
         # A signal shuts the context down from rclpy's own thread, also while the node is being
         # built: rclpy then raises RCLError or RuntimeError from wherever the main thread was.
@@ -121,7 +121,9 @@ def run(
             raise
     finally:
         _shut_down(node)
-    return 0
+    # rclpy is shut down: a kernel still loading (seconds on a cold machine) is not waited for.
+    compiled.exit_now_if_loading(code)
+    return code
 
 
 def _shut_down(node: Node | None) -> None:

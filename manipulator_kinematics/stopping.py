@@ -8,7 +8,9 @@ console script runs (``from scara_kinematics.nodes import forward`` runs
 ``scara_kinematics/__init__.py`` first). A process then has two phases:
 
 * start-up (imports, arguments, reading a bag; nothing to clean up yet; all of a batch tool's
-  run): a signal ends the process at once, exit 0, with one line on stderr;
+  run, the plot tools, ``pump_boom_regions`` and ``excavator_demo`` included): a signal ends the
+  process at once, exit 0, with one line on stderr, after ending the child processes it started
+  (:func:`adopt`: SIGTERM, then SIGKILL for what still runs after :data:`CHILD_GRACE`);
 * from :func:`hold` on (called just before ``rclpy.init``): a signal is only recorded
   (:func:`requested`, :func:`on_request`) and the program ends itself. rclpy's handlers, when
   ``rclpy.init`` installs them, shut the context down first and then call this handler (they
@@ -21,23 +23,39 @@ end the process with -2 or -15 after all. Only the interpreter's own start-up, b
 console script's first import, is outside this module's reach (the operating system's defaults
 apply: 27-549 ms from exec in 50 runs at a load average of 8-13 on 2 cores).
 
-No import beyond the standard library's ``atexit``, ``os``, ``signal`` and ``sys``: this runs
-before them.
+No import beyond the standard library's ``atexit``, ``contextlib``, ``os``, ``signal``, ``sys``
+and ``time``: this runs before them.
 """
 
 from __future__ import annotations
 
 import atexit
+import contextlib
 import os
 import signal
 import sys
+import time
 from collections.abc import Callable
+from typing import Protocol
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 _holding = False
 _received: int | None = None
 _callbacks: list[Callable[[], None]] = []
+#: Seconds a child gets to end on SIGTERM before SIGKILL: the whole stop stays under 2 s.
+CHILD_GRACE = 1.2
+
+
+class Child(Protocol):
+    """What :func:`adopt` needs of a child process (a ``subprocess.Popen``)."""
+
+    pid: int
+
+    def poll(self) -> int | None: ...
+
+
+_children: list[Child] = []
 
 
 def install_for(*executables: str) -> None:
@@ -77,14 +95,41 @@ def on_request(callback: Callable[[], None]) -> None:
         callback()
 
 
+def adopt(child: Child) -> Child:
+    """``child`` is ended with this process when a signal ends it in the start-up phase (a tool
+    that starts nodes: nothing of it may outlive it). Returns ``child``."""
+    _children.append(child)
+    return child
+
+
+def _end_children() -> None:
+    """SIGTERM to every adopted child still running, SIGKILL to those left after CHILD_GRACE."""
+    running = [child for child in _children if child.poll() is None]
+    for child in running:
+        _kill(child.pid, signal.SIGTERM)
+    deadline = time.monotonic() + CHILD_GRACE
+    while running and time.monotonic() < deadline:
+        time.sleep(0.02)
+        running = [child for child in running if child.poll() is None]
+    for child in running:
+        _kill(child.pid, signal.SIGKILL)
+        child.poll()
+
+
+def _kill(pid: int, signum: int) -> None:
+    with contextlib.suppress(ProcessLookupError):  # ended (and reaped) meanwhile
+        os.kill(pid, signum)
+
+
 def _on_signal(signum: int, frame: object) -> None:
     global _received
     _received = signum
     if not _holding:
-        # Nothing to clean up yet; os.write bypasses Python's buffers, which the interrupted main
-        # thread may be holding.
+        # Nothing to clean up but the children; os.write bypasses Python's buffers, which the
+        # interrupted main thread may be holding.
         name = os.path.basename(getattr(sys.modules.get("__main__"), "__file__", None) or sys.argv[0])
         os.write(2, f"{name}: stopped by {signal.Signals(signum).name}\n".encode())
+        _end_children()
         os._exit(0)
     for callback in _callbacks:
         callback()

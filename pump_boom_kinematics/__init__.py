@@ -8,4 +8,4 @@ from manipulator_kinematics.stopping import install_for
 
 # The first code of ours its console scripts run: a signal during the imports that follow ends
 # them with exit 0 (manipulator_kinematics.stopping).
-install_for("pump_boom_forward", "pump_boom_ik_server")
+install_for("pump_boom_forward", "pump_boom_ik_server", "pump_boom_regions", "pump_boom_plots")

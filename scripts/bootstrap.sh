@@ -3,7 +3,8 @@
 #   1. the venv itself (default <repo>/.venv, override with MK_VENV; interpreter MK_PYTHON or python3.11),
 #   2. exactly requirements.lock (pip, setuptools, ROS 2 Jazzy wheels, numpy, colcon, ...),
 #   3. the interface package manipulator_kinematics_interfaces, built with cmake INTO the venv,
-#   4. the repo itself, editable (`pip install --no-deps -e .`): console scripts in <venv>/bin.
+#   4. the repo itself, editable (`pip install --no-deps -e .`): console scripts in <venv>/bin,
+#   5. numba's cache of every compiled kernel (scripts/warm_kernels.py), so no first run compiles.
 # Idempotent: <venv>/.mk_bootstrap.stamp records a hash of each step's inputs and a step whose
 # inputs are unchanged is skipped, so a run with nothing to do takes well under a second.
 # MK_FRESH=1 deletes and recreates the venv. Works from any cwd. Output: short progress lines.
@@ -231,6 +232,15 @@ if [ "$(stamp_get project)" != "$PROJ_HASH" ]; then
     run_logged pip-project "$PYV" -m pip install -q --disable-pip-version-check \
         --no-deps --no-build-isolation -e "$REPO"
     stamp_set project "$PROJ_HASH"
+fi
+
+# ---------------------------------------------------------------- 5. compiled kernels
+# numba invalidates a kernel's cache when its source changes; the stamp only skips a run.
+KERNELS_HASH="$( { echo "$PROJ_HASH"; hash_files $(cd "$REPO" && ls -- */*_kernel.py | grep -v "^test/"); } | sha256sum | cut -c1-64)"
+if [ "$(stamp_get kernels)" != "$KERNELS_HASH" ]; then
+    say "compiling the numba kernels into their cache (first run: about a minute)"
+    run_logged warm-kernels "$PYV" "$REPO/scripts/warm_kernels.py"
+    stamp_set kernels "$KERNELS_HASH"
 fi
 
 say "venv ready: $VENV ($((SECONDS - T0)) s)"

@@ -1,6 +1,6 @@
 """launch/*.launch.xml (ROS 2 launch XML) are consistent with the package (issue #20).
 
-ros2 launch is not on PyPI, so the files cannot run here; each is parsed (xml.etree) and checked:
+Each is parsed (xml.etree) and checked (test_launch_service.py runs them with launch itself):
 one per registered machine with a URDF plus the excavator chain; every node's package and
 executable exist (ours: a console script of setup.py; another package: named in package.xml);
 every params file and URDF a file reads exists in config/ or urdf/ (installed to share/ by
@@ -122,7 +122,7 @@ def test_every_frame_id_gets_the_prefix(path: Path) -> None:
             assert prefix.get("type") == "str", "launch_ros reads an empty value as YAML null without it"
         if node.get("exec") == "robot_state_publisher":
             description = params["robot_description"]
-            assert description.get("type") == "str" and "$(command 'cat " in description.get("value")
+            assert description.get("type") == "str" and description.get("value") == "$(var urdf)"
 
 
 @pytest.mark.parametrize("path", FILES, ids=lambda p: p.name)
@@ -142,3 +142,32 @@ def test_the_excavator_urdf_follows_urdf_joint_states() -> None:
     rsp = next(n for n in root.iter("node") if n.get("exec") == "robot_state_publisher")
     remaps = [(r.get("from"), r.get("to")) for r in rsp.findall("remap")]
     assert remaps == [("joint_states", "urdf_joint_states")]
+
+
+MACHINE_FILES = [p for p in FILES if p.name != "excavator_chain.launch.xml"]
+
+
+@pytest.mark.parametrize("path", MACHINE_FILES, ids=lambda p: p.name)
+def test_robot_state_publisher_is_optional_first_and_gets_the_urdf_of_the_machine_given(path: Path) -> None:
+    """Started before any node of ours (a launch that fails there has started nothing), only with
+    robot_state_publisher:=true (the default), with robot_description or else mk_urdf's URDF of
+    params_file (not the shipped file's: issue 28 item 1)."""
+    root = ET.parse(path).getroot()
+    args = {a.get("name"): a.get("default") for a in root.findall("arg")}
+    assert args["robot_state_publisher"] == "true" and args["robot_description"] == ""
+    first = root.find("group")
+    children = list(root)
+    assert first is not None and children.index(first) < min(children.index(n) for n in root.findall("node"))
+    assert first.get("if") == "$(var robot_state_publisher)"
+    machine = path.name.split(".")[0]
+    generated = f"$(command '$(exec-in-pkg mk_urdf {PKG}) {machine} --params-file $(var params_file)')"
+    assert [let.get("value") for let in first.findall("let")] == ["$(var robot_description)", generated]
+
+
+def test_the_chain_includes_robot_state_publisher_before_its_simulator() -> None:
+    root = ET.parse(LAUNCH / "excavator_chain.launch.xml").getroot()
+    children = list(root)
+    assert children.index(root.find("include")) < children.index(root.find("node"))
+    passed = {a.get("name"): a.get("value") for a in root.find("include").findall("arg")}
+    assert passed["robot_state_publisher"] == "$(var robot_state_publisher)"
+    assert passed["robot_description"] == "$(var robot_description)"

@@ -1,11 +1,12 @@
 """Nodes as processes, spun by the package's entry point (node_util.run): they serve, survive a
 failing callback, refuse run-time parameter changes with a reason, and end with exit 0 on SIGINT
-and SIGTERM while inputs are still arriving; so does the recorder. Every executable, nodes and
-mk_* tools, ends with exit 0 and no traceback on a signal at any moment of its start-up and
-shutdown (isolated domain; every wait on a condition)."""
+and SIGTERM while inputs are still arriving; so does the recorder. Every executable (nodes, mk_*
+tools, batch tools and the demo) ends with exit 0, no traceback and no child left running on a
+signal at any moment of its start-up and shutdown (isolated domain; every wait on a condition)."""
 from __future__ import annotations
 
 import ast
+import contextlib
 import os
 import signal
 import subprocess
@@ -308,7 +309,7 @@ def test_record_stops_on_sigint_while_a_publisher_keeps_sending(probe: Probe, tm
         process.stop()
 
 
-# Every executable that runs until it is stopped or works on for seconds: the nodes and mk_* tools.
+# Every executable (console script): the nodes, the mk_* tools and the batch tools.
 BAG = str(sorted((Path(__file__).resolve().parent / "data").glob("*_golden"))[0])
 EXECUTABLES: dict[str, Callable[[Path], tuple[tuple[str, ...], tuple[str, ...]]]] = {
     # name: scratch directory -> (our arguments, ROS arguments)
@@ -324,12 +325,42 @@ EXECUTABLES: dict[str, Callable[[Path], tuple[tuple[str, ...], tuple[str, ...]]]
     "mk_replay --loop": lambda _: ((BAG, "--loop"), ()),
     "mk_evaluate": lambda work: ((BAG, "-o", str(work / "report")), ()),
     "mk_urdf": lambda work: (("--all", str(work)), ()),
+    # The batch tools: plots, tables, the examples and the demo (which starts five processes).
+    "excavator_demo": lambda work: (("--output", str(work / "demo")), ()),
+    "excavator_slope_example": lambda work: (("--output", str(work / "slope")), ()),
+    "excavator_working_ranges": lambda work: (("--json", str(work / "ranges.json"),
+                                               "--plot", str(work / "ranges.png")), ()),
+    "pump_boom_regions": lambda work: (("--output", str(work / "regions.yaml")), ()),
+    "pump_boom_plots": lambda work: ((str(work),), ()),
+    "tool_changer_plots": lambda work: ((str(work),), ()),
+    "palletizer_plots": lambda work: ((str(work),), ()),
 }
+# Executables that take no ROS arguments (no namespace to give them).
+NO_ROS_ARGS = {"mk_evaluate", "mk_urdf", "excavator_demo", "excavator_slope_example",
+               "excavator_working_ranges", "pump_boom_regions", "pump_boom_plots", "tool_changer_plots",
+               "palletizer_plots"}
 # Seconds after the process catches SIGTERM (its first import of ours): imports, arguments,
 # rclpy.init, building the node, serving. Each run gets one; a second signal follows the first
 # by SHUTDOWN_DELAY (the shutdown itself). Which signal a delay gets alternates between executables.
 DELAYS = (0.0, 0.4, 1.0, 2.0)
 SHUTDOWN_DELAY = 0.05
+
+
+def child_pids(pid: int) -> set[int]:
+    """The children of process ``pid`` (of all its threads), none if it ended."""
+    found: set[int] = set()
+    for children in Path(f"/proc/{pid}/task").glob("*/children"):
+        with contextlib.suppress(FileNotFoundError):
+            found.update(int(child) for child in children.read_text().split())
+    return found
+
+
+def running(pid: int) -> bool:
+    """Whether process ``pid`` exists and is not a zombie."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError):
+        return False
 
 
 def catches_sigterm(pid: int) -> bool:
@@ -356,12 +387,13 @@ def test_every_executable_ends_with_exit_0_on_a_signal_at_any_moment(
             work.mkdir()
             args, ros = EXECUTABLES[name](work)
             signum = (signal.SIGINT, signal.SIGTERM)[(first + i) % 2]
-            ros = (*ros, "-r", f"__ns:=/signalled_{i}") if exe not in ("mk_evaluate", "mk_urdf") else ros
+            ros = (*ros, "-r", f"__ns:=/signalled_{i}") if exe not in NO_ROS_ARGS else ros
             process = NodeProcess(exe, *ros, args=args)
             runs.append([process, delay, signum, None])
         probe.wait_until(lambda: all(catches_sigterm(run[0].process.pid) for run in runs), TIMEOUT,
                          f"{name} to catch SIGTERM")
         start = time.monotonic()
+        children: set[int] = set()  # every child process seen (the demo's nodes and recorder)
 
         def signalled() -> bool:
             now = time.monotonic() - start
@@ -369,6 +401,7 @@ def test_every_executable_ends_with_exit_0_on_a_signal_at_any_moment(
                 process, delay, signum, sent = run
                 if not process.alive():
                     continue
+                children.update(child_pids(process.process.pid))
                 if sent is None and now >= delay:
                     process.process.send_signal(signum)
                     run[3] = now
@@ -382,14 +415,12 @@ def test_every_executable_ends_with_exit_0_on_a_signal_at_any_moment(
             log = process.log()
             assert process.process.returncode == 0, (delay, signum, log)
             assert "Traceback" not in log, (delay, signum, log)
+            assert log.count("stopped by SIG") <= 1, (delay, signum, log)
+        # The processes ended their children before they ended (reaped, or reparented and gone).
+        assert not [pid for pid in children if running(pid)], children
     finally:
         for run in runs:
             run[0].stop()
-
-
-# Console scripts that are one-shot batch jobs (plots, tables, the demo's driver): Python's defaults.
-BATCH = {"excavator_demo", "excavator_slope_example", "excavator_working_ranges", "pump_boom_regions",
-         "pump_boom_plots", "tool_changer_plots", "palletizer_plots"}
 
 
 def test_every_node_and_mk_tool_is_named_in_its_package_init_and_importing_leaves_signals_alone() -> None:
@@ -403,10 +434,34 @@ def test_every_node_and_mk_tool_is_named_in_its_package_init_and_importing_leave
     assert named == {name.split()[0] for name in EXECUTABLES}
     entries = distribution("manipulator_kinematics").entry_points
     scripts = {e.name for e in entries if e.group == "console_scripts"}
-    assert scripts == named | BATCH
+    assert scripts == named
     imported = subprocess.run(
         [sys.executable, "-c", "import signal, manipulator_kinematics, excavator_kinematics, "
          "scara_kinematics, pump_boom_kinematics, tool_changer_kinematics, palletizer_kinematics; "
          "print(signal.getsignal(signal.SIGTERM))"],
         capture_output=True, text=True, timeout=TIMEOUT, check=True)
     assert imported.stdout.strip() == str(signal.SIG_DFL), imported.stdout
+
+
+@pytest.mark.parametrize("exe", ["pump_boom_ik_server", "tool_changer_ik_server"])
+def test_a_node_compiling_its_kernel_on_a_cold_cache_stops_within_2_s_of_sigint(
+    probe: Probe, exe: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The first run after an install (an empty numba cache): the compile runs in a child that
+    the node kills when signalled, instead of finishing it first (launch SIGKILLed both 5 s after
+    SIGINT; issue 28 item 2)."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    process = NodeProcess(exe, "-r", f"__ns:=/cold_{exe}")
+    try:
+        probe.wait_until(lambda: child_pids(process.process.pid) or not process.alive(), TIMEOUT,
+                         f"the kernel compile of {exe}")
+        compiling = child_pids(process.process.pid)
+        assert process.alive(), process.log()
+        process.process.send_signal(signal.SIGINT)
+        signalled = time.monotonic()
+        probe.wait_until(lambda: not process.alive(), TIMEOUT, f"the end of {exe}")
+        assert time.monotonic() - signalled < 2.0, process.log()
+        assert process.process.returncode == 0, process.log()
+        assert not [pid for pid in compiling if running(pid)], compiling
+    finally:
+        process.stop()

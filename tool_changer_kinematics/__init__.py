@@ -4,4 +4,4 @@ from manipulator_kinematics.stopping import install_for
 
 # The first code of ours its console scripts run: a signal during the imports that follow ends
 # them with exit 0 (manipulator_kinematics.stopping).
-install_for("tool_changer_forward", "tool_changer_ik_server")
+install_for("tool_changer_forward", "tool_changer_ik_server", "tool_changer_plots")
