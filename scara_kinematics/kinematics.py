@@ -364,10 +364,10 @@ class Scara:
     def _solve_ik_one(self, kernel: ModuleType, target: np.ndarray, use_orientation: bool, mode: str,
                       seed: np.ndarray | None, requested: int | None) -> IKSolutions:
         """:meth:`solve_ik` of one target (4, 4), mode and branch checked: the same steps in Python
-        floats around the compiled kernel (:meth:`_ik_one`). Issue #32: on 0-d arrays they cost
+        floats around the compiled kernel (:meth:`_kernel_one`). Issue #32: on 0-d arrays they cost
         2.5x :meth:`ik`, more than the kernel itself (a reduction over two axes alone 9 us)."""
         rows = target.tolist()
-        finite = all(math.isfinite(value) for row in rows for value in row)
+        finite = all(map(math.isfinite, rows[0] + rows[1] + rows[2] + rows[3]))
         x, y, z = rows[0][3], rows[1][3], rows[2][3]
         heading = math.atan2(rows[1][0], rows[0][0])
         tilt = math.acos(min(max(rows[2][2], -1.0), 1.0))  # NaN stays NaN
@@ -376,11 +376,11 @@ class Scara:
             raise RequestError(f"mode 'fixed_phi' holds phi = 90 deg but the target heading is "
                                f"{math.degrees(heading):.6g} deg: use mode 'phi' or clear "
                                "use_orientation", IKStatus.INVALID)
-        solved = self._ik_one(kernel, mode, x, y, heading if mode == "phi" else None, seed,
-                              requested).solutions
+        q, found, selected, tie, outcome, phi_used, preferred = self._kernel_one(
+            kernel, mode, x, y, heading if mode == "phi" else None, seed, requested)
         off_plane = finite and abs(z) > PLANE_TOL
         tilted = finite and use_orientation and tilt > PLANE_TOL
-        status = solved.status.copy()
+        status = found.copy()
         if off_plane or tilted:
             status[:] = _UNREACHABLE
         if not finite:
@@ -394,11 +394,14 @@ class Scara:
                 return _off_plane_text(z)
             if tilted:
                 return _tilted_text(tilt)
-            return solved.note(index)
+            solved = IKSolutions(q=q, status=found, branches=BRANCHES, selected=np.array(selected),
+                                 tie=np.array(tie))  # what ik answered, for its text
+            return self._explain(solved, index, mode, phi_used, preferred, outcome, seed is not None,
+                                 requested)
 
-        return IKSolutions(q=solved.q, status=status, branches=BRANCHES,
-                           selected=np.array(int(solved.selected) if answered else -1, dtype=np.int8),
-                           tie=np.array(answered and bool(solved.tie)), explain=explain)
+        return IKSolutions(q=q, status=status, branches=BRANCHES,
+                           selected=np.array(selected if answered else -1, dtype=np.int8),
+                           tie=np.array(answered and bool(tie)), explain=explain)
 
     def state_note(self, q: ArrayLike) -> str:
         """A remark on one joint state for FK answers: near the singularity, or nothing."""
@@ -440,20 +443,12 @@ class Scara:
         if mode == "position":
             preferred = (np.full(px.shape, PAPER_PHI) if seed is None
                          else wrap_angle(np.broadcast_to(seed[..., 1] + seed[..., 2], px.shape)))
-            if kernel is not None:
-                phi_used, q, status, selected, tie, outcome = self._position_one(
-                    kernel, float(px), float(py), float(preferred), seed, requested)
-            else:
-                phi_used, q, status, outcome = self._position_ik(px, py, preferred, requested)
-                selected, tie = select(q, status, seed=seed, branch=requested, weights=self._weights)
+            phi_used, q, status, outcome = self._position_ik(px, py, preferred, requested)
+            selected, tie = select(q, status, seed=seed, branch=requested, weights=self._weights)
         else:
             phi_used = preferred = np.full(px.shape, PAPER_PHI) if phi is None else wrap_angle(phi)
-            if kernel is not None:
-                q, status, selected, tie = self._solve_one(kernel, float(px), float(py), float(phi_used),
-                                                           seed, requested)
-            else:
-                q, status = self._solve_phi(px, py, phi_used)
-                selected, tie = select(q, status, seed=seed, branch=requested, weights=self._weights)
+            q, status = self._solve_phi(px, py, phi_used)
+            selected, tie = select(q, status, seed=seed, branch=requested, weights=self._weights)
             # The best status of the branches that may answer (np.minimum: a reduction over an axis of
             # two costs several times more on a batch).
             outcome = (np.minimum(status[..., 0], status[..., 1]) if requested is None
@@ -546,51 +541,42 @@ class Scara:
 
     def _ik_one(self, kernel: ModuleType, mode: str, px: float, py: float, phi: float | None,
                 seed: np.ndarray | None, requested: int | None) -> HeadingIK:
-        """:meth:`ik` of one target through the compiled kernel, the steps around it in Python
-        floats (on 0-d arrays they cost several times the kernel, issue #32)."""
-        if mode == "position":
-            preferred = PAPER_PHI if seed is None else _wrap(float(seed[1]) + float(seed[2]))
-            phi_used, q, status, selected, tie, outcome = self._position_one(kernel, px, py, preferred, seed,
-                                                                             requested)
-            phi_used, outcome = float(phi_used), int(outcome)
-        else:
-            phi_used = preferred = PAPER_PHI if phi is None else _wrap(phi)
-            q, status, selected, tie = self._solve_one(kernel, px, py, phi_used, seed, requested)
-            first, second = status.tolist()
-            outcome = min(first, second) if requested is None else (first, second)[requested]
-        if not (math.isfinite(px) and math.isfinite(py) and math.isfinite(phi_used)):
-            outcome = int(_INVALID)
-            status[:] = _INVALID
+        """:meth:`ik` of one target through the compiled kernel (:meth:`_kernel_one`)."""
+        q, status, selected, tie, outcome, phi_used, preferred = self._kernel_one(
+            kernel, mode, px, py, phi, seed, requested)
 
         def explain(solutions: IKSolutions, index: tuple[int, ...]) -> str:
             return self._explain(solutions, index, mode, phi_used, preferred, outcome, seed is not None,
                                  requested)
 
-        solutions = IKSolutions(q=q, status=status, branches=BRANCHES, selected=selected, tie=tie,
-                                explain=explain)
+        solutions = IKSolutions(q=q, status=status, branches=BRANCHES, selected=np.array(selected),
+                                tie=np.array(tie), explain=explain)
         return HeadingIK(solutions=solutions, status=np.array(outcome, dtype=np.int8), phi=np.array(phi_used),
                          preferred_phi=np.array(preferred))
 
-    def _solve_one(self, kernel: ModuleType, px: float, py: float, phi: float, seed: np.ndarray | None,
-                   requested: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`_solve_phi` and :func:`select` for one target through the compiled kernel."""
+    def _kernel_one(self, kernel: ModuleType, mode: str, px: float, py: float, phi: float | None,
+                    seed: np.ndarray | None, requested: int | None) -> tuple[Any, ...]:
+        """:meth:`ik`'s steps for one target in Python floats around the compiled kernel (on 0-d
+        arrays they cost several times the kernel, issue #32): q (2, 3), status (2,), and the
+        selection, tie, outcome, heading used and preferred heading as Python numbers."""
         q, status = np.empty((2, 3)), np.empty(2, dtype=np.int8)
         seeded = seed is not None
-        selected, tie = kernel.solve_phi(self._packed, px, py, phi, seed if seeded else self._packed[:3],
-                                         seeded, -1 if requested is None else requested, TIE_TOLERANCE, q,
-                                         status)
-        return q, status, np.array(selected), np.array(tie)
-
-    def _position_one(self, kernel: ModuleType, px: float, py: float, preferred: float,
-                      seed: np.ndarray | None, requested: int | None) -> tuple[np.ndarray, ...]:
-        """:meth:`_position_ik` and :func:`select` for one target through the compiled kernel: the
-        heading, both branches there, their statuses, the selection, the tie and the outcome."""
-        q, status = np.empty((2, 3)), np.empty(2, dtype=np.int8)
-        seeded = seed is not None
-        phi, selected, tie, outcome = kernel.solve_position(
-            self._packed, px, py, preferred, seed if seeded else self._packed[:3], seeded,
-            -1 if requested is None else requested, TIE_TOLERANCE, q, status)
-        return np.array(phi), q, status, np.array(selected), np.array(tie), np.array(outcome, dtype=np.int8)
+        start = seed if seeded else self._packed[:3]
+        chosen = -1 if requested is None else requested
+        if mode == "position":
+            preferred = PAPER_PHI if seed is None else _wrap(float(seed[1]) + float(seed[2]))
+            phi_used, selected, tie, outcome = kernel.solve_position(
+                self._packed, px, py, preferred, start, seeded, chosen, TIE_TOLERANCE, q, status)
+        else:
+            phi_used = preferred = PAPER_PHI if phi is None else _wrap(phi)
+            selected, tie = kernel.solve_phi(self._packed, px, py, phi_used, start, seeded, chosen,
+                                             TIE_TOLERANCE, q, status)
+            first, second = status.tolist()
+            outcome = min(first, second) if requested is None else (first, second)[requested]
+        if not (math.isfinite(px) and math.isfinite(py) and math.isfinite(phi_used)):
+            outcome = int(_INVALID)
+            status[:] = _INVALID
+        return q, status, selected, tie, outcome, phi_used, preferred
 
     @cached_property
     def _packed(self) -> np.ndarray:
