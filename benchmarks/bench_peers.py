@@ -227,7 +227,7 @@ def worker() -> None:
     D = rng.uniform(lo + 0.01 * (hi - lo), hi - 0.01 * (hi - lo), (largest, 4))
     D_dot = rng.uniform(-1, 1, (largest, 4)) * exc.limits.max_rates
     D_ddot = rng.uniform(-1, 1, (largest, 4)) * exc.limits.max_rates
-    Q = exc.pose(D[:count])
+    Q = exc.pose(D)
     pal = Palletizer.default()
     pq = rng.uniform(pal.limits.lower, pal.limits.upper, (largest, pal.limits.lower.size))
     p_targets = pal.fkine(pq)
@@ -240,7 +240,7 @@ def worker() -> None:
         "SCARA solve_ik": (lambda i: scara.solve_ik(S_all[i]), lambda n: scara.solve_ik(S_all[:n])),
         "palletizer solve_ik": (lambda i: pal.solve_ik(p_targets[i]), lambda n: pal.solve_ik(p_targets[:n])),
         "excavator pose": (lambda i: exc.pose(D[i]), lambda n: exc.pose(D[:n])),
-        "excavator ik": (lambda i: exc.ik(Q[i]), lambda n: exc.ik(Q[: min(n, len(Q))])),
+        "excavator ik": (lambda i: exc.ik(Q[i]), lambda n: exc.ik(Q[:n])),
         "excavator state": (lambda i: exc.state(D[i], D_dot[i], D_ddot[i]),
                             lambda n: exc.state(D[:n], D_dot[:n], D_ddot[:n])),
     }
