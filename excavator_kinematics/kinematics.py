@@ -74,15 +74,13 @@ STROKE_TOLERANCE = 1e-9
 # ms per batch (state / pose): 4096 states per block 17.2 / 9.6, 8192 15.2 / 8.3, 16384 15.7 /
 # 10.0, 32768 18.8 / 9.3, the whole batch in one 39.0 / 8.4.
 _BLOCK = 2 * BLOCK
-# Batches of full states up to this many run the kernel's loop (states), larger ones numpy:
-# the scalar kernel takes 180-210 ns per state whatever the batch, numpy's SIMD trigonometry wins
-# from a few thousand on (and for pose and JC0 alone at every size that matters: the kernel's
-# pose is 1.1-1.2x numpy's at 1000 states, 0.9x at 2048). Measured, M full states/s, kernel vs
-# numpy: 100 states 3.1 vs 0.6; 1000 5.5 vs 3.4; 2048 5.7 vs 5.2; 32768 4.9 vs 6.5.
+# Batches of full states or poses up to this many run the kernel's loop (states, poses), larger
+# ones numpy (issue #32: numpy's fixed cost made a pose batch of one 90x a single call, and a pose
+# batch of 1000 cost 0.73 us a state against the kernel's 0.30 at load 16-21, bench_peers.py):
+# the scalar kernel takes 180-210 ns per full state whatever the batch, numpy's SIMD trigonometry
+# wins from a few thousand on. Measured, M full states/s, kernel vs numpy: 100 states 3.1 vs 0.6;
+# 1000 5.5 vs 3.4; 2048 5.7 vs 5.2; 32768 4.9 vs 6.5.
 _KERNEL_BATCH = 2048
-# Batches of poses up to this many run the kernel's loop (poses): below it numpy's fixed cost per
-# call (about 200 us at load 6, a batch of one 90x a single call, issue #32) dominates.
-_KERNEL_POSES = 256
 
 # Dddot of a state without accelerations (the kernel reads it, never writes it).
 _NO_ACCELERATION = np.zeros(4)
@@ -483,7 +481,7 @@ class Excavator:
         D = np.asarray(D, dtype=float)
         if D.shape == (4,) and (Q := self._compiled("pose", np.empty(4), D)) is not None:
             return Q
-        if D.ndim == 2 and D.shape[1] == 4 and len(D) <= _KERNEL_POSES and (Q := self._compiled(
+        if D.ndim == 2 and D.shape[1] == 4 and len(D) <= _KERNEL_BATCH and (Q := self._compiled(
                 "poses", np.empty(D.shape), np.ascontiguousarray(D))) is not None:
             return Q
         D = self.validate(D)

@@ -86,12 +86,13 @@ def test_a_batch_through_the_kernel_equals_the_numpy_batch(monkeypatch: pytest.M
 
 
 def test_a_batch_of_poses_through_the_kernel_equals_the_numpy_batch(monkeypatch: pytest.MonkeyPatch):
-    """Batches of poses up to _KERNEL_POSES run the kernel's loop (poses, issue #32): the numpy
-    batch's values to 1e-12 over 10^4 states in batches of every size to it, and the same refusal."""
+    """Batches of poses up to _KERNEL_BATCH run the kernel's loop (poses, issue #32): the numpy
+    batch's values to 1e-12 over 2 x 10^4 states in batches of sizes to it and past it, and the same
+    refusal."""
     assert compiled_kernel(EXC, wait=True) is not None
     rng = np.random.default_rng(32)
-    D = rng.uniform(LIM.d_min, LIM.d_max, size=(10_000, 4))
-    sizes = [1, 2, 7, 100, kinematics._KERNEL_POSES]
+    D = rng.uniform(LIM.d_min, LIM.d_max, size=(20_000, 4))
+    sizes = [1, 2, 7, 100, 1000, kinematics._KERNEL_BATCH, kinematics._KERNEL_BATCH + 1]
     batches = np.split(D, np.cumsum(sizes * (len(D) // sum(sizes)))[:-1])
     calls = 0
     real = kinematics.KERNEL.ready.poses
@@ -104,7 +105,7 @@ def test_a_batch_of_poses_through_the_kernel_equals_the_numpy_batch(monkeypatch:
     with monkeypatch.context() as spy:
         spy.setattr(kinematics.KERNEL.ready, "poses", counted)
         compiled = [EXC.pose(batch) for batch in batches]
-    assert calls == sum(len(batch) <= kinematics._KERNEL_POSES for batch in batches) > 100
+    assert calls == sum(len(batch) <= kinematics._KERNEL_BATCH for batch in batches) >= 12
     with monkeypatch.context() as numpy_only:
         numpy_only.setattr(kinematics.KERNEL, "ready", None)
         reference = [EXC.pose(batch) for batch in batches]
