@@ -74,11 +74,12 @@ STROKE_TOLERANCE = 1e-9
 # ms per batch (state / pose): 4096 states per block 17.2 / 9.6, 8192 15.2 / 8.3, 16384 15.7 /
 # 10.0, 32768 18.8 / 9.3, the whole batch in one 39.0 / 8.4.
 _BLOCK = 2 * BLOCK
-# Batches of full states up to this many run the kernel's loop (states), larger ones numpy:
-# the scalar kernel takes 180-210 ns per state whatever the batch, numpy's SIMD trigonometry wins
-# from a few thousand on (and for pose and JC0 alone at every size that matters: the kernel's
-# pose is 1.1-1.2x numpy's at 1000 states, 0.9x at 2048). Measured, M full states/s, kernel vs
-# numpy: 100 states 3.1 vs 0.6; 1000 5.5 vs 3.4; 2048 5.7 vs 5.2; 32768 4.9 vs 6.5.
+# Batches of full states or poses up to this many run the kernel's loop (states, poses), larger
+# ones numpy (issue #32: numpy's fixed cost made a pose batch of one 90x a single call, and a pose
+# batch of 1000 cost 0.73 us a state against the kernel's 0.30 at load 16-21, bench_peers.py):
+# the scalar kernel takes 180-210 ns per full state whatever the batch, numpy's SIMD trigonometry
+# wins from a few thousand on. Measured, M full states/s, kernel vs numpy: 100 states 3.1 vs 0.6;
+# 1000 5.5 vs 3.4; 2048 5.7 vs 5.2; 32768 4.9 vs 6.5.
 _KERNEL_BATCH = 2048
 
 # Dddot of a state without accelerations (the kernel reads it, never writes it).
@@ -158,11 +159,12 @@ def _warm(state_kernel: ModuleType) -> None:
     state_kernel.jc0(packed, D, np.empty((4, 4)))
     batch = np.zeros((1, 4))
     state_kernel.states(packed, batch, batch, batch, np.empty((1, 10, 4)))
+    state_kernel.poses(packed, batch, np.empty((1, 4)))
     state_kernel.bucket_quaternion(0.0, 0.0, np.empty(4))
     state_kernel.bucket_angular_velocity(0.0, 0.0, 0.0, three)
     state_kernel.bucket_angular_acceleration(0.0, 0.0, 0.0, 0.0, 0.0, three)
     for function in (state_kernel.state, state_kernel.pose, state_kernel.jc0, state_kernel.states,
-                     state_kernel.bucket_quaternion,
+                     state_kernel.poses, state_kernel.bucket_quaternion,
                      state_kernel.bucket_angular_velocity, state_kernel.bucket_angular_acceleration):
         function.disable_compile()
 
@@ -527,6 +529,9 @@ class Excavator:
         """Q = [x, y, z, alpha] of the bucket tip for D (eqs. 1-3)."""
         D = np.asarray(D, dtype=float)
         if D.shape == (4,) and (Q := self._compiled("pose", np.empty(4), D)) is not None:
+            return Q
+        if D.ndim == 2 and D.shape[1] == 4 and len(D) <= _KERNEL_BATCH and (Q := self._compiled(
+                "poses", np.empty(D.shape), np.ascontiguousarray(D))) is not None:
             return Q
         D = self.validate(D)
         return in_blocks(self._poses, D.reshape(-1, 4), block=_BLOCK, rows=True).T.reshape(D.shape)

@@ -195,6 +195,16 @@ def states(k: np.ndarray, D: np.ndarray, D_dot: np.ndarray, D_ddot: np.ndarray, 
 
 
 @njit(cache=True, error_model="numpy")
+def poses(k: np.ndarray, D: np.ndarray, out: np.ndarray) -> bool:
+    """:func:`pose` of every row of a batch D (N, 4) into ``out`` (N, 4); False as soon as one
+    state is refused (the caller's numpy path then says why)."""
+    i = 0
+    while i < D.shape[0] and pose(k, D[i], out[i]):
+        i += 1
+    return i == D.shape[0]
+
+
+@njit(cache=True, error_model="numpy")
 def bucket_quaternion(theta1: float, alpha: float, out: np.ndarray) -> None:
     """kinematics.bucket_quaternion of one swing angle and bucket angle into ``out`` (4,)."""
     cy, sy = math.cos(0.5 * theta1), math.sin(0.5 * theta1)

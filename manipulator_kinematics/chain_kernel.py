@@ -164,6 +164,14 @@ BLOCK = 64
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def _check_length(k, q):
+    """q (n,) of the chain's length: the single calls take q as given (SerialChain's hot path
+    checks only that it is a 1-D array), so a wrong length is refused here, not read past."""
+    if q.shape[0] != int(k[1]):
+        raise ValueError("joint values of the wrong length")
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _scratch(k, count):
     """P for :func:`_joints`: (3, count, n_rows)."""
     return np.empty((3, count, int(k[0])))
@@ -217,6 +225,7 @@ def _jacobian(k, F, pose, jacobian):
 @njit(void(_IN1, _IN1, _OUT3), cache=True, error_model="numpy")
 def frames(k, q, out):
     """The frames out (n_rows + 1, 4, 4) of q (n,)."""
+    _check_length(k, q)
     P = _scratch(k, 1)
     _joints(k, q, P, 0)
     _walk(k, P, 0, out)
@@ -225,6 +234,7 @@ def frames(k, q, out):
 @njit(void(_IN1, _IN1, _OUT2), cache=True, error_model="numpy")
 def fkine(k, q, pose):
     """The tool pose (4, 4) of q (n,)."""
+    _check_length(k, q)
     P = _scratch(k, 1)
     _joints(k, q, P, 0)
     _store(_tool(k, _walk(k, P, 0, None)), pose)
@@ -233,6 +243,7 @@ def fkine(k, q, pose):
 @njit(void(_IN1, _IN1, _OUT2, _OUT2), cache=True, error_model="numpy")
 def fkine_jacob0(k, q, pose, jacobian):
     """The tool pose (4, 4) and the Jacobian (6, n) of q (n,)."""
+    _check_length(k, q)
     P, F = _scratch(k, 1), np.empty((int(k[0]) + 1, 4, 4))
     _joints(k, q, P, 0)
     _store(_tool(k, _walk(k, P, 0, F)), pose)

@@ -320,6 +320,12 @@ class Scara:
             raise RequestError("mode 'position' leaves the heading free: use mode 'phi' to give an "
                                "orientation", IKStatus.INVALID)
         target = np.asarray(target, dtype=float)
+        requested = None if branch is None else BRANCHES.index(branch)
+        if target.shape == (4, 4):
+            kernel = compiled_kernel(self)
+            seed = _checked_seed(seed)
+            if kernel is not None and (seed is None or seed.shape == (3,)):
+                return self._solve_ik_one(kernel, target, use_orientation, mode, seed, requested)
         finite = np.all(np.isfinite(target), axis=(-2, -1))
         position = target[..., :3, 3]
         heading = np.arctan2(target[..., 1, 0], target[..., 0, 0])
@@ -340,23 +346,62 @@ class Scara:
         status = solved.status.copy()
         status[refused] = _UNREACHABLE
         status[~finite] = _INVALID
-        if branch is not None:  # the other branch is no solution of this request
-            status[..., 1 - BRANCHES.index(branch)] = np.maximum(status[..., 1 - BRANCHES.index(branch)],
-                                                                 _JOINT_LIMITS)
+        if requested is not None:  # the other branch is no solution of this request
+            status[..., 1 - requested] = np.maximum(status[..., 1 - requested], _JOINT_LIMITS)
         answered = ~refused & finite
         selected = np.where(answered, solved.selected, -1).astype(np.int8)
 
         def explain(solutions: IKSolutions, index: tuple[int, ...]) -> str:
             if off_plane[index]:
-                return (f"target z = {position[index + (2,)]:.6g} m: the arm moves in the plane z = 0 of "
-                        "its base frame")
+                return _off_plane_text(float(position[index + (2,)]))
             if tilted[index]:
-                return (f"target orientation tilts the tool z axis by {math.degrees(tilt[index]):.6g} deg: "
-                        "the arm only turns about base z")
+                return _tilted_text(float(tilt[index]))
             return solved.note(index)
 
         return IKSolutions(q=solved.q, status=status, branches=BRANCHES, selected=selected,
                            tie=answered & solved.tie, explain=explain)
+
+    def _solve_ik_one(self, kernel: ModuleType, target: np.ndarray, use_orientation: bool, mode: str,
+                      seed: np.ndarray | None, requested: int | None) -> IKSolutions:
+        """:meth:`solve_ik` of one target (4, 4), mode and branch checked: the same steps in Python
+        floats around the compiled kernel (:meth:`_kernel_one`). Issue #32: on 0-d arrays they cost
+        2.5x :meth:`ik`, more than the kernel itself (a reduction over two axes alone 9 us)."""
+        rows = target.tolist()
+        finite = all(map(math.isfinite, rows[0] + rows[1] + rows[2] + rows[3]))
+        x, y, z = rows[0][3], rows[1][3], rows[2][3]
+        heading = math.atan2(rows[1][0], rows[0][0])
+        tilt = math.acos(min(max(rows[2][2], -1.0), 1.0))  # NaN stays NaN
+        if (mode == "fixed_phi" and use_orientation and finite
+                and abs(_wrap(heading - PAPER_PHI)) > PLANE_TOL):
+            raise RequestError(f"mode 'fixed_phi' holds phi = 90 deg but the target heading is "
+                               f"{math.degrees(heading):.6g} deg: use mode 'phi' or clear "
+                               "use_orientation", IKStatus.INVALID)
+        q, found, selected, tie, outcome, phi_used, preferred = self._kernel_one(
+            kernel, mode, x, y, heading if mode == "phi" else None, seed, requested)
+        off_plane = finite and abs(z) > PLANE_TOL
+        tilted = finite and use_orientation and tilt > PLANE_TOL
+        status = found.copy()
+        if off_plane or tilted:
+            status[:] = _UNREACHABLE
+        if not finite:
+            status[:] = _INVALID
+        if requested is not None:  # the other branch is no solution of this request
+            status[1 - requested] = max(status[1 - requested], _JOINT_LIMITS)
+        answered = finite and not (off_plane or tilted)
+
+        def explain(solutions: IKSolutions, index: tuple[int, ...]) -> str:
+            if off_plane:
+                return _off_plane_text(z)
+            if tilted:
+                return _tilted_text(tilt)
+            solved = IKSolutions(q=q, status=found, branches=BRANCHES, selected=np.array(selected),
+                                 tie=np.array(tie))  # what ik answered, for its text
+            return self._explain(solved, index, mode, phi_used, preferred, outcome, seed is not None,
+                                 requested)
+
+        return IKSolutions(q=q, status=status, branches=BRANCHES,
+                           selected=np.array(selected if answered else -1, dtype=np.int8),
+                           tie=np.array(answered and bool(tie)), explain=explain)
 
     def state_note(self, q: ArrayLike) -> str:
         """A remark on one joint state for FK answers: near the singularity, or nothing."""
@@ -388,30 +433,22 @@ class Scara:
             phi = np.asarray(phi, dtype=float)
             if phi.shape != px.shape:
                 px, py, phi = np.broadcast_arrays(px, py, phi)
-        if seed is not None:
-            seed = np.asarray(seed, dtype=float)
-            if seed.ndim == 0 or seed.shape[-1] != 3 or not np.all(np.isfinite(seed)):
-                raise ValueError(f"seed must be finite joint values of shape (..., 3), got {seed!r}")
+        seed = _checked_seed(seed)
         requested = None if branch is None else BRANCHES.index(branch)
         one = px.ndim == 0 and compiled and (seed is None or seed.shape == (3,))
         kernel = compiled_kernel(self) if one else None
+        if kernel is not None:
+            return self._ik_one(kernel, mode, float(px), float(py), None if phi is None else float(phi),
+                                seed, requested)
         if mode == "position":
             preferred = (np.full(px.shape, PAPER_PHI) if seed is None
                          else wrap_angle(np.broadcast_to(seed[..., 1] + seed[..., 2], px.shape)))
-            if kernel is not None:
-                phi_used, q, status, selected, tie, outcome = self._position_one(
-                    kernel, float(px), float(py), float(preferred), seed, requested)
-            else:
-                phi_used, q, status, outcome = self._position_ik(px, py, preferred, requested)
-                selected, tie = select(q, status, seed=seed, branch=requested, weights=self._weights)
+            phi_used, q, status, outcome = self._position_ik(px, py, preferred, requested)
+            selected, tie = select(q, status, seed=seed, branch=requested, weights=self._weights)
         else:
             phi_used = preferred = np.full(px.shape, PAPER_PHI) if phi is None else wrap_angle(phi)
-            if kernel is not None:
-                q, status, selected, tie = self._solve_one(kernel, float(px), float(py), float(phi_used),
-                                                           seed, requested)
-            else:
-                q, status = self._solve_phi(px, py, phi_used)
-                selected, tie = select(q, status, seed=seed, branch=requested, weights=self._weights)
+            q, status = self._solve_phi(px, py, phi_used)
+            selected, tie = select(q, status, seed=seed, branch=requested, weights=self._weights)
             # The best status of the branches that may answer (np.minimum: a reduction over an axis of
             # two costs several times more on a batch).
             outcome = (np.minimum(status[..., 0], status[..., 1]) if requested is None
@@ -502,26 +539,44 @@ class Scara:
         status[inside & singular[..., None]] = _SINGULAR
         return q, status
 
-    def _solve_one(self, kernel: ModuleType, px: float, py: float, phi: float, seed: np.ndarray | None,
-                   requested: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`_solve_phi` and :func:`select` for one target through the compiled kernel."""
-        q, status = np.empty((2, 3)), np.empty(2, dtype=np.int8)
-        seeded = seed is not None
-        selected, tie = kernel.solve_phi(self._packed, px, py, phi, seed if seeded else self._packed[:3],
-                                         seeded, -1 if requested is None else requested, TIE_TOLERANCE, q,
-                                         status)
-        return q, status, np.array(selected), np.array(tie)
+    def _ik_one(self, kernel: ModuleType, mode: str, px: float, py: float, phi: float | None,
+                seed: np.ndarray | None, requested: int | None) -> HeadingIK:
+        """:meth:`ik` of one target through the compiled kernel (:meth:`_kernel_one`)."""
+        q, status, selected, tie, outcome, phi_used, preferred = self._kernel_one(
+            kernel, mode, px, py, phi, seed, requested)
 
-    def _position_one(self, kernel: ModuleType, px: float, py: float, preferred: float,
-                      seed: np.ndarray | None, requested: int | None) -> tuple[np.ndarray, ...]:
-        """:meth:`_position_ik` and :func:`select` for one target through the compiled kernel: the
-        heading, both branches there, their statuses, the selection, the tie and the outcome."""
+        def explain(solutions: IKSolutions, index: tuple[int, ...]) -> str:
+            return self._explain(solutions, index, mode, phi_used, preferred, outcome, seed is not None,
+                                 requested)
+
+        solutions = IKSolutions(q=q, status=status, branches=BRANCHES, selected=np.array(selected),
+                                tie=np.array(tie), explain=explain)
+        return HeadingIK(solutions=solutions, status=np.array(outcome, dtype=np.int8), phi=np.array(phi_used),
+                         preferred_phi=np.array(preferred))
+
+    def _kernel_one(self, kernel: ModuleType, mode: str, px: float, py: float, phi: float | None,
+                    seed: np.ndarray | None, requested: int | None) -> tuple[Any, ...]:
+        """:meth:`ik`'s steps for one target in Python floats around the compiled kernel (on 0-d
+        arrays they cost several times the kernel, issue #32): q (2, 3), status (2,), and the
+        selection, tie, outcome, heading used and preferred heading as Python numbers."""
         q, status = np.empty((2, 3)), np.empty(2, dtype=np.int8)
         seeded = seed is not None
-        phi, selected, tie, outcome = kernel.solve_position(
-            self._packed, px, py, preferred, seed if seeded else self._packed[:3], seeded,
-            -1 if requested is None else requested, TIE_TOLERANCE, q, status)
-        return np.array(phi), q, status, np.array(selected), np.array(tie), np.array(outcome, dtype=np.int8)
+        start = seed if seeded else self._packed[:3]
+        chosen = -1 if requested is None else requested
+        if mode == "position":
+            preferred = PAPER_PHI if seed is None else _wrap(float(seed[1]) + float(seed[2]))
+            phi_used, selected, tie, outcome = kernel.solve_position(
+                self._packed, px, py, preferred, start, seeded, chosen, TIE_TOLERANCE, q, status)
+        else:
+            phi_used = preferred = PAPER_PHI if phi is None else _wrap(phi)
+            selected, tie = kernel.solve_phi(self._packed, px, py, phi_used, start, seeded, chosen,
+                                             TIE_TOLERANCE, q, status)
+            first, second = status.tolist()
+            outcome = min(first, second) if requested is None else (first, second)[requested]
+        if not (math.isfinite(px) and math.isfinite(py) and math.isfinite(phi_used)):
+            outcome = int(_INVALID)
+            status[:] = _INVALID
+        return q, status, selected, tie, outcome, phi_used, preferred
 
     @cached_property
     def _packed(self) -> np.ndarray:
@@ -604,6 +659,30 @@ KERNEL = Kernel("scara_kinematics.ik_kernel", _warm)
 def compiled_kernel(scara: Scara, wait: bool = False) -> ModuleType | None:
     """:data:`KERNEL` once loaded, else None and its load started; ``wait``: load it first."""
     return KERNEL.get(scara._packed, wait=wait)
+
+
+def _checked_seed(seed: ArrayLike | None) -> np.ndarray | None:
+    """The seed as floats, or ValueError unless finite joint values of shape (..., 3)."""
+    if seed is None:
+        return None
+    seed = np.asarray(seed, dtype=float)
+    if seed.ndim == 0 or seed.shape[-1] != 3 or not np.isfinite(seed).all():
+        raise ValueError(f"seed must be finite joint values of shape (..., 3), got {seed!r}")
+    return seed
+
+
+def _wrap(angle: float) -> float:
+    """wrap_angle of one float: the same floor modulo as numpy's, so the same bits."""
+    return (angle + math.pi) % math.tau - math.pi
+
+
+def _off_plane_text(z: float) -> str:
+    return f"target z = {z:.6g} m: the arm moves in the plane z = 0 of its base frame"
+
+
+def _tilted_text(tilt: float) -> str:
+    return (f"target orientation tilts the tool z axis by {math.degrees(tilt):.6g} deg: the arm only turns "
+            "about base z")
 
 
 def _allowed(requested: int | None) -> np.ndarray:

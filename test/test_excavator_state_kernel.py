@@ -85,6 +85,38 @@ def test_a_batch_through_the_kernel_equals_the_numpy_batch(monkeypatch: pytest.M
         EXC.state(outside, rates)
 
 
+def test_a_batch_of_poses_through_the_kernel_equals_the_numpy_batch(monkeypatch: pytest.MonkeyPatch):
+    """Batches of poses up to _KERNEL_BATCH run the kernel's loop (poses, issue #32): the numpy
+    batch's values to 1e-12 over 2 x 10^4 states in batches of sizes to it and past it, and the same
+    refusal."""
+    assert compiled_kernel(EXC, wait=True) is not None
+    rng = np.random.default_rng(32)
+    D = rng.uniform(LIM.d_min, LIM.d_max, size=(20_000, 4))
+    sizes = [1, 2, 7, 100, 1000, kinematics._KERNEL_BATCH, kinematics._KERNEL_BATCH + 1]
+    batches = np.split(D, np.cumsum(sizes * (len(D) // sum(sizes)))[:-1])
+    calls = 0
+    real = kinematics.KERNEL.ready.poses
+
+    def counted(*arguments):
+        nonlocal calls
+        calls += 1
+        return real(*arguments)
+
+    with monkeypatch.context() as spy:
+        spy.setattr(kinematics.KERNEL.ready, "poses", counted)
+        compiled = [EXC.pose(batch) for batch in batches]
+    assert calls == sum(len(batch) <= kinematics._KERNEL_BATCH for batch in batches) >= 12
+    with monkeypatch.context() as numpy_only:
+        numpy_only.setattr(kinematics.KERNEL, "ready", None)
+        reference = [EXC.pose(batch) for batch in batches]
+    for got, expected in zip(compiled, reference, strict=True):
+        assert got.shape == expected.shape and _close(got, expected)
+    outside = D[:10].copy()
+    outside[5, 2] = LIM.d_max[2] + 0.1
+    with pytest.raises(StrokeError):
+        EXC.pose(outside)
+
+
 def test_the_single_call_returns_the_kernel_result_and_refuses_as_the_numpy_path():
     kernel = compiled_kernel(EXC, wait=True)
     D, V, A = LIM.reference, np.array([0.2, 0.05, -0.08, 0.1]), np.array([0.1, 0.02, 0.01, -0.03])

@@ -381,3 +381,47 @@ def test_a_users_params_file_is_loaded(tmp_path: Path) -> None:
     machine = Scara.from_parameters(load_parameters(path, "scara_ik_server")["scara"])
     assert (machine.l1, machine.l2, machine.l3) == (0.20, 0.35, 0.2)
     np.testing.assert_allclose(machine.fk([0.0, 0.0, 0.0]), [0.75, 0.0, 0.0])
+
+
+def test_solve_ik_of_one_target_is_the_batch_path(scara: Scara) -> None:
+    """solve_ik of one pose (Python floats around the compiled kernel, issue #32) against the same
+    pose in a batch (numpy): the same candidates (1e-12), statuses, selections, ties and texts,
+    over 2000 poses with off-plane, tilted and non-finite ones among them, in every mode, seeded
+    and not, with a branch asked for."""
+    assert compiled_kernel(scara, wait=True) is not None
+    rng = np.random.default_rng(32)
+    n = 2000
+    m = n - n // 2
+    x = np.concatenate([scara.fk(random_states(scara, rng, n // 2)),
+                        np.column_stack([rng.uniform(-0.6, 1.4, m), rng.uniform(-0.9, 0.9, m),
+                                         rng.uniform(-math.pi, math.pi, m)])])
+    poses = scara.fkine(np.zeros((n, 3)))
+    c, s = np.cos(x[:, 2]), np.sin(x[:, 2])
+    poses[:, 0, 0], poses[:, 0, 1], poses[:, 1, 0], poses[:, 1, 1] = c, -s, s, c
+    poses[:, 0, 3], poses[:, 1, 3] = x[:, 0], x[:, 1]
+    poses[7::40, 2, 3] = rng.uniform(-0.1, 0.1, len(poses[7::40]))  # off the plane
+    tilted = poses[9::40]
+    tilted[:, :3, :3] = tilted[:, :3, :3] @ np.array([[1.0, 0.0, 0.0], [0.0, 0.6, -0.8], [0.0, 0.8, 0.6]])
+    poses[9::40] = tilted
+    poses[11::97, 1, 0] = np.nan
+    poses[13::97, 2, 3] = np.inf
+    fixed = poses.copy()  # heading 90 deg: what mode fixed_phi with an orientation accepts
+    fixed[:, :2, :2] = [[0.0, -1.0], [1.0, 0.0]]
+    seeds = rng.uniform(scara.limits.lower, scara.limits.upper, (n, 3))
+    for targets, orientation, mode, seed, branch in ((poses, True, None, None, None),
+                                                     (poses, True, "phi", seeds, "elbow_b"),
+                                                     (poses, False, None, seeds, None),
+                                                     (poses, False, "position", None, "elbow_a"),
+                                                     (fixed, True, "fixed_phi", seeds, None),
+                                                     (poses, False, "fixed_phi", None, None)):
+        batch = scara.solve_ik(targets, use_orientation=orientation, mode=mode, seed=seed, branch=branch)
+        assert len(set(batch.status.ravel().tolist())) >= 3
+        for i in range(n):
+            one = scara.solve_ik(targets[i], use_orientation=orientation, mode=mode,
+                                 seed=None if seed is None else seed[i], branch=branch)
+            np.testing.assert_allclose(one.q, batch.q[i], rtol=0.0, atol=1e-12)
+            assert np.array_equal(one.status, batch.status[i]), i
+            assert one.selected.shape == () and one.tie.shape == ()
+            assert one.tie == batch.tie[i], i
+            assert one.selected == batch.selected[i] or (one.tie and one.valid.all()), i
+            assert one.note() == batch.note(i), (i, one.note(), batch.note(i))

@@ -103,3 +103,18 @@ def test_any_layout_of_joint_values_is_accepted(kernel) -> None:
             np.testing.assert_allclose(got, reference, rtol=0, atol=TOL)
     assert chain.fkine(np.zeros((0, chain.n))).shape == (0, 4, 4)
     assert chain.fkine_jacob0(np.zeros((2, 0, chain.n)))[1].shape == (2, 0, 6, chain.n)
+
+
+def test_the_single_call_hot_path_refuses_or_converts_what_its_kernel_cannot_take(kernel) -> None:
+    """One configuration goes to the kernel as given (issue #32): a wrong length is refused with
+    the shape named, integer or float32 values are converted, as the general path does."""
+    chain = CHAINS["tool_changer"]()
+    for wrong in (np.zeros(chain.n - 1), np.zeros(chain.n + 1), np.zeros(0)):
+        for call in (chain.fkine, chain.fkine_jacob0):
+            with pytest.raises(ValueError, match=rf"shape \(\.\.\., {chain.n}\)"):
+                call(wrong)
+    for values in (np.arange(chain.n), np.linspace(-2.0, 2.0, chain.n, dtype=np.float32)):
+        expected = chain.fkine_jacob0(values.astype(float), compiled=False)
+        for got, reference in zip(chain.fkine_jacob0(values), expected, strict=True):
+            np.testing.assert_allclose(got, reference, rtol=0, atol=TOL)
+        np.testing.assert_allclose(chain.fkine(values), expected[0], rtol=0, atol=TOL)
