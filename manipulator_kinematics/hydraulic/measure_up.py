@@ -179,14 +179,14 @@ def report(cal: Calibration, machine: Path, measured: Path, widened: Sequence[st
             f"{len(cal.not_observable)} parameter combinations not determined by these data, held "
             "at the drawing (see not_observable for what would determine them)."
         )
-    bad = [
-        name
-        for name in sorted(set(names))
-        if _distances(cal.residuals[names == name])["max"] > 5 * float(np.median(data.sigma)) * math.sqrt(3)
-    ]
+    # A 3-D distance of three sigma-sized errors exceeds 5 sigma * sqrt(3) by chance ~1e-5 of the time.
+    distance = np.linalg.norm(cal.residuals, axis=1)
+    bad = np.flatnonzero(distance > 5.0 * data.sigma * math.sqrt(3.0))
     lines.append(
-        "Check the points of " + ", ".join(bad) + ": residuals above 5 sigma."
-        if bad
+        "Check these shots (residual above 5 sigma): "
+        + ", ".join(f"{poses[k]} {names[k]} ({1000 * distance[k]:.1f} mm)" for k in bad[:8])
+        + (" ..." if len(bad) > 8 else "")
+        if len(bad)
         else "No residual above 5 sigma."
     )
     lines.extend(widened)
@@ -293,22 +293,22 @@ def residual_plot(cal: Calibration, png: Path) -> None:
     labels = list(dict.fromkeys(data.pose))
     where = {p: i for i, p in enumerate(labels)}
     x = np.array([where[p] for p in data.pose])
-    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    fig, axes = plt.subplots(2, 1, figsize=(12, 6), sharex=True)
     for ax, errors, title in (
         (axes[0], cal.drawing_residuals, "drawing (instrument best placed)"),
         (axes[1], cal.residuals, "calibrated"),
     ):
         d = 1000 * np.linalg.norm(errors, axis=1)
-        for name in sorted(set(data.point)):
+        for k, name in enumerate(sorted(set(data.point))):
             rows = np.array(data.point) == name
-            ax.plot(x[rows], d[rows], "o", ms=4, label=name)
+            ax.plot(x[rows], d[rows], "osD^v<>ph*Xd"[k % 12], ms=4, color=plt.cm.tab20(k % 20), label=name)
         ax.set_ylabel("3-D residual (mm)")
         ax.set_title(
             f"{cal.geometry.description.name}, {title}: rms "
             f"{1000 * _distances(errors)['rms']:.1f} mm, max {d.max():.1f} mm"
         )
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8, ncol=4)
+    axes[0].legend(fontsize=7, ncol=2, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     axes[1].set_xlabel("pose")
     axes[1].set_xticks(range(len(labels)), labels, rotation=90, fontsize=7)
     fig.tight_layout()
