@@ -241,6 +241,18 @@ def test_tip_points_alone_leave_offsets_against_pins_unobservable() -> None:
     assert any(e["kind"] == "gauge (exact)" for e in cal.not_observable)
     held = {h["parameter"] for h in cal.held}
     assert {"swing.zero_offset", "bodies.upper_structure.pins.boom_foot.z"} <= held
+    assert cal.held_share[cal.geometry.index["cylinders.boom_cylinder.zero_offset"]] > 0.1
+
+
+def test_pins_named_with_a_pin_suffix(tmp_path: Path) -> None:
+    """The issue's names: arm_pin and bucket_pin are pins of the file, boom_foot_pin is boom_foot."""
+    truth, rows = _good_rows(np.random.default_rng(6))
+    rows = [
+        [*r[:5], name, *r[6:]]
+        for r, name in zip(rows, ["arm_pin", "bucket_pin", "boom_foot_pin"], strict=False)
+    ]
+    data = read_points(write_csv(tmp_path / "m.csv", truth, rows), read(config_path(FILES["CET200"])))
+    assert data.point == ("arm_pin", "bucket_pin", "boom_foot")
 
 
 def _good_rows(rng: np.random.Generator) -> tuple[HydraulicModel, list[list]]:
@@ -312,6 +324,13 @@ def test_a_csv_of_another_machine_is_refused(tmp_path: Path, capsys: pytest.Capt
     err = capsys.readouterr().err.strip()
     assert "row 1, column 2: 'lift_cylinder', expected 'swing_joint' (a CSV of another machine?)" in err, err
     assert len(err.splitlines()) == 1
+
+
+def test_an_unknown_actuator_column_is_refused(tmp_path: Path) -> None:
+    measured = tmp_path / "m.csv"
+    measured.write_text("pose,swing_joint,boom_cylindr,arm_cylinder,bucket_cylinder,point,x,y,z\n")
+    with pytest.raises(CalibrationError, match=r"row 1, column 3: 'boom_cylindr', expected 'boom_cylinder'"):
+        read_points(measured, read(config_path(FILES["CET200"])))
 
 
 def test_a_fit_that_does_not_converge_says_so_and_writes_nothing(

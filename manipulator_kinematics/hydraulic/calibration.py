@@ -301,7 +301,7 @@ class Calibration:
     geometry: Geometry
     values: np.ndarray  # every parameter, fitted or held
     std: np.ndarray  # its standard deviation (0 where held)
-    fitted: np.ndarray  # bool per parameter: in the span of the fitted directions
+    held_share: np.ndarray  # per parameter, the share (0..1) of it in not-observable combinations
     not_observable: list[dict[str, Any]]
     held: list[dict[str, str]]
     residuals: np.ndarray  # (N, 3) predicted - measured (m)
@@ -424,8 +424,8 @@ def calibrate(
     cov_c = np.linalg.pinv(Jc.T @ Jc)
     std = np.zeros(len(p))
     std[free] = g.scale[free] * np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", V_obs, cov_c, V_obs), 0.0))
-    fitted = np.zeros(len(p), dtype=bool)
-    fitted[free] = np.linalg.norm(V_obs, axis=1) > 1e-9
+    held_share = np.ones(len(p))
+    held_share[free] = np.linalg.norm(V_null, axis=1) ** 2
 
     not_observable = []
     for i in np.flatnonzero(weak):
@@ -444,7 +444,7 @@ def calibrate(
         geometry=g,
         values=p,
         std=std,
-        fitted=fitted,
+        held_share=held_share,
         not_observable=not_observable,
         held=held,
         residuals=r,

@@ -56,7 +56,9 @@ _SWING = {
     "max_angle": Number(-2 * math.pi, 2 * math.pi, "rad"),
     "reference_angle": Number(-2 * math.pi, 2 * math.pi, "rad"),
     "max_speed": Number(0.0, 10.0, "rad/s", exclusive_min=True),
-    "zero_offset": Number(-math.pi, math.pi, "rad", default=0.0, doc="true angle = encoder reading + zero_offset"),
+    "zero_offset": Number(
+        -math.pi, math.pi, "rad", default=0.0, doc="true angle = encoder reading + zero_offset"
+    ),
 }
 _PRISMATIC = {
     "parent": _NAME,

@@ -143,7 +143,16 @@ def report(cal: Calibration, machine: Path, measured: Path, widened: Sequence[st
     fit, drawing = _distances(cal.residuals), _distances(cal.drawing_residuals)
     parameters = []
     for k, p in enumerate(g.parameters):
-        status = "held: " + p.held if p.held else ("fitted" if cal.fitted[k] else "held: not observable")
+        share = cal.held_share[k]
+        status = (
+            "held: " + p.held
+            if p.held
+            else "fitted"
+            if share < 1e-6
+            else "held: not observable"
+            if share > 1.0 - 1e-6
+            else f"fitted, {100 * share:.0f}% of it in not-observable combinations (held at the drawing)"
+        )
         if p.name.startswith("instrument."):
             continue
         parameters.append(
@@ -233,8 +242,11 @@ def write_machine(cal: Calibration, machine: Path, out: Path) -> list[str]:
         value = round(float(cal.values[k]), 9)
         if keys[0] == "bodies":
             section["bodies"][keys[1]]["pins"][keys[3]]["xz".index(keys[4])] = value
-        elif keys[0] == "links":
+        elif keys[0] == "links" and keys[1] in section.get("links", {}):
             section["links"][keys[1]]["length"] = value
+        elif keys[0] == "links":  # a two-pin body written as a link: its x-axis pin at (length, 0)
+            pins = section["bodies"][keys[1]]["pins"]
+            pins[next(pin for pin, xz in pins.items() if any(xz))] = [value, 0.0]
         elif keys[0] == "cylinders":
             section["cylinders"][keys[1]]["zero_offset"] = value
         elif keys[0] == "swing":
