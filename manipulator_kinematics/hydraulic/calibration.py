@@ -381,7 +381,10 @@ def calibrate(
     drawing_residuals = g.predict(p0, data.readings, data.point) - data.xyz
     if not np.all(np.isfinite(drawing_residuals)):
         row = int(np.argmax(~np.all(np.isfinite(drawing_residuals), axis=1)))
-        raise CalibrationError(f"row {row + 1}: the drawing's linkage does not close at these readings")
+        raise CalibrationError(
+            f"pose {data.pose[row]!r}: the drawing's linkage does not close at these readings "
+            f"({', '.join(f'{v:.6g}' for v in data.readings[row])})"
+        )
     J = _jacobian(lambda u: weighted(at(u)), np.zeros(free.sum()))
     _, s, Vt = np.linalg.svd(J, full_matrices=True)
     s = np.concatenate((s, np.zeros(Vt.shape[0] - len(s))))
@@ -435,7 +438,7 @@ def calibrate(
             "std_if_fitted": None if s[i] <= 1e-12 * s[0] else float(1.0 / s[i]),
             "kind": "gauge (exact)" if s[i] <= 1e-6 * s[0] else "weak",
             "held": "at the drawing",
-            "would_determine": _suggest(g, at, free, v, s[i], data, tolerance),
+            "would_determine": _suggest(g, at, v, s[i], data, tolerance),
         }
         not_observable.append(entry)
     held = [{"parameter": q.name, "why": q.held} for q in g.parameters if q.held]
@@ -461,7 +464,7 @@ def calibrate(
 
 
 def _suggest(
-    g: Geometry, at: Any, free: np.ndarray, v: np.ndarray, s: float, data: Measurements, tolerance: float
+    g: Geometry, at: Any, v: np.ndarray, s: float, data: Measurements, tolerance: float
 ) -> list[str]:
     """Extra measurements that would bring the combination v under ``tolerance``: a point at the
     same poses, or the measured points at poses with one cylinder at a stroke end."""
