@@ -364,6 +364,33 @@ def test_a_fit_that_does_not_converge_says_so_and_writes_nothing(
         )
 
 
+def test_a_machine_far_from_its_drawing_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A bucket 0.5 m longer than the drawing's (another bucket on the machine): the fit stops at
+    its bound and writes nothing."""
+    rng = np.random.default_rng(8)
+    section, _ = as_built("WL20", rng)
+    section["bodies"]["bucket"]["pins"]["cutting_edge"][0] += 0.5
+    truth = HydraulicModel(parse(section))
+    pins = ["bucket_hinge", "lift_cyl_rod", "tilt_cyl_base", "tilt_cyl_rod", "bell_crank_pivot"]
+    rows = measure(truth, instrument(rng), poses(truth, rng, 16), EDGE + pins, rng, 0.002)
+    out = tmp_path / "c.yaml"
+    code = main(
+        [
+            str(config_path(FILES["WL20"])),
+            str(write_csv(tmp_path / "m.csv", truth, rows)),
+            "-o",
+            str(out),
+            "--report",
+            str(tmp_path / "r.json"),
+        ]
+    )
+    err = capsys.readouterr().err
+    assert code == 1 and "drawing or data wrong; nothing written" in err, err
+    assert not out.exists()
+
+
 def test_the_calibrated_file_keeps_strokes_and_adds_offsets(tmp_path: Path) -> None:
     """CALIBRATED.yaml: same keys as the drawing's plus zero_offset, strokes unchanged."""
     rng = np.random.default_rng(9)

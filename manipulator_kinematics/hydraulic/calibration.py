@@ -392,9 +392,11 @@ def calibrate(
     V_obs, V_null = Vt[~weak].T, Vt[weak].T
     free_names = [n for n, f in zip(names, free, strict=True) if f]
 
-    # The fit runs on combinations of parameters: its box is a trust region of 1 m (scaled) per
-    # direction; each parameter's own bound is checked on the result.
-    c_bound = np.ones(V_obs.shape[1])
+    bound = np.array([q.bound for q in g.parameters])[free] / g.scale[free]
+    if V_null.shape[1] == 0:  # everything observable: the parameters themselves, each in its bound
+        V_obs, c_bound = np.eye(len(bound)), bound
+    else:  # on the observable combinations: a 1 m (scaled) box each, the bounds checked after
+        c_bound = np.ones(V_obs.shape[1])
 
     def residual(c: np.ndarray) -> np.ndarray:
         r = weighted(at(V_obs @ c))
@@ -413,6 +415,13 @@ def calibrate(
     )
     if result.status <= 0 or not np.all(np.isfinite(result.fun)) or np.any(np.abs(result.fun) >= 1e6):
         raise CalibrationError(f"the fit did not converge ({result.message}); nothing written")
+    if np.any(result.active_mask != 0):  # a bound stops the fit: no geometry near the drawing fits
+        k = int(np.flatnonzero(result.active_mask)[0])
+        what = free_names[k] if V_null.shape[1] == 0 else _combination(free_names, V_obs[:, k])
+        raise CalibrationError(
+            f"the fit stopped at the bound of {what} (0.2 m from the drawing): drawing or data wrong; "
+            "nothing written"
+        )
     u = V_obs @ result.x
     p = at(u)
     moved = np.abs(p - g.drawing)
