@@ -171,7 +171,10 @@ class Geometry:
         held = {(anchor, "x"): why, (anchor, "z"): why}
         others = [p for p in pins if p != anchor]
         if others:
-            far = max(others, key=lambda p: float(np.linalg.norm(pins[p] - pins[anchor])))
+            # the x-axis pin of a body drawn the way docs/hydraulic_family.md asks (the tool point
+            # stays on the tool body's x axis, so alpha keeps its meaning), else the farthest pin
+            on_axis = [p for p in others if body != d.ground and pins[p][1] == 0.0 and pins[p][0] > 0.0]
+            far = max(on_axis or others, key=lambda p: float(np.linalg.norm(pins[p] - pins[anchor])))
             r = pins[far] - pins[anchor]
             held[(far, "x" if abs(r[1]) > abs(r[0]) else "z")] = turn
         return held
