@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.linalg import qr
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
@@ -442,9 +443,19 @@ def calibrate(
     held_share = np.ones(len(p))
     held_share[free] = np.linalg.norm(V_null, axis=1) ** 2
 
+    # The exact gauges span a subspace whose SVD basis is arbitrary: turned so that each has its
+    # own leading parameter (reduced echelon form, pivots by QR with column pivoting), which
+    # makes each one read as a single mechanism (a cylinder's pins turned about their hinge).
+    exact = np.flatnonzero(s <= 1e-6 * s[0])
+    directions = Vt.copy()
+    if len(exact):
+        N = Vt[exact].T
+        _, _, pivots = qr(N.T, pivoting=True)
+        B = N @ np.linalg.inv(N[pivots[: len(exact)]])
+        directions[exact] = (B / np.linalg.norm(B, axis=0)).T
     not_observable = []
     for i in np.flatnonzero(weak):
-        v = Vt[i]
+        v = directions[i]
         entry = {
             "combination": _combination(free_names, v),
             "std_if_fitted": None if s[i] <= 1e-12 * s[0] else float(1.0 / s[i]),
