@@ -458,7 +458,7 @@ def calibrate(
         v = directions[i]
         entry = {
             "combination": _combination(free_names, v),
-            "std_if_fitted": None if s[i] <= 1e-12 * s[0] else float(1.0 / s[i]),
+            "std_if_fitted": None if s[i] <= 1e-6 * s[0] else float(1.0 / s[i]),
             "kind": "gauge (exact)" if s[i] <= 1e-6 * s[0] else "weak",
             "held": "at the drawing",
             "would_determine": _suggest(g, at, v, s[i], data, tolerance),
