@@ -524,7 +524,7 @@ def _edit(section: dict, path: str, value: object) -> None:
         ("cylinders.tilt_cylinder.max_speed", None, r"cylinders\.tilt_cylinder\.max_speed: missing"),
         ("cylinders.tilt_cylinder.min_length", 2.1, r"cylinders\.tilt_cylinder\.max_length: must exceed"),
         ("tool.width", "wide", r"tool\.width: expected a number"),
-        ("cylinders.tilt_cylinder.zero_offset", 1.5, r"cylinders\.tilt_cylinder\.zero_offset = 1.5 is outside \[-1, 1\]"),
+        ("cylinders.tilt_cylinder.zero_offset", 1.5, r"tilt_cylinder\.zero_offset = 1.5 is outside \[-1, 1"),
         ("cylinders.tilt_cylinder.zero_ofset", 0.01, r"zero_ofset: unknown key \(did you mean 'zero_offset'"),
         ("tool.velocity_rows", ["z", "beta"], r"tool\.velocity_rows: 'beta' is not one of"),
         ("tooll", {}, r"hydraulic_machine\.tooll: unknown key \(did you mean 'tool'"),
