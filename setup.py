@@ -56,6 +56,7 @@ setup(
             "machine_markers = manipulator_kinematics.nodes.markers:main",
             "mk_urdf = manipulator_kinematics.urdf:main",
             "mk_machine_check = manipulator_kinematics.hydraulic.check:main",
+            "mk_calibrate = manipulator_kinematics.hydraulic.measure_up:main",
             "excavator_working_ranges = excavator_kinematics.working_ranges:main",
         ],
         # The machine registry (manipulator_kinematics.registry): one Machine per machine package.

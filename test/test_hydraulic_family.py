@@ -524,6 +524,8 @@ def _edit(section: dict, path: str, value: object) -> None:
         ("cylinders.tilt_cylinder.max_speed", None, r"cylinders\.tilt_cylinder\.max_speed: missing"),
         ("cylinders.tilt_cylinder.min_length", 2.1, r"cylinders\.tilt_cylinder\.max_length: must exceed"),
         ("tool.width", "wide", r"tool\.width: expected a number"),
+        ("cylinders.tilt_cylinder.zero_offset", 1.5, r"tilt_cylinder\.zero_offset = 1.5 is outside \[-1, 1"),
+        ("cylinders.tilt_cylinder.zero_ofset", 0.01, r"zero_ofset: unknown key \(did you mean 'zero_offset'"),
         ("tool.velocity_rows", ["z", "beta"], r"tool\.velocity_rows: 'beta' is not one of"),
         ("tooll", {}, r"hydraulic_machine\.tooll: unknown key \(did you mean 'tool'"),
         ("chain.theta3.parent", "front_frame", r"chain\.theta3\.parent: must be 'lift_arm'"),
@@ -544,6 +546,23 @@ def test_malformed_machine_file_refused_with_the_key(path: str, value: object, m
     with pytest.raises(ConfigError, match=message) as error:
         HydraulicModel(parse(section))
     assert "\n" not in str(error.value)
+
+
+def test_zero_offsets_turn_readings_into_true_states() -> None:
+    from manipulator_kinematics.hydraulic import parse
+
+    section = _loader_section()
+    _edit(section, "cylinders.lift_cylinder.zero_offset", 0.012)
+    _edit(section, "cylinders.tilt_cylinder.zero_offset", -0.015)
+    model = HydraulicModel(parse(section))
+    readings = np.array([[1.5, 1.7], [2.0, 1.9]])
+    D = model.from_readings(readings)
+    np.testing.assert_allclose(D - readings, [[0.012, -0.015]] * 2, atol=1e-15)
+    np.testing.assert_allclose(model.pose(D), LOADER.pose(readings + [0.012, -0.015]), atol=1e-12)
+    np.testing.assert_allclose(model.to_readings(D), readings, atol=1e-15)
+    np.testing.assert_array_equal(LOADER.zero_offset, [0.0, 0.0])  # absent: no offset
+    with pytest.raises(StrokeError, match=r"D\[0\] = 2.31 \(lift_cylinder\) is outside its stroke"):
+        model.from_readings([2.298, 1.7])  # the reading is inside, the true length is not
 
 
 # ------------------------------------------------------------------ position IK (closed form)

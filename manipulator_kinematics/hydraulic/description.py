@@ -48,6 +48,7 @@ _CYLINDER = {
     "max_length": Number(0.0, 20.0, "m", exclusive_min=True),
     "reference_length": Number(0.0, 20.0, "m", exclusive_min=True),
     "max_speed": Number(0.0, 5.0, "m/s", exclusive_min=True),
+    "zero_offset": Number(-1.0, 1.0, "m", default=0.0, doc="true length = sensor reading + zero_offset"),
 }
 _SWING = {
     "actuator": _NAME,
@@ -55,6 +56,9 @@ _SWING = {
     "max_angle": Number(-2 * math.pi, 2 * math.pi, "rad"),
     "reference_angle": Number(-2 * math.pi, 2 * math.pi, "rad"),
     "max_speed": Number(0.0, 10.0, "rad/s", exclusive_min=True),
+    "zero_offset": Number(
+        -math.pi, math.pi, "rad", default=0.0, doc="true angle = encoder reading + zero_offset"
+    ),
 }
 _PRISMATIC = {
     "parent": _NAME,
@@ -88,6 +92,7 @@ class Cylinder:
     reference: float
     max_speed: float
     index: int
+    zero_offset: float = 0.0  # true length = sensor reading + zero_offset (m)
 
 
 @dataclass(frozen=True)
@@ -186,6 +191,12 @@ class Description:
         return np.array(swing + [c.max_speed for c in self.cylinders])
 
     @property
+    def zero_offset(self) -> np.ndarray:
+        """Per actuator, what its sensor misses: true value = reading + zero_offset (rad, m)."""
+        swing = [self.swing["zero_offset"]] if self.swing else []
+        return np.array(swing + [c.zero_offset for c in self.cylinders])
+
+    @property
     def task_names(self) -> tuple[str, ...]:
         return ("x", "y", "z", "alpha") if self.has_angle else ("x", "y", "z")
 
@@ -270,6 +281,7 @@ def parse(section: Any, prefix: str = SECTION) -> Description:
                 c["reference_length"],
                 c["max_speed"],
                 i + offset,
+                c["zero_offset"],
             )
         )
     for name in raw_cylinders:

@@ -129,6 +129,7 @@ class HydraulicModel:
         self.task_names = d.task_names
         self.lower, self.upper, self.reference = d.lower, d.upper, d.reference
         self.max_speed = d.max_speed
+        self.zero_offset = d.zero_offset
         self.m = len(self.actuator_names)
         self.swing = d.swing is not None
         self._dyads = [s for s in d.steps if isinstance(s, Dyad)]
@@ -162,6 +163,21 @@ class HydraulicModel:
                     f"D[{i}] = {value:.6g} ({name}) {what} [{self.lower[i]:.6g}, {self.upper[i]:.6g}]"
                 )
         return D
+
+    def from_readings(self, readings: Any) -> np.ndarray:
+        """D (..., m) from the actuators' sensor readings: true = reading + zero_offset (the
+        machine file's, per actuator; strokes are true lengths), validated as :meth:`validate`."""
+        readings = np.asarray(readings, dtype=float)
+        if readings.ndim == 0 or readings.shape[-1] != self.m:
+            raise StrokeError(
+                f"readings: expected (..., {self.m}) values [{', '.join(self.actuator_names)}], "
+                f"got shape {readings.shape}"
+            )
+        return self.validate(readings + self.zero_offset)
+
+    def to_readings(self, D: Any) -> np.ndarray:
+        """What the sensors read at the true state D: reading = D - zero_offset."""
+        return self.validate(D) - self.zero_offset
 
     def _placing_dyads(self) -> dict[str, str]:
         """Body -> the dyad whose solution placed it (the last dyad before its Place step)."""
