@@ -32,7 +32,9 @@ the planned D on ``planned_joint_states``; on arrival the measured D must be wit
 Afterwards the bag is read back for the summary and the Fig. 11 / Fig. 12 style plots
 (:mod:`excavator_kinematics.cycle_report`), and an animated side view of the whole linkage
 (``excavator_digging.gif``). The recorder adds the topics Foxglove's 3-D panel needs
-(``record --visuals``: /robot_description, /tf, /tf_static, machine_markers). Exit status 1 if
+(``record --visuals``: /robot_description, /tf, /tf_static, machine_markers). Last, what the
+bucket dug: the per-sample table and as-built surface of :mod:`manipulator_kinematics.bag.asbuilt`
+in ``asbuilt/`` (docs/asbuilt.md). Exit status 1 if
 a process died, the cycle did not run, or the bucket left the reference path by more than
 ``--max-error`` metres, or the planned move did not arrive at the start.
 """
@@ -645,6 +647,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     os.environ.setdefault("MPLBACKEND", "Agg")
     from excavator_kinematics.cycle_report import report  # matplotlib only once the backend is set
+    from manipulator_kinematics.bag.asbuilt import process_bag
 
     args.output.mkdir(parents=True, exist_ok=True)
     exc = Excavator.default()
@@ -682,6 +685,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     with step("plotting the planned move"):
         moved = move_report(args.output, exc, mover)
     print(moved)
+    with step("mapping what the bucket dug (mk_asbuilt)"):
+        dug = process_bag(args.output / "bag", args.output / "asbuilt", [], cell=0.1)
+    for table in dug.tables:
+        print(f"  as-built: {table['rows']} samples in {table['file']}; surface, CSV and map beside it")
+    if dug.error:
+        print(f"  as-built: not made: {dug.error}")
     print(f"excavator_demo: finished in {time.monotonic() - began:.1f} s", flush=True)
     if not mover.arrived.ok:
         print(f"excavator_demo: FAILED: the planned move did not arrive at the start "
