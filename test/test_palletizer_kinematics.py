@@ -166,7 +166,7 @@ def test_dh_answers_convert_to_the_axis_angles_checked_on_the_limits(variant: st
     converted = axis_from_dh(dh.q[exists], variant)
     np.testing.assert_allclose(converted, axis.q[exists], rtol=0, atol=1e-12)
     inside = np.all((converted >= lower - 1e-10) & (converted <= upper + 1e-10), axis=-1)
-    np.testing.assert_array_equal(inside, dh.status[exists] != IKStatus.LIMITS)
+    np.testing.assert_array_equal(inside, dh.status[exists] != IKStatus.JOINT_LIMITS)
     assert (~inside).sum() > 100 and inside.sum() > 1000  # both kinds are tested
     reached = model.fkine_dh(np.where(exists[..., None], dh.q, 0.0))
     assert np.abs(reached - targets[:, None])[exists].max() < 1e-9
