@@ -131,12 +131,12 @@ class ImuState(MachineNode):
         again): every sensor and the set start over from it."""
         stamp_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
         if stamp.sec < 0:
-            self.log("error", f"rejected imu {name}: negative stamp (sec {stamp.sec})")
+            self.log("error", f"rejected imu {name}: negative stamp (sec {stamp.sec})", kind="negative stamp")
             return None
         ahead = stamp_ns - now
         if now > 0 and ahead > self.max_age_ns:
             self.log("error", f"rejected imu {name}: stamp {ahead * 1e-9:.3f} s ahead of the node clock "
-                     f"(max_age {self.max_age_ns * 1e-9:g} s)")
+                     f"(max_age {self.max_age_ns * 1e-9:g} s)", kind="future stamp")
             return None
         previous = self.latest[name]
         # The newest stamp this sensor's next message must pass: its previous one, or the last set's.
@@ -146,10 +146,10 @@ class ImuState(MachineNode):
         behind = (reference - stamp_ns) * 1e-9
         if reference - stamp_ns <= self.max_age_ns:
             self.log("warning", f"rejected imu {name}: stamp {behind:.3f} s behind (or equal to) its "
-                     "previous message or the last set")
+                     "previous message or the last set", kind="stamp out of order")
             return None
         self.log("warning", f"imu {name}: stamp {behind:.3f} s behind its previous message or the last set, "
-                 "more than max_age: the clock went back, every sensor starts over")
+                 "more than max_age: the clock went back, every sensor starts over", kind="clock back")
         for sensor in SENSORS:
             self.latest[sensor] = None
             self.filters[sensor].up = None

@@ -191,14 +191,22 @@ def test_plan_path_is_the_librarys_plan_and_stops_at_the_workspace(probe: Probe,
     last = short.trajectory.points[-1]
     assert len(short.trajectory.points) > 10 and list(last.velocities) == [0.0] * 4
     bad = {
-        "none": (path_request([]), Codes.INVALID_GOAL_CONSTRAINTS, "at least one"),
+        "none": (path_request([]), Codes.INVALID_GOAL_CONSTRAINTS, "need 1 to 1000, got 0"),
+        "many": (path_request([start] * 1001), Codes.INVALID_GOAL_CONSTRAINTS, "need 1 to 1000, got 1001"),
         "nan": (path_request([start, [math.nan, 0.0, 0.0]]), Codes.INVALID_GOAL_CONSTRAINTS, "finite"),
         "step": (path_request([start], step=-1.0), Codes.INVALID_GOAL_CONSTRAINTS, "step -1.0"),
         "mode": (path_request([start], mode="region"), Codes.INVALID_MODE, "unknown mode 'region'"),
-        "slow": (path_request([start], tip_speed=1e-300), Codes.INVALID_GOAL_CONSTRAINTS, ">= 0.001"),
+        "slow": (path_request([start], tip_speed=1e-300), Codes.INVALID_GOAL_CONSTRAINTS, "outside [0.001"),
+        "fast": (path_request([start], tip_speed=1e300), Codes.INVALID_GOAL_CONSTRAINTS,
+                 "tip_speed 1e+300 m/s is outside"),
+        "long step": (path_request([start], step=1e300), Codes.INVALID_GOAL_CONSTRAINTS,
+                      "step 1e+300 m is outside"),
         "far": (path_request([start, [1e300, 0.0, 0.0]]), Codes.INVALID_GOAL_CONSTRAINTS, "implausible"),
         "points": (path_request([start, start + [1000.0, 0.0, 0.0]], step=1e-4),
-                   Codes.INVALID_GOAL_CONSTRAINTS, "at most 1000000"),
+                   Codes.INVALID_GOAL_CONSTRAINTS, "at most 20000"),
+        # Issue 29: a 0.45 m line at a 4.53e-7 m step (10^6 points) took 63.5 s and 1.85 GB.
+        "million": (path_request([start, start + [0.45, 0.0, 0.0]], step=4.53e-7),
+                    Codes.INVALID_GOAL_CONSTRAINTS, "at most 20000"),
         "first": (path_request([[30.0, 0.0, 0.0]]), Codes.NO_IK_SOLUTION, "first waypoint"),
         "seed": (path_request([start], seed=[0.0, 1.0]), Codes.INVALID_ROBOT_STATE, "seed"),
     }
@@ -210,12 +218,13 @@ def test_plan_path_is_the_librarys_plan_and_stops_at_the_workspace(probe: Probe,
 
 
 def test_solve_ik_is_answered_while_a_long_plan_runs(probe: Probe, server) -> None:
-    # plan_path runs in a callback group of its own on two threads (PlanPathServer.THREADS): a
-    # plan of ~80,000 points (seconds) does not hold up solve_ik. One callback at a time would
-    # answer no solve_ik until the plan is done.
+    # plan_path runs in a callback group of its own on two threads (PlanPathServer.THREADS): the
+    # largest plan the bounds allow (19,801 points of MAX_POINTS 20,000; seconds) holds up no
+    # solve_ik for more than 0.5 s (issue 29: solve_fk waited 30.7 s). One callback at a time
+    # would answer no solve_ik until the plan is done.
     _, ik, _, planner = server
     start = EXC.pose(REFERENCE)[:3]
-    waypoints = [start + [0.5 * (k % 2), 0.0, 0.0] for k in range(401)]
+    waypoints = [start + [0.5 * (k % 2), 0.0, 0.0] for k in range(100)]
     pose = EXC.fkine(REFERENCE)
     sent = time.monotonic()
     future = planner.call_async(path_request(waypoints, step=0.0025, seed=REFERENCE))
@@ -228,8 +237,10 @@ def test_solve_ik_is_answered_while_a_long_plan_runs(probe: Probe, server) -> No
     finished = time.monotonic()
     plan = future.result()
     assert plan.success, plan.message
-    assert len(plan.trajectory.points) == 400 * 200 + 1
+    assert len(plan.trajectory.points) == 99 * 200 + 1
     took = finished - sent
     gaps = np.diff([sent, *answered, finished])
     assert took > 0.3 and len(answered) >= 3, (took, len(answered))
-    assert gaps.max() < 0.5 * took, (took, gaps.max(), len(answered))
+    assert gaps.max() < 0.5, (took, gaps.max(), len(answered))
+    print(f"\nplan of {len(plan.trajectory.points)} points: {took:.2f} s, {len(answered)} solve_ik answered "
+          f"meanwhile, longest wait {gaps.max():.3f} s")

@@ -423,9 +423,9 @@ def test_whole_chain_on_imus_across_processes():
                 pub.publish(imu_message(stamp, q[i], omega[i], f[i], with_orientation=True))
             return False
 
-        # Until the three processes have found each other: resend a first set (10 ms apart).
-        probe.wait_until(lambda: send(len(got["pose"]) * 10_000_000 + 10_000_000) or got["pose"], 30.0,
-                         "the first pose")
+        # Until the three processes have found each other: send sets 10 ms apart.
+        sent = iter(range(10_000_000, 10_000_000_000, 10_000_000))
+        probe.wait_until(lambda: send(next(sent)) or got["pose"], 30.0, "the first pose")
         probe.wait_until(lambda: got["level"], 5.0, "the first level pose")
         # Then ten sets at 5 Hz (stamps 0.2 s apart, beyond tilt_max_age 0.1 s): each set's tilt and
         # lengths carry one stamp, so each set gets its level pose, whichever topic arrives first.
@@ -699,7 +699,10 @@ def test_imu_state_node_refuses_bad_stamps_and_answers_the_sets_after_them():
     node.create_subscription(JointState, "/imu_stamps/cylinder_lengths", got.append, qos)
     pubs = [node.create_publisher(Imu, f"/imu_stamps/imu/{name}", qos) for name in SENSORS]
 
+    sent = []
+
     def send(stamp_ns: int, sec: int | None = None) -> bool:
+        sent.append(stamp_ns)
         for i, pub in enumerate(pubs):
             msg = imu_message(stamp_ns, q[i], omega[i], f[i], True)
             if sec is not None:
@@ -713,12 +716,16 @@ def test_imu_state_node_refuses_bad_stamps_and_answers_the_sets_after_them():
     try:
         probe.wait_until(lambda: all(p.get_subscription_count() for p in pubs), 30.0, "subscriptions")
         probe.wait_until(lambda: send(time.time_ns()) or got, 30.0, "a first set")
-        first = stamp_of(got[-1])
-        send(time.time_ns() + 3600 * 1_000_000_000)
-        send(0, sec=-1)
-        send(first - 50_000_000)  # each sensor's previous message is newer
-        for pattern in ("s ahead of the node clock", "negative stamp (sec -1)", "s behind (or equal to)"):
-            probe.wait_until(lambda pattern=pattern: pattern in process.log(), 10.0, pattern)
+        last = sent[-1]
+        cases = ((time.time_ns() + 3600 * 1_000_000_000, None, "s ahead of the node clock"),
+                 (0, -1, "negative stamp (sec -1)"),
+                 (last - 50_000_000, None, "s behind (or equal to)"))  # the previous message is newer
+        for stamp, sec, pattern in cases:
+            send(stamp, sec)
+            try:
+                probe.wait_until(lambda pattern=pattern: pattern in process.log(), 10.0, pattern)
+            except TimeoutError:
+                raise AssertionError(f"no {pattern!r} in {process.log()}") from None
         count = len(got)
         sets = []
         for _ in range(10):
