@@ -16,10 +16,11 @@ from numpy.typing import ArrayLike
 
 #: Most waypoints of one plan.
 MAX_WAYPOINTS = 1_000
-#: Most points of one plan (2 km at a 0.1 m step): a request with a tiny step or far waypoints
-#: cannot make the planner allocate without bound, and a plan takes at most about a second
-#: (benchmarks/bench_pump_boom_plan.py measures the worst case).
-MAX_POINTS = 20_000
+#: Most points of one plan (1 km at a 0.1 m step): a request with a tiny step or far waypoints
+#: cannot make the planner allocate without bound. The answer's conversion to a C message holds
+#: Python's lock for all its points at once (0.63 s for 19,801 points on 2 loaded cores, 0.3 s
+#: for half): at this size it holds up the server's other services less than 0.5 s.
+MAX_POINTS = 10_000
 #: Longest plan (s) at the asked tip speed (the timing can only make it longer): one day.
 MAX_DURATION = 86_400.0
 #: The interpolation step (m), the tip speed (m/s) and the bound of the tip's acceleration along

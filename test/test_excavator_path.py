@@ -97,7 +97,7 @@ def test_requests_it_cannot_take() -> None:
     unreachable = plan_path(EXC, [[20.0, 0.0, 0.0], START], 0.05, 0.5, 0.5)
     assert not unreachable.ok and unreachable.last_waypoint == -1 and "first waypoint" in unreachable.message
     with pytest.raises(ValueError, match=f"at most {MAX_POINTS}"):
-        plan_path(EXC, [START, START + [1000.0, 0.0, 0.0]], 1e-4, 0.5, 0.5)
+        plan_path(EXC, [START, START + [1000.0, 0.0, 0.0]], 0.01, 0.5, 0.5)
     with pytest.raises(ValueError, match="acceleration"):
         plan_path(EXC, [START], 0.05, 0.5, 0.0)
     # The bounds of every machine's plan (manipulator_kinematics.plan_bounds), before any work.
