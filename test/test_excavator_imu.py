@@ -717,6 +717,8 @@ def test_imu_state_node_refuses_bad_stamps_and_answers_the_sets_after_them():
         probe.wait_until(lambda: all(p.get_subscription_count() for p in pubs), 30.0, "subscriptions")
         probe.wait_until(lambda: send(time.time_ns()) or got, 30.0, "a first set")
         last = sent[-1]
+        # The last warm-up set is the reference the out-of-order case must be behind.
+        probe.wait_until(lambda: answered(last), 10.0, "the answer to the last warm-up set")
         cases = ((time.time_ns() + 3600 * 1_000_000_000, None, "s ahead of the node clock"),
                  (0, -1, "negative stamp (sec -1)"),
                  (last - 50_000_000, None, "s behind (or equal to)"))  # the previous message is newer
