@@ -111,7 +111,7 @@ def start(exe: str, namespace: str, tmp: Path, params: tuple[str, ...] = (),
     """``exe`` in ``namespace`` with the package's params files and ``settings`` for the node."""
     args = [a for p in params for a in ("--params-file", p)]
     if settings:
-        path = tmp / f"{exe}.yaml"
+        path = tmp / f"{namespace.strip('/')}_{exe}.yaml"  # one file per node: a node may run twice
         path.write_text(yaml.safe_dump({f"{namespace}/{exe}": {"ros__parameters": settings}}))
         args += ["--params-file", str(path)]
     return NodeProcess(exe, *args, "-r", f"__ns:={namespace}")
