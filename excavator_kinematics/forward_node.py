@@ -193,8 +193,7 @@ class ForwardKinematics(MachineNode):
         surface = self.surface.values(stamp_ns, theta1, Q[:3]) if self.surface is not None else []
         # The input checks keep the arithmetic far from overflow; this is the promise itself.
         edge = [v for point in surface if point is not None for v in point]
-        level = self.level.values(stamp_ns, theta1, pose) if self.level is not None else []
-        if not all(map(math.isfinite, (*pose, *twist, *joints, *accel, *grade, *urdf, *edge, *level))):
+        if not all(map(math.isfinite, (*pose, *twist, *joints, *accel, *grade, *urdf, *edge))):
             self.log("error", f"dropped the outputs of cylinder_lengths D = {D.tolist()}, "
                      f"D_dot = {[theta1_dot, *rates.tolist()]}: not finite")
             return
@@ -212,8 +211,8 @@ class ForwardKinematics(MachineNode):
             self.grade_pub.publish(self.grade.pack((*sec_nanosec, *grade)))
         if surface:
             self.surface.publish(sec_nanosec, surface)
-        if level:
-            self.level.publish(sec_nanosec, level)
+        if self.level is not None:
+            self.level.pose(stamp_ns, sec_nanosec, theta1, pose)
 
     def urdf_values(self, stamp_ns: int, D: np.ndarray, D_dot: list[float]) -> list[float]:
         """Positions then rates of every URDF joint when urdf_joint_states is due, else []."""

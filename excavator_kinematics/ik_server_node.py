@@ -14,7 +14,9 @@ for the excavator, in the actuator coordinates D = [theta1, d2, d3, d4], plus ``
   within every actuator's max speed, the tip speed and ``path.acceleration``, at rest at both
   ends (:mod:`excavator_kinematics.path`); positions, velocities and accelerations. A path that
   leaves the workspace ends at the farthest reachable point: success false (NO_IK_SOLUTION), the
-  reason, ``last_reachable_waypoint`` and the trajectory up to there.
+  reason, ``last_reachable_waypoint`` and the trajectory up to there. A request beyond the bounds
+  of every machine's plan (:mod:`manipulator_kinematics.plan_bounds`: waypoints, points, duration,
+  the ranges of step, speed and acceleration) is refused before any work, INVALID_GOAL_CONSTRAINTS.
 
 Settings in config/excavator_nodes.yaml (``/**/excavator_ik_server``).
 """
@@ -27,21 +29,21 @@ from typing import ClassVar
 import numpy as np
 
 from excavator_kinematics.node_settings import NODES_CONFIG
-from excavator_kinematics.path import MIN_ACCELERATION, MIN_SPEED, BucketPlan, plan_path
+from excavator_kinematics.path import BucketPlan, plan_path
 from manipulator_kinematics.config import Number, Schema
 from manipulator_kinematics.nodes import run_node
-from manipulator_kinematics.nodes.ik_server import SETTINGS, PlanPathServer, Rejected
+from manipulator_kinematics.nodes.ik_server import SETTINGS, PlanPathServer
+from manipulator_kinematics.plan_bounds import ACCELERATION_RANGE, STEP_RANGE, TIP_SPEED_RANGE
 from manipulator_kinematics.registry import Machine
-from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes
 from manipulator_kinematics_interfaces.srv import PlanPath
 
 NODE = "excavator_ik_server"
 PATH_SETTINGS = {
-    "step": Number(min=0.0, max=100.0, unit="m", exclusive_min=True,
+    "step": Number(min=STEP_RANGE[0], max=STEP_RANGE[1], unit="m",
                    doc="plan_path: sample spacing along each line when the request's step is 0"),
-    "tip_speed": Number(min=MIN_SPEED, max=10.0, unit="m/s",
+    "tip_speed": Number(min=TIP_SPEED_RANGE[0], max=TIP_SPEED_RANGE[1], unit="m/s",
                         doc="plan_path: tip speed limit when the request's tip_speed is 0"),
-    "acceleration": Number(min=MIN_ACCELERATION, max=100.0, unit="m/s^2",
+    "acceleration": Number(min=ACCELERATION_RANGE[0], max=ACCELERATION_RANGE[1], unit="m/s^2",
                            doc="plan_path: bound of the tip's acceleration along the path"),
 }
 
@@ -62,13 +64,9 @@ class ExcavatorIKServer(PlanPathServer):
                                f"{path['tip_speed']:g} m/s, acceleration {path['acceleration']:g} m/s^2)")
 
     def plan(self, request: PlanPath.Request, waypoints: np.ndarray, seed: np.ndarray | None) -> BucketPlan:
-        for name, value in (("step", request.step), ("tip_speed", request.tip_speed)):
-            if not (np.isfinite(value) and value >= 0.0):
-                raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
-                               f"{name} {value} must be >= 0 (0 = the default)")
+        # 0 = the default; anything else (negative, NaN, tiny, huge) the shared bounds check.
         return plan_path(self.model, waypoints, request.step or self.path["step"],
                          request.tip_speed or self.path["tip_speed"], self.path["acceleration"], seed)
-
 
 def main(args: Sequence[str] | None = None) -> int:
     return run_node(ExcavatorIKServer, "excavator", NODE, args)

@@ -52,6 +52,13 @@ from manipulator_kinematics.model import level_rotation  # noqa: F401 - re-expor
 SENSORS = ("cab", "boom", "arm", "bucket_linkage")
 GRAVITY = 9.80665
 
+#: Largest angle (rad) between a sensor's boom-plane normal (body y) and the horizontal. The side
+#: angle atan2(ux, uz) is undefined when y points up (ux = uz = 0), and the gyro's share in
+#: :func:`side_rate` grows as |uy| / (ux^2 + uz^2): at 60 deg a noise of 0.01 rad/s becomes at most
+#: 0.035 rad/s, near 90 deg it became cylinder rates of 1.6e7 m/s (issue 29). No excavator works
+#: rolled that far (they tip over near 30 deg), so such a set is refused, not bounded.
+MAX_SIDEWAYS_TILT = math.radians(60.0)
+
 
 class ImuJoints(NamedTuple):
     """theta2..theta4 and their rates (..., 3); cylinder lengths and rates (..., 3); world up in
@@ -148,6 +155,14 @@ class ImuArm:
         are out of the machine's reach."""
         up_body = np.einsum("sij,...sj->...si", self.mounting, np.asarray(up, dtype=float))
         omega_body = np.einsum("sij,...sj->...si", self.mounting, np.asarray(omega, dtype=float))
+        sideways = np.arcsin(np.clip(np.abs(up_body[..., 1]), 0.0, 1.0))
+        if not np.all(sideways <= MAX_SIDEWAYS_TILT):
+            worst = np.unravel_index(np.argmax(np.where(np.isnan(sideways), np.inf, sideways)),
+                                     sideways.shape)
+            raise StrokeError(
+                f"imu {SENSORS[worst[-1]]}: its boom plane is tilted {math.degrees(sideways[worst]):.1f} deg "
+                f"sideways (more than {math.degrees(MAX_SIDEWAYS_TILT):g}): the side angle and its rate are "
+                "ill-conditioned there (gyro noise amplified as |uy| / (ux^2 + uz^2))")
         a, a_dot = side_angle(up_body), side_rate(up_body, omega_body)
         relative = np.diff(a, axis=-1)  # boom - cab, arm - boom, linkage - arm
         relative_dot = np.diff(a_dot, axis=-1)

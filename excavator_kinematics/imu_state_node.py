@@ -34,6 +34,7 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+from builtin_interfaces.msg import Time as Stamp
 from geometry_msgs.msg import Vector3, Vector3Stamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
@@ -51,6 +52,10 @@ from manipulator_kinematics.registry import Machine
 
 NODE = "excavator_imu_state"
 
+#: A cylinder rate beyond this many times its speed limit (machine file) is refused: the gyros'
+#: noise at full speed stays far below it, a rate the cylinder cannot have does not.
+RATE_MARGIN = 2.0
+
 
 class ImuState(MachineNode):
     """The node's state and callbacks."""
@@ -67,6 +72,7 @@ class ImuState(MachineNode):
         self.max_skew_ns = int(s["max_skew"] * 1e9)
         self.max_rate = s["max_angular_rate"]
         self.max_dynamic = s["max_dynamic_acceleration"]
+        self.max_rates = RATE_MARGIN * self.exc.limits.max_rates[1:]
         self.filters = {name: TiltFilter(s["gravity_time_constant"]) for name in SENSORS}
         # Per sensor: (stamp ns, up (3,), omega (3,)) of its latest good message, or None.
         self.latest: dict[str, tuple[int, np.ndarray, np.ndarray] | None] = dict.fromkeys(SENSORS)
@@ -93,9 +99,12 @@ class ImuState(MachineNode):
         )
 
     def on_imu(self, name: str, msg: Imu) -> None:
-        self.arrived[name] = self.get_clock().now().nanoseconds
+        now = self.get_clock().now().nanoseconds
+        self.arrived[name] = now
         self.heard.add(name)
-        stamp_ns = Time.from_msg(msg.header.stamp).nanoseconds
+        stamp_ns = self.checked_stamp(name, msg.header.stamp, now)
+        if stamp_ns is None:
+            return
         q, w, f = msg.orientation, msg.angular_velocity, msg.linear_acceleration
         omega = np.array([w.x, w.y, w.z])
         has_orientation = msg.orientation_covariance[0] != -1.0
@@ -113,6 +122,39 @@ class ImuState(MachineNode):
             up = self.filters[name].update(dt, omega, [f.x, f.y, f.z])
         self.latest[name] = (stamp_ns, up, omega)
         self.publish_if_complete()
+
+    def checked_stamp(self, name: str, stamp: Stamp, now: int) -> int | None:
+        """The message's stamp (ns), or None with a throttled reason: a negative stamp, one more than
+        ``max_age`` ahead of the node clock (one such set would otherwise hold back every later set
+        until the clock caught up), or one not newer than the sensor's previous message (or the last
+        set). A stamp more than ``max_age`` behind those is a clock that went back (a bag played
+        again): every sensor and the set start over from it."""
+        stamp_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        if stamp.sec < 0:
+            self.log("error", f"rejected imu {name}: negative stamp (sec {stamp.sec})", kind="negative stamp")
+            return None
+        ahead = stamp_ns - now
+        if now > 0 and ahead > self.max_age_ns:
+            self.log("error", f"rejected imu {name}: stamp {ahead * 1e-9:.3f} s ahead of the node clock "
+                     f"(max_age {self.max_age_ns * 1e-9:g} s)", kind="future stamp")
+            return None
+        previous = self.latest[name]
+        # The newest stamp this sensor's next message must pass: its previous one, or the last set's.
+        reference = max(previous[0] if previous is not None else -1, self.published_ns)
+        if stamp_ns > reference:
+            return stamp_ns
+        behind = (reference - stamp_ns) * 1e-9
+        if reference - stamp_ns <= self.max_age_ns:
+            self.log("warning", f"rejected imu {name}: stamp {behind:.3f} s behind (or equal to) its "
+                     "previous message or the last set", kind="stamp out of order")
+            return None
+        self.log("warning", f"imu {name}: stamp {behind:.3f} s behind its previous message or the last set, "
+                 "more than max_age: the clock went back, every sensor starts over", kind="clock back")
+        for sensor in SENSORS:
+            self.latest[sensor] = None
+            self.filters[sensor].up = None
+        self.published_ns = -1
+        return stamp_ns
 
     def check_stale(self) -> None:
         """Timer: sensors silent for more than ``max_age`` count as missing, with a reason."""
@@ -168,13 +210,21 @@ class ImuState(MachineNode):
         if not (np.all(np.isfinite(joints.lengths)) and np.all(np.isfinite(joints.rates))):
             self.log("error", f"no cylinder state: not finite ({joints.lengths.tolist()})")
             return
+        too_fast = np.abs(joints.rates) > self.max_rates
+        if np.any(too_fast):
+            i = int(np.argmax(too_fast))
+            self.log("error", f"no cylinder state: {CYLINDERS[i]} rate {joints.rates[i]:.6g} m/s from the "
+                     f"gyros is beyond {self.max_rates[i]:g} m/s ({RATE_MARGIN:g} x its speed limit): "
+                     "not a motion this machine can make (gyro fault or noise)")
+            return
         newest = max(stamps)
         self.published_ns = newest
         stamp = Time(nanoseconds=newest).to_msg()
-        self.cylinder_pub.publish(messages.joint_state(stamp, CYLINDERS, joints.lengths, joints.rates))
+        # The tilt first: excavator_forward pairs each cylinder message with the tilt of its stamp.
         x, y, z = joints.up_cab.tolist()
         self.tilt_pub.publish(Vector3Stamped(header=Header(stamp=stamp, frame_id=self.upper_frame),
                                              vector=Vector3(x=x, y=y, z=z)))
+        self.cylinder_pub.publish(messages.joint_state(stamp, CYLINDERS, joints.lengths, joints.rates))
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from excavator_kinematics.inverse import BRANCHES, seed_bucket_angle
+from manipulator_kinematics.plan_bounds import MAX_DURATION, MAX_POINTS, check_plan  # noqa: F401 - MAX_POINTS re-exported
 from manipulator_kinematics.time_scaling import TimeScaling, time_scale
 from manipulator_kinematics.trajectory import straight_line
 
@@ -35,17 +36,9 @@ if TYPE_CHECKING:
 
 #: Bisection of the reachable end of a line stops when the bracket is shorter than this (m).
 END_TOLERANCE = 1e-6
-#: Most samples one plan may have (as the pump boom's plan): a tiny step or far waypoints cannot
-#: make the planner allocate without bound.
-MAX_POINTS = 1_000_000
 #: A swing change between neighbouring samples above this (rad) is a line passing the swing axis:
 #: the machine would have to turn on the spot, the path ends before it.
 MAX_SWING_STEP = 0.5
-#: Slowest tip speed and smallest acceleration bound a plan takes (m/s, m/s^2), and its longest
-#: duration (s): a trajectory's times must fit a ROS Duration with room to spare.
-MIN_SPEED = 1e-3
-MIN_ACCELERATION = 1e-3
-MAX_DURATION = 1e6
 #: Two lines whose directions differ by less than this (rad) are one stretch, no stop between.
 CORNER = 1e-9
 
@@ -71,24 +64,9 @@ class BucketPlan:
 
 def plan_path(exc: Excavator, waypoints: ArrayLike, step: float, tip_speed: float, acceleration: float,
               seed: ArrayLike | None = None) -> BucketPlan:
-    """Plan through ``waypoints`` (K, 3) (module docstring). ValueError for a malformed request
-    (no waypoint, not finite, step, speed or acceleration <= 0, more than MAX_POINTS samples)."""
-    waypoints = np.asarray(waypoints, dtype=float)
-    if waypoints.ndim != 2 or waypoints.shape[1] != 3 or len(waypoints) == 0:
-        raise ValueError(f"waypoints must have shape (K, 3) with K >= 1, got {waypoints.shape}")
-    if not np.all(np.isfinite(waypoints)):
-        raise ValueError("waypoints must be finite")
-    if not (np.isfinite(step) and step > 0.0):
-        raise ValueError(f"step must be finite and > 0, got {step}")
-    for name, value, least in (("tip_speed", tip_speed, MIN_SPEED),
-                               ("acceleration", acceleration, MIN_ACCELERATION)):
-        if not (np.isfinite(value) and value >= least):
-            raise ValueError(f"{name} must be finite and >= {least:g}, got {value}")
-    with np.errstate(over="ignore"):
-        count = float(np.sum(np.ceil(np.linalg.norm(np.diff(waypoints, axis=0), axis=1) / step)))
-    if not count <= MAX_POINTS:
-        raise ValueError(f"the path would have {count:.3g} points at step {step:g} m; at most {MAX_POINTS} "
-                         "(a longer step, or fewer or closer waypoints)")
+    """Plan through ``waypoints`` (K, 3) (module docstring). ValueError for a request beyond the
+    bounds of every machine's plan (:func:`manipulator_kinematics.plan_bounds.check_plan`)."""
+    waypoints = check_plan(waypoints, step, tip_speed, acceleration)
     if seed is not None:
         alpha = float(seed_bucket_angle(exc, seed))
     else:

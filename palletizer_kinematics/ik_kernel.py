@@ -131,7 +131,11 @@ def solve(k: np.ndarray, pose: np.ndarray, seed: np.ndarray, seeded: bool, allow
                 elif axis_mode:
                     q[c, 0], q[c, 1], q[c, 2], q[c, 3] = axis1, axis2, axis3, theta5
                 else:
-                    q[c, 0], q[c, 1], q[c, 2], q[c, 3] = theta1, theta2, theta3, theta5
+                    # The D-H angles of the wrapped axis angles (dh_from_axis), not atan2's: they
+                    # differ by whole turns, so the pose is the same and the axes are the ones
+                    # checked against the limits (issue 29: A3 -4.67 for 1.61).
+                    dh3 = (axis3 - axis2 if double else axis3) + 0.5 * math.pi
+                    q[c, 0], q[c, 1], q[c, 2], q[c, 3] = theta1, axis2 - 0.5 * math.pi, dh3, theta5
     weights, home = np.ones(4), allowed.copy()
     home[_HOME_COUNT:] = False
     selected, tie = select_one(q, status, seed, seeded, home, weights, tie_tolerance)

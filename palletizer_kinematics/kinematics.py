@@ -569,7 +569,9 @@ class Palletizer:
         status[(status == IKStatus.SUCCESS) & singular] = IKStatus.SINGULAR
         status[blocked] = IKStatus.UNREACHABLE
         status[invalid] = IKStatus.INVALID
-        q = axis if mode == "axis" else _flange_turns(theta)
+        # D-H angles of the wrapped axis angles: whole turns from atan2's, so axis_from_dh of an
+        # answer gives the axis angles the limits were checked on.
+        q = axis if mode == "axis" else dh_from_axis(axis, self.variant)
         q[status >= IKStatus.UNREACHABLE] = np.nan
         # The shared selection rule over the home elbow branch if it has a valid candidate the
         # request allows, else over every allowed candidate.

@@ -57,6 +57,7 @@ from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.config import Names, Number, Numbers, Text, require, validate
 from manipulator_kinematics.model import IKSolutions, IKStatus, RequestError, describe_limits
 from manipulator_kinematics.params import ConfigError, config_path, load_parameters
+from manipulator_kinematics.plan_bounds import STEP_RANGE, TIP_SPEED_RANGE
 from manipulator_kinematics.planar import ELBOW_NEGATIVE, two_link_ik, wrap_angle
 from manipulator_kinematics.serial_chain import JointLimits, SerialChain, revolute
 from pump_boom_kinematics.regions import Grid, RegionTable
@@ -72,10 +73,6 @@ ENVELOPE_TOL = 1e-9
 #: The paper's example (section 2.2, Fig. 5), deg: fixed theta1..theta4, ranges of theta5, theta6.
 PAPER_EXAMPLE = {"fixed": (0.0, 75.0, 165.0, 160.0), "theta5": (160.0, 240.0), "theta6": (30.0, 170.0)}
 
-#: The interpolation step (m) and the tip speed (m/s) of a pour: in the machine file and in a
-#: request (a step below 1 mm or a crawl below 1 mm/s is a typo, not a pour).
-STEP_RANGE = (1e-3, 10.0)
-TIP_SPEED_RANGE = (1e-3, 10.0)
 
 SCHEMA = {
     "name": Text(empty=False, default="pump_boom", doc="the machine's name: the robot name of its URDF"),

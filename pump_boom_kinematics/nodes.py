@@ -10,9 +10,10 @@
   ``pump_boom.joint_max_speed`` and the tip at ``tip_speed`` wherever the joints allow it, with the
   tip's acceleration along the path bounded by the setting ``tip_acceleration``.
 
-A plan is bounded before it is computed (``pour.MAX_WAYPOINTS``, ``MAX_POINTS``,
-``MAX_DURATION``, the ranges of step, speed and acceleration; waypoints no farther than
-1000 x the reach): anything outside is refused with INVALID_GOAL_CONSTRAINTS and the reason.
+A plan is bounded before it is computed by the rule of every machine
+(:mod:`manipulator_kinematics.plan_bounds`: ``MAX_WAYPOINTS``, ``MAX_POINTS``, ``MAX_DURATION``,
+the ranges of step, speed and acceleration; waypoints no farther than 1000 x the reach):
+anything outside is refused with INVALID_GOAL_CONSTRAINTS and the reason.
 plan_path runs in a callback group of its own on a multi-threaded executor (``THREADS``), so
 solve_ik and solve_fk are answered while a plan (up to about a second) is computed.
 
@@ -35,7 +36,7 @@ from manipulator_kinematics.registry import Machine
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes
 from manipulator_kinematics_interfaces.srv import PlanPath, SolveIK
 from pump_boom_kinematics.kinematics import MODES, RegionTableError
-from pump_boom_kinematics.pour import ACCELERATION_RANGE, MAX_WAYPOINTS, PathPlan, plan_path
+from pump_boom_kinematics.pour import ACCELERATION_RANGE, PathPlan, plan_path
 
 SERVER_SETTINGS = {
     **SETTINGS,
@@ -49,7 +50,6 @@ class PumpBoomServer(PlanPathServer):
 
     SETTINGS = SERVER_SETTINGS
     PLAN_MODES = MODES
-    MAX_WAYPOINTS = MAX_WAYPOINTS
 
     def __init__(self, node_name: str, machine: Machine, argv: Sequence[str]) -> None:
         super().__init__(node_name, machine, argv)

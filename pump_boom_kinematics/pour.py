@@ -16,10 +16,9 @@ the segment's start. The plan says so (``truncated``, ``message``) and gives the
 last waypoint reached in full. theta1 is unwrapped along the path (no jump of 2 pi when the pour
 passes behind the truck).
 
-A plan is bounded before any point is solved: at most :data:`MAX_WAYPOINTS` waypoints and
-:data:`MAX_POINTS` points, no longer than :data:`MAX_DURATION` at the asked speed, the step and
-the speed within ``STEP_RANGE`` and ``TIP_SPEED_RANGE``, the acceleration within
-:data:`ACCELERATION_RANGE`; anything else is a ValueError with the reason.
+A plan is bounded before any point is solved by the rule of every machine,
+:func:`manipulator_kinematics.plan_bounds.check_plan` (waypoints, points, duration, the ranges of
+step, speed and acceleration); anything else is a ValueError with the reason.
 """
 
 from __future__ import annotations
@@ -29,10 +28,17 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from manipulator_kinematics.plan_bounds import (  # noqa: F401 - re-exported: the pump boom's bounds
+    ACCELERATION_RANGE,
+    MAX_DURATION,
+    MAX_POINTS,
+    MAX_WAYPOINTS,
+    check_plan,
+)
 from manipulator_kinematics.planar import wrap_angle
 from manipulator_kinematics.time_scaling import TimeScaling, time_scale
 from manipulator_kinematics.trajectory import straight_line
-from pump_boom_kinematics.kinematics import STEP_RANGE, TIP_SPEED_RANGE, PumpBoom
+from pump_boom_kinematics.kinematics import PumpBoom
 
 _C30, _S30 = np.cos(np.radians(30.0)), np.sin(np.radians(30.0))
 #: The paper's two typical pours (section 3.4, Figs. 9-10) on the default boom: name ->
@@ -83,17 +89,8 @@ class PathPlan:
     timing: TimeScaling | None
 
 
-#: Most waypoints of one plan.
-MAX_WAYPOINTS = 1_000
-#: Most points of one plan (2 km at the default 0.1 m step), so that a request with a tiny step or
-#: far waypoints cannot make the planner allocate without bound, and a plan takes at most about
-#: a second (benchmarks/bench_pump_boom_ik.py measures the worst case).
-MAX_POINTS = 20_000
-#: Longest plan (s) at the asked tip speed (the timing can only make it longer): one day.
-MAX_DURATION = 86_400.0
 #: Default bound of the tip's acceleration along the path (m/s^2): the node's ``tip_acceleration``.
 ACCELERATION = 0.1
-ACCELERATION_RANGE = (1e-3, 10.0)
 
 
 def plan_path(
@@ -111,29 +108,9 @@ def plan_path(
     Raises ValueError for a request out of the bounds (module docstring), and its subclass
     RegionTableError when the boom's region table was built for another geometry.
     """
-    waypoints = np.asarray(waypoints, dtype=float)
     step = boom.pour_step if step is None else float(step)
     speed = boom.tip_speed if tip_speed is None else float(tip_speed)
-    if waypoints.ndim != 2 or waypoints.shape[1] != 3 or not 1 <= len(waypoints) <= MAX_WAYPOINTS:
-        raise ValueError(f"waypoints must have shape (K, 3) with 1 <= K <= {MAX_WAYPOINTS}, "
-                         f"got {waypoints.shape}")
-    if not np.all(np.isfinite(waypoints)):
-        raise ValueError("waypoints must be finite")
-    bounds = (("step", step, "m", STEP_RANGE), ("tip_speed", speed, "m/s", TIP_SPEED_RANGE),
-              ("acceleration", acceleration, "m/s^2", ACCELERATION_RANGE))
-    for name, value, unit, (low, high) in bounds:
-        if not low <= value <= high:  # NaN fails too
-            raise ValueError(f"{name} {value:g} {unit} is outside [{low:g}, {high:g}] {unit}")
-    with np.errstate(over="ignore", invalid="ignore"):
-        lengths = np.linalg.norm(np.diff(waypoints, axis=0), axis=1)
-        count = float(np.sum(np.ceil(lengths / step))) + 1.0
-        duration = float(np.sum(lengths)) / speed + speed / acceleration
-    if not count <= MAX_POINTS:
-        raise ValueError(f"the path would have {count:.3g} points at step {step:g} m; at most {MAX_POINTS} "
-                         "(a longer step, or fewer or closer waypoints)")
-    if not duration <= MAX_DURATION:
-        raise ValueError(f"the path would take at least {duration:.3g} s at {speed:g} m/s; at most "
-                         f"{MAX_DURATION:g} s (a higher tip_speed, or a shorter path)")
+    waypoints = check_plan(waypoints, step, speed, acceleration)
     first = boom.region_ik(waypoints[0], seed)
     if not first.ok:
         return _plan(

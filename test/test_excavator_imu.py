@@ -13,15 +13,17 @@ from scipy.spatial.transform import Rotation
 from excavator_kinematics.design_surface import read_landxml
 from excavator_kinematics.imu import (
     GRAVITY,
+    MAX_SIDEWAYS_TILT,
     SENSORS,
     ImuArm,
     TiltFilter,
     base_up,
     level_rotation,
+    simulated_readings,
     up_from_acceleration,
     up_from_orientation,
 )
-from excavator_kinematics.kinematics import Excavator
+from excavator_kinematics.kinematics import Excavator, StrokeError
 
 EXC = Excavator.default()
 LIM = EXC.limits
@@ -182,6 +184,41 @@ def imu_message(stamp_ns: int, q, omega, f, with_orientation: bool):
     msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = (float(v) for v in omega)
     msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z = (float(v) for v in f)
     return msg
+
+
+def test_a_machine_rolled_near_90_deg_gets_no_rates_it_cannot_have():
+    """Issue 29 defect 2: rolled near 90 deg with 0.01 rad/s gyro noise, the cylinder rates were
+    15.6 m/s to 1.6e7 m/s: the side angle's rate divides by ux^2 + uz^2, which vanishes when a
+    sensor's y axis points up. A set beyond MAX_SIDEWAYS_TILT is refused with the reason; below it
+    the noise stays well inside RATE_MARGIN x the speed limits."""
+    from excavator_kinematics.imu_state_node import RATE_MARGIN
+
+    arm = ImuArm(EXC, imu_section("h_link"))
+    rng = np.random.default_rng(29)
+    D, _ = states(50)
+    D[:, 0] = 0.0  # the swing turns the boom plane against the roll: here the roll is its tilt
+    bound = RATE_MARGIN * LIM.max_rates[1:]
+    refused = 0
+    for roll in np.radians([0.0, 20.0, 40.0, 55.0, 70.0, 85.0, 89.0, 89.9]):
+        q, omega, _ = simulated_readings(arm, D, np.zeros_like(D), (roll, 0.0, 0.0), rng, 0.0, 0.01)
+        up = up_from_orientation(q)
+        sideways = np.degrees(np.arcsin(np.abs(np.einsum("sij,nsj->nsi", arm.mounting, up)[..., 1])))
+        for k in range(len(D)):
+            try:
+                rates = arm.joints(up[k], omega[k]).rates
+            except StrokeError as error:
+                assert sideways[k].max() > math.degrees(MAX_SIDEWAYS_TILT)
+                assert "sideways" in str(error) and "ill-conditioned" in str(error)
+                refused += 1
+                continue
+            assert sideways[k].max() <= math.degrees(MAX_SIDEWAYS_TILT)
+            assert np.all(np.abs(rates) < 0.5 * bound), (math.degrees(roll), rates)
+    assert refused == 4 * len(D)  # every set at 70 deg and beyond
+
+
+def stamp_of(msg) -> int:
+    """A message's header stamp in ns."""
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
 
 
 def test_imu_state_node_publishes_cylinder_lengths_and_refuses_bad_sensors():
@@ -378,30 +415,38 @@ def test_whole_chain_on_imus_across_processes():
         probe.wait_until(lambda: all(p.get_subscription_count() for p in pubs)
                          and swing_pub.get_subscription_count()
                          and node.count_publishers("/chain/bucket_pose_level"), 30.0, "both nodes")
-        for k in range(1, 60):
-            stamp = k * 10_000_000
+        def send(stamp: int) -> bool:
             swing = JointState(name=[JOINTS[0]], position=[D[0]], velocity=[0.0])
-            swing.header.stamp.nanosec = stamp
+            swing.header.stamp.sec, swing.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
             swing_pub.publish(swing)
             for i, pub in enumerate(pubs):
                 pub.publish(imu_message(stamp, q[i], omega[i], f[i], with_orientation=True))
-            try:
-                probe.wait_until(lambda: got["pose"] and got["level"], 0.5, "the poses")
-                break
-            except TimeoutError:
-                continue
-        assert got["pose"] and got["level"], imu_node.log()[-2000:] + forward.log()[-2000:]
+            return False
+
+        # Until the three processes have found each other: send sets 10 ms apart.
+        sent = iter(range(10_000_000, 10_000_000_000, 10_000_000))
+        probe.wait_until(lambda: send(next(sent)) or got["pose"], 30.0, "the first pose")
+        probe.wait_until(lambda: got["level"], 5.0, "the first level pose")
+        # Then ten sets at 5 Hz (stamps 0.2 s apart, beyond tilt_max_age 0.1 s): each set's tilt and
+        # lengths carry one stamp, so each set gets its level pose, whichever topic arrives first.
+        start = 10 * 1_000_000_000
+        sets = [start + k * 200_000_000 for k in range(10)]
+        for stamp in sets:
+            send(stamp)
+            probe.wait_until(lambda stamp=stamp: any(stamp_of(m) == stamp for m in got["level"]), 5.0,
+                             f"the level pose of the set at {stamp} ns")
+        assert [stamp_of(m) for m in got["level"] if stamp_of(m) >= start] == sets
     finally:
         logs = imu_node.stop() + forward.stop()
         probe.close()
     assert "Traceback" not in logs, logs
     tip = EXC.pose(D)[:3]
-    p = got["pose"][0].pose.position
+    p = got["pose"][-1].pose.position
     np.testing.assert_allclose([p.x, p.y, p.z], tip, rtol=0, atol=1e-9)
-    level = got["level"][0]
-    assert level.header.frame_id == "base_level"
     height = Rotation.from_euler("xyz", tilt).apply(tip)[2]
-    assert level.pose.position.z == pytest.approx(height, abs=1e-9)
+    for level in got["level"]:
+        assert level.header.frame_id == "base_level"
+        assert level.pose.position.z == pytest.approx(height, abs=1e-9)
     assert abs(height - tip[2]) > 0.2  # the slope matters at this reach
 
 
@@ -624,3 +669,88 @@ def test_mounting_figure_is_drawn(tmp_path):
 
     draw(EXC, tmp_path / "frames.png")
     assert imread(tmp_path / "frames.png").shape[1] > 500
+
+
+def test_imu_state_node_refuses_bad_stamps_and_answers_the_sets_after_them():
+    """Issue 29 defect 1: a set stamped an hour ahead held back every later set for good, and a
+    negative stamp raised in the callback. Now a stamp ahead of the node clock by more than max_age,
+    a negative one and one behind the sensor's previous message are each refused with a reason,
+    and every valid set after them is answered; a clock that went back (a bag played again) starts
+    the sets over."""
+    import time
+
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from ros_harness import NodeProcess, Probe
+    from sensor_msgs.msg import Imu, JointState
+
+    from manipulator_kinematics.params import config_path
+
+    D = LIM.reference + np.array([0.5, 0.12, -0.3, 0.2])
+    q, omega, f = readings(D, np.zeros(4), "h_link", mountings={key: [0.0, 0.0, 0.0] for key in SENSORS})
+    files = [config_path("excavator_cet200.yaml"), config_path("excavator_nodes.yaml")]
+    process = NodeProcess("excavator_imu_state", *[a for p in files for a in ("--params-file", str(p))],
+                          "-r", "__ns:=/imu_stamps",
+                          params={"/imu_stamps/excavator_imu_state":
+                                  {"ros__parameters": {"warning_period": 0.1}}})
+    qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+    probe = Probe("imu_stamps_probe")
+    node = probe.node
+    got: list[JointState] = []
+    node.create_subscription(JointState, "/imu_stamps/cylinder_lengths", got.append, qos)
+    pubs = [node.create_publisher(Imu, f"/imu_stamps/imu/{name}", qos) for name in SENSORS]
+
+    sent = []
+
+    def send(stamp_ns: int, sec: int | None = None) -> bool:
+        sent.append(stamp_ns)
+        for i, pub in enumerate(pubs):
+            msg = imu_message(stamp_ns, q[i], omega[i], f[i], True)
+            if sec is not None:
+                msg.header.stamp.sec = sec
+            pub.publish(msg)
+        return False
+
+    def answered(stamp_ns: int) -> bool:
+        return any(stamp_of(m) == stamp_ns for m in got)
+
+    try:
+        probe.wait_until(lambda: all(p.get_subscription_count() for p in pubs), 30.0, "subscriptions")
+        probe.wait_until(lambda: send(time.time_ns()) or got, 30.0, "a first set")
+        last = sent[-1]
+        # The last warm-up set is the reference the out-of-order case must be behind.
+        probe.wait_until(lambda: answered(last), 10.0, "the answer to the last warm-up set")
+        cases = ((time.time_ns() + 3600 * 1_000_000_000, None, "s ahead of the node clock"),
+                 (0, -1, "negative stamp (sec -1)"),
+                 (last - 50_000_000, None, "s behind (or equal to)"))  # the previous message is newer
+        for stamp, sec, pattern in cases:
+            send(stamp, sec)
+            try:
+                probe.wait_until(lambda pattern=pattern: pattern in process.log(), 10.0, pattern)
+            except TimeoutError:
+                raise AssertionError(f"no {pattern!r} in {process.log()}") from None
+        count = len(got)
+        sets = []
+        for _ in range(10):
+            sets.append(time.time_ns())
+            send(sets[-1])
+            probe.wait_until(lambda: answered(sets[-1]), 10.0, f"the answer to set {len(sets)}")
+        assert len(got) == count + 10
+        # Gyros saying the arm turns at 5 rad/s (under max_angular_rate): a cylinder rate the
+        # machine cannot have, refused with the reason (issue 29 defect 2).
+        fast = time.time_ns()
+        for i, pub in enumerate(pubs):
+            w = [0.0, 5.0, 0.0] if SENSORS[i] == "arm" else omega[i]
+            pub.publish(imu_message(fast, q[i], w, f[i], True))
+        probe.wait_until(lambda: "not a motion this machine can make" in process.log(), 10.0,
+                         "the rate refusal")
+        assert not answered(fast)
+        # The clock goes back 60 s: the sets start over from there.
+        back = sets[-1] - 60 * 1_000_000_000
+        send(back)
+        probe.wait_until(lambda: answered(back), 10.0, "the set after the clock went back")
+        assert "the clock went back" in process.log()
+        assert process.alive()
+    finally:
+        log = process.stop()
+        probe.close()
+    assert "Traceback" not in log and "failed on" not in log, log

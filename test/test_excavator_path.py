@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from excavator_kinematics.kinematics import Excavator
-from excavator_kinematics.path import END_TOLERANCE, MAX_POINTS, plan_path
+from excavator_kinematics.path import END_TOLERANCE, plan_path
+from manipulator_kinematics.plan_bounds import MAX_POINTS, MAX_WAYPOINTS
 from manipulator_kinematics.time_scaling import ACCELERATION, TIP_SPEED
 
 EXC = Excavator.default()
@@ -96,12 +97,18 @@ def test_requests_it_cannot_take() -> None:
     unreachable = plan_path(EXC, [[20.0, 0.0, 0.0], START], 0.05, 0.5, 0.5)
     assert not unreachable.ok and unreachable.last_waypoint == -1 and "first waypoint" in unreachable.message
     with pytest.raises(ValueError, match=f"at most {MAX_POINTS}"):
-        plan_path(EXC, [START, START + [1000.0, 0.0, 0.0]], 1e-4, 0.5, 0.5)
+        plan_path(EXC, [START, START + [1000.0, 0.0, 0.0]], 0.01, 0.5, 0.5)
     with pytest.raises(ValueError, match="acceleration"):
         plan_path(EXC, [START], 0.05, 0.5, 0.0)
-    with pytest.raises(ValueError, match=r"tip_speed must be finite and >= 0\.001"):
+    # The bounds of every machine's plan (manipulator_kinematics.plan_bounds), before any work.
+    with pytest.raises(ValueError, match=r"tip_speed 1e-300 m/s is outside \[0\.001, 10\]"):
         plan_path(EXC, [START], 0.05, 1e-300, 0.5)
-    with pytest.raises(ValueError, match=r"at most 1e\+06 s"):  # 3 km back and forth at 1 mm/s
-        plan_path(EXC, [START, START + [1.0, 0.0, 0.0]] * 1500, 0.5, 1e-3, 0.5, seed=REFERENCE)
+    for step, speed, what in ((1e300, 0.5, "step 1e\\+300 m"), (0.05, 1e300, "tip_speed 1e\\+300 m/s")):
+        with pytest.raises(ValueError, match=what):
+            plan_path(EXC, [START], step, speed, 0.5)
+    with pytest.raises(ValueError, match=f"1 <= K <= {MAX_WAYPOINTS}"):
+        plan_path(EXC, [START] * (MAX_WAYPOINTS + 1), 0.05, 0.5, 0.5)
+    with pytest.raises(ValueError, match=r"at least 7\.99e\+05 s at 0\.001 m/s; at most 86400 s"):
+        plan_path(EXC, [START, START + [1.0, 0.0, 0.0]] * 400, 0.5, 1e-3, 0.5, seed=REFERENCE)
     one = plan_path(EXC, [START], 0.05, 0.5, 0.5, seed=REFERENCE)
     assert one.ok and len(one.timing.t) == 1 and one.timing.duration == 0.0

@@ -30,12 +30,22 @@ import numpy as np
 import pytest
 import yaml
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import AccelStamped, Point, PointStamped, PoseStamped, TwistStamped
+from geometry_msgs.msg import (
+    AccelStamped,
+    Point,
+    PointStamped,
+    PoseStamped,
+    TwistStamped,
+    Vector3,
+    Vector3Stamped,
+)
 from rclpy.duration import Duration
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from ros_harness import NodeProcess, Probe
-from sensor_msgs.msg import JointState
+from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import Imu, JointState
+from std_msgs.msg import Header
 
 from excavator_kinematics import messages
 from excavator_kinematics.display import DesignPlane
@@ -101,7 +111,7 @@ def start(exe: str, namespace: str, tmp: Path, params: tuple[str, ...] = (),
     """``exe`` in ``namespace`` with the package's params files and ``settings`` for the node."""
     args = [a for p in params for a in ("--params-file", p)]
     if settings:
-        path = tmp / f"{exe}.yaml"
+        path = tmp / f"{namespace.strip('/')}_{exe}.yaml"  # one file per node: a node may run twice
         path.write_text(yaml.safe_dump({f"{namespace}/{exe}": {"ros__parameters": settings}}))
         args += ["--params-file", str(path)]
     return NodeProcess(exe, *args, "-r", f"__ns:={namespace}")
@@ -138,6 +148,14 @@ def nodes(tmp: Path) -> Iterator[dict[str, NodeProcess]]:
         "excavator_sim": start("excavator_sim", "/fz_sim", tmp, EXCAVATOR_PARAMS, input_queue_depth=400,
                                rate=100.0, **FUZZ_SETTINGS),
         "excavator_ik_server": start("excavator_ik_server", "/fz_eik", tmp, EXCAVATOR_PARAMS),
+        # The IMU chain: the IMU node and a forward node with the level pose (reads machine_tilt).
+        "excavator_imu_state": start("excavator_imu_state", "/fz_imu", tmp, EXCAVATOR_PARAMS,
+                                     qos_depth=400, input_reliability="reliable", **FUZZ_SETTINGS),
+        "excavator_imu_forward": start("excavator_forward", "/fz_imu", tmp, EXCAVATOR_PARAMS,
+                                       qos_depth=400, input_reliability="reliable",
+                                       level={"enabled": True}, **FUZZ_SETTINGS),
+        "machine_markers": start("machine_markers", "/fz_mk", tmp, (str(config_path("scara.yaml")),),
+                                 qos_depth=400, input_reliability="reliable", **FUZZ_SETTINGS),
     }
     for name in SERIAL:
         params = (str(config_path(machine(name).config_file)),)
@@ -246,6 +264,8 @@ def test_excavator_forward_survives_any_input(probe: Probe, nodes: dict[str, Nod
     lower, upper, rates = LIMITS.d_min, LIMITS.d_max, LIMITS.max_rates
     sent = 0
     try:
+        # Start-up first: the module's nodes all start at once, this test usually meets them first.
+        probe.wait_until(lambda: "->" in process.log(), 4 * TIMEOUT, "start-up")
         probe.wait_until(lambda: cylinders.get_subscription_count() > 0 and swing.get_subscription_count() > 0
                          and all(node.count_publishers(t) > 0 for t in topics), TIMEOUT, "excavator_forward")
 
@@ -323,6 +343,189 @@ def test_excavator_forward_survives_any_input(probe: Probe, nodes: dict[str, Nod
     assert out.non_finite() == 0
     assert "Traceback" not in log and "failed on" not in log, log[-3000:]
     assert "rejected cylinder_lengths" in log and "rejected joint_states" in log
+
+
+# ------------------------------------------------------------------------------ excavator_imu_state
+def bad_imu(rng: np.random.Generator, k: int, now_ns: int, valid: tuple) -> Imu:
+    """One Imu message: a stamp an hour ahead, negative, or going back; a machine rolled near
+    90 deg with 0.01 rad/s gyro noise (issue 29's seeds); extreme numbers in any field."""
+    q, omega, f = (np.array(v, dtype=float) for v in valid)
+    stamp_ns = now_ns
+    kind = k % 8
+    if kind == 0:
+        stamp_ns = now_ns + 3600 * 1_000_000_000
+    elif kind == 1:
+        stamp_ns = now_ns - int(rng.integers(1, 10**10))
+    elif kind == 2:  # rolled near 90 deg, gyro noise
+        roll = Rotation.from_euler("x", rng.uniform(1.4, 1.5707))
+        q = (roll * Rotation.from_quat(q)).as_quat()
+        omega = omega + rng.normal(0.0, 0.01, 3)
+    elif kind == 3:
+        q = np.array(extreme(rng, 4, 1.0))
+    elif kind == 4:
+        omega = np.array(extreme(rng, 3, 1.0))
+    elif kind == 5:
+        f = np.array(extreme(rng, 3, 10.0))
+    msg = Imu()
+    msg.header.stamp = Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)
+    if kind == 6:
+        msg.header.stamp.sec = -1
+    if kind == 7:  # no orientation: gravity only, now and then a huge or tiny one
+        msg.orientation_covariance[0] = -1.0
+        with np.errstate(over="ignore"):  # inf is one of the seeds
+            f = f * float(rng.choice([1.0, 1e308, 0.0, 1e-300]))
+    msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = map(float, q)
+    msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = map(float, omega)
+    msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z = map(float, f)
+    return msg
+
+
+def test_excavator_imu_state_survives_any_input(probe: Probe, nodes: dict[str, NodeProcess]) -> None:
+    """Issue 29 defects 1-2: bursts of bad IMU sets (stamps an hour ahead, negative, going back; a
+    machine rolled near 90 deg; extremes; bad bytes) and bad machine_tilt (sec -1, not unit), each
+    followed by a valid set stamped now that must be answered with the library's lengths and a
+    level pose; no rate beyond 2 x a speed limit, nothing non-finite."""
+    import time
+
+    from excavator_kinematics.imu import SENSORS, ImuArm, simulated_readings
+    from excavator_kinematics.imu_state_node import RATE_MARGIN
+
+    ns = "/fz_imu"
+    imu_node, forward = nodes.pop("excavator_imu_state"), nodes.pop("excavator_imu_forward")
+    node = probe.node
+    imus = [node.create_publisher(Imu, f"{ns}/imu/{name}", QOS) for name in SENSORS]
+    swing = node.create_publisher(JointState, f"{ns}/joint_states", QOS)
+    tilt = node.create_publisher(Vector3Stamped, f"{ns}/machine_tilt", QOS)
+    # Not machine_tilt: this test's own bad tilts go there too.
+    out = Outputs(probe, {f"{ns}/cylinder_lengths": JointState, f"{ns}/bucket_pose_level": PoseStamped})
+    lengths, levels = out.messages[f"{ns}/cylinder_lengths"], out.messages[f"{ns}/bucket_pose_level"]
+    D = LIMITS.reference + np.array([0.2, 0.1, -0.2, 0.1])
+    readings = simulated_readings(ImuArm(EXC), D[None], np.zeros((1, 4)), (0.05, -0.03, 0.0))
+    q, omega, f = (v[0] for v in readings)
+    rng = np.random.default_rng(2929)
+    sent = 0
+
+    def valid_set() -> int:
+        stamp_ns = time.time_ns()
+        stamp = Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)
+        swing.publish(JointState(header=Header(stamp=stamp), name=[JOINTS[0]], position=[float(D[0])],
+                                 velocity=[0.0]))
+        for i, pub in enumerate(imus):
+            msg = Imu(header=Header(stamp=stamp))
+            msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = map(float, q[i])
+            msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = map(float, omega[i])
+            msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z = map(float, f[i])
+            pub.publish(msg)
+        return stamp_ns
+
+    sets: list[int] = []
+    paced = [0.0]
+
+    def paced_set() -> None:
+        """A valid set now and then (4 Hz): a flood would only measure the nodes' queues."""
+        if time.monotonic() - paced[0] > 0.25:
+            paced[0] = time.monotonic()
+            sets.append(valid_set())
+
+    def answered(stamp_ns: int, messages: list) -> bool:
+        return any(m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec == stamp_ns for m in messages)
+
+    try:
+        # Start-up first: run alone (-k), this test meets all the module's nodes starting at once.
+        probe.wait_until(lambda: "->" in imu_node.log() and "->" in forward.log(), 4 * TIMEOUT, "start-up")
+        try:
+            probe.wait_until(lambda: all(p.get_subscription_count() > 0 for p in imus)
+                             and swing.get_subscription_count() > 0 and tilt.get_subscription_count() > 0,
+                             TIMEOUT, "excavator_imu_state and excavator_forward")
+        except TimeoutError:
+            raise AssertionError(f"{imu_node.log()[-2000:]}\n{forward.log()[-2000:]}") from None
+        probe.wait_until(lambda: paced_set() is None and bool(levels), TIMEOUT, "a first level pose")
+        for burst in range(6):
+            now = time.time_ns()
+            for k in range(BURST // 4):
+                sensor = int(rng.integers(0, 4))
+                msg = bad_imu(rng, burst * BURST + k, now, (q[sensor], omega[sensor], f[sensor]))
+                data = serialize_message(msg)
+                if rng.random() < 0.2:
+                    data = bad_bytes(rng, data, k)
+                if k % 4 == 0:  # a whole set of the same kind, so it reaches the set's checks
+                    for pub in imus:
+                        pub.publish(data)
+                else:
+                    imus[sensor].publish(data)
+                bad_tilt = Vector3Stamped(vector=Vector3(x=float(rng.normal()), y=0.0, z=1.0))
+                bad_tilt.header.stamp.sec = -1 if k % 2 else int(rng.integers(0, 2**31))
+                if k % 3 == 0:
+                    bad_tilt.vector.z = float(EXTREMES[k % len(EXTREMES)])
+                tilt.publish(bad_tilt)
+                sent += 5
+            after = time.time_ns()
+            try:
+                probe.wait_until(lambda after=after: paced_set() is None and any(
+                    stamp >= after and answered(stamp, lengths) and answered(stamp, levels)
+                    for stamp in sets), TIMEOUT, f"a valid set after burst {burst}")
+            except TimeoutError:
+                raise AssertionError(f"{imu_node.log()[-2000:]}\n{forward.log()[-2000:]}") from None
+            assert imu_node.alive() and forward.alive()
+        got = lengths[-1]
+        np.testing.assert_allclose(got.position, D[1:], atol=1e-9)
+    finally:
+        imu_log, forward_log = imu_node.stop(), forward.stop()
+    report("excavator_imu_state", sent=sent, outputs_checked=out.count(), non_finite=out.non_finite(),
+           alive=1)
+    assert out.non_finite() == 0
+    bound = RATE_MARGIN * LIMITS.max_rates[1:]
+    assert all(np.all(np.abs(m.velocity) <= bound) for m in lengths)
+    for log in (imu_log, forward_log):
+        assert "Traceback" not in log and "failed on" not in log, log[-3000:]
+    assert "ahead of the node clock" in imu_log and "negative stamp" in imu_log
+    assert "rejected machine_tilt" in forward_log
+
+
+# ------------------------------------------------------------------------------ machine_markers
+def test_machine_markers_survives_any_input(probe: Probe, nodes: dict[str, NodeProcess]) -> None:
+    """Issue 29 defect 6: bursts of bad joint states (1e308 rail positions among them), each followed
+    by a valid state whose markers must come; no marker has a non-finite number."""
+    from visualization_msgs.msg import MarkerArray
+
+    ns = "/fz_mk"
+    process = nodes.pop("machine_markers")
+    model = machine("scara").model()
+    lower, upper = np.asarray(model.limits.lower), np.asarray(model.limits.upper)
+    names = tuple(model.joint_names)
+    states = probe.node.create_publisher(JointState, f"{ns}/joint_states", QOS)
+    out = Outputs(probe, {f"{ns}/machine_markers": MarkerArray})
+    arrays = out.messages[f"{ns}/machine_markers"]
+    rng = np.random.default_rng(2906)
+    sent = 0
+    try:
+        probe.wait_until(lambda: states.get_subscription_count() > 0, TIMEOUT, "machine_markers")
+        for burst in range(5):
+            for k in range(BURST // 2):
+                msg = bad_joint_states(rng, names, lower, upper, 1.0, burst * BURST + k)
+                if k % 5 == 0:
+                    msg = joint_state(names, [float(rng.choice([1e308, -1e308, 1e19])), *lower[1:]])
+                data = serialize_message(msg)
+                if rng.random() < 0.3:
+                    data = bad_bytes(rng, data, k)
+                states.publish(data)
+                sent += 1
+            q = lower + (upper - lower) * rng.uniform(0.1, 0.9, len(names))
+            valid = joint_state(names, q, sec=burst + 1)
+
+            def drawn(valid: JointState = valid) -> bool:
+                states.publish(valid)
+                sec = valid.header.stamp.sec
+                return any(a.markers and a.markers[0].header.stamp.sec == sec for a in arrays)
+
+            probe.wait_until(drawn, TIMEOUT, f"the markers after burst {burst}")
+            assert process.alive(), process.log()[-3000:]
+    finally:
+        log = process.stop()
+    report("machine_markers", sent=sent, outputs_checked=out.count(), non_finite=out.non_finite(), alive=1)
+    assert out.non_finite() == 0
+    assert "Traceback" not in log and "failed on" not in log, log[-3000:]
+    assert "ignored" in log
 
 
 # ------------------------------------------------------------------------------ excavator_velocity_ik

@@ -101,3 +101,34 @@ def test_without_a_machine_file_the_node_refuses_to_start() -> None:
     result = subprocess.run([console_script("machine_markers")], capture_output=True, text=True, timeout=60)
     assert result.returncode == 2, result.stderr
     assert "no machine section" in result.stderr and "excavator_cet200.yaml" in result.stderr
+
+
+def test_absurd_and_non_finite_states_are_not_drawn(probe: Probe) -> None:
+    """Issue 29 defect 6: a SCARA rail position of 1e308 drew markers of infinite scale and position.
+    Now a value beyond a joint's limits by more than their span is ignored with a reason, nothing
+    non-finite is published, and the next valid state is drawn."""
+    model = machine("scara").model()
+    lo, hi = np.asarray(model.limits.lower), np.asarray(model.limits.upper)
+    q = lo + (hi - lo) * np.array([0.3, 0.6, 0.4, 0.5][: len(lo)])
+    qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+    received: list[MarkerArray] = []
+    sub = probe.node.create_subscription(MarkerArray, "machine_markers", received.append, qos)
+    pub = probe.node.create_publisher(JointState, "joint_states", qos)
+    process = NodeProcess("machine_markers", "--params-file", str(config_path("scara.yaml")),
+                          *RELIABLE_INPUTS)
+    names = list(model.joint_names)
+    try:
+        probe.wait_until(lambda: pub.get_subscription_count(), TIMEOUT, "machine_markers")
+        for value in (1e308, -1e308, hi[0] + 3.0 * (hi[0] - lo[0])):
+            pub.publish(joint_state(names, [value, *q[1:]]))
+        probe.wait_until(lambda: "ignored" in process.log(), TIMEOUT, "the reason")
+        assert not received
+        pub.publish(joint_state(names, q))
+        probe.wait_until(lambda: received, TIMEOUT, "the valid state's markers")
+    finally:
+        log = process.stop()
+        probe.node.destroy_publisher(pub)
+        probe.node.destroy_subscription(sub)
+    assert "Traceback" not in log, log
+    assert f"ignored {names[0]} = 1e+308" in log
+    check(received[-1], "scara", q)

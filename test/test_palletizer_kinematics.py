@@ -143,6 +143,38 @@ def test_every_candidate_reaches_the_target(model: Palletizer) -> None:
     assert np.all(np.nanmin(np.max(difference, axis=-1), axis=-1) < 1e-9)
 
 
+@pytest.mark.parametrize("variant", ["single", "double"])
+@pytest.mark.parametrize("compiled", [True, False])
+def test_dh_answers_convert_to_the_axis_angles_checked_on_the_limits(variant: str, compiled: bool) -> None:
+    # Issue 29 defect 7: mode dh gave atan2's D-H angles while the limits were checked on the
+    # wrapped axis angles, so 255 of 1,993 candidates converted outside the limits (A3 -4.67 for
+    # 1.61) and 12 SUCCESS answers were 2 pi off. Random targets in and beyond the reach, one by
+    # one and in a batch: every dh candidate is axis_from_dh-exactly the axis candidate, its status
+    # is the limit rule on that conversion, and it reaches the target (FK, independent of the IK).
+    model = Palletizer.default(variant)
+    if compiled:
+        assert compiled_kernel(model, wait=True) is not None or not enabled()
+    n = 3000
+    lower, upper = model.limits.lower, model.limits.upper
+    span = upper - lower
+    axes = RNG.uniform(lower - 0.3 * span, upper + 0.3 * span, size=(n, 4))  # a third beyond a limit
+    targets = model.fkine_dh(dh_from_axis(axes, variant))
+    dh = model.solve_ik(targets, mode="dh", compiled=compiled)
+    axis = model.solve_ik(targets, mode="axis", compiled=compiled)
+    np.testing.assert_array_equal(dh.status, axis.status)
+    exists = np.all(np.isfinite(dh.q), axis=-1)
+    converted = axis_from_dh(dh.q[exists], variant)
+    np.testing.assert_allclose(converted, axis.q[exists], rtol=0, atol=1e-12)
+    inside = np.all((converted >= lower - 1e-10) & (converted <= upper + 1e-10), axis=-1)
+    np.testing.assert_array_equal(inside, dh.status[exists] != IKStatus.JOINT_LIMITS)
+    assert (~inside).sum() > 100 and inside.sum() > 1000  # both kinds are tested
+    reached = model.fkine_dh(np.where(exists[..., None], dh.q, 0.0))
+    assert np.abs(reached - targets[:, None])[exists].max() < 1e-9
+    for i in range(0, n, 50):  # one target at a time: the single call's path
+        one = model.solve_ik(targets[i], mode="dh", compiled=compiled)
+        np.testing.assert_allclose(one.q, dh.q[i], rtol=0, atol=1e-12)
+
+
 def test_round_trip_selects_the_generating_axis_angles(model: Palletizer) -> None:
     # Inside the limits the home elbow branch is selected; with the seed there, its flange turn too.
     q = random_axes(model, 2000)

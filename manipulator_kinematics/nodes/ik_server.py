@@ -43,6 +43,7 @@ from manipulator_kinematics.nodes.messages import (
     pose_stamped,
     twist_stamped,
 )
+from manipulator_kinematics.plan_bounds import MAX_WAYPOINTS
 from manipulator_kinematics.registry import Machine
 from manipulator_kinematics.time_scaling import TimeScaling
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes
@@ -235,8 +236,8 @@ class PlanPathServer(IKServerNode):
     THREADS = 2
     #: Modes plan_path takes ("" is always the default).
     PLAN_MODES: ClassVar[tuple[str, ...]] = ()
-    #: Most waypoints of one request (None: only the planner's bounds).
-    MAX_WAYPOINTS: ClassVar[int | None] = None
+    #: Most waypoints of one request: the rule of every machine (plan_bounds).
+    MAX_WAYPOINTS: ClassVar[int] = MAX_WAYPOINTS
 
     def __init__(self, node_name: str, machine: Machine, argv: Sequence[str]) -> None:
         super().__init__(node_name, machine, argv)
@@ -258,10 +259,9 @@ class PlanPathServer(IKServerNode):
             raise Rejected(KinematicsErrorCodes.INVALID_MODE,
                            f"unknown mode {request.mode!r}; known: {', '.join(self.PLAN_MODES)}")
         count, most = len(request.waypoints), self.MAX_WAYPOINTS
-        if count == 0 or (most is not None and count > most):
-            wanted = "at least one" if most is None else f"1 to {most}"
+        if not 1 <= count <= most:
             raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
-                           f"waypoints: need {wanted}, got {count}")
+                           f"waypoints: need 1 to {most}, got {count}")
         waypoints = np.array([[p.x, p.y, p.z] for p in request.waypoints], dtype=float).reshape(-1, 3)
         if not np.all(np.isfinite(waypoints)):
             raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS, "waypoints must be finite")

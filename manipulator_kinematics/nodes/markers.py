@@ -11,14 +11,15 @@ machine): ``base_frame``, ``rate`` (Hz, the most MarkerArrays per second), ``qos
 
 The machine's state (``Machine.joint_names``: a serial machine's joints, the excavator's swing
 joint and three cylinders) is gathered by joint name from every topic of ``topics.states``: the
-latest finite position of each joint wins, whatever topic brought it, so one setting serves the
+latest finite position of each joint within its limits widened by their span wins (a value beyond
+is logged, throttled, and ignored), whatever topic brought it, so one setting serves the
 serial machines (``joint_states``) and the excavator (``joint_states`` for the swing,
 ``cylinder_lengths`` for the cylinders). Once every joint has a value, each timer tick that
 follows a new message draws the state (``Machine.scene``) and publishes one MarkerArray, stamped
 with the newest input's stamp: cylinders for links, barrels and rods, spheres for joints and
 pins, namespace = the kind of solid (``link``, ``barrel``, ``rod``, ...) so a display can hide a
-kind. A state the machine cannot take (a cylinder beyond its stroke) is logged, throttled, and
-not drawn.
+kind. A state the machine cannot take (a cylinder beyond its stroke), or one whose solids are not
+finite, is logged, throttled, and not drawn: nothing publishes NaN or inf.
 """
 
 from __future__ import annotations
@@ -100,6 +101,13 @@ class MarkersNode(MachineNode):
         self.joint_names = tuple(machine.joint_names(self.model))
         self.index = {name: i for i, name in enumerate(self.joint_names)}
         self.state = np.full(len(self.joint_names), np.nan)
+        # A value beyond a joint's limits by more than their span is no state of this machine
+        # (1e308 drew markers of infinite size); one a little beyond is still drawn, as measured.
+        limits = machine.limits(self.model)
+        bounds = dict(zip(limits.names, zip(limits.lower.tolist(), limits.upper.tolist(), strict=True),
+                          strict=True))
+        self.bounds = {name: (low - (high - low), high + (high - low))
+                       for name, (low, high) in bounds.items() if name in self.index}
         self.stamp: Time | None = None
         self.fresh = False
         self.log = ThrottledLog(self, s["warning_period"])
@@ -122,9 +130,15 @@ class MarkersNode(MachineNode):
         taken = False
         for name, value in zip(msg.name, msg.position, strict=True):
             i = self.index.get(name)
-            if i is not None and math.isfinite(value):
-                self.state[i] = value
-                taken = True
+            if i is None or not math.isfinite(value):
+                continue
+            low, high = self.bounds.get(name, (-math.inf, math.inf))
+            if not low <= value <= high:
+                self.log("warning", f"ignored {name} = {value:.6g}: beyond its limits by more than "
+                         f"their span [{low:.6g}, {high:.6g}]")
+                continue
+            self.state[i] = value
+            taken = True
         if taken:
             self.stamp, self.fresh = msg.header.stamp, True
 
@@ -136,6 +150,10 @@ class MarkersNode(MachineNode):
             parts = solids(self.machine.scene(self.model, self.state.copy()))
         except ValueError as error:  # StrokeError and the like: a state the machine cannot take
             self.log("warning", f"not drawn: {error}")
+            return
+        drawn = (parts.position, parts.orientation, parts.scale)
+        if not all(np.all(np.isfinite(values)) for values in drawn):
+            self.log("warning", f"not drawn: state {self.state.tolist()} gives non-finite markers")
             return
         self.publisher.publish(marker_array(parts, self.stamp, self.frame))
 
