@@ -29,7 +29,7 @@ MAX_FILE_BYTES = 4 << 20
 
 
 # libyaml's parser where PyYAML has it: the pure-Python one takes 3.5 s for a 1.2 MB file, this 0.4 s.
-class RosLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
+class RosLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]  # a base chosen at run time
     """YAML as rcl reads a parameter: a plain ``1e3`` is a number (YAML 1.2), as rcl's parser
     takes it, not the string PyYAML's YAML 1.1 rules make of it; quoted values stay strings."""
 
