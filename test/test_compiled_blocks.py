@@ -95,6 +95,7 @@ atexit.register(lambda: print("loaded at exit:", kinematics.KERNEL.ready is not 
 """
 
 
+@pytest.mark.ros
 def test_a_process_ends_after_its_kernel_load_not_during_it() -> None:
     """A loader still running Python while the interpreter finalizes was ended inside rclpy's
     handle destructors (its garbage collection): a signalled node aborted (exit -6)."""

@@ -41,6 +41,7 @@ def test_python_block_runs(code: str, monkeypatch: pytest.MonkeyPatch) -> None:
         exec(compile(code, str(README), "exec"), {"__name__": "readme"})
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize("code", blocks(None, "bash"), ids=lambda c: c.splitlines()[0][:60])
 def test_shell_block_runs(code: str) -> None:
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}"}
@@ -54,6 +55,7 @@ def test_shell_block_runs(code: str) -> None:
         shutil.rmtree(out, ignore_errors=True)
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize("code", blocks("nodes", "bash"), ids=lambda c: c.splitlines()[0][:60])
 def test_node_block_starts_and_stops_cleanly(code: str, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(REPO)  # the README's paths are relative to the repository
