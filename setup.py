@@ -7,7 +7,7 @@ PACKAGE = "manipulator_kinematics"
 
 setup(
     name=PACKAGE,
-    version="0.1.0",
+    version="0.4.0",
     packages=find_packages(exclude=["test", "test.*", "benchmarks", "scripts"]),
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),

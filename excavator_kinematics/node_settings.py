@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from manipulator_kinematics.config import Flag, Number, Numbers, Text
+from manipulator_kinematics.config import Flag, Number, Numbers, Schema, Text
 from manipulator_kinematics.nodes.base import FRAME_PREFIX, input_reliability
 
 NODES_CONFIG = "excavator_nodes.yaml"
@@ -13,19 +13,23 @@ def _topic(what: str) -> Text:
     return Text(empty=False, doc=what)
 
 
-_SECONDS = {"unit": "s", "min": 0.0, "max": 3600.0}
-_WARNING_PERIOD = Number(**_SECONDS, doc="the same kind of rejection is logged at most this often")
+def _seconds(doc: str, exclusive_min: bool = False) -> Number:
+    """A duration setting: 0 s (or just above, with ``exclusive_min``) to an hour."""
+    return Number(unit="s", min=0.0, max=3600.0, exclusive_min=exclusive_min, doc=doc)
+
+
+_WARNING_PERIOD = _seconds("the same kind of rejection is logged at most this often")
 _QOS_DEPTH = Number(min=1, max=100_000, integer=True, doc="reliable keep-last depth of the publishers")
 _INPUT_DEPTH = Number(min=1, max=100_000, integer=True,
                       doc="depth of the input subscriptions: act on the latest input, drop a backlog")
-_SWING_MAX_AGE = Number(**_SECONDS, doc="max |stamp(cylinder_lengths) - stamp(joint_states)|")
+_SWING_MAX_AGE = _seconds("max |stamp(cylinder_lengths) - stamp(joint_states)|")
 
-FORWARD = {
+FORWARD: Schema = {
     "base_frame": Text(empty=False, doc="frame_id of bucket_pose, bucket_twist and bucket_accel"),
     "frame_prefix": FRAME_PREFIX,
     "swing_max_age": _SWING_MAX_AGE,
-    "acceleration_time_constant": Number(**_SECONDS, doc="low-pass on the accelerations; 0 = raw"),
-    "acceleration_max_gap": Number(**_SECONDS, doc="a longer gap between messages restarts the differencing"),
+    "acceleration_time_constant": _seconds("low-pass on the accelerations; 0 = raw"),
+    "acceleration_max_gap": _seconds("a longer gap between messages restarts the differencing"),
     "warning_period": _WARNING_PERIOD,
     "qos_depth": Number(min=1, max=100_000, integer=True,
                         doc="reliable keep-last depth of every topic (400: 0.4 s of 1 kHz input; "
@@ -51,7 +55,7 @@ FORWARD = {
     "level": {
         "enabled": Flag(doc="publish bucket_pose_level from the machine tilt (topics.machine_tilt)"),
         "frame": Text(empty=False, doc="frame_id of bucket_pose_level: base_link levelled by gravity"),
-        "tilt_max_age": Number(**_SECONDS, doc="max |stamp(cylinder_lengths) - stamp(machine_tilt)|"),
+        "tilt_max_age": _seconds("max |stamp(cylinder_lengths) - stamp(machine_tilt)|"),
     },
     "design_surface": {
         "file": Text(doc="LandXML 1.2 file of the design TIN (read at start-up); empty: none"),
@@ -64,7 +68,7 @@ FORWARD = {
                                  doc="fixed position of base_link in the site frame (m)"),
         "site_rpy": Numbers(3, Number(min=-7.0, max=7.0, unit="rad"),
                             doc="fixed roll, pitch, yaw of base_link in the site frame (rad, fixed axes)"),
-        "site_pose_max_age": Number(**_SECONDS, doc="max |stamp(cylinder_lengths) - stamp(site pose)|"),
+        "site_pose_max_age": _seconds("max |stamp(cylinder_lengths) - stamp(site pose)|"),
     },
     "topics": {
         "cylinder_lengths": _topic("input: sensor_msgs/JointState, boom/arm/bucket cylinder length and rate"),
@@ -85,21 +89,21 @@ FORWARD = {
     },
 }
 
-VELOCITY_IK = {
+VELOCITY_IK: Schema = {
     "base_frame": Text(empty=False, doc="the frame_id of target_bucket_twist (empty frame_id: this one)"),
     "frame_prefix": FRAME_PREFIX,
-    "command_timeout": Number(**_SECONDS, doc="no accepted target for this long: zero rates once, then hold"),
-    "state_timeout": Number(**_SECONDS, doc="a cylinder/swing state older than this is refused"),
+    "command_timeout": _seconds("no accepted target for this long: zero rates once, then hold"),
+    "state_timeout": _seconds("a cylinder/swing state older than this is refused"),
     "swing_max_age": _SWING_MAX_AGE,
     "condition_threshold": Number(min=1.0, max=1e12,
                                   doc="cond(JC0) above which damped least squares starts"),
-    "stroke_horizon": Number(**_SECONDS, exclusive_min=True,
+    "stroke_horizon": _seconds(exclusive_min=True,
                              doc="the whole command slows: no actuator reaches its end sooner than this"),
     "bucket_angle_gives_way": Flag(doc="at a stroke end keep the tip's linear direction and let the bucket "
                                        "angle rate give way; false: the whole twist's direction is kept"),
     "line_gain": Number(min=0.0, max=100.0, unit="1/s",
                         doc="a constant target's drift from its line is corrected at this rate; 0 = off"),
-    "status_period": Number(**_SECONDS, doc="an unchanged status is published again after this long"),
+    "status_period": _seconds("an unchanged status is published again after this long"),
     "twist_residual_tolerance": Number(min=0.0, max=1e3, unit="rad/s",
                                        doc="unachievable angular velocity before a (throttled) warning"),
     "warning_period": _WARNING_PERIOD,
@@ -117,12 +121,12 @@ VELOCITY_IK = {
     },
 }
 
-IMU_STATE = {
-    "max_skew": Number(**_SECONDS, doc="largest spread of the four sensors' latest stamps in one set"),
-    "max_age": Number(**_SECONDS, exclusive_min=True,
+IMU_STATE: Schema = {
+    "max_skew": _seconds("largest spread of the four sensors' latest stamps in one set"),
+    "max_age": _seconds(exclusive_min=True,
                       doc="a sensor whose newest message arrived longer ago (node clock) is stale: no "
                           "output, a reason; also the grace after start-up; checked every max_age / 4"),
-    "gravity_time_constant": Number(**_SECONDS, doc="complementary filter of the gravity direction "
+    "gravity_time_constant": _seconds("complementary filter of the gravity direction "
                                     "(sensors without orientation); 0 = the accelerometer as it is"),
     "max_angular_rate": Number(min=0.0, max=1e3, unit="rad/s", exclusive_min=True,
                                doc="a gyro reading beyond this is implausible"),
@@ -143,11 +147,11 @@ IMU_STATE = {
     },
 }
 
-SIM = {
+SIM: Schema = {
     "rate": Number(min=0.0, max=10_000.0, unit="Hz", exclusive_min=True,
                    doc="rate of cylinder_lengths and joint_states"),
-    "time_constant": Number(**_SECONDS, doc="first-order lag of the actuators; 0 = ideal"),
-    "command_timeout": Number(**_SECONDS, doc="no rate command for this long: the actuators stop"),
+    "time_constant": _seconds("first-order lag of the actuators; 0 = ideal"),
+    "command_timeout": _seconds("no rate command for this long: the actuators stop"),
     "warning_period": _WARNING_PERIOD,
     "initial_swing_angle": Number(min=-7.0, max=7.0, unit="rad", doc="swing angle at start (rad)"),
     "initial_cylinder_lengths": Numbers(3, Number(min=0.0, max=20.0, unit="m"), default=None,

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from manipulator_kinematics.config import Number, Numbers, Text, require, validate
+from manipulator_kinematics.config import Number, Numbers, Schema, Text, require, validate
 
 SECTION = "excavator"
 CYLINDERS = ("boom_cylinder", "arm_cylinder", "bucket_cylinder")
@@ -58,7 +58,7 @@ def _cylinder(**pins: Any) -> dict[str, Any]:
 
 
 #: The ``excavator:`` section of a parameters file; every key is required.
-SCHEMA = {
+SCHEMA: Schema = {
     "name": Text(empty=False, doc="the machine's name: the robot name of its URDF"),
     # Height of the base frame's origin above the level ground the machine stands on: z = 0 of
     # the working ranges (SAE J1193 / ISO 7135 ground reference plane) is z = -base_height.

@@ -139,8 +139,8 @@ class IKSolutions:
     def solution(self) -> np.ndarray:
         """(..., n) the selected candidate, NaN where there is none."""
         if self.selected.ndim == 0:  # one target: plain indexing costs a tenth of the general path
-            chosen = int(self.selected)
-            return self.q[chosen].copy() if chosen >= 0 else np.full(self.q.shape[-1], np.nan)
+            one = int(self.selected)
+            return self.q[one].copy() if one >= 0 else np.full(self.q.shape[-1], np.nan)
         index = np.maximum(self.selected, 0)[..., None, None]
         chosen = np.take_along_axis(self.q, index, axis=-2)[..., 0, :]
         return np.where(self.ok[..., None], chosen, np.nan)

@@ -100,7 +100,7 @@ class _CheckedComposer(yaml.composer.Composer):
 _Base = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
-class RosLoader(_CheckedComposer, _Base):
+class RosLoader(_CheckedComposer, _Base):  # type: ignore[misc,valid-type]  # a base chosen at run time
     """YAML as rcl reads a parameter: a plain ``1e3`` is a number (YAML 1.2), as rcl's parser
     takes it, not the string PyYAML's YAML 1.1 rules make of it; quoted values stay strings.
     Refuses (a YAMLError) what :func:`parse_yaml` says."""

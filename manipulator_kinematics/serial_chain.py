@@ -289,7 +289,7 @@ class SerialChain:
     def _numpy(self, q: np.ndarray, function: Callable, *shapes: tuple[int, ...]) -> Any:
         """``function`` on q (..., n) as rows (N, n), in blocks (in_blocks); outputs (..., *shape)."""
         outputs = in_blocks(function, q.reshape(-1, self.n))
-        if len(shapes) == 1:
+        if isinstance(outputs, np.ndarray):  # one output (len(shapes) == 1)
             return outputs.reshape(q.shape[:-1] + shapes[0])
         return tuple(out.reshape(q.shape[:-1] + shape) for out, shape in zip(outputs, shapes, strict=True))
 
@@ -374,7 +374,7 @@ class JointLimits:
         inside = q <= self.upper + tol
         return np.where(below, -1, np.where(inside, 0, 1)).astype(np.int8)
 
-    def within(self, q: ArrayLike, tol: float = 0.0) -> np.ndarray:
+    def within(self, q: ArrayLike, tol: float = 0.0) -> np.ndarray | np.bool_:
         """(...,) True where every joint is inside its limits (within ``tol``); False for NaN."""
         q = np.asarray(q, dtype=float)
         return ((q >= self.lower - tol) & (q <= self.upper + tol)).all(axis=-1)

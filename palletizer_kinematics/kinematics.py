@@ -83,7 +83,7 @@ from numpy.typing import ArrayLike
 
 from manipulator_kinematics.blocks import in_blocks
 from manipulator_kinematics.compiled import Kernel
-from manipulator_kinematics.config import Names, Number, Numbers, Text, require, validate
+from manipulator_kinematics.config import Names, Number, Numbers, Schema, Text, require, validate
 from manipulator_kinematics.model import (
     TIE_TOLERANCE,
     IKSolutions,
@@ -135,7 +135,7 @@ _BOTTOM_ROW = np.array([0.0, 0.0, 0.0, 1.0])
 _ANGLE = Number(min=-2 * math.tau, max=2 * math.tau, unit="rad")
 
 #: The ``palletizer:`` section of a parameters file (manipulator_kinematics.config).
-SCHEMA = {
+SCHEMA: Schema = {
     "name": Text(empty=False, default="palletizer", doc="the machine's name: the robot name of its URDF"),
     "variant": Text(choices=VARIANTS, doc="single or double parallelogram: which axis angles the motors see"),
     "a1": Number(min=0.0, max=10.0, unit="m", doc="D-H a1: axis 1 to axis 2, horizontal"),

@@ -54,7 +54,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from manipulator_kinematics.compiled import Kernel
-from manipulator_kinematics.config import Names, Number, Numbers, Text, require, validate
+from manipulator_kinematics.config import Names, Number, Numbers, Schema, Text, require, validate
 from manipulator_kinematics.model import IKSolutions, IKStatus, RequestError, describe_limits
 from manipulator_kinematics.params import ConfigError, config_path, load_parameters
 from manipulator_kinematics.plan_bounds import STEP_RANGE, TIP_SPEED_RANGE
@@ -74,7 +74,7 @@ ENVELOPE_TOL = 1e-9
 PAPER_EXAMPLE = {"fixed": (0.0, 75.0, 165.0, 160.0), "theta5": (160.0, 240.0), "theta6": (30.0, 170.0)}
 
 
-SCHEMA = {
+SCHEMA: Schema = {
     "name": Text(empty=False, default="pump_boom", doc="the machine's name: the robot name of its URDF"),
     "root": Numbers(2, Number(min=-20.0, max=20.0, unit="m")),
     "lengths": Numbers(5, Number(min=0.0, max=100.0, unit="m", exclusive_min=True)),

@@ -53,7 +53,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from manipulator_kinematics.compiled import Kernel
-from manipulator_kinematics.config import Names, Number, Numbers, Text, require, validate
+from manipulator_kinematics.config import Names, Number, Numbers, Schema, Text, require, validate
 from manipulator_kinematics.model import (
     TIE_TOLERANCE,
     IKSolutions,
@@ -82,7 +82,7 @@ PLANE_TOL = 1e-6
 CONFIG_FILE = "scara.yaml"
 
 #: The ``scara:`` section of a parameters file (manipulator_kinematics.config).
-SCHEMA = {
+SCHEMA: Schema = {
     "name": Text(empty=False, default="scara", doc="the machine's name: the robot name of its URDF"),
     "l1": Number(min=0.0, max=100.0, unit="m", doc="base offset: shoulder x at rail_joint = 0 (m)"),
     "l2": Number(min=0.0, max=100.0, unit="m", exclusive_min=True, doc="upper arm, shoulder to elbow (m)"),
@@ -270,7 +270,7 @@ class Scara:
         """(..., 3): -1 below, +1 above (or NaN), 0 inside each joint's limits (stroke of the rail)."""
         return self.limits.violation(q, LIMIT_TOL)
 
-    def within_limits(self, q: ArrayLike) -> np.ndarray:
+    def within_limits(self, q: ArrayLike) -> np.ndarray | np.bool_:
         return self.limits.within(q, LIMIT_TOL)
 
     # ---- the shared model protocol (manipulator_kinematics.model.SerialModel) -----------------

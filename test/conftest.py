@@ -18,9 +18,10 @@ import fcntl
 import fnmatch
 import os
 import shutil
+import subprocess
 import sys
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from importlib.metadata import distribution
 from pathlib import Path
 
@@ -95,3 +96,46 @@ def no_files_left_behind() -> Iterator[None]:
     assert not new, f"the tests left these in {_TMP}: {', '.join(new)} (use tmp_path, or delete in a finally)"
     assert not left_running, f"tests left these processes running (now stopped): {left_running}"
     assert not left_files, f"tests left these in the harness's directory (now removed): {left_files}"
+
+
+class _NotInFastTier(RuntimeError):
+    pass
+
+
+def _refuse(what: str, nodeid: str):  # type: ignore[no-untyped-def]
+    def refuse(*_args: object, **_kwargs: object) -> None:
+        raise _NotInFastTier(
+            f"{nodeid} {what} but is not marked 'ros': add pytest.mark.ros (or pytestmark = "
+            "pytest.mark.ros for a file of such tests) so `scripts/test.sh --fast` stays fast"
+        )
+
+    return refuse
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> Generator[None]:
+    """Keep the tiers honest: a test not marked ``ros`` that starts a process (subprocess.Popen,
+    which the harness and subprocess.run use) or a ROS context (rclpy.init, Context.init) fails
+    with a message saying so, in set-up, call and tear-down (module fixtures included)."""
+    if item.get_closest_marker("ros") is not None:
+        yield
+        return
+    patches: list[tuple[object, str, object]] = [
+        (subprocess, "Popen", _refuse("starts a process", item.nodeid))
+    ]
+    try:
+        import rclpy
+        import rclpy.context
+    except ImportError:
+        pass
+    else:
+        patches.append((rclpy, "init", _refuse("starts ROS (rclpy.init)", item.nodeid)))
+        patches.append((rclpy.context.Context, "init", _refuse("starts ROS (Context.init)", item.nodeid)))
+    saved = [(owner, name, getattr(owner, name)) for owner, name, _ in patches]
+    for owner, name, replacement in patches:
+        setattr(owner, name, replacement)
+    try:
+        yield
+    finally:
+        for owner, name, original in saved:
+            setattr(owner, name, original)

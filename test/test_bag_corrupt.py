@@ -147,6 +147,7 @@ def test_a_damaged_bag_fails_in_one_line_or_reads(case: int, tmp_path: Path) -> 
         assert contents(bag) == before, f"{name} changed the bag ({what})"
 
 
+@pytest.mark.ros
 def test_console_scripts_fail_in_one_line_on_damaged_bags(tmp_path: Path) -> None:
     rng = random.Random(SEED)
     bags = {}

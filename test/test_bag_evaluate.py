@@ -277,6 +277,7 @@ def evaluate_cli(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run([*command, *args], capture_output=True, text=True, timeout=120)
 
 
+@pytest.mark.ros
 def test_command_writes_table_json_and_plots(tmp_path: Path) -> None:
     result = evaluate_cli(str(DATA / "excavator_forward_golden"), "-o", str(tmp_path / "out"))
     assert result.returncode == 0, result.stderr
@@ -316,6 +317,7 @@ def bad_bags(tmp_path: Path) -> dict[str, tuple[Path, str]]:
     return bags
 
 
+@pytest.mark.ros
 def test_bad_bags_fail_in_one_line_and_overwrite_nothing(tmp_path: Path) -> None:
     out = tmp_path / "out"
     out.mkdir()
@@ -348,6 +350,7 @@ def test_params_files_set_the_machine_and_the_node_settings(tmp_path: Path) -> N
     assert "acceleration_time_constant 0.03" in consistency["bucket_accel"]["not_compared"]
 
 
+@pytest.mark.ros
 def test_recover_evaluates_a_bag_without_its_summary(tmp_path: Path) -> None:
     write_bag(tmp_path / "bag", excavator_bag(EXC, 100, RATE))
     data = tmp_path / "bag" / "bag.mcap"

@@ -238,6 +238,7 @@ KILLED_WRITER = textwrap.dedent("""
 """)
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
 def test_a_killed_writer_leaves_everything_up_to_its_last_flush(tmp_path: Path, storage: str) -> None:
     result = subprocess.run([sys.executable, "-c", KILLED_WRITER, str(tmp_path / "bag"), storage])

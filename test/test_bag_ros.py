@@ -44,6 +44,8 @@ from manipulator_kinematics.node_util import console_script
 from manipulator_kinematics.params import flatten, unflatten
 from manipulator_kinematics.registry import Machine, machines
 
+pytestmark = pytest.mark.ros
+
 DATA = Path(__file__).resolve().parent / "data"
 QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 TIMEOUT = 60.0

@@ -161,6 +161,7 @@ def test_a_bag_without_machine_states_is_refused(tmp_path: Path) -> None:
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.ros
 def test_record_visuals_flag(tmp_path: Path) -> None:
     """``mk_record --visuals`` across processes: SCARA joint states recorded, then /tf added."""
     model = machine("scara").model()

@@ -14,6 +14,8 @@ import pytest
 from manipulator_kinematics.node_util import console_script
 from manipulator_kinematics.plain import plain
 
+pytestmark = pytest.mark.ros
+
 ENTRY_POINTS = sorted((e for e in distribution("manipulator_kinematics").entry_points
                        if e.group == "console_scripts"), key=lambda e: e.name)
 

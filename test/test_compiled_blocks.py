@@ -103,6 +103,7 @@ while "excavator_kinematics.state_kernel" not in sys.modules and time.monotonic(
 """
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize("imported", ["rclpy", "numpy only"])
 def test_a_process_with_rclpy_ends_after_its_kernel_load_one_without_does_not_wait(imported: str) -> None:
     """A loader still running Python while the interpreter finalizes was ended inside rclpy's
@@ -135,6 +136,7 @@ print(time.time(), flush=True)  # the main thread ends here
 """
 
 
+@pytest.mark.ros
 def test_a_compile_on_a_cold_cache_is_abandoned_at_exit(tmp_path: Path) -> None:
     """With an empty cache the kernel compiles in a child process (seconds to tens of seconds);
     a process whose main thread ends kills it and ends at once, exit 0 (issue 28 item 2: 2 s)."""

@@ -22,6 +22,8 @@ from artefacts import bag_differences, xml_differences
 from manipulator_kinematics.bag.synthetic import golden_name
 from manipulator_kinematics.registry import machines
 
+pytestmark = pytest.mark.ros
+
 REPO = Path(__file__).resolve().parent.parent
 DATA = REPO / "test" / "data"
 

@@ -165,6 +165,7 @@ def test_cutting_edge_ends_and_site_pose():
     np.testing.assert_allclose(turned, [1.0, 3.0, 3.0], atol=1e-15)
 
 
+@pytest.mark.ros
 def test_forward_node_publishes_cutting_edge_grade_over_the_tin():
     """excavator_forward across processes with the ditch TIN and a GNSS pose topic: the three
     heights equal the core's, a point beyond the surface gets no message but a WARN status, and

@@ -96,6 +96,7 @@ def test_urdf_joint_rates_match_finite_differences():
     np.testing.assert_allclose(end_rates[:, :4], EXC.state(ends, D_dot[:2]).theta_dot, atol=1e-5)
 
 
+@pytest.mark.ros
 def test_forward_node_publishes_grade_and_urdf_joints(tmp_path):
     """The forward node across processes: grade_height and urdf_joint_states for a state."""
     grade = {"enabled": True, "point": [5.0, 0.5, -1.0], "slope": -3.0, "cross_slope": 2.0,

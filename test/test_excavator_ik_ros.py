@@ -22,6 +22,8 @@ from manipulator_kinematics.params import config_path, load_parameters
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
 from manipulator_kinematics_interfaces.srv import PlanPath, SolveFK, SolveIK
 
+pytestmark = pytest.mark.ros
+
 EXC = Excavator.default()
 NAMES = list(ACTUATORS)
 PARAMS = ("--params-file", str(config_path("excavator_cet200.yaml")),

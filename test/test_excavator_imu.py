@@ -221,6 +221,7 @@ def stamp_of(msg) -> int:
     return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
 
 
+@pytest.mark.ros
 def test_imu_state_node_publishes_cylinder_lengths_and_refuses_bad_sensors():
     """excavator_imu_state across processes on the machine file's mounting (all zero, H-link):
     orientation sets and gravity-only sets give back the lengths and rates; a stale boom sensor
@@ -284,6 +285,7 @@ def test_imu_state_node_publishes_cylinder_lengths_and_refuses_bad_sensors():
         np.testing.assert_allclose(message.velocity, D_dot[1:], rtol=0, atol=1e-7)
 
 
+@pytest.mark.ros
 def test_imu_state_node_says_which_sensors_fell_silent():
     """Gap a: the max_age timer. Before any message: "since start-up"; the boom falling silent
     while the others go on, then all four: a reason naming them, and no set stamped after the
@@ -382,6 +384,7 @@ def test_level_frame_from_the_cab_imu_gives_heights_along_gravity():
     np.testing.assert_allclose(level_rotation([0.0, 0.0, 1.0]), np.eye(3), atol=0)
 
 
+@pytest.mark.ros
 def test_whole_chain_on_imus_across_processes():
     """excavator_imu_state -> excavator_forward over DDS on a machine standing on a 5 % slope
     (pitch 2.86 deg) and a 2 % cross slope: bucket_pose equals the core's pose of D (the chain runs

@@ -376,7 +376,7 @@ def test_a_vector_of_rates_is_broadcast_over_a_batch():
         EXC.cylinder_accelerations(D, V, A), EXC.cylinder_accelerations(D, tiled[0], tiled[1])
     )
     np.testing.assert_array_equal(EXC.joint_accelerations(D, V, A), EXC.joint_accelerations(D, *tiled))
-    # The README's batch call, as written there.
+    # The batch call of docs/machines.md, as written there.
     assert EXC.state(np.tile(STATE, (1000, 1)), [0.1, 0.05, -0.05, 0.08]).Q.shape == (1000, 4)
 
 

@@ -34,6 +34,8 @@ from excavator_kinematics.kinematics import (
 from excavator_kinematics.twist import bucket_angles, twist_from_q_dot
 from manipulator_kinematics.params import config_path
 
+pytestmark = pytest.mark.ros
+
 EXC = Excavator.default()
 LIMITS = EXC.limits
 QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)

@@ -217,6 +217,7 @@ def test_a_target_that_overflows_is_refused() -> None:
         rate_command(EXC.jc0(D), D, np.full(4, 1.7e308), LIMITS, 50.0, 0.1)
 
 
+@pytest.mark.slow
 def test_speed_limits_hold_exactly_not_to_an_ulp() -> None:
     """20,000 random states and targets (most far beyond the speeds): no command exceeds a limit,
     not even by an ulp (before the fix 1 in 25 did, ratio 1.0000000000000002), and the direction

@@ -59,6 +59,8 @@ from manipulator_kinematics.registry import machine
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
 from manipulator_kinematics_interfaces.srv import PlanPath, SolveFK, SolveIK
 
+pytestmark = pytest.mark.ros
+
 EXC = Excavator.default()
 LIMITS = EXC.limits
 QOS = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)

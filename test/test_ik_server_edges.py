@@ -24,6 +24,8 @@ from manipulator_kinematics.registry import machine
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
 from manipulator_kinematics_interfaces.srv import SolveFK, SolveIK
 
+pytestmark = pytest.mark.ros
+
 SERIAL = ("scara", "tool_changer", "palletizer", "pump_boom")
 TIMEOUT = 30.0
 MAX = 1.7976931348623157e308

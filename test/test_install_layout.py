@@ -18,6 +18,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.ros
+
 REPO = Path(__file__).resolve().parent.parent
 PKG = "manipulator_kinematics"
 IFACE = "manipulator_kinematics_interfaces"

@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from manipulator_kinematics.registry import Hook, machines
 
 REPO = Path(__file__).resolve().parent.parent
@@ -52,6 +54,7 @@ def test_every_machine_package_is_registered_under_its_name() -> None:
 
 
 
+@pytest.mark.ros
 def test_loading_the_registry_imports_no_hook_code_and_every_hook_resolves() -> None:
     # Every node loads the registry at start-up: the bag, URDF and drawing hooks wait for a call.
     code = ("import sys; from manipulator_kinematics.registry import machines; machines(); "

@@ -6,6 +6,7 @@ from __future__ import annotations
 import subprocess
 
 import numpy as np
+import pytest
 from builtin_interfaces.msg import Time
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe
@@ -17,6 +18,8 @@ from manipulator_kinematics.node_util import console_script
 from manipulator_kinematics.params import config_path
 from manipulator_kinematics.registry import machine
 from manipulator_kinematics.scene import solids
+
+pytestmark = pytest.mark.ros
 
 TIMEOUT = 20.0
 STAMP = Time(sec=1_700_000_123, nanosec=456_000_000)

@@ -17,6 +17,8 @@ from manipulator_kinematics.node_util import console_script
 from manipulator_kinematics.nodes.base import params_files
 from manipulator_kinematics.params import SHOWN, ConfigError, config_path, load_parameters, shown
 
+pytestmark = pytest.mark.ros
+
 TIMEOUT = 15.0
 SCARA = load_parameters(config_path("scara.yaml"))["scara"]
 

@@ -34,6 +34,8 @@ from manipulator_kinematics.executor import EXECUTORS
 from manipulator_kinematics.params import config_path
 from manipulator_kinematics_interfaces.srv import SolveFK
 
+pytestmark = pytest.mark.ros
+
 TIMEOUT = 20.0
 QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 # Outputs (or answers) a node must have produced before it is signalled.

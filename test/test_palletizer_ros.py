@@ -19,6 +19,8 @@ from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
 from manipulator_kinematics_interfaces.srv import SolveFK, SolveIK
 from palletizer_kinematics.kinematics import Palletizer
 
+pytestmark = pytest.mark.ros
+
 DEG = math.pi / 180
 NAMES = ["axis_1", "axis_2", "axis_3", "axis_6"]
 PARAMS = str(config_path("irb460.yaml"))

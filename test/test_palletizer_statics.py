@@ -174,6 +174,7 @@ def test_door_single_variant_and_a_failing_point() -> None:
         door_trajectory(single, [[1.505, 0.0, 1.436], [4.0, 0.0, 1.0]])
 
 
+@pytest.mark.slow
 def test_palletizer_plots_writes_everything(tmp_path, capsys) -> None:
     assert main([str(tmp_path), "--step", "0.05"]) == 0
     names = {p.name for p in tmp_path.iterdir()}

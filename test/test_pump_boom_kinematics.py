@@ -231,6 +231,7 @@ def test_a_refusal_names_the_nearest_covered_point(boom: PumpBoom) -> None:
         assert math.dist(near, (r, z)) <= np.hypot(*(samples - [r, z]).T).min() + 1e-12
 
 
+@pytest.mark.slow
 def test_single_point_path_equals_the_vectorised_ik(boom: PumpBoom, monkeypatch: pytest.MonkeyPatch) -> None:
     """region_ik_point (the compiled kernel, and before it is loaded region_ik on a batch of one)
     against region_ik over the table, its bands and around it: the same joints to 1e-12, the same
@@ -824,6 +825,7 @@ def test_section_2_folds_back_only_where_no_other_shape_reaches(boom: PumpBoom) 
     assert math.degrees(boom.region_ik([20.0, 0.0, 17.5]).q[2]) >= 90.0
 
 
+@pytest.mark.slow
 def test_builder_is_deterministic_and_its_table_serves_a_changed_machine(tmp_path) -> None:
     section = load_parameters(config_path("pump_boom.yaml"))["pump_boom"]
     section["lengths"] = [9.7, 8.4, 8.2, 8.6, 6.7]

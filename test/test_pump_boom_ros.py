@@ -25,6 +25,8 @@ from manipulator_kinematics_interfaces.srv import PlanPath, SolveFK, SolveIK
 from pump_boom_kinematics.kinematics import PumpBoom
 from pump_boom_kinematics.pour import MAX_POINTS, MAX_WAYPOINTS, TYPICAL_POURS, plan_path, pour_line
 
+pytestmark = pytest.mark.ros
+
 NAMES = ["slew_joint", "section_1_joint", "section_2_joint", "section_3_joint", "section_4_joint",
          "section_5_joint"]
 PARAMS = str(config_path("pump_boom.yaml"))

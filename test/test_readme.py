@@ -1,4 +1,5 @@
-"""The README runs as written: every code block marked ``<!-- runnable -->`` is run, Python blocks
+"""The README and docs/machines.md (the README's machine sections) run as written: every code
+block marked ``<!-- runnable -->`` is run, Python blocks
 in-process and shell blocks with the venv's executables; blocks marked ``<!-- runnable: nodes -->``
 start their nodes together, which must come up, log a start-up line and exit 0 on SIGINT."""
 from __future__ import annotations
@@ -18,12 +19,14 @@ import pytest
 from ros_harness import REPO, NodeProcess
 
 README = REPO / "README.md"
+PAGES = (README, REPO / "docs" / "machines.md")
 BLOCK = re.compile(r"<!-- runnable(?::\s*(?P<kind>\w+))? -->\n```(?P<lang>\w+)\n(?P<code>.*?)\n```", re.S)
 STARTUP_TIMEOUT = 30.0
 
 
 def blocks(kind: str | None, lang: str) -> list[str]:
-    found = [(m["kind"], m["lang"], m["code"]) for m in BLOCK.finditer(README.read_text(encoding="utf-8"))]
+    found = [(m["kind"], m["lang"], m["code"])
+             for page in PAGES for m in BLOCK.finditer(page.read_text(encoding="utf-8"))]
     return [code for k, language, code in found if k == kind and language == lang]
 
 
@@ -38,6 +41,7 @@ def test_python_block_runs(code: str, monkeypatch: pytest.MonkeyPatch) -> None:
         exec(compile(code, str(README), "exec"), {"__name__": "readme"})
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize("code", blocks(None, "bash"), ids=lambda c: c.splitlines()[0][:60])
 def test_shell_block_runs(code: str) -> None:
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}"}
@@ -51,6 +55,7 @@ def test_shell_block_runs(code: str) -> None:
         shutil.rmtree(out, ignore_errors=True)
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize("code", blocks("nodes", "bash"), ids=lambda c: c.splitlines()[0][:60])
 def test_node_block_starts_and_stops_cleanly(code: str, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(REPO)  # the README's paths are relative to the repository

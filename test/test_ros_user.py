@@ -33,6 +33,8 @@ from manipulator_kinematics.urdf import machine_urdf, prefixed_urdf
 from manipulator_kinematics_interfaces.srv import SolveIK
 from palletizer_kinematics.kinematics import Palletizer
 
+pytestmark = pytest.mark.ros
+
 TIMEOUT = 20.0
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 BEST_EFFORT = qos_profile_sensor_data  # what a sensor driver uses

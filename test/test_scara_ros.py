@@ -18,6 +18,8 @@ from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
 from manipulator_kinematics_interfaces.srv import SolveFK, SolveIK
 from scara_kinematics.kinematics import Scara
 
+pytestmark = pytest.mark.ros
+
 DEG = math.pi / 180
 NAMES = ["rail_joint", "shoulder_joint", "elbow_joint"]
 PARAMS = str(config_path("scara.yaml"))

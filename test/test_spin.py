@@ -28,6 +28,8 @@ from manipulator_kinematics.node_util import param, refuse_runtime_changes
 from manipulator_kinematics.params import ConfigError
 from manipulator_kinematics.throttle import ThrottledLog
 
+pytestmark = pytest.mark.ros
+
 TIMEOUT = 15.0
 QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 TOPICS = ("numbers", "others")

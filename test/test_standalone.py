@@ -37,6 +37,7 @@ def pointers(path: Path) -> list[str]:
     ]
 
 
+@pytest.mark.ros
 def test_nothing_points_outside_the_repository() -> None:
     files = repository_files()
     assert REPO / "README.md" in files and REPO / "docs" / "bags.md" in files and REPO / "setup.py" in files

@@ -64,6 +64,7 @@ def test_workspace_extents_approach_the_reference_values(arm: ToolChanger) -> No
     assert np.abs(plane.points[:, 0]).max() < 0.552 + 0.175 + 1e-9
 
 
+@pytest.mark.slow
 def test_plot_script_writes_the_pngs(tmp_path, capsys) -> None:
     plots_main([str(tmp_path), "--samples", "20000", "--section-samples", "5000"])
     names = sorted(p.name for p in tmp_path.glob("*.png"))

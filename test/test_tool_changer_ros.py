@@ -17,6 +17,8 @@ from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
 from manipulator_kinematics_interfaces.srv import SolveFK, SolveIK
 from tool_changer_kinematics.kinematics import ToolChanger
 
+pytestmark = pytest.mark.ros
+
 PARAMS = str(config_path("tool_changer.yaml"))
 TIMEOUT = 15.0
 PAPER_Q = [math.pi / 2, math.pi / 6, -math.pi / 3, math.pi / 3, math.pi / 2, 0.0]

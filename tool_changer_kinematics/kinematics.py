@@ -72,7 +72,7 @@ from numpy.typing import ArrayLike
 
 from manipulator_kinematics.blocks import in_blocks
 from manipulator_kinematics.compiled import Kernel
-from manipulator_kinematics.config import Names, Number, Numbers, Text, require, validate
+from manipulator_kinematics.config import Names, Number, Numbers, Schema, Text, require, validate
 from manipulator_kinematics.model import (
     TIE_TOLERANCE,
     IKSolutions,
@@ -127,7 +127,7 @@ _SUCCESS, _SINGULAR, _JOINT_LIMITS, _UNREACHABLE, _INVALID = (int(s) for s in IK
 _SIX = Numbers(6)
 
 #: The ``tool_changer:`` section of a parameters file (manipulator_kinematics.config).
-SCHEMA = {
+SCHEMA: Schema = {
     "name": Text(empty=False, default="tool_changer", doc="the machine's name: the robot name of its URDF"),
     "joint_names": Names(6),
     "dh": {
