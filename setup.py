@@ -1,4 +1,5 @@
 """ament_python build of manipulator_kinematics (one package, one Python package per machine)."""
+
 from glob import glob
 
 from setuptools import find_packages, setup

@@ -49,8 +49,10 @@ def main() -> int:
     samples = int(args.minutes * 60 * args.rate)
     t = time.perf_counter()
     paths = make_bags(args.data / "bags", args.bags, samples, args.rate)
-    print(f"{args.bags} bags of {args.minutes:g} min at {args.rate:g} Hz ({samples} samples each), "
-          f"ready in {time.perf_counter() - t:.1f} s; {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}")
+    print(
+        f"{args.bags} bags of {args.minutes:g} min at {args.rate:g} Hz ({samples} samples each), "
+        f"ready in {time.perf_counter() - t:.1f} s; {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}"
+    )
     print("Dask local process scheduler (dask.compute(scheduler='processes', num_workers=N)); wall time")
     print("| round | what | wall s | s per bag | speed-up vs 1 worker |")
     print("| ---: | --- | ---: | ---: | ---: |")
@@ -70,8 +72,10 @@ def main() -> int:
             wall = time.perf_counter() - t
             assert not any(x.error for x in results)
             base = wall if base is None else base
-            print(f"| {r} | fleet, {n} worker{'s' if n > 1 else ''} | {wall:.1f} | {wall / len(paths):.2f} "
-                  f"| {base / wall:.2f} |")
+            print(
+                f"| {r} | fleet, {n} worker{'s' if n > 1 else ''} | {wall:.1f} | {wall / len(paths):.2f} "
+                f"| {base / wall:.2f} |"
+            )
     return 0
 
 

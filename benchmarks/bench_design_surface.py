@@ -67,8 +67,10 @@ def main() -> None:
     start = time.perf_counter()
     Tin(tin.vertices, tin.faces)
     index = time.perf_counter() - start
-    print(f"TIN: {len(tin.faces)} triangles, {len(tin.vertices)} points; LandXML {size / 1e6:.1f} MB: "
-          f"written in {written:.2f} s, read + indexed in {read:.2f} s (index alone {index:.2f} s)")
+    print(
+        f"TIN: {len(tin.faces)} triangles, {len(tin.vertices)} points; LandXML {size / 1e6:.1f} MB: "
+        f"written in {written:.2f} s, read + indexed in {read:.2f} s (index alone {index:.2f} s)"
+    )
     assert np.array_equal(loaded.faces, tin.faces)
 
     pose = SitePose.from_rpy([E0 + 250.0, N0 + 250.0, 99.0], [0.01, -0.05, 0.4])
@@ -85,10 +87,14 @@ def main() -> None:
     np.testing.assert_allclose(tin.heights(three).height, brute(three), rtol=0, atol=1e-9)
     rows = [
         ("3 points: Tin.heights (trapezoid map)", per_call_us(lambda: tin.heights(three), repeat, rounds)),
-        ("3 points: brute force (all triangles)",
-         per_call_us(lambda: brute(three), max(repeat // 100, 5), rounds)),
-        ("grade step: edge + site pose + heights",
-         per_call_us(lambda: tin.heights(pose.apply(cutting_edge(tip, 0.3, 1.0))), repeat, rounds)),
+        (
+            "3 points: brute force (all triangles)",
+            per_call_us(lambda: brute(three), max(repeat // 100, 5), rounds),
+        ),
+        (
+            "grade step: edge + site pose + heights",
+            per_call_us(lambda: tin.heights(pose.apply(cutting_edge(tip, 0.3, 1.0))), repeat, rounds),
+        ),
         ("10^4 points: Tin.heights", per_call_us(lambda: tin.heights(batch), 5, rounds)),
     ]
     print(f"\n| query ({len(tin.faces)} triangles) | us per call, median of {rounds} rounds | rounds |")
@@ -96,9 +102,11 @@ def main() -> None:
     for name, times in rows:
         print(f"| {name} | {np.median(times):.1f} | {', '.join(f'{t:.1f}' for t in times)} |")
     ratio = [b / i for i, b in zip(rows[0][1], rows[1][1], strict=True)]
-    print(f"\nbrute force / trapezoid map, 3 points: median {np.median(ratio):.0f} x "
-          f"(rounds: {', '.join(f'{r:.0f}' for r in ratio)}); "
-          f"batch: {np.median(rows[3][1]) / 1e4 * 1e3:.0f} ns per point")
+    print(
+        f"\nbrute force / trapezoid map, 3 points: median {np.median(ratio):.0f} x "
+        f"(rounds: {', '.join(f'{r:.0f}' for r in ratio)}); "
+        f"batch: {np.median(rows[3][1]) / 1e4 * 1e3:.0f} ns per point"
+    )
 
 
 if __name__ == "__main__":

@@ -122,8 +122,12 @@ def one_round(exc: Excavator, scale: float, batches: dict[int, tuple[np.ndarray,
     for size, (batch, rates, accelerations) in batches.items():
         repeat = max(int(1e5 / size), 1)
 
-        def states(batch: np.ndarray = batch, rates: np.ndarray = rates,
-                   accelerations: np.ndarray = accelerations, repeat: int = repeat) -> None:
+        def states(
+            batch: np.ndarray = batch,
+            rates: np.ndarray = rates,
+            accelerations: np.ndarray = accelerations,
+            repeat: int = repeat,
+        ) -> None:
             for _ in range(repeat):
                 exc.state(batch, rates, accelerations)
 
@@ -149,8 +153,11 @@ def main() -> None:
     batches = {}
     for size in (1000, 100_000):
         batch = rng.uniform(lo + 0.01 * (hi - lo), hi - 0.01 * (hi - lo), size=(size, 4))
-        batches[size] = (batch, rng.uniform(-1, 1, size=(size, 4)) * exc.limits.max_rates,
-                         rng.uniform(-1, 1, size=(size, 4)) * exc.limits.max_rates)
+        batches[size] = (
+            batch,
+            rng.uniform(-1, 1, size=(size, 4)) * exc.limits.max_rates,
+            rng.uniform(-1, 1, size=(size, 4)) * exc.limits.max_rates,
+        )
     rounds = [one_round(exc, scale, batches) for _ in range(args.rounds)]
     D = exc.limits.reference.copy()
     baseline = BisectionBaseline(exc)

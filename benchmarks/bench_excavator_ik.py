@@ -49,8 +49,12 @@ def first_calls() -> tuple[float, float, float]:
     """(import + machine s, kernel ready with an empty cache s, the same from the cache s)."""
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache)
-        runs = [subprocess.run([sys.executable, "-c", _FIRST_CALL], env=env, check=True, capture_output=True,
-                               text=True).stdout.split() for _ in range(2)]
+        runs = [
+            subprocess.run(
+                [sys.executable, "-c", _FIRST_CALL], env=env, check=True, capture_output=True, text=True
+            ).stdout.split()
+            for _ in range(2)
+        ]
     return float(runs[1][0]), float(runs[0][1]), float(runs[1][1])
 
 
@@ -63,8 +67,9 @@ def numerical_ik(model: Excavator, Q: np.ndarray, seed: np.ndarray) -> np.ndarra
         error[3] = wrap_angle(error[3])
         return error
 
-    return least_squares(residual, seed, bounds=(limits.lower, limits.upper), xtol=1e-12, ftol=1e-12,
-                         gtol=1e-12).x
+    return least_squares(
+        residual, seed, bounds=(limits.lower, limits.upper), xtol=1e-12, ftol=1e-12, gtol=1e-12
+    ).x
 
 
 def timed(call, items) -> tuple[list[float], list]:
@@ -94,8 +99,9 @@ def one_round(model: Excavator, calls: int, batch: int, rng: np.random.Generator
     model.position_ik(positions)
     position_seconds = time.perf_counter() - start
     numeric, solutions = timed(lambda q: numerical_ik(model, q, model.limits.reference), Q)
-    numeric_errors = np.array([np.abs(model.pose(s) - q)[:3].max()
-                               for s, q in zip(solutions, Q, strict=True)])
+    numeric_errors = np.array(
+        [np.abs(model.pose(s) - q)[:3].max() for s, q in zip(solutions, Q, strict=True)]
+    )
     return {
         "kernel_us": statistics.median(kernel),
         "numpy_us": statistics.median(reference),
@@ -117,34 +123,44 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3)
     args = parser.parse_args()
     ready, cold, warm = first_calls()
-    print(f"fresh process: import + machine {ready:.2f} s; kernel ready (a background thread; single "
-          f"calls take the numpy path meanwhile): {cold:.2f} s with an empty numba cache (compile), "
-          f"{warm:.3f} s from the cache")
+    print(
+        f"fresh process: import + machine {ready:.2f} s; kernel ready (a background thread; single "
+        f"calls take the numpy path meanwhile): {cold:.2f} s with an empty numba cache (compile), "
+        f"{warm:.3f} s from the cache"
+    )
     model = Excavator.default()
     compiled_kernel(model, wait=True)
     rng = np.random.default_rng(200)
     model.ik(model.pose(model.limits.reference))  # warm-up
     model.position_ik([5.0, 0.0, 0.0])
-    print(f"{args.calls} targets per call series, batch of {args.batch}, machine {model.name}; us per call "
-          "(medians), ratio = least squares / ours")
-    print("round  kernel us  numpy us  6-D us  position us  least_sq us  ratio  position ratio  "
-          "batch targets/s  batch ratio  position/s  max |D error|  ls converged")
+    print(
+        f"{args.calls} targets per call series, batch of {args.batch}, machine {model.name}; us per call "
+        "(medians), ratio = least squares / ours"
+    )
+    print(
+        "round  kernel us  numpy us  6-D us  position us  least_sq us  ratio  position ratio  "
+        "batch targets/s  batch ratio  position/s  max |D error|  ls converged"
+    )
     rows = []
     for k in range(args.rounds):
         r = one_round(model, args.calls, args.batch, rng)
         rows.append(r)
-        print(f"{k + 1:5d}  {r['kernel_us']:9.1f}  {r['numpy_us']:8.0f}  {r['six_d_us']:6.0f}  "
-              f"{r['position_us']:11.0f}  {r['numeric_us']:11.0f}  {r['numeric_us'] / r['kernel_us']:4.0f}x  "
-              f"{r['numeric_us'] / r['position_us']:13.1f}x  {r['batch_rate']:15.3g}  "
-              f"{r['numeric_us'] * 1e-6 * r['batch_rate']:10.0f}x  {r['position_rate']:10.3g}  "
-              f"{r['closed_error']:13.1e}  {r['numeric_converged']:12.1%}")
+        print(
+            f"{k + 1:5d}  {r['kernel_us']:9.1f}  {r['numpy_us']:8.0f}  {r['six_d_us']:6.0f}  "
+            f"{r['position_us']:11.0f}  {r['numeric_us']:11.0f}  {r['numeric_us'] / r['kernel_us']:4.0f}x  "
+            f"{r['numeric_us'] / r['position_us']:13.1f}x  {r['batch_rate']:15.3g}  "
+            f"{r['numeric_us'] * 1e-6 * r['batch_rate']:10.0f}x  {r['position_rate']:10.3g}  "
+            f"{r['closed_error']:13.1e}  {r['numeric_converged']:12.1%}"
+        )
     best_call = min(r["kernel_us"] for r in rows)
     best_rate = max(r["batch_rate"] for r in rows)
     best_position = min(r["position_us"] / r["kernel_us"] for r in rows)
-    print(f"one call: best {best_call:.1f} us (target <= 20 us: {'met' if best_call <= 20 else 'MISSED'}); "
-          f"batch: best {best_rate:.3g} targets/s (>= 1e6: {'met' if best_rate >= 1e6 else 'MISSED'}); "
-          f"position only: best {best_position:.1f} x the pose IK (target <= 10x: "
-          f"{'met' if best_position <= 10 else 'MISSED'})")
+    print(
+        f"one call: best {best_call:.1f} us (target <= 20 us: {'met' if best_call <= 20 else 'MISSED'}); "
+        f"batch: best {best_rate:.3g} targets/s (>= 1e6: {'met' if best_rate >= 1e6 else 'MISSED'}); "
+        f"position only: best {best_position:.1f} x the pose IK (target <= 10x: "
+        f"{'met' if best_position <= 10 else 'MISSED'})"
+    )
 
 
 if __name__ == "__main__":

@@ -51,7 +51,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from excavator_kinematics import messages
+from excavator_kinematics import message_codec
 from excavator_kinematics.demo import node_command
 from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator
 from manipulator_kinematics.executor import ENVIRONMENT, EXECUTORS
@@ -60,8 +60,12 @@ from manipulator_kinematics.node_util import console_script, make_node, run
 ECHO = "echo"
 FORWARD = "excavator_forward"
 # The serial machines' forward nodes (manipulator_kinematics.nodes.forward), by machine.
-SERIAL = {"scara_forward": "scara", "tool_changer_forward": "tool_changer",
-          "palletizer_forward": "palletizer", "pump_boom_forward": "pump_boom"}
+SERIAL = {
+    "scara_forward": "scara",
+    "tool_changer_forward": "tool_changer",
+    "palletizer_forward": "palletizer",
+    "pump_boom_forward": "pump_boom",
+}
 
 
 def echo(depth: int) -> int:
@@ -118,10 +122,11 @@ def publish(rate: float, duration: float, depth: int, sent_file: Path, kind: str
         cylinder_msg = serial_state(SERIAL[kind])
         first = cylinder_msg.position[0]
     else:
-        cylinder_msg = messages.joint_state(
-            clock.now().to_msg(), CYLINDERS, reference[1:], [0.01, -0.02, 0.015])
+        cylinder_msg = message_codec.joint_state(
+            clock.now().to_msg(), CYLINDERS, reference[1:], [0.01, -0.02, 0.015]
+        )
         first = reference[1]
-    swing_msg = messages.joint_state(clock.now().to_msg(), JOINTS[:1], [0.0], [0.0])
+    swing_msg = message_codec.joint_state(clock.now().to_msg(), JOINTS[:1], [0.0], [0.0])
     swing_every = max(1, round(rate / 100.0))
     sent = []
     warm_up = int(rate)
@@ -138,7 +143,7 @@ def publish(rate: float, duration: float, depth: int, sent_file: Path, kind: str
         cylinder_msg.position[0] = first + 1e-6 * (n % 1000)
         cylinders.publish(cylinder_msg)
         if n >= warm_up:
-            sent.append(messages.stamp_ns(stamp))
+            sent.append(message_codec.stamp_ns(stamp))
     np.save(sent_file, np.array(sent, dtype=np.int64))
     # The participant must not go while a stalled subscriber still lacks messages: they would be lost.
     for publisher in (cylinders, swing):
@@ -156,8 +161,16 @@ def start_node(kind: str, executor: str, depth: int, node_depth: int | None, wor
     if kind == ECHO:
         command = [sys.executable, __file__, "--echo", "--depth", str(depth)]
     elif kind in SERIAL:
-        command = [console_script(kind), "--ros-args", "-r", "joint_states:=cylinder_lengths",
-                   "-r", "tool_twist:=bucket_twist", "--params-file", str(overrides)]
+        command = [
+            console_script(kind),
+            "--ros-args",
+            "-r",
+            "joint_states:=cylinder_lengths",
+            "-r",
+            "tool_twist:=bucket_twist",
+            "--params-file",
+            str(overrides),
+        ]
     else:
         command = node_command(FORWARD, overrides)
     log = (work / "node.log").open("w")
@@ -173,8 +186,14 @@ def cpu_seconds(pid: int) -> float:
 
 
 def measure(
-    node: Node, kind: str, executor_name: str, rate: float, duration: float, depth: int,
-    node_depth: int | None, work: Path,
+    node: Node,
+    kind: str,
+    executor_name: str,
+    rate: float,
+    duration: float,
+    depth: int,
+    node_depth: int | None,
+    work: Path,
 ) -> dict[str, float]:
     """Start the node under test and a publisher process; receive bucket_twist here."""
     qos = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
@@ -183,7 +202,7 @@ def measure(
     sub = node.create_subscription(
         TwistStamped,
         "bucket_twist",
-        lambda m: received.setdefault(messages.stamp_ns(m.header.stamp), clock.now().nanoseconds),
+        lambda m: received.setdefault(message_codec.stamp_ns(m.header.stamp), clock.now().nanoseconds),
         qos,
     )
     # The measuring end must not be the bottleneck: rclpy's SingleThreadedExecutor costs a few
@@ -250,8 +269,13 @@ def main() -> int:
     parser.add_argument("--executors", nargs="+", choices=sorted(EXECUTORS), default=list(EXECUTORS))
     parser.add_argument("--echo", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--publish", nargs=3, metavar=("RATE", "DURATION", "FILE"), help=argparse.SUPPRESS)
-    parser.add_argument("--nodes", nargs="+", choices=[FORWARD, *SERIAL], default=[FORWARD],
-                        help="forward nodes to measure, each beside the echo")
+    parser.add_argument(
+        "--nodes",
+        nargs="+",
+        choices=[FORWARD, *SERIAL],
+        default=[FORWARD],
+        help="forward nodes to measure, each beside the echo",
+    )
     parser.add_argument("--node-depth", type=int, help="qos_depth of the nodes (default: as configured)")
     parser.add_argument("--kind", default=FORWARD, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -274,7 +298,8 @@ def main() -> int:
                 for name in args.executors:
                     for kind in (ECHO, *args.nodes):
                         result = measure(
-                            node, kind, name, rate, args.duration, args.depth, args.node_depth, work)
+                            node, kind, name, rate, args.duration, args.depth, args.node_depth, work
+                        )
                         rows.append((round_, kind, name, rate, result))
                         done = f"round {round_ + 1}: {kind:<20} {name:<6} {rate:6.0f} Hz  done"
                         print(done, file=sys.stderr, flush=True)

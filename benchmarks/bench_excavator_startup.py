@@ -31,26 +31,33 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from excavator_kinematics import messages
+from excavator_kinematics import message_codec
 from excavator_kinematics.demo import node_command
 from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator
 from manipulator_kinematics.ros_domain import reserved_domain
 
 
-def one_start(node: Node, executor: SingleThreadedExecutor, rate: float, after: float, cache: Path | None,
-              work: Path) -> dict[str, float]:
+def one_start(
+    node: Node, executor: SingleThreadedExecutor, rate: float, after: float, cache: Path | None, work: Path
+) -> dict[str, float]:
     """Launch the node (``cache``: its NUMBA_CACHE_DIR, None = the default, warm) and watch."""
     received: list[float] = []
     qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-    sub = node.create_subscription(PoseStamped, "bucket_pose", lambda _: received.append(time.monotonic()),
-                                   qos)
+    sub = node.create_subscription(
+        PoseStamped, "bucket_pose", lambda _: received.append(time.monotonic()), qos
+    )
     overrides = work / "startup_params.yaml"
-    overrides.write_text(yaml.safe_dump({"/**/excavator_forward": {"ros__parameters": {
-        "input_reliability": "reliable"}}}))
+    overrides.write_text(
+        yaml.safe_dump({"/**/excavator_forward": {"ros__parameters": {"input_reliability": "reliable"}}})
+    )
     env = dict(os.environ, **({} if cache is None else {"NUMBA_CACHE_DIR": str(cache)}))
     start = time.monotonic()
-    process = subprocess.Popen(node_command("excavator_forward", overrides), env=env,
-                               stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
+    process = subprocess.Popen(
+        node_command("excavator_forward", overrides),
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.STDOUT,
+    )
     try:
         while not received and time.monotonic() < start + 60.0:
             executor.spin_once(timeout_sec=0.001)
@@ -63,8 +70,11 @@ def one_start(node: Node, executor: SingleThreadedExecutor, rate: float, after: 
         process.wait(10)
         node.destroy_subscription(sub)
     gaps = [b - a for a, b in itertools.pairwise(received) if b <= end]
-    return {"first": first - start, "outputs": sum(t <= end for t in received) / (after * rate),
-            "gap": max(gaps, default=float("nan"))}
+    return {
+        "first": first - start,
+        "outputs": sum(t <= end for t in received) / (after * rate),
+        "gap": max(gaps, default=float("nan")),
+    }
 
 
 def main() -> int:
@@ -85,8 +95,10 @@ def main() -> int:
 
         def send() -> None:
             stamp = clock.now().to_msg()
-            swing.publish(messages.joint_state(stamp, JOINTS[:1], [0.0], [0.0]))
-            cylinders.publish(messages.joint_state(stamp, CYLINDERS, reference[1:], [0.01, -0.02, 0.015]))
+            swing.publish(message_codec.joint_state(stamp, JOINTS[:1], [0.0], [0.0]))
+            cylinders.publish(
+                message_codec.joint_state(stamp, CYLINDERS, reference[1:], [0.01, -0.02, 0.015])
+            )
 
         node.create_timer(1.0 / args.rate, send)
         executor = SingleThreadedExecutor()
@@ -102,15 +114,20 @@ def main() -> int:
             rows["cold"].append(one_start(node, executor, args.rate, args.after, cold, Path(tmp)))
         node.destroy_node()
         rclpy.shutdown()
-    print(f"excavator_forward start-up, {args.rounds} rounds, inputs at {args.rate:g}/s, "
-          f"load {os.getloadavg()}")
-    print(f"{'numba cache':<12}{'first output s: median':>24}{'min':>7}{'max':>7}"
-          f"{f'outputs/input in {args.after:g} s':>26}{'longest gap ms':>16}")
+    print(
+        f"excavator_forward start-up, {args.rounds} rounds, inputs at {args.rate:g}/s, load {os.getloadavg()}"
+    )
+    print(
+        f"{'numba cache':<12}{'first output s: median':>24}{'min':>7}{'max':>7}"
+        f"{f'outputs/input in {args.after:g} s':>26}{'longest gap ms':>16}"
+    )
     for cache, results in rows.items():
         firsts = [r["first"] for r in results]
-        print(f"{cache:<12}{statistics.median(firsts):>24.3f}{min(firsts):>7.3f}{max(firsts):>7.3f}"
-              f"{statistics.median(r['outputs'] for r in results):>26.3f}"
-              f"{max(r['gap'] for r in results) * 1e3:>16.1f}")
+        print(
+            f"{cache:<12}{statistics.median(firsts):>24.3f}{min(firsts):>7.3f}{max(firsts):>7.3f}"
+            f"{statistics.median(r['outputs'] for r in results):>26.3f}"
+            f"{max(r['gap'] for r in results) * 1e3:>16.1f}"
+        )
     return 0
 
 

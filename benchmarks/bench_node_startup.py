@@ -12,6 +12,7 @@ PYTHONPATH), so the difference is from one run.
 
 Run: .venv/bin/python benchmarks/bench_node_startup.py [--rounds 10] [--baseline DIR]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -30,7 +31,7 @@ def first_output(probe, repo: Path, node: str) -> float:
     from geometry_msgs.msg import PoseStamped
     from sensor_msgs.msg import JointState
 
-    from manipulator_kinematics.params import config_path
+    from manipulator_kinematics.param_files import config_path
     from manipulator_kinematics_interfaces.srv import SolveIK
 
     code = f"import sys; from scara_kinematics.nodes import {NODES[node]}; sys.exit({NODES[node]}(sys.argv))"
@@ -38,8 +39,9 @@ def first_output(probe, repo: Path, node: str) -> float:
     env = os.environ | {"PYTHONPATH": str(repo)}
     seen: list[float] = []
     if node == "scara_forward":
-        subscription = probe.node.create_subscription(PoseStamped, "tool_pose",
-                                                      lambda _: seen.append(time.perf_counter()), 10)
+        subscription = probe.node.create_subscription(
+            PoseStamped, "tool_pose", lambda _: seen.append(time.perf_counter()), 10
+        )
         publisher = probe.node.create_publisher(JointState, "joint_states", 10)
         message = JointState(name=["rail_joint", "shoulder_joint", "elbow_joint"], position=[0.1, 0.5, 0.6])
         timer = probe.node.create_timer(0.01, lambda: publisher.publish(message))
@@ -99,16 +101,24 @@ def main() -> None:
     finally:
         probe.close()
     load = ", ".join(f"{v:.1f}" for v in os.getloadavg())
-    revision = {label: subprocess.run(["git", "-C", str(repo), "log", "-1", "--format=%h"],
-                                      capture_output=True, text=True).stdout.strip() or repo.name
-                for label, repo in trees}
-    print(f"\nNode start-up, launch to first output: {os.cpu_count()} cores (load average {load}), "
-          f"{args.rounds} rounds, ms (median [min, max]).\n")
+    revision = {
+        label: subprocess.run(
+            ["git", "-C", str(repo), "log", "-1", "--format=%h"], capture_output=True, text=True
+        ).stdout.strip()
+        or repo.name
+        for label, repo in trees
+    }
+    print(
+        f"\nNode start-up, launch to first output: {os.cpu_count()} cores (load average {load}), "
+        f"{args.rounds} rounds, ms (median [min, max]).\n"
+    )
     print("| node | " + " | ".join(f"{label} ({revision[label]})" for label, _ in trees) + " |")
     print("|---|" + "---|" * len(trees))
     for node in NODES:
-        cells = [f"{np.median(t):.0f} [{min(t):.0f}, {max(t):.0f}]"
-                 for t in (times[label, node] for label, _ in trees)]
+        cells = [
+            f"{np.median(t):.0f} [{min(t):.0f}, {max(t):.0f}]"
+            for t in (times[label, node] for label, _ in trees)
+        ]
         print(f"| {node} | " + " | ".join(cells) + " |")
 
 

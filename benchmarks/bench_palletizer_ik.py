@@ -61,12 +61,19 @@ def rtb_worker() -> None:
     from spatialmath import SE3
 
     job = json.load(sys.stdin)
-    robot = rtb.DHRobot([rtb.RevoluteMDH(a=r["a"], alpha=r["alpha"], d=r["d"], qlim=lim)
-                         for r, lim in zip(job["rows"], job["qlim"], strict=True)], name="palletizer")
+    robot = rtb.DHRobot(
+        [
+            rtb.RevoluteMDH(a=r["a"], alpha=r["alpha"], d=r["d"], qlim=lim)
+            for r, lim in zip(job["rows"], job["qlim"], strict=True)
+        ],
+        name="palletizer",
+    )
     targets = np.array(job["targets"])
     poses = [SE3(T, check=False) for T in targets]
-    out = {"version": rtb.__version__,
-           "check": float(np.abs(robot.fkine(np.array(job["check_q"])).A - np.array(job["check_T"])).max())}
+    out = {
+        "version": rtb.__version__,
+        "check": float(np.abs(robot.fkine(np.array(job["check_q"])).A - np.array(job["check_T"])).max()),
+    }
     for name in ("ik_LM", "ikine_LM"):
         solve = getattr(robot, name)
         count = len(poses) if name == "ik_LM" else min(len(poses), 100)
@@ -78,15 +85,26 @@ def rtb_worker() -> None:
             found += bool(solution.success)
             if solution.success:
                 errors.append(float(np.abs(robot.fkine(solution.q).A - T).max()))
-        out[name] = {"micro": float(np.median(micro)), "success": found / count,
-                     "max_error": max(errors, default=math.nan)}
+        out[name] = {
+            "micro": float(np.median(micro)),
+            "success": found / count,
+            "max_error": max(errors, default=math.nan),
+        }
     json.dump(out, sys.stdout)
 
 
 def run_rtb(job: dict) -> tuple[dict | None, str]:
     """Timings from the Robotics Toolbox, or None and the reason it is unavailable."""
-    return run_worker(__file__, "--rtb-worker", job, (RTB_PACKAGE,), "import roboticstoolbox", RTB_VENV,
-                      "MK_RTB_PYTHON", timeout=1800)
+    return run_worker(
+        __file__,
+        "--rtb-worker",
+        job,
+        (RTB_PACKAGE,),
+        "import roboticstoolbox",
+        RTB_VENV,
+        "MK_RTB_PYTHON",
+        timeout=1800,
+    )
 
 
 # ---- the project's side ---------------------------------------------------------------------------
@@ -156,8 +174,9 @@ def main() -> None:
         single = range(args.calls)
         r["one_seed"], _ = per_call(lambda i: model.solve_ik(targets[i], seed=seeds[i]).solution, single)
         r["one"], _ = per_call(lambda i: model.solve_ik(targets[i]).solution, single)
-        r["one_numpy"], _ = per_call(lambda i: model.solve_ik(targets[i], compiled=False).solution,
-                                     range(min(args.calls, 300)))
+        r["one_numpy"], _ = per_call(
+            lambda i: model.solve_ik(targets[i], compiled=False).solution, range(min(args.calls, 300))
+        )
         for label, seed in (("batch_seed", seeds), ("batch", None)):
             start = time.perf_counter()
             result = model.solve_ik(targets, seed=seed)
@@ -166,21 +185,33 @@ def main() -> None:
         reached = model.fkine(np.where(result.ok[:, None], result.solution, 0.0))
         r["error"] = float(np.abs(reached - targets)[result.ok].max())
         r["ls"], numeric = per_call(lambda i: numerical_ik(model, targets[i], np.zeros(4)), range(n))
-        r["ls_converged"] = float(np.mean([np.abs(model.fkine(x)[:3, 3] - targets[i, :3, 3]).max() < 1e-6
-                                           for i, x in enumerate(numeric)]))
+        r["ls_converged"] = float(
+            np.mean(
+                [
+                    np.abs(model.fkine(x)[:3, 3] - targets[i, :3, 3]).max() < 1e-6
+                    for i, x in enumerate(numeric)
+                ]
+            )
+        )
         ours.append(r)
 
     def med(key: str, rounds=ours) -> float:
         return statistics.median(r[key] for r in rounds)
 
     rows = [
-        ("ours, one target per call, seeded (compiled kernel)", f"{med('one_seed'):.1f} us",
-         f"max FK(IK) error {max(r['error'] for r in ours):.1e}"),
+        (
+            "ours, one target per call, seeded (compiled kernel)",
+            f"{med('one_seed'):.1f} us",
+            f"max FK(IK) error {max(r['error'] for r in ours):.1e}",
+        ),
         ("ours, one target per call, no seed", f"{med('one'):.1f} us", ""),
         ("ours, one target per call, numpy path (compiled=False)", f"{med('one_numpy'):.1f} us", ""),
         (f"ours, batch of {args.batch}, seeded", f"{med('batch_seed'):.2f} us/target", ""),
-        (f"ours, batch of {args.batch}, no seed", f"{med('batch'):.2f} us/target",
-         f"solved {ours[0]['batch_ok']:.0%}"),
+        (
+            f"ours, batch of {args.batch}, no seed",
+            f"{med('batch'):.2f} us/target",
+            f"solved {ours[0]['batch_ok']:.0%}",
+        ),
     ]
     if peers:
         pairs = list(zip(peers, ours, strict=False))
@@ -188,21 +219,32 @@ def main() -> None:
             ratio = statistics.median(o["one_seed"] / p[name]["micro"] for p, o in pairs)
             target = " (target <= 0.5)" if name == "ik_LM" else ""
             first = peers[0][name]
-            rows.append((f"RTB {version} {label}, one answer, 5-joint D-H chain",
-                         f"{statistics.median(p[name]['micro'] for p in peers):.1f} us",
-                         f"ours one call / this = {ratio:.3f}{target}; solved {first['success']:.0%}, "
-                         f"max error {first['max_error']:.1e}; model check {peers[0]['check']:.0e}"))
+            rows.append(
+                (
+                    f"RTB {version} {label}, one answer, 5-joint D-H chain",
+                    f"{statistics.median(p[name]['micro'] for p in peers):.1f} us",
+                    f"ours one call / this = {ratio:.3f}{target}; solved {first['success']:.0%}, "
+                    f"max error {first['max_error']:.1e}; model check {peers[0]['check']:.0e}",
+                )
+            )
     else:
         rows.append(("Robotics Toolbox", "-", why or "--no-rtb"))
     ls_ratio = statistics.median(r["ls"] / r["one"] for r in ours)
-    rows.append(("scipy least_squares, same model, from home", f"{med('ls'):.0f} us",
-                 f"ours {ls_ratio:.0f}x faster per call (target >= 50x), "
-                 f"{statistics.median(r['ls'] / r['batch'] for r in ours):.0f}x batched; "
-                 f"converged {ours[0]['ls_converged']:.0%}"))
+    rows.append(
+        (
+            "scipy least_squares, same model, from home",
+            f"{med('ls'):.0f} us",
+            f"ours {ls_ratio:.0f}x faster per call (target >= 50x), "
+            f"{statistics.median(r['ls'] / r['batch'] for r in ours):.0f}x batched; "
+            f"converged {ours[0]['ls_converged']:.0%}",
+        )
+    )
     load = ", ".join(f"{v:.1f}" for v in os.getloadavg())
-    print(f"\nPalletizer IK benchmark: {os.cpu_count()} cores (load {load}), "
-          f"Python {sys.version.split()[0]}, numpy {np.__version__}, variant {model.variant}; "
-          f"medians over {args.rounds} rounds.\n")
+    print(
+        f"\nPalletizer IK benchmark: {os.cpu_count()} cores (load {load}), "
+        f"Python {sys.version.split()[0]}, numpy {np.__version__}, variant {model.variant}; "
+        f"medians over {args.rounds} rounds.\n"
+    )
     print_table(("what", "time", "notes"), rows)
 
 

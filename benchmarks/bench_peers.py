@@ -24,6 +24,7 @@ Peers, at their fastest documented call paths (printed with the tables):
 
 Run: .venv/bin/python benchmarks/bench_peers.py [--rounds 5] [--largest 100000]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -45,7 +46,7 @@ BLOCK_US = 2000.0  # a timed block's length, about (several calls: thread_time_n
 CALLS = {
     "pin_cfj": "pin.computeFrameJacobian(model, data, q, frame, LOCAL_WORLD_ALIGNED); data.oMf[frame]",
     "pin_doc": "pin.forwardKinematics; pin.computeJointJacobians; pin.updateFramePlacement; "
-               "pin.getFrameJacobian(..., LOCAL_WORLD_ALIGNED)",
+    "pin.getFrameJacobian(..., LOCAL_WORLD_ALIGNED)",
     "rtb_fkj": "ets = robot.ets() once; ets.fkine(q); ets.jacob0(q)",
     "rtb_ik": f"ets = robot.ets() once; ets.ik_LM(T, q0=seed, tol={IK_TOL:g}, joint_limits=True)",
     "rtb_ik_mask": f"ets.ik_LM(T, q0=seed, tol={IK_TOL:g}, mask=[1, 1, 0, 0, 0, 1], joint_limits=True)",
@@ -129,8 +130,13 @@ def worker() -> None:
     arm.compiled_kernel(wait=True)
     chain = arm.chain
     lower, upper = arm.limits.lower, arm.limits.upper
-    robot = rtb.DHRobot([rtb.RevoluteDH(a=float(r.a), alpha=float(r.alpha), d=float(r.d), qlim=[lo, hi])
-                         for r, lo, hi in zip(chain.rows, lower, upper, strict=True)], name="tool_changer")
+    robot = rtb.DHRobot(
+        [
+            rtb.RevoluteDH(a=float(r.a), alpha=float(r.alpha), d=float(r.d), qlim=[lo, hi])
+            for r, lo, hi in zip(chain.rows, lower, upper, strict=True)
+        ],
+        name="tool_changer",
+    )
     ets = robot.ets()
     model, parent, placement = pin.Model(), 0, pin.SE3.Identity()
     for i, r in enumerate(chain.rows):  # joint i+1 at the fixed part Tz(d) Tx(a) Rx(alpha) of row i
@@ -157,8 +163,9 @@ def worker() -> None:
         for function in (pin_cfj, pin_doc):
             placement_, jac = function(sample)
             equal = max(equal, np.abs(placement_.homogeneous - pose).max(), np.abs(jac - jacobian).max())
-        equal = max(equal, np.abs(ets.fkine(sample).A - pose).max(),
-                    np.abs(ets.jacob0(sample) - jacobian).max())
+        equal = max(
+            equal, np.abs(ets.fkine(sample).A - pose).max(), np.abs(ets.jacob0(sample) - jacobian).max()
+        )
     assert equal < 1e-12, equal
     count = min(2000, largest)  # IK targets timed one per call
     targets, seeds = arm.fkine(q[:count]), rng.uniform(lower, upper, (count, 6))
@@ -172,8 +179,10 @@ def worker() -> None:
         ours = arm.solve_ik(target, seed=seed)
         if ours.selected >= 0:
             ours_errors.append(np.abs(arm.fkine(ours.q[ours.selected]) - target).max())
-    tc_ik_note = (f"ik_LM found {found}/200, max error {max(errors):.1e}; ours {len(ours_errors)}/200, "
-                  f"max error {max(ours_errors):.1e}")
+    tc_ik_note = (
+        f"ik_LM found {found}/200, max error {max(errors):.1e}; ours {len(ours_errors)}/200, "
+        f"max error {max(ours_errors):.1e}"
+    )
 
     # -- SCARA: the same arm in RTB (mask x, y, yaw), checked equal
     scara = Scara.default()
@@ -182,8 +191,11 @@ def worker() -> None:
     links = []
     for r, lo, hi in zip(sc.rows, scara.limits.lower, scara.limits.upper, strict=True):
         common = {"a": float(r.a), "alpha": float(r.alpha), "offset": float(r.offset), "qlim": [lo, hi]}
-        links.append(rtb.PrismaticDH(theta=float(r.theta), **common) if r.prismatic
-                     else rtb.RevoluteDH(d=float(r.d), **common))
+        links.append(
+            rtb.PrismaticDH(theta=float(r.theta), **common)
+            if r.prismatic
+            else rtb.RevoluteDH(d=float(r.d), **common)
+        )
     scara_ets = rtb.DHRobot(links, base=SE3(sc.base), name="scara").ets()
     sq = rng.uniform(scara.limits.lower, scara.limits.upper, (largest, 3))
     assert max(np.abs(scara_ets.fkine(s).A - sc.fkine(s)).max() for s in sq[:100]) < 1e-12
@@ -201,25 +213,52 @@ def worker() -> None:
     scara_ik_note = f"ik_LM found {found}/200, max error {max(errors):.1e} m"
 
     peers = {
-        "tool changer FK + Jacobian": Case({
-            "ours": (chain.fkine_jacob0, single), "pin_cfj": (pin_cfj, single), "pin_doc": (pin_doc, single),
-            "rtb_fkj": (lambda s: (ets.fkine(s), ets.jacob0(s)), single)}),
-        "tool changer IK (all 8 + selection)": Case({
-            "ours": (lambda item: arm.solve_ik(item[0], seed=item[1]), ik_items),
-            "rtb_ik": (lambda item: ets.ik_LM(item[0], q0=item[1], tol=IK_TOL, joint_limits=True),
-                       ik_items)}),
-        "SCARA solve_ik (the service's entry)": Case({
-            "ours": (lambda item: scara.solve_ik(item[0], seed=item[1]), s_items),
-            "rtb_ik_mask": (lambda item: scara_ets.ik_LM(item[0], q0=item[1], tol=IK_TOL, mask=mask,
-                                                          joint_limits=True), s_items)}),
-        "SCARA ik()": Case({
-            "ours": (lambda item: scara.ik(item[0], phi=item[1], seed=item[2]), s_planar),
-            "rtb_ik_mask": (lambda item: scara_ets.ik_LM(item[3], q0=item[2], tol=IK_TOL, mask=mask,
-                                                          joint_limits=True), s_planar)}),
+        "tool changer FK + Jacobian": Case(
+            {
+                "ours": (chain.fkine_jacob0, single),
+                "pin_cfj": (pin_cfj, single),
+                "pin_doc": (pin_doc, single),
+                "rtb_fkj": (lambda s: (ets.fkine(s), ets.jacob0(s)), single),
+            }
+        ),
+        "tool changer IK (all 8 + selection)": Case(
+            {
+                "ours": (lambda item: arm.solve_ik(item[0], seed=item[1]), ik_items),
+                "rtb_ik": (
+                    lambda item: ets.ik_LM(item[0], q0=item[1], tol=IK_TOL, joint_limits=True),
+                    ik_items,
+                ),
+            }
+        ),
+        "SCARA solve_ik (the service's entry)": Case(
+            {
+                "ours": (lambda item: scara.solve_ik(item[0], seed=item[1]), s_items),
+                "rtb_ik_mask": (
+                    lambda item: scara_ets.ik_LM(
+                        item[0], q0=item[1], tol=IK_TOL, mask=mask, joint_limits=True
+                    ),
+                    s_items,
+                ),
+            }
+        ),
+        "SCARA ik()": Case(
+            {
+                "ours": (lambda item: scara.ik(item[0], phi=item[1], seed=item[2]), s_planar),
+                "rtb_ik_mask": (
+                    lambda item: scara_ets.ik_LM(
+                        item[3], q0=item[2], tol=IK_TOL, mask=mask, joint_limits=True
+                    ),
+                    s_planar,
+                ),
+            }
+        ),
     }
-    notes = {"tool changer IK (all 8 + selection)": tc_ik_note,
-             "SCARA solve_ik (the service's entry)": scara_ik_note, "SCARA ik()": scara_ik_note,
-             "tool changer FK + Jacobian": f"same arm: FK and Jacobian equal to {equal:.0e}"}
+    notes = {
+        "tool changer IK (all 8 + selection)": tc_ik_note,
+        "SCARA solve_ik (the service's entry)": scara_ik_note,
+        "SCARA ik()": scara_ik_note,
+        "tool changer FK + Jacobian": f"same arm: FK and Jacobian equal to {equal:.0e}",
+    }
 
     # -- every batch API against N single calls (ours), and the peers' loops
     exc = Excavator.default()
@@ -234,15 +273,19 @@ def worker() -> None:
     T_all = arm.fkine(q)
     S_all = scara.fkine(sq)
     apis = {  # name: (one call of state i, a batch of rows :n)
-        "tool changer fkine_jacob0": (lambda i: chain.fkine_jacob0(q[i]),
-                                      lambda n: chain.fkine_jacob0(q[:n])),
+        "tool changer fkine_jacob0": (
+            lambda i: chain.fkine_jacob0(q[i]),
+            lambda n: chain.fkine_jacob0(q[:n]),
+        ),
         "tool changer solve_ik": (lambda i: arm.solve_ik(T_all[i]), lambda n: arm.solve_ik(T_all[:n])),
         "SCARA solve_ik": (lambda i: scara.solve_ik(S_all[i]), lambda n: scara.solve_ik(S_all[:n])),
         "palletizer solve_ik": (lambda i: pal.solve_ik(p_targets[i]), lambda n: pal.solve_ik(p_targets[:n])),
         "excavator pose": (lambda i: exc.pose(D[i]), lambda n: exc.pose(D[:n])),
         "excavator ik": (lambda i: exc.ik(Q[i]), lambda n: exc.ik(Q[:n])),
-        "excavator state": (lambda i: exc.state(D[i], D_dot[i], D_ddot[i]),
-                            lambda n: exc.state(D[:n], D_dot[:n], D_ddot[:n])),
+        "excavator state": (
+            lambda i: exc.state(D[i], D_dot[i], D_ddot[i]),
+            lambda n: exc.state(D[:n], D_dot[:n], D_ddot[:n]),
+        ),
     }
     for kernel in (excavator_state_kernel, excavator_ik_kernel):
         kernel(exc, wait=True)
@@ -266,8 +309,15 @@ def worker() -> None:
         ours = case.median("ours")
         for side in case.sides:
             if side != "ours":
-                out["peers"].append([what, f"{ours:.3g} us", CALLS[side], f"{case.median(side):.3g} us",
-                                     spread(case.ratio("ours", side))])
+                out["peers"].append(
+                    [
+                        what,
+                        f"{ours:.3g} us",
+                        CALLS[side],
+                        f"{case.median(side):.3g} us",
+                        spread(case.ratio("ours", side)),
+                    ]
+                )
     for what, case in batches.items():
         one = case.median("one")
         row = [what, f"{one:.3g} us"]
@@ -298,15 +348,19 @@ def main() -> None:
 
     load = ", ".join(f"{a:.1f}-{b:.1f}" for a, b in zip(before, os.getloadavg(), strict=True))
     versions = ", ".join(f"{k} {v}" for k, v in result["versions"].items())
-    print(f"Measured {time.strftime('%Y-%m-%d')}: {os.cpu_count()} cores, load average (1, 5, 15 min) {load} "
-          f"(start-end); {versions}; one process, ours and the peer in turn, CPU time, medians of "
-          f"{args.rounds} rounds; ratio = ours / peer, median (min-max) of the per-round ratios.\n")
+    print(
+        f"Measured {time.strftime('%Y-%m-%d')}: {os.cpu_count()} cores, load average (1, 5, 15 min) {load} "
+        f"(start-end); {versions}; one process, ours and the peer in turn, CPU time, medians of "
+        f"{args.rounds} rounds; ratio = ours / peer, median (min-max) of the per-round ratios.\n"
+    )
     print_table(["what", "ours", "peer called as", "peer", "ratio"], result["peers"])
     print()
     for what, note in result["notes"].items():
         print(f"* {what}: {note}")
-    print("\nEvery batch API against single calls: per state in us, (batch of N) / (N single calls) "
-          "in brackets; <= 1 means the batch never costs more than single calls.\n")
+    print(
+        "\nEvery batch API against single calls: per state in us, (batch of N) / (N single calls) "
+        "in brackets; <= 1 means the batch never costs more than single calls.\n"
+    )
     print_table(["API", "one call", *[f"N={n}" for n in result["sizes"]]], result["batches"])
 
 

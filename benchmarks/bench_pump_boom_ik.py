@@ -134,12 +134,14 @@ def quality(boom: PumpBoom, q: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Per pour: largest joint jump between consecutive points (deg), points outside positive
     envelope, points not reached (tip error > 1 mm), point count."""
     error = np.abs(boom.tip(q) - points).max(axis=-1)
-    return np.array([
-        math.degrees(float(np.abs(np.diff(q, axis=0)).max())),
-        float(np.sum(~boom.positive_envelope(q))),
-        float(np.sum(error > 1e-3)),
-        float(len(points)),
-    ])
+    return np.array(
+        [
+            math.degrees(float(np.abs(np.diff(q, axis=0)).max())),
+            float(np.sum(~boom.positive_envelope(q))),
+            float(np.sum(error > 1e-3)),
+            float(len(points)),
+        ]
+    )
 
 
 def smoothness_row(boom: PumpBoom, name: str, pours: list[np.ndarray]) -> str:
@@ -172,10 +174,14 @@ def main() -> None:
         assert plan.ok and not plan.truncated, (name, plan.message)
     everything = np.vstack([plan.points for plan in plans.values()])
     count = len(everything)
-    print(f"{len(plans)} pours, {count} points every 100 mm; {args.rounds} rounds; numerical: "
-          f"least_squares dogbox, tolerances {TOLERANCE:g}")
-    print("round  region us/point  batched us/point  numpy path 1 point/call us  numerical us/point  "
-          "per point  batched")
+    print(
+        f"{len(plans)} pours, {count} points every 100 mm; {args.rounds} rounds; numerical: "
+        f"least_squares dogbox, tolerances {TOLERANCE:g}"
+    )
+    print(
+        "round  region us/point  batched us/point  numpy path 1 point/call us  numerical us/point  "
+        "per point  batched"
+    )
     per_point_ratios, batch_ratios = [], []
     results: dict[str, dict[str, np.ndarray]] = {}
     for k in range(args.rounds):
@@ -200,18 +206,24 @@ def main() -> None:
         region_us, numeric_us = statistics.median(region_times), statistics.median(numeric_times)
         per_point_ratios.append(numeric_us / region_us)
         batch_ratios.append(numeric_us / batch_us)
-        print(f"{k + 1:5d}  {region_us:15.1f}  {batch_us:16.2f}  {statistics.median(numpy_times):27.0f}  "
-              f"{numeric_us:18.0f}  "
-              f"{per_point_ratios[-1]:8.0f}x  {batch_ratios[-1]:6.0f}x")
-    print(f"speed-up per point over the rounds: {min(per_point_ratios):.0f}-{max(per_point_ratios):.0f}x "
-          f"(target >= 100x: met in {sum(r >= 100 for r in per_point_ratios)} of {len(per_point_ratios)}); "
-          f"batched {min(batch_ratios):.0f}-{max(batch_ratios):.0f}x")
+        print(
+            f"{k + 1:5d}  {region_us:15.1f}  {batch_us:16.2f}  {statistics.median(numpy_times):27.0f}  "
+            f"{numeric_us:18.0f}  "
+            f"{per_point_ratios[-1]:8.0f}x  {batch_ratios[-1]:6.0f}x"
+        )
+    print(
+        f"speed-up per point over the rounds: {min(per_point_ratios):.0f}-{max(per_point_ratios):.0f}x "
+        f"(target >= 100x: met in {sum(r >= 100 for r in per_point_ratios)} of {len(per_point_ratios)}); "
+        f"batched {min(batch_ratios):.0f}-{max(batch_ratios):.0f}x"
+    )
     for name, plan in plans.items():  # the per-point path gives the plan's joints
         np.testing.assert_allclose(results[name]["region"], plan.q, atol=1e-12)
     print()
-    print("| pour | points | largest joint jump per 100 mm (deg), region / numerical "
-          "| outside positive envelope, region / numerical | numerical: point not reached "
-          "| numerical: out and back, joint difference at the start (deg) |")
+    print(
+        "| pour | points | largest joint jump per 100 mm (deg), region / numerical "
+        "| outside positive envelope, region / numerical | numerical: point not reached "
+        "| numerical: out and back, joint difference at the start (deg) |"
+    )
     print("| --- | ---: | ---: | ---: | ---: | ---: |")
     for name, plan in plans.items():
         print(smoothness_row(boom, name, [plan.points]))

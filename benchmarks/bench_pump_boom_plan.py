@@ -36,8 +36,9 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5)
     args = parser.parse_args()
     boom = PumpBoom.default()
-    zigzag = np.array([[16.0 + 12.0 * (k % 2), -6.0 + 12.0 * k / (MAX_WAYPOINTS - 1), 12.5]
-                       for k in range(MAX_WAYPOINTS)])
+    zigzag = np.array(
+        [[16.0 + 12.0 * (k % 2), -6.0 + 12.0 * k / (MAX_WAYPOINTS - 1), 12.5] for k in range(MAX_WAYPOINTS)]
+    )
     line = np.array(TYPICAL_POURS["slanted_line"][1:])
     cases = {
         f"{MAX_WAYPOINTS} waypoints": (zigzag, MAX_POINTS - 2000),
@@ -56,12 +57,20 @@ def main() -> None:
             messages.append(time.perf_counter() - middle)
         assert plan.ok and not plan.truncated, plan.message
         total = [a + b for a, b in zip(plans, messages, strict=True)]
-        rows.append((name, str(len(plan.q)), f"{step:.4g}", *(f"{statistics.median(x):.3f} / {max(x):.3f}"
-                                                              for x in (plans, messages, total)),
-                     f"{plan.t[-1]:.0f}"))
+        rows.append(
+            (
+                name,
+                str(len(plan.q)),
+                f"{step:.4g}",
+                *(f"{statistics.median(x):.3f} / {max(x):.3f}" for x in (plans, messages, total)),
+                f"{plan.t[-1]:.0f}",
+            )
+        )
     load = ", ".join(f"{v:.1f}" for v in os.getloadavg())
-    print(f"\nLargest pump boom plans: {os.cpu_count()} cores (load average {load}), Python "
-          f"{sys.version.split()[0]}, numpy {np.__version__}; {args.rounds} rounds, median / worst in s.\n")
+    print(
+        f"\nLargest pump boom plans: {os.cpu_count()} cores (load average {load}), Python "
+        f"{sys.version.split()[0]}, numpy {np.__version__}; {args.rounds} rounds, median / worst in s.\n"
+    )
     header = ("plan", "points", "step (m)", "plan (s)", "message (s)", "total (s)", "trajectory (s)")
     print_table(header, rows)
 

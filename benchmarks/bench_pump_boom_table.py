@@ -75,7 +75,7 @@ print(json.dumps({"squares": len(table), "load": load, "first": times[0], "warm"
 
 _IN_PROCESS = """
 import json, resource, sys, time
-from manipulator_kinematics import params
+from manipulator_kinematics import param_files
 from pump_boom_kinematics.kinematics import PumpBoom
 from pump_boom_kinematics.regions import RegionTable
 boom = PumpBoom.default()
@@ -95,8 +95,8 @@ print(json.dumps(times))
 _PHASES = """
 import json, sys, time
 import numpy as np
-from manipulator_kinematics import params
-from manipulator_kinematics.config import validate
+from manipulator_kinematics import param_files
+from manipulator_kinematics.schema import validate
 from pump_boom_kinematics import regions
 from pump_boom_kinematics.kinematics import PumpBoom
 boom = PumpBoom.default()
@@ -109,8 +109,8 @@ def timed(name, call):
     times.setdefault(name, []).append(time.perf_counter() - start)
     return result
 for _ in range(int(sys.argv[1])):
-    params._parse.cache_clear()
-    document = timed("YAML parse (libyaml) of the file", lambda: params.load_parameters(path))
+    param_files._parse.cache_clear()
+    document = timed("YAML parse (libyaml) of the file", lambda: param_files.load_parameters(path))
     section = timed("schema check", lambda: validate(document[regions.TABLE_SECTION], regions.TABLE_SCHEMA,
                                                      regions.TABLE_SECTION))
     squares = timed("squares (base64, zlib) -> arrays",
@@ -118,7 +118,7 @@ for _ in range(int(sys.argv[1])):
     index = np.stack([squares["column"], squares["row"], squares["level"]], axis=-1)
     table = timed("cell owners (RegionTable())", lambda: regions.RegionTable(
         boom.grid, index, squares["triple"], squares["margin"], section["built_for"], {}, {}))
-    params._parse.cache_clear()
+    param_files._parse.cache_clear()
     timed("whole load (RegionTable.load)", lambda: regions.RegionTable.load(path, key))
     timed("first use: square extents (nearest)", lambda: table._extent)
 print(json.dumps(times))
@@ -134,8 +134,9 @@ CALLS = (
 
 def run(code: str, tree: Path, *args: str) -> str:
     env = dict(os.environ, PYTHONPATH=str(tree))
-    return subprocess.run([sys.executable, "-c", code, *args], cwd=tree, env=env, check=True,
-                          capture_output=True, text=True).stdout
+    return subprocess.run(
+        [sys.executable, "-c", code, *args], cwd=tree, env=env, check=True, capture_output=True, text=True
+    ).stdout
 
 
 def ms(values: list[float]) -> str:
@@ -162,8 +163,9 @@ def main() -> None:
         for commit in args.commits:
             trees[commit] = Path(scratch) / commit
             trees[commit].mkdir()
-            archive = subprocess.run(["git", "archive", commit], cwd=ROOT, check=True,
-                                     capture_output=True).stdout
+            archive = subprocess.run(
+                ["git", "archive", commit], cwd=ROOT, check=True, capture_output=True
+            ).stdout
             subprocess.run(["tar", "-x", "-C", str(trees[commit])], input=archive, check=True)
         trees["this checkout"] = ROOT
         # Row after row within each turn: the machine's load (shared) falls on every row alike.
@@ -181,22 +183,38 @@ def main() -> None:
         calls = [[r for k, r in enumerate(results) if k % len(CALLS) == c] for c in range(len(CALLS))]
         alone = [t for t, preempted in loads[name] if not preempted]
         alone_ms = f"{ms(alone) if alone else '-'}, {len(alone)} of {len(loads[name])}"
-        rows.append([name, str(results[0]["squares"]), ms([r["load"] for r in results]),
-                     ms([t for t, _ in loads[name]]), alone_ms,
-                     *(f"{ms([r['first'] for r in rs])} / {ms([r['warm'] for r in rs])}" for rs in calls)])
-    print(f"Region table load, ms median (min-max): {args.processes * len(CALLS)} fresh processes per row, "
-          f"3 x {args.rounds} loads in one process; first call / the same call warm, ms, "
-          f"{args.processes} fresh processes each; load average {os.getloadavg()[0]:.1f} "
-          f"({os.cpu_count()} CPUs)")
+        rows.append(
+            [
+                name,
+                str(results[0]["squares"]),
+                ms([r["load"] for r in results]),
+                ms([t for t, _ in loads[name]]),
+                alone_ms,
+                *(f"{ms([r['first'] for r in rs])} / {ms([r['warm'] for r in rs])}" for rs in calls),
+            ]
+        )
+    print(
+        f"Region table load, ms median (min-max): {args.processes * len(CALLS)} fresh processes per row, "
+        f"3 x {args.rounds} loads in one process; first call / the same call warm, ms, "
+        f"{args.processes} fresh processes each; load average {os.getloadavg()[0]:.1f} "
+        f"({os.cpu_count()} CPUs)"
+    )
     print_table(
-        ["code, shipped table", "squares", "load, fresh process", "load, in-process",
-         "in-process, loads not preempted",
-         *(f"first {call}, {kind} point" for call, _, _, kind in CALLS)],
+        [
+            "code, shipped table",
+            "squares",
+            "load, fresh process",
+            "load, in-process",
+            "in-process, loads not preempted",
+            *(f"first {call}, {kind} point" for call, _, _, kind in CALLS),
+        ],
         rows,
     )
     print()
-    print(f"This checkout, where the load's time goes ({args.rounds} rounds in one process), "
-          "ms median (min-max):")
+    print(
+        f"This checkout, where the load's time goes ({args.rounds} rounds in one process), "
+        "ms median (min-max):"
+    )
     print_table(["step", "ms"], [[name, ms(times)] for name, times in phases.items()])
 
 

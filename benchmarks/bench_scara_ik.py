@@ -17,6 +17,7 @@ fails, the table says so and the damped-least-squares fallback is measured inste
 
 Run: .venv/bin/python benchmarks/bench_scara_ik.py [--calls 1000] [--targets 2000] [--rounds 3] [--no-rtb]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -66,15 +67,26 @@ def rtb_worker() -> None:
             found += bool(solution.success)
             if solution.success:
                 errors.append(float(np.linalg.norm(robot.fkine(solution.q).t[:2] - pose.t[:2])))
-        out[name] = {"micro": micro, "success": found / len(poses),
-                     "max_error": max(errors, default=math.nan)}
+        out[name] = {
+            "micro": micro,
+            "success": found / len(poses),
+            "max_error": max(errors, default=math.nan),
+        }
     json.dump(out, sys.stdout)
 
 
 def run_rtb(job: dict) -> tuple[dict | None, str]:
     """Timings from the Robotics Toolbox, or None and the reason it is unavailable."""
-    return run_worker(__file__, "--rtb-worker", job, (RTB_PACKAGE,), "import roboticstoolbox", RTB_VENV,
-                      "MK_RTB_PYTHON", timeout=1800)
+    return run_worker(
+        __file__,
+        "--rtb-worker",
+        job,
+        (RTB_PACKAGE,),
+        "import roboticstoolbox",
+        RTB_VENV,
+        "MK_RTB_PYTHON",
+        timeout=1800,
+    )
 
 
 # ---- the project's side -------------------------------------------------------------------------
@@ -107,8 +119,9 @@ def main() -> None:
         x = scara.fk((fixed if mode == "fixed_phi" else q)[:n])
         return x[:, :2], x[:, 2]
 
-    def solve(mode: str, p: np.ndarray, phi: np.ndarray, seed: np.ndarray | None = None,
-              compiled: bool = True):
+    def solve(
+        mode: str, p: np.ndarray, phi: np.ndarray, seed: np.ndarray | None = None, compiled: bool = True
+    ):
         return scara.ik(p, mode=mode, phi=phi if mode == "phi" else None, seed=seed, compiled=compiled)
 
     def one_call(call, n: int) -> tuple[float, float]:
@@ -126,25 +139,34 @@ def main() -> None:
         return float(np.median(medians)), float(np.percentile(timings, 99))
 
     scalar: dict[str, float] = {}
-    for mode, compiled in (("fixed_phi", True), ("phi", True), ("position", True), ("fixed_phi", False),
-                           ("phi", False), ("position", False)):
+    for mode, compiled in (
+        ("fixed_phi", True),
+        ("phi", True),
+        ("position", True),
+        ("fixed_phi", False),
+        ("phi", False),
+        ("position", False),
+    ):
         p, phi = targets_for(mode, args.targets)
-        seeds = q[-args.targets:]
-        median, p99 = one_call(lambda i, p=p, phi=phi, s=seeds, m=mode, c=compiled:
-                               solve(m, p[i], phi[i], s[i], c), len(p))
+        seeds = q[-args.targets :]
+        median, p99 = one_call(
+            lambda i, p=p, phi=phi, s=seeds, m=mode, c=compiled: solve(m, p[i], phi[i], s[i], c), len(p)
+        )
         path = "compiled kernel" if compiled else "numpy path"
         scalar[mode if compiled else f"{mode}, numpy path"] = median
-        rows.append((f"library, one target per call, mode {mode} ({path})", f"{median:.1f}",
-                     f"p99 {p99:.1f}", ""))
-    poses = scara.fkine(q[:args.targets])
+        rows.append(
+            (f"library, one target per call, mode {mode} ({path})", f"{median:.1f}", f"p99 {p99:.1f}", "")
+        )
+    poses = scara.fkine(q[: args.targets])
     median, p99 = one_call(lambda i: scara.solve_ik(poses[i], seed=q[-1 - i]), len(poses))
     scalar["solve_ik"] = median
-    rows.append(("library, solve_ik(4x4 pose), one target per call, mode phi", f"{median:.1f}",
-                 f"p99 {p99:.1f}", ""))
+    rows.append(
+        ("library, solve_ik(4x4 pose), one target per call, mode phi", f"{median:.1f}", f"p99 {p99:.1f}", "")
+    )
     batch: dict[str, float] = {}
     for mode in MODES:
         p, phi = targets_for(mode, 100_000)
-        seeds = q[-len(p):]
+        seeds = q[-len(p) :]
         rounds = []
         for _ in range(args.rounds):
             start = time.perf_counter()
@@ -152,8 +174,14 @@ def main() -> None:
             rounds.append((time.perf_counter() - start) / len(p) * 1e6)
         per_target = batch[mode] = float(np.median(rounds))
         error = np.abs(scara.fk(result.q)[:, :2] - p).max()
-        rows.append((f"library, batch of {len(p)}, mode {mode}", f"{per_target:.2f}",
-                     f"all solved: {bool(result.ok.all())}, max |FK(IK(p)) - p| {error:.1e} m", ""))
+        rows.append(
+            (
+                f"library, batch of {len(p)}, mode {mode}",
+                f"{per_target:.2f}",
+                f"all solved: {bool(result.ok.all())}, max |FK(IK(p)) - p| {error:.1e} m",
+                "",
+            )
+        )
 
     if not args.no_service:
         rows += service_rows(scara, targets_for("phi", args.calls), args.calls)
@@ -167,8 +195,17 @@ def main() -> None:
     ratio = ""
     if not args.no_rtb:
         job = {
-            "rows": [{"a": r.a, "alpha": r.alpha, "d": r.d, "theta": r.theta, "offset": r.offset,
-                      "prismatic": r.prismatic} for r in chain.rows],
+            "rows": [
+                {
+                    "a": r.a,
+                    "alpha": r.alpha,
+                    "d": r.d,
+                    "theta": r.theta,
+                    "offset": r.offset,
+                    "prismatic": r.prismatic,
+                }
+                for r in chain.rows
+            ],
             "qlim": np.column_stack([scara.limits.lower, scara.limits.upper]).tolist(),
             "base": chain.base.tolist(),
             "targets": np.column_stack([p, phi]).tolist(),
@@ -182,30 +219,43 @@ def main() -> None:
                 if name in measured:
                     m = measured[name]
                     median = float(np.median(m["micro"]))
-                    rows.append((f"Robotics Toolbox {measured['version']} {label}, same D-H model",
-                                 f"{median:.1f}",
-                                 f"solved {m['success']:.0%}, max error {m['max_error']:.1e} m",
-                                 f"{median / reference:.0f}x / {median / batched:.0f}x"))
+                    rows.append(
+                        (
+                            f"Robotics Toolbox {measured['version']} {label}, same D-H model",
+                            f"{median:.1f}",
+                            f"solved {m['success']:.0%}, max error {m['max_error']:.1e} m",
+                            f"{median / reference:.0f}x / {median / batched:.0f}x",
+                        )
+                    )
                     if name == "ik_LM":
-                        ratio = (f"library one call / ik_LM: ik {reference / median:.2f}, "
-                                 f"solve_ik {scalar['solve_ik'] / median:.2f}, mode position "
-                                 f"{scalar['position'] / median:.2f} (numpy path "
-                                 f"{scalar['position, numpy path'] / median:.2f}) (target <= 0.5)")
+                        ratio = (
+                            f"library one call / ik_LM: ik {reference / median:.2f}, "
+                            f"solve_ik {scalar['solve_ik'] / median:.2f}, mode position "
+                            f"{scalar['position'] / median:.2f} (numpy path "
+                            f"{scalar['position, numpy path'] / median:.2f}) (target <= 0.5)"
+                        )
     if not any(row[0].startswith("Robotics Toolbox") and row[1] != "-" for row in rows):
         # Fallback baseline: a plain numerical IK of our own on the same D-H chain.
         dls = [dls_ik(chain, scara, np.array([p[i, 0], p[i, 1], phi[i]]), seeds[i]) for i in range(n)]
         micro = np.array([d[0] for d in dls])
         solved = np.array([d[1] for d in dls])
         median = float(np.median(micro))
-        rows.append(("fallback: own damped least squares Newton on the same D-H chain", f"{median:.1f}",
-                     f"solved {solved.mean():.0%} (tol 1e-10, 100 iterations, one start, no restarts)",
-                     f"{median / reference:.0f}x / {median / batched:.0f}x"))
+        rows.append(
+            (
+                "fallback: own damped least squares Newton on the same D-H chain",
+                f"{median:.1f}",
+                f"solved {solved.mean():.0%} (tol 1e-10, 100 iterations, one start, no restarts)",
+                f"{median / reference:.0f}x / {median / batched:.0f}x",
+            )
+        )
 
     load = ", ".join(f"{v:.1f}" for v in os.getloadavg())
     python = sys.version.split()[0]
-    print(f"\nSCARA IK benchmark: {os.cpu_count()} cores (load average {load}), Python {python}, "
-          f"numpy {np.__version__}.\nTimes are medians in microseconds per IK. Speed-up of the library in "
-          f"mode phi: one target per call ({reference:.1f} us) / batched ({batched:.2f} us per target).\n")
+    print(
+        f"\nSCARA IK benchmark: {os.cpu_count()} cores (load average {load}), Python {python}, "
+        f"numpy {np.__version__}.\nTimes are medians in microseconds per IK. Speed-up of the library in "
+        f"mode phi: one target per call ({reference:.1f} us) / batched ({batched:.2f} us per target).\n"
+    )
     header = ("what", "us/IK", "notes", "library speed-up (one / batch)")
     widths = [max(len(r[i]) for r in [*rows, header]) for i in range(4)]
     print("| " + " | ".join(h.ljust(w) for h, w in zip(header, widths, strict=True)) + " |")
@@ -224,7 +274,7 @@ def service_rows(scara, targets, calls: int) -> list[tuple[str, str, str, str]]:
     import conftest  # noqa: F401 - reserves an unused ROS_DOMAIN_ID and keeps discovery on localhost
     from ros_harness import NodeProcess, Probe
 
-    from manipulator_kinematics.params import config_path
+    from manipulator_kinematics.param_files import config_path
     from manipulator_kinematics.planar import yaw_quaternion
     from manipulator_kinematics_interfaces.srv import SolveIK
 
@@ -253,8 +303,14 @@ def service_rows(scara, targets, calls: int) -> list[tuple[str, str, str, str]]:
     finally:
         process.stop()
         probe.close()
-    return [(f"SolveIK service across processes, {calls} calls, mode phi", f"{np.median(micro):.0f}",
-             f"p99 {np.percentile(micro, 99):.0f}; max |service - library| {worst:.0e}", "")]
+    return [
+        (
+            f"SolveIK service across processes, {calls} calls, mode phi",
+            f"{np.median(micro):.0f}",
+            f"p99 {np.percentile(micro, 99):.0f}; max |service - library| {worst:.0e}",
+            "",
+        )
+    ]
 
 
 def dls_ik(chain, scara, target, seed, tol: float = 1e-10, iterations: int = 100) -> tuple[float, bool]:
@@ -267,8 +323,13 @@ def dls_ik(chain, scara, target, seed, tol: float = 1e-10, iterations: int = 100
     solved = False
     for _ in range(iterations):
         T = chain.fkine(q)
-        error = np.array([target[0] - T[0, 3], target[1] - T[1, 3],
-                          math.remainder(target[2] - math.atan2(T[1, 0], T[0, 0]), 2 * math.pi)])
+        error = np.array(
+            [
+                target[0] - T[0, 3],
+                target[1] - T[1, 3],
+                math.remainder(target[2] - math.atan2(T[1, 0], T[0, 0]), 2 * math.pi),
+            ]
+        )
         if np.abs(error).max() < tol:
             q[1:] = [math.remainder(v, 2 * math.pi) for v in q[1:]]
             solved = bool(scara.within_limits(q))

@@ -15,6 +15,7 @@ repeated calls on one (N, n) array; batches of 10^3 and more in thread CPU time 
 
 Run: .venv/bin/python benchmarks/bench_serial_chain.py [--rounds 5] [--baseline 47c33a1]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -45,16 +46,25 @@ def chains() -> dict:
     from scara_kinematics.kinematics import Scara
     from tool_changer_kinematics.kinematics import ToolChanger
 
-    return {"tool_changer": ToolChanger.default().chain, "palletizer": Palletizer.default().chain,
-            "scara": Scara.default().chain, "pump_boom": PumpBoom.default().chain}
+    return {
+        "tool_changer": ToolChanger.default().chain,
+        "palletizer": Palletizer.default().chain,
+        "scara": Scara.default().chain,
+        "pump_boom": PumpBoom.default().chain,
+    }
 
 
 def described(chain) -> dict:
     """A chain as JSON data: its rows and transforms (what a worker builds its SerialChain from)."""
     fields = ("a", "alpha", "d", "theta", "prismatic", "offset")
     rows = [{field: np.asarray(getattr(row, field)).item() for field in fields} for row in chain.rows]
-    return {"rows": rows, "modified": chain.modified, "base": chain.base.tolist(),
-            "tool": chain.tool.tolist(), "coupling": chain.coupling.tolist()}
+    return {
+        "rows": rows,
+        "modified": chain.modified,
+        "base": chain.base.tolist(),
+        "tool": chain.tool.tolist(),
+        "coupling": chain.coupling.tolist(),
+    }
 
 
 def timed(function, q: np.ndarray, size: int, single: int, part: int) -> list[int]:
@@ -71,7 +81,7 @@ def timed(function, q: np.ndarray, size: int, single: int, part: int) -> list[in
     times = []
     if size == 1:
         share = single // PARTS
-        for sample in q[part * share:(part + 1) * share]:
+        for sample in q[part * share : (part + 1) * share]:
             start = clock()
             function(sample)
             times.append(clock() - start)
@@ -101,18 +111,24 @@ def worker() -> None:
     rng = np.random.default_rng(7)
     built, check = [], {}
     for name, spec in setup["chains"].items():
-        chain = serial_chain.SerialChain([serial_chain.DHRow(**row) for row in spec["rows"]],
-                                         modified=spec["modified"], base=spec["base"], tool=spec["tool"],
-                                         coupling=spec["coupling"])
+        chain = serial_chain.SerialChain(
+            [serial_chain.DHRow(**row) for row in spec["rows"]],
+            modified=spec["modified"],
+            base=spec["base"],
+            tool=spec["tool"],
+            coupling=spec["coupling"],
+        )
         q = rng.uniform(-3.0, 3.0, (SIZES[-1], chain.n))
         pose, jacobian = chain.fkine_jacob0(q[:100])
         check[name] = [pose.tolist(), jacobian.tolist()]
         built.append((chain, q))
     cases, options = [], {"compiled": False} if setup["numpy"] else {}
     for chain, q in built:
-        functions = {"fkine": lambda q, c=chain: c.fkine(q, **options),
-                     "frames": lambda q, c=chain: c.fkine(q, all_frames=True, **options),
-                     "fkine_jacob0": lambda q, c=chain: c.fkine_jacob0(q, **options)}
+        functions = {
+            "fkine": lambda q, c=chain: c.fkine(q, **options),
+            "frames": lambda q, c=chain: c.fkine(q, all_frames=True, **options),
+            "fkine_jacob0": lambda q, c=chain: c.fkine_jacob0(q, **options),
+        }
         cases += [(functions[what], q, size) for what in WHATS for size in SIZES]
     print(json.dumps({"where": serial_chain.__file__, "check": check}), flush=True)
     for line in sys.stdin:
@@ -126,8 +142,14 @@ class Worker:
 
     def __init__(self, tree: Path, setup: dict) -> None:
         env = dict(os.environ, PYTHONPATH=str(tree))
-        self.process = subprocess.Popen([sys.executable, __file__, "--worker"], cwd=tree, env=env, text=True,
-                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        self.process = subprocess.Popen(
+            [sys.executable, __file__, "--worker"],
+            cwd=tree,
+            env=env,
+            text=True,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+        )
         self.ask(json.dumps(setup))
         answer = json.loads(self.process.stdout.readline())
         where = Path(answer["where"]).resolve()
@@ -165,13 +187,16 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as directory:
         trees = {"ours": (REPO, False), "numpy": (REPO, True)}
         if args.baseline:
-            archive = subprocess.run(["git", "-C", str(REPO), "archive", args.baseline], capture_output=True,
-                                     check=True).stdout
+            archive = subprocess.run(
+                ["git", "-C", str(REPO), "archive", args.baseline], capture_output=True, check=True
+            ).stdout
             with tarfile.open(fileobj=io.BytesIO(archive)) as tar:
                 tar.extractall(directory, filter="data")
             trees["baseline"] = (Path(directory), False)
-        workers = {side: Worker(tree, {"chains": specs, "single": args.single, "numpy": numpy})
-                   for side, (tree, numpy) in trees.items()}
+        workers = {
+            side: Worker(tree, {"chains": specs, "single": args.single, "numpy": numpy})
+            for side, (tree, numpy) in trees.items()
+        }
         for side, other in workers.items():
             for name in specs:
                 for theirs, ours in zip(other.check[name], workers["ours"].check[name], strict=True):
@@ -211,9 +236,11 @@ def main() -> None:
             row.append(ratio(k, "baseline"))
         table.append(row)
     load = ", ".join(f"{v:.1f}" for v in os.getloadavg())
-    print(f"\nSerialChain benchmark: {os.cpu_count()} cores (load {load}), Python {sys.version.split()[0]}, "
-          f"numpy {np.__version__}; medians over {args.rounds} rounds; each side in its own process; "
-          f"batches of {CPU_TIMED} and more in CPU time.\n")
+    print(
+        f"\nSerialChain benchmark: {os.cpu_count()} cores (load {load}), Python {sys.version.split()[0]}, "
+        f"numpy {np.__version__}; medians over {args.rounds} rounds; each side in its own process; "
+        f"batches of {CPU_TIMED} and more in CPU time.\n"
+    )
     print_table(header, table)
 
 

@@ -21,6 +21,7 @@ is created with pip on first use), through ``peer_venv.run_worker``.
 
 Run: .venv/bin/python benchmarks/bench_time_scaling.py [--rounds 7] [--no-toppra]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -73,8 +74,11 @@ def toppra_worker() -> None:
         else:
             _, sd, _ = instance.compute_parameterization(0.0, 0.0)
             rates = np.abs(spline(s, 1)[:, :-1]) * sd[:, None]
-            result |= {"duration": float(trajectory.duration), "joint_ratio": float(np.max(rates / vmax)),
-                       "tip_ratio": float(np.max(sd) / job["tip_speed"])}
+            result |= {
+                "duration": float(trajectory.duration),
+                "joint_ratio": float(np.max(rates / vmax)),
+                "tip_ratio": float(np.max(sd) / job["tip_speed"]),
+            }
         out["paths"].append(result)
     json.dump(out, sys.stdout)
 
@@ -82,16 +86,27 @@ def toppra_worker() -> None:
 def _toppra_solve(toppra, s, augmented, velocity, acceleration):
     """Spline through the samples, constraints, TOPP-RA on the grid s, constant-acceleration timing."""
     spline = toppra.SplineInterpolator(s, augmented)
-    constraints = [toppra.constraint.JointVelocityConstraint(velocity),
-                   toppra.constraint.JointAccelerationConstraint(acceleration)]
-    instance = toppra.algorithm.TOPPRA(constraints, spline, gridpoints=s,
-                                       parametrizer="ParametrizeConstAccel")
+    constraints = [
+        toppra.constraint.JointVelocityConstraint(velocity),
+        toppra.constraint.JointAccelerationConstraint(acceleration),
+    ]
+    instance = toppra.algorithm.TOPPRA(
+        constraints, spline, gridpoints=s, parametrizer="ParametrizeConstAccel"
+    )
     return spline, instance, instance.compute_trajectory(0.0, 0.0)
 
 
 def run_toppra(job: dict) -> tuple[dict | None, str]:
-    return run_worker(__file__, "--toppra-worker", job, (TOPPRA_PACKAGE,), "import toppra", TOPPRA_VENV,
-                      "MK_TOPPRA_PYTHON", timeout=1800)
+    return run_worker(
+        __file__,
+        "--toppra-worker",
+        job,
+        (TOPPRA_PACKAGE,),
+        "import toppra",
+        TOPPRA_VENV,
+        "MK_TOPPRA_PYTHON",
+        timeout=1800,
+    )
 
 
 # ---- the project's side -------------------------------------------------------------------------
@@ -106,8 +121,9 @@ def pump_boom_paths():
     boom = PumpBoom.default()
     paths = [("slanted line, 100 mm", pour_line(boom, *TYPICAL_POURS["slanted_line"][1:]))]
     # A raster over the boom's front: rows 2 m apart at z = 12.5 m, x 16-28 m.
-    raster = np.array([[x, y, 12.5] for y in np.arange(-6.0, 6.1, 2.0)
-                       for x in ((16.0, 28.0) if y % 4 else (28.0, 16.0))])
+    raster = np.array(
+        [[x, y, 12.5] for y in np.arange(-6.0, 6.1, 2.0) for x in ((16.0, 28.0) if y % 4 else (28.0, 16.0))]
+    )
     length = float(np.sum(np.linalg.norm(np.diff(raster, axis=0), axis=1)))
     for count in (2_000, MAX_POINTS):
         plan = plan_path(boom, raster, step=length / (count - len(raster)))
@@ -138,22 +154,53 @@ def main() -> None:
             timed = time_scale(q, s, vmax, TIP_SPEED, ACCELERATION)
             seconds.append(time.perf_counter() - start)
         chord = np.abs(np.diff(q, axis=0) / np.diff(s)[:, None])
-        rate = np.maximum.reduce([np.abs(np.gradient(q, s, axis=0, edge_order=2)),
-                                  np.vstack([chord[:1], chord]), np.vstack([chord, chord[-1:]])])
-        ours.append({"seconds": seconds, "duration": timed.duration,
-                     "joint_ratio": float(np.max(rate * timed.speed[:, None] / vmax)),
-                     "tip_ratio": float(np.max(timed.speed) / TIP_SPEED)})
-    peer, why = (None, "skipped (--no-toppra)") if args.no_toppra else run_toppra({
-        "paths": [{"q": q.tolist(), "s": s.tolist(), "vmax": vmax.tolist()} for _, q, s, vmax in paths],
-        "tip_speed": TIP_SPEED, "acceleration": ACCELERATION, "rounds": args.rounds})
+        rate = np.maximum.reduce(
+            [
+                np.abs(np.gradient(q, s, axis=0, edge_order=2)),
+                np.vstack([chord[:1], chord]),
+                np.vstack([chord, chord[-1:]]),
+            ]
+        )
+        ours.append(
+            {
+                "seconds": seconds,
+                "duration": timed.duration,
+                "joint_ratio": float(np.max(rate * timed.speed[:, None] / vmax)),
+                "tip_ratio": float(np.max(timed.speed) / TIP_SPEED),
+            }
+        )
+    peer, why = (
+        (None, "skipped (--no-toppra)")
+        if args.no_toppra
+        else run_toppra(
+            {
+                "paths": [
+                    {"q": q.tolist(), "s": s.tolist(), "vmax": vmax.tolist()} for _, q, s, vmax in paths
+                ],
+                "tip_speed": TIP_SPEED,
+                "acceleration": ACCELERATION,
+                "rounds": args.rounds,
+            }
+        )
+    )
 
     load = ", ".join(f"{v:.1f}" for v in os.getloadavg())
-    print(f"\nTime scaling benchmark: {os.cpu_count()} cores (load average {load}), Python "
-          f"{sys.version.split()[0]}, numpy {np.__version__}, toppra {peer['version'] if peer else why}.\n"
-          f"Tip speed {TIP_SPEED} m/s, tip acceleration {ACCELERATION} m/s^2, the boom's joint speed limits; "
-          f"compute times are medians of {args.rounds} rounds.\n")
-    header = ("path", "N", "duration ours / toppra (s)", "ratio", "compute ours / toppra (ms)", "speed-up",
-              "max joint speed/limit ours / toppra", "max tip speed/limit ours / toppra")
+    print(
+        f"\nTime scaling benchmark: {os.cpu_count()} cores (load average {load}), Python "
+        f"{sys.version.split()[0]}, numpy {np.__version__}, toppra {peer['version'] if peer else why}.\n"
+        f"Tip speed {TIP_SPEED} m/s, tip acceleration {ACCELERATION} m/s^2, the boom's joint speed limits; "
+        f"compute times are medians of {args.rounds} rounds.\n"
+    )
+    header = (
+        "path",
+        "N",
+        "duration ours / toppra (s)",
+        "ratio",
+        "compute ours / toppra (ms)",
+        "speed-up",
+        "max joint speed/limit ours / toppra",
+        "max tip speed/limit ours / toppra",
+    )
     rows = []
     for k, (name, q, _, _) in enumerate(paths):
         mine = ours[k]
@@ -161,14 +208,32 @@ def main() -> None:
         ms = 1e3 * float(np.median(mine["seconds"]))
         if other is None or other["duration"] is None:
             note = why if other is None else "toppra found no parameterisation"
-            rows.append((name, str(len(q)), f"{mine['duration']:.2f} / -", "-", f"{ms:.2f} / -", note,
-                         f"{mine['joint_ratio']:.6f} / -", f"{mine['tip_ratio']:.6f} / -"))
+            rows.append(
+                (
+                    name,
+                    str(len(q)),
+                    f"{mine['duration']:.2f} / -",
+                    "-",
+                    f"{ms:.2f} / -",
+                    note,
+                    f"{mine['joint_ratio']:.6f} / -",
+                    f"{mine['tip_ratio']:.6f} / -",
+                )
+            )
             continue
         theirs = 1e3 * float(np.median(other["seconds"]))
-        rows.append((name, str(len(q)), f"{mine['duration']:.2f} / {other['duration']:.2f}",
-                     f"{mine['duration'] / other['duration']:.4f}", f"{ms:.2f} / {theirs:.1f}",
-                     f"{theirs / ms:.0f}x", f"{mine['joint_ratio']:.6f} / {other['joint_ratio']:.6f}",
-                     f"{mine['tip_ratio']:.6f} / {other['tip_ratio']:.6f}"))
+        rows.append(
+            (
+                name,
+                str(len(q)),
+                f"{mine['duration']:.2f} / {other['duration']:.2f}",
+                f"{mine['duration'] / other['duration']:.4f}",
+                f"{ms:.2f} / {theirs:.1f}",
+                f"{theirs / ms:.0f}x",
+                f"{mine['joint_ratio']:.6f} / {other['joint_ratio']:.6f}",
+                f"{mine['tip_ratio']:.6f} / {other['tip_ratio']:.6f}",
+            )
+        )
     print_table(header, rows)
 
 

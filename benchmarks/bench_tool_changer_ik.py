@@ -18,6 +18,7 @@ bench_scara_ik.py (``$MK_BENCH_PYTHON`` names an interpreter that has ``robotics
 
 Run: .venv/bin/python benchmarks/bench_tool_changer_ik.py [--rounds 3] [--batch 100000]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -57,8 +58,13 @@ def peer_worker() -> None:
 
     job = json.load(sys.stdin)
     rows = job["rows"]
-    robot = rtb.DHRobot([rtb.RevoluteDH(a=r["a"], alpha=r["alpha"], d=r["d"], qlim=lim)
-                         for r, lim in zip(rows, job["qlim"], strict=True)], name="tool_changer")
+    robot = rtb.DHRobot(
+        [
+            rtb.RevoluteDH(a=r["a"], alpha=r["alpha"], d=r["d"], qlim=lim)
+            for r, lim in zip(rows, job["qlim"], strict=True)
+        ],
+        name="tool_changer",
+    )
     ets = robot.ets()
     # Pinocchio: joint i+1 sits at the fixed part Tz(d_i) Tx(a_i) Rx(alpha_i) of row i; the tool frame
     # at that of the last row.
@@ -91,8 +97,12 @@ def peer_worker() -> None:
     pose_ref, jacobian_ref = (np.array(m) for m in job["check"])
     out["check"] = {
         "pinocchio": float(max(np.abs(oMf.homogeneous - pose_ref).max(), np.abs(jac - jacobian_ref).max())),
-        "rtb_ets": float(max(np.abs(ets.fkine(check_q).A - pose_ref).max(),
-                             np.abs(ets.jacob0(check_q) - jacobian_ref).max())),
+        "rtb_ets": float(
+            max(
+                np.abs(ets.fkine(check_q).A - pose_ref).max(),
+                np.abs(ets.jacob0(check_q) - jacobian_ref).max(),
+            )
+        ),
     }
     poses = [SE3(np.array(T), check=False) for T in job["targets"]]
     seeds = np.array(job["seeds"])
@@ -121,15 +131,26 @@ def peer_worker() -> None:
                 found += bool(solution.success)
                 if solution.success:
                     errors.append(float(np.abs(robot.fkine(solution.q).A - pose.A).max()))
-            result[name] = {"micro": float(np.median(micro)), "success": found / len(poses),
-                            "max_error": max(errors, default=float("nan"))}
+            result[name] = {
+                "micro": float(np.median(micro)),
+                "success": found / len(poses),
+                "max_error": max(errors, default=float("nan")),
+            }
         out["rounds"].append(result)
     json.dump(out, sys.stdout)
 
 
 def run_peers(job: dict) -> tuple[dict | None, str]:
-    return run_worker(__file__, "--peer-worker", job, PACKAGES, "import roboticstoolbox, pinocchio", VENV,
-                      "MK_BENCH_PYTHON", timeout=3600)
+    return run_worker(
+        __file__,
+        "--peer-worker",
+        job,
+        PACKAGES,
+        "import roboticstoolbox, pinocchio",
+        VENV,
+        "MK_BENCH_PYTHON",
+        timeout=3600,
+    )
 
 
 # ---- the project's side ----------------------------------------------------------------------------
@@ -158,8 +179,11 @@ def main() -> None:
     job = {
         "rows": [{"a": r.a, "alpha": r.alpha, "d": r.d} for r in chain.rows],
         "qlim": np.column_stack([arm.limits.lower, arm.limits.upper]).tolist(),
-        "q": q.tolist(), "single": args.single, "rounds": 1,
-        "targets": T[: args.ik_targets].tolist(), "seeds": seeds[: args.ik_targets].tolist(),
+        "q": q.tolist(),
+        "single": args.single,
+        "rounds": 1,
+        "targets": T[: args.ik_targets].tolist(),
+        "seeds": seeds[: args.ik_targets].tolist(),
         "check": [m.tolist() for m in chain.fkine_jacob0(single[0])],
     }
     arm.compiled_kernel(wait=True)  # numba loads (or compiles) the single-call kernel before timing
@@ -173,8 +197,9 @@ def main() -> None:
                 rounds += peers["rounds"]
         r = {}
         r["ik_one"] = per_call(lambda i: arm.solve_ik(T[i], seed=seeds[i]), range(args.single))
-        r["ik_one_numpy"] = per_call(lambda i: arm.solve_ik(T[i], seed=seeds[i], compiled=False),
-                                     range(args.single // 4))
+        r["ik_one_numpy"] = per_call(
+            lambda i: arm.solve_ik(T[i], seed=seeds[i], compiled=False), range(args.single // 4)
+        )
         start = time.perf_counter()
         batch = arm.solve_ik(T, seed=seeds)
         r["ik_batch"] = time.perf_counter() - start
@@ -194,17 +219,28 @@ def main() -> None:
     n = args.batch
     ik_one, ik_batch = med(r["ik_one"] for r in ours), med(r["ik_batch"] for r in ours)
     rows = [
-        ("IK, ours: all 8 solutions + selection, one target per call", f"{ik_one:.1f} us",
-         f"max FK(IK) error {max(r['ik_error'] for r in ours):.1e}"),
-        ("IK, ours: one target per call, numpy path (compiled=False)",
-         f"{med(r['ik_one_numpy'] for r in ours):.1f} us", "the reference the kernel is tested against"),
+        (
+            "IK, ours: all 8 solutions + selection, one target per call",
+            f"{ik_one:.1f} us",
+            f"max FK(IK) error {max(r['ik_error'] for r in ours):.1e}",
+        ),
+        (
+            "IK, ours: one target per call, numpy path (compiled=False)",
+            f"{med(r['ik_one_numpy'] for r in ours):.1f} us",
+            "the reference the kernel is tested against",
+        ),
         (f"IK, ours: batch of {n}", f"{ik_batch:.3f} s", f"{n / ik_batch:,.0f} poses/s (target >= 200,000)"),
     ]
     fkj_one, fkj_batch = med(r["fkj_one"] for r in ours), med(r["fkj_batch"] for r in ours)
-    rows += [("FK + Jacobian, ours (SerialChain.fkine_jacob0), one call", f"{fkj_one:.2f} us",
-              "target <= Pinocchio's"),
-             ("FK, ours (SerialChain.fkine), one call", f"{med(r['fk_one'] for r in ours):.2f} us", ""),
-             (f"FK + Jacobian, ours, one batched call of {n}", f"{fkj_batch:.3f} s", "")]
+    rows += [
+        (
+            "FK + Jacobian, ours (SerialChain.fkine_jacob0), one call",
+            f"{fkj_one:.2f} us",
+            "target <= Pinocchio's",
+        ),
+        ("FK, ours (SerialChain.fkine), one call", f"{med(r['fk_one'] for r in ours):.2f} us", ""),
+        (f"FK + Jacobian, ours, one batched call of {n}", f"{fkj_batch:.3f} s", ""),
+    ]
     if peers is None:
         rows.append(("Robotics Toolbox / Pinocchio", "-", why))
     else:
@@ -217,27 +253,46 @@ def main() -> None:
             if name == "ik_LM":
                 share = med(o["ik_one"] / p[name]["micro"] for p, o in pairs)
                 target = f"; ours / this = {share:.3f} (target <= 0.5)"
-            rows.append((f"IK, RTB {peers['rtb']} {label}, one answer", f"{micro:.1f} us",
-                         f"ours {per_call_ratio:.0f}x faster per call{target}, {batch_ratio:.0f}x batched; "
-                         f"solved {rounds[0][name]['success']:.0%}"))
+            rows.append(
+                (
+                    f"IK, RTB {peers['rtb']} {label}, one answer",
+                    f"{micro:.1f} us",
+                    f"ours {per_call_ratio:.0f}x faster per call{target}, {batch_ratio:.0f}x batched; "
+                    f"solved {rounds[0][name]['success']:.0%}",
+                )
+            )
         rows += [
             ("FK + Jacobian, RTB DHRobot fkine + jacob0", f"{med(p['rtb_dh'] for p in rounds):.1f} us", ""),
-            ("FK + Jacobian, RTB ETS (C) fkine + jacob0", f"{med(p['rtb_ets'] for p in rounds):.1f} us",
-             f"max |difference| to ours {peers['check']['rtb_ets']:.0e}"),
+            (
+                "FK + Jacobian, RTB ETS (C) fkine + jacob0",
+                f"{med(p['rtb_ets'] for p in rounds):.1f} us",
+                f"max |difference| to ours {peers['check']['rtb_ets']:.0e}",
+            ),
             (f"FK + Jacobian, RTB ETS, loop of {n}", f"{med(p['rtb_ets_batch'] for p in rounds):.3f} s", ""),
-            (f"FK + Jacobian, Pinocchio {peers['pin']}", f"{med(p['pin'] for p in rounds):.2f} us",
-             f"max |difference| to ours {peers['check']['pinocchio']:.0e}; ours one call / this = "
-             f"{med(o['fkj_one'] / p['pin'] for p, o in pairs):.2f} (target <= 1)"),
-            ("FK, Pinocchio forwardKinematics + updateFramePlacement",
-             f"{med(p['pin_fk'] for p in rounds):.2f} us",
-             f"ours one call / this = {med(o['fk_one'] / p['pin_fk'] for p, o in pairs):.2f}"),
-            (f"FK + Jacobian, Pinocchio, loop of {n}", f"{med(p['pin_batch'] for p in rounds):.3f} s",
-             f"ours batched / Pinocchio loop = {med(o['fkj_batch'] / p['pin_batch'] for p, o in pairs):.2f} "
-             "(target <= 1)"),
+            (
+                f"FK + Jacobian, Pinocchio {peers['pin']}",
+                f"{med(p['pin'] for p in rounds):.2f} us",
+                f"max |difference| to ours {peers['check']['pinocchio']:.0e}; ours one call / this = "
+                f"{med(o['fkj_one'] / p['pin'] for p, o in pairs):.2f} (target <= 1)",
+            ),
+            (
+                "FK, Pinocchio forwardKinematics + updateFramePlacement",
+                f"{med(p['pin_fk'] for p in rounds):.2f} us",
+                f"ours one call / this = {med(o['fk_one'] / p['pin_fk'] for p, o in pairs):.2f}",
+            ),
+            (
+                f"FK + Jacobian, Pinocchio, loop of {n}",
+                f"{med(p['pin_batch'] for p in rounds):.3f} s",
+                "ours batched / Pinocchio loop = "
+                f"{med(o['fkj_batch'] / p['pin_batch'] for p, o in pairs):.2f} "
+                "(target <= 1)",
+            ),
         ]
     load = ", ".join(f"{v:.1f}" for v in os.getloadavg())
-    print(f"\nTool changer benchmark: {os.cpu_count()} cores (load {load}), Python {sys.version.split()[0]}, "
-          f"numpy {np.__version__}; medians over {args.rounds} rounds.\n")
+    print(
+        f"\nTool changer benchmark: {os.cpu_count()} cores (load {load}), Python {sys.version.split()[0]}, "
+        f"numpy {np.__version__}; medians over {args.rounds} rounds.\n"
+    )
     widths = [max(len(row[i]) for row in rows) for i in range(3)]
     header = ("what", "time", "notes")
     print("| " + " | ".join(h.ljust(w) for h, w in zip(header, widths, strict=True)) + " |")

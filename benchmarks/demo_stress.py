@@ -49,7 +49,9 @@ def run_once(output: Path) -> dict[str, object]:
         with open(output / "demo.out", "w", encoding="utf-8") as log:
             demo = subprocess.Popen(
                 [console_script("excavator_demo"), "--output", str(output)],
-                stdout=log, stderr=subprocess.STDOUT, env=env,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                env=env,
             )
             try:
                 code = demo.wait()

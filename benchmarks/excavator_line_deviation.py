@@ -32,7 +32,7 @@ from excavator_kinematics.kinematics import Excavator
 from excavator_kinematics.plant import Plant
 from excavator_kinematics.rate_command import rate_command, toward_line
 from manipulator_kinematics.node_util import console_script
-from manipulator_kinematics.params import config_path
+from manipulator_kinematics.param_files import config_path
 
 # The table: (label, linear target m/s).
 TARGETS = (
@@ -52,8 +52,9 @@ def line_deviation(tips: np.ndarray, start: np.ndarray, direction: np.ndarray) -
     return float(along.max()), float(np.linalg.norm(offsets - along[:, None] * u, axis=1).max())
 
 
-def in_plant(linear: np.ndarray, duration: float, gain: float, gives_way: bool, dt: float = 0.01
-             ) -> tuple[float, float]:
+def in_plant(
+    linear: np.ndarray, duration: float, gain: float, gives_way: bool, dt: float = 0.01
+) -> tuple[float, float]:
     exc = Excavator.default()
     plant = Plant(exc.limits, exc.limits.reference)
     q_dot = np.r_[linear, 0.0]
@@ -76,18 +77,24 @@ def across_processes(linear: np.ndarray, duration: float, gives_way: bool) -> tu
     from rclpy.node import Node
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from excavator_kinematics import messages
+    from excavator_kinematics import message_codec
 
-    files = [arg for name in ("excavator_cet200.yaml", "excavator_nodes.yaml")
-             for arg in ("--params-file", str(config_path(name)))]
+    files = [
+        arg
+        for name in ("excavator_cet200.yaml", "excavator_nodes.yaml")
+        for arg in ("--params-file", str(config_path(name)))
+    ]
     settings = tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False)  # noqa: SIM115 - deleted below
-    yaml.safe_dump({"/**/excavator_velocity_ik": {"ros__parameters": {"bucket_angle_gives_way": gives_way}}},
-                   settings)
+    yaml.safe_dump(
+        {"/**/excavator_velocity_ik": {"ros__parameters": {"bucket_angle_gives_way": gives_way}}}, settings
+    )
     settings.close()
     files += ["--params-file", settings.name]
     logs = [open(os.devnull, "w") for _ in NODES]  # noqa: SIM115 - closed below
-    processes = [subprocess.Popen([console_script(n), "--ros-args", *files], stdout=log, stderr=log)
-                 for n, log in zip(NODES, logs, strict=True)]
+    processes = [
+        subprocess.Popen([console_script(n), "--ros-args", *files], stdout=log, stderr=log)
+        for n, log in zip(NODES, logs, strict=True)
+    ]
     context = rclpy.Context()
     rclpy.init(context=context)
     try:
@@ -98,9 +105,14 @@ def across_processes(linear: np.ndarray, duration: float, gives_way: bool) -> tu
         target = node.create_publisher(TwistStamped, "target_bucket_twist", qos)
         poses: list[tuple[int, np.ndarray]] = []
         node.create_subscription(
-            PoseStamped, "bucket_pose",
-            lambda m: poses.append((messages.stamp_ns(m.header.stamp),
-                                    np.array([m.pose.position.x, m.pose.position.y, m.pose.position.z]))),
+            PoseStamped,
+            "bucket_pose",
+            lambda m: poses.append(
+                (
+                    message_codec.stamp_ns(m.header.stamp),
+                    np.array([m.pose.position.x, m.pose.position.y, m.pose.position.z]),
+                )
+            ),
             qos,
         )
 
@@ -116,8 +128,9 @@ def across_processes(linear: np.ndarray, duration: float, gives_way: bool) -> tu
         start = poses[-1][1]
 
         def send() -> None:
-            target.publish(messages.bucket_twist(node.get_clock().now().to_msg(), "base_link",
-                                                 linear, np.zeros(3)))
+            target.publish(
+                message_codec.bucket_twist(node.get_clock().now().to_msg(), "base_link", linear, np.zeros(3))
+            )
 
         node.create_timer(0.02, send)
         deadline = start_ns + int(duration * 1e9)
@@ -138,8 +151,12 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--where", choices=("both", "plant", "nodes"), default="both")
     parser.add_argument("--duration", type=float, default=14.0, help="seconds per direction")
-    parser.add_argument("--line-gain", type=float, default=2.0,
-                        help="plant: the IK's line_gain (1/s, config default 2); the nodes use their config")
+    parser.add_argument(
+        "--line-gain",
+        type=float,
+        default=2.0,
+        help="plant: the IK's line_gain (1/s, config default 2); the nodes use their config",
+    )
     parser.add_argument("--bucket-angle-gives-way", action="store_true", help="the IK's secondary task")
     parser.add_argument("--only", help="one target of the table, e.g. '+x 2 m/s'")
     args = parser.parse_args()
@@ -158,10 +175,14 @@ def main() -> int:
                     os.environ["ROS_DOMAIN_ID"] = str(domain)
                     travel, off = across_processes(np.array(linear), args.duration, gives_way)
             rows.append((label, where, travel, off))
-            print(f"{label:10} {where:6} travel {travel:6.3f} m  max distance from the line {off:6.4f} m",
-                  flush=True)
-    print(f"\n| target ({args.duration:g} s) | where | tip travel along it (m) | "
-          "largest distance from the line (m) |")
+            print(
+                f"{label:10} {where:6} travel {travel:6.3f} m  max distance from the line {off:6.4f} m",
+                flush=True,
+            )
+    print(
+        f"\n| target ({args.duration:g} s) | where | tip travel along it (m) | "
+        "largest distance from the line (m) |"
+    )
     print("| --- | --- | --- | --- |")
     for label, where, travel, off in rows:
         print(f"| {label} | {where} | {travel:.3f} | {off:.4f} |")

@@ -44,8 +44,12 @@ def _until(arrays: TopicArrays, end_ns: int | None) -> TopicArrays:
     if end_ns is None or "header.stamp.sec" not in arrays.fields:
         return arrays
     keep = arrays.stamp_ns() <= end_ns
-    return TopicArrays(arrays.topic, arrays.msgtype, arrays.log_time[keep],
-                       {path: values[keep] for path, values in arrays.fields.items()})
+    return TopicArrays(
+        arrays.topic,
+        arrays.msgtype,
+        arrays.log_time[keep],
+        {path: values[keep] for path, values in arrays.fields.items()},
+    )
 
 
 def _matched(a: TopicArrays, b: TopicArrays) -> tuple[np.ndarray, np.ndarray]:
@@ -95,8 +99,15 @@ def _clip_spikes(ax: plt.Axes, values: np.ndarray) -> None:
     off = int(np.sum(np.abs(values[np.isfinite(values)]) > limit))
     if limit > 0.0 and off:
         ax.set_ylim(-limit, limit)
-        ax.text(0.99, 0.03, f"axis clipped at +-{limit:.3g}: {off} samples off-scale (stall spikes)",
-                transform=ax.transAxes, ha="right", fontsize=8, color="0.3")
+        ax.text(
+            0.99,
+            0.03,
+            f"axis clipped at +-{limit:.3g}: {off} samples off-scale (stall spikes)",
+            transform=ax.transAxes,
+            ha="right",
+            fontsize=8,
+            color="0.3",
+        )
 
 
 def _shade(axes: np.ndarray, path: BucketPath, label_row: np.ndarray) -> None:

@@ -59,7 +59,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from excavator_kinematics import messages, planned_move
+from excavator_kinematics import message_codec, planned_move
 from excavator_kinematics.bucket_path import (
     BucketPath,
     CycleClock,
@@ -75,7 +75,7 @@ from excavator_kinematics.twist import bucket_angles, twist_from_q_dot
 from manipulator_kinematics import registry, stopping
 from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.node_util import console_script
-from manipulator_kinematics.params import config_path
+from manipulator_kinematics.param_files import config_path
 from manipulator_kinematics.ros_domain import isolated
 from manipulator_kinematics_interfaces.srv import PlanPath
 
@@ -144,8 +144,14 @@ RECORDED = {
 }
 
 
-def animation(bag: Path, gif: Path, exc: Excavator, start_ns: int, end_ns: int,
-              progress: Callable[[int, int], None] | None = None) -> Path:
+def animation(
+    bag: Path,
+    gif: Path,
+    exc: Excavator,
+    start_ns: int,
+    end_ns: int,
+    progress: Callable[[int, int], None] | None = None,
+) -> Path:
     """Side view (boom plane) and top view of the whole linkage through the recorded cycle (stamps
     ``start_ns`` to ``end_ns``), with the reference path and the bucket-tip trace, as an animated
     GIF (:func:`manipulator_kinematics.animation.animate`); the top view shows the swing to the
@@ -160,11 +166,19 @@ def animation(bag: Path, gif: Path, exc: Excavator, start_ns: int, end_ns: int,
     reference = arrays["/reference_bucket_pose"]
     points = np.stack([reference[f"pose.position.{c}"] for c in "xyz"], axis=-1)
     return animate(
-        machine.scene(exc, D[cycle]), gif,
-        [View(boom_plane(D[cycle, 0]), "r (m)", "z (m)", "side view of the boom plane"),
-         View(view_xy, "x (m)", "y (m)", "top view: the swing to the truck")],
-        times=(stamp[cycle] - start_ns) * 1e-9, reference=points, ground=0.0, speed=ANIMATION_SPEED,
-        title=f"{exc.name}: digging cycle ({ANIMATION_SPEED:g}x speed)", size=ANIMATION_SIZE, dpi=90,
+        machine.scene(exc, D[cycle]),
+        gif,
+        [
+            View(boom_plane(D[cycle, 0]), "r (m)", "z (m)", "side view of the boom plane"),
+            View(view_xy, "x (m)", "y (m)", "top view: the swing to the truck"),
+        ],
+        times=(stamp[cycle] - start_ns) * 1e-9,
+        reference=points,
+        ground=0.0,
+        speed=ANIMATION_SPEED,
+        title=f"{exc.name}: digging cycle ({ANIMATION_SPEED:g}x speed)",
+        size=ANIMATION_SIZE,
+        dpi=90,
         progress=progress,
     )
 
@@ -214,7 +228,7 @@ class Driver:
 
     def on_pose(self, msg: PoseStamped) -> None:
         # The reference is taken at the measurement's stamp, so delivery delays are not errors.
-        stamp = messages.stamp_ns(msg.header.stamp)
+        stamp = message_codec.stamp_ns(msg.header.stamp)
         age = (self.node.get_clock().now().nanoseconds - stamp) * 1e-9
         if self.running:
             self.delays.append(age)
@@ -236,7 +250,7 @@ class Driver:
         predicted = measured + TRANSPORT * c_dot
         q_predicted, q_dot = to_task(predicted, c_dot)
         twist = twist_from_q_dot(predicted[1], q_predicted[:3], q_dot)
-        self.target.publish(messages.bucket_twist(msg.header.stamp, FRAME, *twist))
+        self.target.publish(message_codec.bucket_twist(msg.header.stamp, FRAME, *twist))
         reference, rate = self.path.at(t)  # what is asked, without the lead
         if not self.running:
             self.hold_error = float(np.linalg.norm(tip - reference[:3]))
@@ -246,10 +260,10 @@ class Driver:
         self.references.append(reference[:3])
         reference_theta1 = float(c_reference[1])
         self.reference_pose.publish(
-            messages.bucket_pose(msg.header.stamp, FRAME, reference_theta1, reference)
+            message_codec.bucket_pose(msg.header.stamp, FRAME, reference_theta1, reference)
         )
         self.reference_twist.publish(
-            messages.bucket_twist(
+            message_codec.bucket_twist(
                 msg.header.stamp,
                 FRAME,
                 *twist_from_q_dot(reference_theta1, reference[:3], rate),
@@ -309,9 +323,11 @@ class Mover:
     def request(self) -> PlanPath.Request:
         """From the measured D's tip to the start's, seeded with the measured D (its bucket angle)."""
         request = PlanPath.Request()
-        request.waypoints = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2]))
-                             for p in (self.exc.pose(self.d)[:3], self.exc.pose(self.start)[:3])]
-        request.seed = messages.joint_state(self.node.get_clock().now().to_msg(), ACTUATORS, self.d)
+        request.waypoints = [
+            Point(x=float(p[0]), y=float(p[1]), z=float(p[2]))
+            for p in (self.exc.pose(self.d)[:3], self.exc.pose(self.start)[:3])
+        ]
+        request.seed = message_codec.joint_state(self.node.get_clock().now().to_msg(), ACTUATORS, self.d)
         request.tip_speed = PLAN_TIP_SPEED
         return request
 
@@ -321,15 +337,19 @@ class Mover:
         self.d = np.r_[self.swing, msg.position]
         if self.trajectory is None or self.arrived is not None:
             return
-        t = self.clock.tick(messages.stamp_ns(msg.header.stamp))
+        t = self.clock.tick(message_codec.stamp_ns(msg.header.stamp))
         if t > self.trajectory.duration + planned_move.SETTLE:
-            self.commands.publish(messages.joint_state(msg.header.stamp, ACTUATORS, velocities=np.zeros(4)))
+            self.commands.publish(
+                message_codec.joint_state(msg.header.stamp, ACTUATORS, velocities=np.zeros(4))
+            )
             self.arrived = planned_move.arrival(self.exc, self.d, self.start)
             return
         rates, q = self.trajectory.command(t, self.d)
         self.max_error = np.maximum(self.max_error, np.abs(q - self.d))
-        self.commands.publish(messages.joint_state(msg.header.stamp, ACTUATORS, velocities=rates))
-        self.planned.publish(messages.joint_state(msg.header.stamp, ACTUATORS, q, self.trajectory.at(t)[1]))
+        self.commands.publish(message_codec.joint_state(msg.header.stamp, ACTUATORS, velocities=rates))
+        self.planned.publish(
+            message_codec.joint_state(msg.header.stamp, ACTUATORS, q, self.trajectory.at(t)[1])
+        )
 
 
 def demo_cycle(start: np.ndarray) -> BucketPath:
@@ -476,8 +496,12 @@ def run_cycle(
             ("excavator_forward", "bucket_pose", driver.poses.get_publisher_count, 1),
             ("excavator_velocity_ik", "cylinder_rate_commands", commands.get_publisher_count, 1),
             ("excavator_sim", "cylinder_lengths", states.get_publisher_count, 1),
-            ("the simulator and the recorder", "cylinder_rate_commands",
-             mover.commands.get_subscription_count, 2),
+            (
+                "the simulator and the recorder",
+                "cylinder_rate_commands",
+                mover.commands.get_subscription_count,
+                2,
+            ),
             ("the recorder", "planned_joint_states", mover.planned.get_subscription_count, 1),
         ]
 
@@ -490,11 +514,15 @@ def run_cycle(
                 )
                 return {info.node_name for info in infos}
 
-            return missing_endpoints(expected, present) + [
-                f"{who} matching the driver on /{topic}"
-                for who, topic, count, least in matches
-                if count() < least
-            ] + ([] if mover.client.service_is_ready() else ["excavator_ik_server serving /plan_path"])
+            return (
+                missing_endpoints(expected, present)
+                + [
+                    f"{who} matching the driver on /{topic}"
+                    for who, topic, count, least in matches
+                    if count() < least
+                ]
+                + ([] if mover.client.service_is_ready() else ["excavator_ik_server serving /plan_path"])
+            )
 
         failure = spin_until(lambda: not graph_missing(), CONNECT_TIMEOUT, lambda: "; ".join(graph_missing()))
         if failure is None:
@@ -543,12 +571,16 @@ def run_cycle(
             # and then stays silent, leaving cylinder_rate_commands to the planned move.
             driver.active = driver.running = False
             mover.watching = True
-            failure = spin_until(lambda: mover.ik_stopped, ROUND_TRIP_TIMEOUT,
-                                 lambda: "excavator_velocity_ik to stop after the last target")
+            failure = spin_until(
+                lambda: mover.ik_stopped,
+                ROUND_TRIP_TIMEOUT,
+                lambda: "excavator_velocity_ik to stop after the last target",
+            )
         if failure is None:
             future = mover.client.call_async(mover.request())
-            failure = spin_until(future.done, PLAN_TIMEOUT,
-                                 lambda: "the plan_path answer of excavator_ik_server")
+            failure = spin_until(
+                future.done, PLAN_TIMEOUT, lambda: "the plan_path answer of excavator_ik_server"
+            )
         if failure is None:
             answer = future.result()
             if not answer.success:
@@ -558,7 +590,9 @@ def run_cycle(
                 mover.trajectory = planned_move.Trajectory.from_points(
                     list(answer.trajectory.joint_names),
                     [p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in points],
-                    [list(p.positions) for p in points], [list(p.velocities) for p in points])
+                    [list(p.positions) for p in points],
+                    [list(p.velocities) for p in points],
+                )
                 say(f"plan_path back to the start: {answer.message}")
                 shown = [0.0]
 
@@ -570,8 +604,10 @@ def run_cycle(
                 failure = spin_until(
                     lambda: mover.arrived is not None,
                     timeout,
-                    lambda: (f"the planned move to finish (at {mover.clock.t:.1f} of "
-                             f"{mover.trajectory.duration:.1f} s)"),
+                    lambda: (
+                        f"the planned move to finish (at {mover.clock.t:.1f} of "
+                        f"{mover.trajectory.duration:.1f} s)"
+                    ),
                     show_move,
                 )
         return failure, driver, mover
@@ -595,28 +631,36 @@ def move_report(output: Path, exc: Excavator, mover: Mover) -> str:
     stamps = np.intersect1d(stamps, swing.stamp_ns())  # the simulator stamps both alike
     ic = np.searchsorted(cylinders.stamp_ns(), stamps)
     js = np.searchsorted(swing.stamp_ns(), stamps)
-    d = np.column_stack((swing.by_name("position", JOINTS[:1])[js],
-                         cylinders.by_name("position", CYLINDERS)[ic]))
-    d_dot = np.column_stack((swing.by_name("velocity", JOINTS[:1])[js],
-                             cylinders.by_name("velocity", CYLINDERS)[ic]))
+    d = np.column_stack(
+        (swing.by_name("position", JOINTS[:1])[js], cylinders.by_name("position", CYLINDERS)[ic])
+    )
+    d_dot = np.column_stack(
+        (swing.by_name("velocity", JOINTS[:1])[js], cylinders.by_name("velocity", CYLINDERS)[ic])
+    )
     plan, arrived, lim = mover.trajectory, mover.arrived, exc.limits
     png = planned_move.plot(output / PLANNED_MOVE, exc, (stamps - start_ns) * 1e-9, d, d_dot, plan)
     units = ["rad/s", "m/s", "m/s", "m/s"]
-    lines = [f"planned move back to the start (plan_path, {len(plan.t)} points, {plan.duration:.2f} s; "
-             f"executed in {(end_ns - start_ns) * 1e-9:.2f} s of simulator time incl. "
-             f"{planned_move.SETTLE:g} s to settle):",
-             "  actuator         planned peak / limit    simulated peak   max |planned - simulated|"]
+    lines = [
+        f"planned move back to the start (plan_path, {len(plan.t)} points, {plan.duration:.2f} s; "
+        f"executed in {(end_ns - start_ns) * 1e-9:.2f} s of simulator time incl. "
+        f"{planned_move.SETTLE:g} s to settle):",
+        "  actuator         planned peak / limit    simulated peak   max |planned - simulated|",
+    ]
     for i, name in enumerate(ACTUATORS):
-        lines.append(f"  {name:<15}  {np.max(np.abs(plan.qd[:, i])):.3f} / {lim.max_rates[i]:.2f} "
-                     f"{units[i]:<6}  {np.max(np.abs(d_dot[:, i])):.3f} {units[i]:<6}  "
-                     f"{mover.max_error[i]:.2e}")
+        lines.append(
+            f"  {name:<15}  {np.max(np.abs(plan.qd[:, i])):.3f} / {lim.max_rates[i]:.2f} "
+            f"{units[i]:<6}  {np.max(np.abs(d_dot[:, i])):.3f} {units[i]:<6}  "
+            f"{mover.max_error[i]:.2e}"
+        )
     lines.append(f"  plot: {png}")
     tolerance = planned_move.TOLERANCE
     errors = ", ".join(f"{e:.1e}" for e in arrived.error)
     verdict = "reached" if arrived.ok else "NOT reached"
-    lines.append(f"  arrival: |D - start| = {errors} (swing rad, cylinders m; tolerance "
-                 f"{tolerance[0]:g} rad, {tolerance[1]:g} m), tip {1e3 * arrived.tip_error:.2f} mm "
-                 f"(tolerance {1e3 * planned_move.TIP_TOLERANCE:g} mm): {verdict}")
+    lines.append(
+        f"  arrival: |D - start| = {errors} (swing rad, cylinders m; tolerance "
+        f"{tolerance[0]:g} rad, {tolerance[1]:g} m), tip {1e3 * arrived.tip_error:.2f} mm "
+        f"(tolerance {1e3 * planned_move.TIP_TOLERANCE:g} mm): {verdict}"
+    )
     return "\n".join(lines)
 
 
@@ -674,8 +718,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     with step("drawing the animation"):
         gif = animation(args.output / "bag", args.output / ANIMATION, exc, start_ns, end_ns, frames)
-    print(f"  animation: {gif} ({gif.stat().st_size / 1e6:.2f} MB); Foxglove: open {args.output / 'bag'} "
-          f"(docs/visualisation.md)")
+    print(
+        f"  animation: {gif} ({gif.stat().st_size / 1e6:.2f} MB); Foxglove: open {args.output / 'bag'} "
+        f"(docs/visualisation.md)"
+    )
     delay = 1e3 * np.percentile(driver.delays, [50, 99])
     print(
         f"  driver: got bucket_pose {delay[0]:.1f} ms (p50) / {delay[1]:.1f} ms (p99) after its stamp; "
@@ -693,8 +739,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"  as-built: not made: {dug.error}")
     print(f"excavator_demo: finished in {time.monotonic() - began:.1f} s", flush=True)
     if not mover.arrived.ok:
-        print(f"excavator_demo: FAILED: the planned move did not arrive at the start "
-              f"({moved.splitlines()[-1].strip()})", file=sys.stderr)
+        print(
+            f"excavator_demo: FAILED: the planned move did not arrive at the start "
+            f"({moved.splitlines()[-1].strip()})",
+            file=sys.stderr,
+        )
         return 1
     if summary.max_path_deviation > args.max_error:
         print(

@@ -37,7 +37,7 @@ from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from manipulator_kinematics.landxml import write_tin
-from manipulator_kinematics.params import ConfigError, open_input, shown
+from manipulator_kinematics.param_files import ConfigError, open_input, shown
 
 #: LandXML linearUnit values -> metres (LandXML 1.2 schema, enumerations metLinear and impLinear).
 LINEAR_UNITS = {
@@ -94,21 +94,27 @@ class Tin:
         faces = np.asarray(self.faces)
         what = f"surface {shown(self.name)}" if self.name else "surface"
         if vertices.ndim != 2 or vertices.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3:
-            raise ValueError(f"{what}: expected vertices of shape (V, 3) and faces (F, 3), "
-                             f"got shapes {vertices.shape} and {faces.shape}")
+            raise ValueError(
+                f"{what}: expected vertices of shape (V, 3) and faces (F, 3), "
+                f"got shapes {vertices.shape} and {faces.shape}"
+            )
         if len(faces) == 0:
             raise ConfigError(f"{what}: no (visible) faces")
         if len(faces) > MAX_FACES or len(vertices) > MAX_POINTS:
-            raise ConfigError(f"{what}: {len(faces)} faces and {len(vertices)} points, more than the "
-                              f"{MAX_FACES} faces or {MAX_POINTS} points a surface may have")
+            raise ConfigError(
+                f"{what}: {len(faces)} faces and {len(vertices)} points, more than the "
+                f"{MAX_FACES} faces or {MAX_POINTS} points a surface may have"
+            )
         if not np.all(np.isfinite(vertices)):
             raise ConfigError(f"{what}: a vertex coordinate is not finite")
         # Before any arithmetic on them: 1e300 overflowed the cross products below.
         far = np.any(np.abs(vertices) > [MAX_HORIZONTAL, MAX_HORIZONTAL, MAX_ELEVATION], axis=1)
         if np.any(far):
             k = int(np.argmax(far))
-            raise ConfigError(f"{what}: vertex {k} at {vertices[k].tolist()} m is no place on a site "
-                              f"(|x|, |y| <= {MAX_HORIZONTAL:g} m, |z| <= {MAX_ELEVATION:g} m)")
+            raise ConfigError(
+                f"{what}: vertex {k} at {vertices[k].tolist()} m is no place on a site "
+                f"(|x|, |y| <= {MAX_HORIZONTAL:g} m, |z| <= {MAX_ELEVATION:g} m)"
+            )
         if faces.min() < 0 or faces.max() >= len(vertices):
             raise ConfigError(f"{what}: a face refers to a vertex index outside 0..{len(vertices) - 1}")
         faces = faces.astype(np.int32)
@@ -134,10 +140,17 @@ class Tin:
         try:
             finder = TrapezoidMapTriFinder(Triangulation(local[:, 0], local[:, 1], faces))
         except (RuntimeError, ValueError):  # matplotlib: "Triangulation is invalid"
-            raise ConfigError(f"{what}: faces overlap in plan view (edges of two faces cross), so a point "
-                              "would lie on two of them") from None
-        for name, value in (("vertices", vertices), ("faces", faces), ("origin", origin),
-                            ("planes", planes), ("_finder", finder)):
+            raise ConfigError(
+                f"{what}: faces overlap in plan view (edges of two faces cross), so a point "
+                "would lie on two of them"
+            ) from None
+        for name, value in (
+            ("vertices", vertices),
+            ("faces", faces),
+            ("origin", origin),
+            ("planes", planes),
+            ("_finder", finder),
+        ):
             object.__setattr__(self, name, value)
 
     def locate(self, xy: ArrayLike) -> np.ndarray:
@@ -187,9 +200,11 @@ def _refuse_overlaps(faces: np.ndarray, counterclockwise: np.ndarray, what: str)
     twice = np.flatnonzero(key[order[1:]] == key[order[:-1]])
     if len(twice):
         first, second = order[twice[0]], order[twice[0] + 1]
-        raise ConfigError(f"{what}: faces {first % len(faces)} and {second % len(faces)} lie on the same "
-                          f"side of their edge {edges[first].tolist()}: they overlap (a duplicate face or "
-                          "a fold)")
+        raise ConfigError(
+            f"{what}: faces {first % len(faces)} and {second % len(faces)} lie on the same "
+            f"side of their edge {edges[first].tolist()}: they overlap (a duplicate face or "
+            "a fold)"
+        )
 
 
 def read_landxml(path: str | Path, surface: str = "") -> Tin:
@@ -220,8 +235,9 @@ def read_landxml(path: str | Path, surface: str = "") -> Tin:
     definitions = _children(element, "Definition")
     if not definitions or definitions[0].get("surfType", "").upper() != "TIN":
         kind = definitions[0].get("surfType") if definitions else None
-        raise ConfigError(f"{path}: surface {shown(name)} has no Definition with surfType=\"TIN\" "
-                          f"(got {shown(kind)})")
+        raise ConfigError(
+            f'{path}: surface {shown(name)} has no Definition with surfType="TIN" (got {shown(kind)})'
+        )
     definition = definitions[0]
     ids, coordinates = [], []
     for p in (p for pnts in _children(definition, "Pnts") for p in _children(pnts, "P")):
@@ -237,8 +253,10 @@ def read_landxml(path: str | Path, surface: str = "") -> Tin:
         corners = (f.text or "").split()
         missing = [c for c in corners if c not in index]
         if len(corners) != 3 or missing:
-            raise ConfigError(f"{path}: surface {shown(name)}: face {shown(f.text)} is not three point ids "
-                              f"of its Pnts{f' (unknown: {shown(missing)})' if missing else ''}")
+            raise ConfigError(
+                f"{path}: surface {shown(name)}: face {shown(f.text)} is not three point ids "
+                f"of its Pnts{f' (unknown: {shown(missing)})' if missing else ''}"
+            )
         faces.append([index[c] for c in corners])
     if not coordinates or not faces:
         raise ConfigError(f"{path}: surface {shown(name)} has no points or no faces")
@@ -263,8 +281,10 @@ def _parse_bounded(path: Path) -> ET.Element:
             _, root = next(events)
             for count, _ in enumerate(events, start=2):
                 if count > MAX_ELEMENTS:
-                    raise ConfigError(f"{path}: more than the {MAX_ELEMENTS} XML elements a design "
-                                      f"surface file may have ({MAX_FACES} faces, {MAX_POINTS} points)")
+                    raise ConfigError(
+                        f"{path}: more than the {MAX_ELEMENTS} XML elements a design "
+                        f"surface file may have ({MAX_FACES} faces, {MAX_POINTS} points)"
+                    )
         except (ET.ParseError, StopIteration) as error:
             raise ConfigError(f"{path}: cannot read a LandXML file: {error or 'empty'}") from None
     return root
@@ -285,8 +305,9 @@ def _linear_unit(root: ET.Element, path: Path) -> float:
             unit = system.get("linearUnit")
             if unit is not None:
                 if unit not in LINEAR_UNITS:
-                    raise ConfigError(f"{path}: linearUnit {shown(unit)} is not one of "
-                                      f"{sorted(LINEAR_UNITS)}")
+                    raise ConfigError(
+                        f"{path}: linearUnit {shown(unit)} is not one of {sorted(LINEAR_UNITS)}"
+                    )
                 return LINEAR_UNITS[unit]
     return 1.0  # LandXML without Units: metres, as every metric exporter writes
 

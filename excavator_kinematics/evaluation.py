@@ -12,7 +12,7 @@ The recomputation is what the forward node should have published for the recorde
   ``acceleration_max_gap``;
 * ``urdf_joint_states`` (every URDF joint and its rate) and, when the node's ``grade`` is
   enabled, ``grade_height`` (the tip's height above the design plane) from the same state
-  (:mod:`excavator_kinematics.display`);
+  (:mod:`excavator_kinematics.display_outputs`);
 * ``bucket_pose_level`` (the tip in the gravity-aligned level frame) from the latest
   ``machine_tilt`` at or before the cylinder stamp (:func:`excavator_kinematics.imu.level_rotation`).
 
@@ -29,7 +29,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from excavator_kinematics.design_surface import SitePose, cutting_edge, read_landxml
-from excavator_kinematics.display import DesignPlane, urdf_joint_states
+from excavator_kinematics.display_outputs import DesignPlane, urdf_joint_states
 from excavator_kinematics.imu import base_up, level_rotation
 from excavator_kinematics.kinematics import (
     CYLINDERS,
@@ -428,13 +428,18 @@ def analyse(
 
 #: Units of the per-sample table's columns (docs/asbuilt.md), by name or name prefix.
 SAMPLE_UNITS = {
-    "stamp_ns": "ns", "swing_joint": "rad", "swing_joint_rate": "rad/s", "alpha": "rad",
-    "published": "bool", "grade_": "m (height above the design surface, + = cut)",
+    "stamp_ns": "ns",
+    "swing_joint": "rad",
+    "swing_joint_rate": "rad/s",
+    "alpha": "rad",
+    "published": "bool",
+    "grade_": "m (height above the design surface, + = cut)",
 }
 
 
-def samples(data: dict[str, TopicArrays], exc: Excavator,
-            context: AnalysisContext) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+def samples(
+    data: dict[str, TopicArrays], exc: Excavator, context: AnalysisContext
+) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     """The excavator's ``samples`` hook: one row per input the forward node accepted (the same
     rule as :func:`analyse`), in stamp order: the actuators and their rates, the tip Q (eq. 3;
     base frame), both cutting-edge corners in the base and the site frame, the grade heights
@@ -472,13 +477,15 @@ def samples(data: dict[str, TopicArrays], exc: Excavator,
     elif m.grade is not None:
         columns["grade_tip"] = m.grade.height(Q[:, :3])
     poses = data.get("bucket_pose")
-    columns["published"] = (np.zeros(n, bool) if poses is None or not n
-                            else match_exact(stamp, poses.stamp_ns()) >= 0)
+    columns["published"] = (
+        np.zeros(n, bool) if poses is None or not n else match_exact(stamp, poses.stamp_ns()) >= 0
+    )
     return columns, units
 
 
-def _site_points(data: dict[str, TopicArrays], surface: dict[str, Any], stamp: np.ndarray,
-                 points: np.ndarray) -> np.ndarray:
+def _site_points(
+    data: dict[str, TopicArrays], surface: dict[str, Any], stamp: np.ndarray, points: np.ndarray
+) -> np.ndarray:
     """``points`` (n, k, 3) of the base frame in the site frame, as the forward node places the
     machine (``design_surface.site_pose_source``): a fixed pose, or the latest recorded
     ``site_pose`` at most ``site_pose_max_age`` old (NaN where there is none)."""

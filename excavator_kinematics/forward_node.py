@@ -11,10 +11,10 @@ at most ``swing_max_age`` apart) and accelerations as finite differences of succ
   only once accelerations are known: from the second message on);
 * ``open_chain_joint_states`` (JointState theta1..theta4 with rates);
 * ``urdf_joint_states`` (JointState of every joint of ``urdf/excavator.urdf``, the passive ones of
-  the cut loops included, with rates; :func:`excavator_kinematics.display.urdf_joint_states`) for
+  the cut loops included, with rates; :func:`excavator_kinematics.display_outputs.urdf_joint_states`) for
   robot_state_publisher, at most ``urdf_joint_states_rate`` per second of input stamps;
 * ``grade_height`` (PointStamped, if ``grade.enabled``): the bucket tip in the design surface's
-  frame, z = its height above the design plane (:class:`excavator_kinematics.display.DesignPlane`);
+  frame, z = its height above the design plane (:class:`excavator_kinematics.display_outputs.DesignPlane`);
 * ``grade/tip``, ``grade/left``, ``grade/right`` (PointStamped) and ``grade/status`` (if
   ``design_surface.file``): the cutting edge's heights above a LandXML TIN in the site frame
   (:mod:`excavator_kinematics.surface_grade`);
@@ -38,8 +38,8 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
-from excavator_kinematics import messages
-from excavator_kinematics.display import DesignPlane, urdf_joint_states
+from excavator_kinematics import message_codec
+from excavator_kinematics.display_outputs import DesignPlane, urdf_joint_states
 from excavator_kinematics.kinematics import (
     ACTUATORS,
     CYLINDERS,
@@ -51,7 +51,7 @@ from excavator_kinematics.kinematics import (
     compiled_kernel,
 )
 from excavator_kinematics.level_pose import LevelPose
-from excavator_kinematics.node_settings import FORWARD, NODES_CONFIG
+from excavator_kinematics.node_schemas import FORWARD, NODES_CONFIG
 from excavator_kinematics.state_input import Plausible, RateDifferentiator, StaleInput, SwingHold
 from excavator_kinematics.surface_grade import SurfaceGrade
 from excavator_kinematics.urdf_joints import URDF_JOINTS
@@ -116,11 +116,17 @@ class ForwardKinematics(MachineNode):
         self.accel_pub = self.create_publisher(AccelStamped, topic["bucket_accel"], qos)
         self.joints_pub = self.create_publisher(JointState, topic["open_chain_joint_states"], qos)
         self.urdf_pub = self.create_publisher(JointState, topic["urdf_joint_states"], qos)
-        self.grade_pub = (self.create_publisher(PointStamped, topic["grade_height"], qos)
-                          if self.plane is not None else None)
+        self.grade_pub = (
+            self.create_publisher(PointStamped, topic["grade_height"], qos)
+            if self.plane is not None
+            else None
+        )
         surface = settings["design_surface"]
-        self.surface = (SurfaceGrade(self, surface, topic, self.exc.bucket_width, qos, self.log)
-                        if surface["file"] else None)
+        self.surface = (
+            SurfaceGrade(self, surface, topic, self.exc.bucket_width, qos, self.log)
+            if surface["file"]
+            else None
+        )
         level = settings["level"]
         self.level = LevelPose(self, level, topic, qos, self.log) if level["enabled"] else None
         # raw: the callbacks decode the bytes themselves (decode_joint_state), at a third of the cost.
@@ -142,7 +148,7 @@ class ForwardKinematics(MachineNode):
     def on_swing(self, raw: bytes) -> None:
         try:
             msg = decode_joint_state(raw)
-            angle, rate = messages.positions_and_rates(msg, (SWING,))
+            angle, rate = message_codec.positions_and_rates(msg, (SWING,))
             self.plausible.rates((SWING,), rate.tolist())
         except InputError as error:
             self.log("error", f"rejected joint_states: {error}")
@@ -156,7 +162,7 @@ class ForwardKinematics(MachineNode):
     def on_cylinders(self, raw: bytes) -> None:
         try:
             msg = decode_joint_state(raw)
-            lengths, rates = messages.positions_and_rates(msg, CYLINDERS)
+            lengths, rates = message_codec.positions_and_rates(msg, CYLINDERS)
             self.plausible.rates(CYLINDERS, rates.tolist())
             stamp_ns = msg.stamp_ns
             theta1, theta1_dot, theta1_ddot = self.swing.at(stamp_ns)
@@ -180,7 +186,7 @@ class ForwardKinematics(MachineNode):
 
         # Python floats from here on: unpacking numpy arrays element by element costs more.
         Q, Q_dot = s.Q.tolist(), s.Q_dot.tolist()
-        pose = messages.bucket_pose_values(theta1, Q)
+        pose = message_codec.bucket_pose_values(theta1, Q)
         twist = [*Q_dot[:3], *bucket_angular_velocity(theta1, theta1_dot, Q_dot[3]).tolist()]
         joints = [*s.theta.tolist(), *s.theta_dot.tolist()]
         accel = []
@@ -194,8 +200,11 @@ class ForwardKinematics(MachineNode):
         # The input checks keep the arithmetic far from overflow; this is the promise itself.
         edge = [v for point in surface if point is not None for v in point]
         if not all(map(math.isfinite, (*pose, *twist, *joints, *accel, *grade, *urdf, *edge))):
-            self.log("error", f"dropped the outputs of cylinder_lengths D = {D.tolist()}, "
-                     f"D_dot = {[theta1_dot, *rates.tolist()]}: not finite")
+            self.log(
+                "error",
+                f"dropped the outputs of cylinder_lengths D = {D.tolist()}, "
+                f"D_dot = {[theta1_dot, *rates.tolist()]}: not finite",
+            )
             return
         sec_nanosec = (msg.sec, msg.nanosec)
         self.outputs_sent = True

@@ -49,8 +49,16 @@ def _triangle_length(theta: float, o: float, offset: float, aa_bb: float, two_ab
 
 
 @njit(cache=True, error_model="numpy")
-def candidates(k: np.ndarray, x: float, y: float, z: float, alpha: np.ndarray, heading: float,
-               D: np.ndarray, reach: np.ndarray) -> None:
+def candidates(
+    k: np.ndarray,
+    x: float,
+    y: float,
+    z: float,
+    alpha: np.ndarray,
+    heading: float,
+    D: np.ndarray,
+    reach: np.ndarray,
+) -> None:
     """D (4, 4) and reach (4,) of one target, candidate b at bucket angle alpha[b], in
     inverse.BRANCHES order (inverse.open_chain_columns, inverse.linkage_length_columns)."""
     l0, l1, l2, l3, l4 = k[0], k[1], k[2], k[3], k[4]
@@ -115,8 +123,9 @@ def candidates(k: np.ndarray, x: float, y: float, z: float, alpha: np.ndarray, h
 
 
 @njit(cache=True, error_model="numpy")
-def judge(k: np.ndarray, x: float, y: float, finite: bool, swing_axis: float, D: np.ndarray,
-          status: np.ndarray) -> None:
+def judge(
+    k: np.ndarray, x: float, y: float, finite: bool, swing_axis: float, D: np.ndarray, status: np.ndarray
+) -> None:
     """Step 5's statuses (inverse.status)."""
     lower, upper = k[30:34], k[34:38]
     for b in range(4):
@@ -135,8 +144,15 @@ def judge(k: np.ndarray, x: float, y: float, finite: bool, swing_axis: float, D:
 
 
 @njit(cache=True, error_model="numpy")
-def pick(k: np.ndarray, D: np.ndarray, status: np.ndarray, seed: np.ndarray, seeded: bool, branch: int,
-         tie_tolerance: float) -> tuple[int, bool]:
+def pick(
+    k: np.ndarray,
+    D: np.ndarray,
+    status: np.ndarray,
+    seed: np.ndarray,
+    seeded: bool,
+    branch: int,
+    tie_tolerance: float,
+) -> tuple[int, bool]:
     """manipulator_kinematics.model.select for one target (the shared select_one): (selected, tie)."""
     allowed = np.full(4, branch < 0)
     if branch >= 0:
@@ -159,8 +175,9 @@ def _margins(k: np.ndarray, D: np.ndarray, margin: np.ndarray) -> None:
 
 
 @njit(cache=True, error_model="numpy")
-def widest_margin_angles(k: np.ndarray, x: float, y: float, z: float, grid_size: int, peaks: int,
-                         golden: float, steps: int) -> np.ndarray:
+def widest_margin_angles(
+    k: np.ndarray, x: float, y: float, z: float, grid_size: int, peaks: int, golden: float, steps: int
+) -> np.ndarray:
     """inverse.widest_margin_angles for one position: (4,) per branch the bucket angle of the
     largest stroke margin; the same grid, peaks and golden-section steps."""
     D, reach, row = np.empty((4, 4)), np.empty(4, dtype=np.int8), np.empty(4)

@@ -28,23 +28,35 @@ from typing import ClassVar
 
 import numpy as np
 
-from excavator_kinematics.node_settings import NODES_CONFIG
+from excavator_kinematics.node_schemas import NODES_CONFIG
 from excavator_kinematics.path import BucketPlan, plan_path
-from manipulator_kinematics.config import Number, Schema
 from manipulator_kinematics.nodes import run_node
 from manipulator_kinematics.nodes.ik_server import SETTINGS, PlanPathServer
 from manipulator_kinematics.plan_bounds import ACCELERATION_RANGE, STEP_RANGE, TIP_SPEED_RANGE
 from manipulator_kinematics.registry import Machine
+from manipulator_kinematics.schema import Number, Schema
 from manipulator_kinematics_interfaces.srv import PlanPath
 
 NODE = "excavator_ik_server"
 PATH_SETTINGS = {
-    "step": Number(min=STEP_RANGE[0], max=STEP_RANGE[1], unit="m",
-                   doc="plan_path: sample spacing along each line when the request's step is 0"),
-    "tip_speed": Number(min=TIP_SPEED_RANGE[0], max=TIP_SPEED_RANGE[1], unit="m/s",
-                        doc="plan_path: tip speed limit when the request's tip_speed is 0"),
-    "acceleration": Number(min=ACCELERATION_RANGE[0], max=ACCELERATION_RANGE[1], unit="m/s^2",
-                           doc="plan_path: bound of the tip's acceleration along the path"),
+    "step": Number(
+        min=STEP_RANGE[0],
+        max=STEP_RANGE[1],
+        unit="m",
+        doc="plan_path: sample spacing along each line when the request's step is 0",
+    ),
+    "tip_speed": Number(
+        min=TIP_SPEED_RANGE[0],
+        max=TIP_SPEED_RANGE[1],
+        unit="m/s",
+        doc="plan_path: tip speed limit when the request's tip_speed is 0",
+    ),
+    "acceleration": Number(
+        min=ACCELERATION_RANGE[0],
+        max=ACCELERATION_RANGE[1],
+        unit="m/s^2",
+        doc="plan_path: bound of the tip's acceleration along the path",
+    ),
 }
 
 
@@ -60,13 +72,22 @@ class ExcavatorIKServer(PlanPathServer):
         super().__init__(node_name, machine, argv)
         self.path = self.settings["path"]
         path = self.path
-        self.get_logger().info(f"serving plan_path (defaults: step {path['step']:g} m, tip speed "
-                               f"{path['tip_speed']:g} m/s, acceleration {path['acceleration']:g} m/s^2)")
+        self.get_logger().info(
+            f"serving plan_path (defaults: step {path['step']:g} m, tip speed "
+            f"{path['tip_speed']:g} m/s, acceleration {path['acceleration']:g} m/s^2)"
+        )
 
     def plan(self, request: PlanPath.Request, waypoints: np.ndarray, seed: np.ndarray | None) -> BucketPlan:
         # 0 = the default; anything else (negative, NaN, tiny, huge) the shared bounds check.
-        return plan_path(self.model, waypoints, request.step or self.path["step"],
-                         request.tip_speed or self.path["tip_speed"], self.path["acceleration"], seed)
+        return plan_path(
+            self.model,
+            waypoints,
+            request.step or self.path["step"],
+            request.tip_speed or self.path["tip_speed"],
+            self.path["acceleration"],
+            seed,
+        )
+
 
 def main(args: Sequence[str] | None = None) -> int:
     return run_node(ExcavatorIKServer, "excavator", NODE, args)

@@ -139,8 +139,9 @@ class ImuArm:
         self.exc = exc
         self.on_h_link = imu["bucket_linkage"]["body"] == "h_link"
         #: (4, 3, 3): each sensor's frame in its body's frame, R_body_sensor.
-        self.mounting = np.stack([Rotation.from_euler("xyz", imu[s]["rotation_rpy"]).as_matrix()
-                                  for s in SENSORS])
+        self.mounting = np.stack(
+            [Rotation.from_euler("xyz", imu[s]["rotation_rpy"]).as_matrix() for s in SENSORS]
+        )
         g = exc.description
         self._pivot = np.array(g.side_link_pivot)  # arm frame
         self._bucket_pin = np.array([g.arm_length, 0.0])
@@ -157,12 +158,14 @@ class ImuArm:
         omega_body = np.einsum("sij,...sj->...si", self.mounting, np.asarray(omega, dtype=float))
         sideways = np.arcsin(np.clip(np.abs(up_body[..., 1]), 0.0, 1.0))
         if not np.all(sideways <= MAX_SIDEWAYS_TILT):
-            worst = np.unravel_index(np.argmax(np.where(np.isnan(sideways), np.inf, sideways)),
-                                     sideways.shape)
+            worst = np.unravel_index(
+                np.argmax(np.where(np.isnan(sideways), np.inf, sideways)), sideways.shape
+            )
             raise StrokeError(
                 f"imu {SENSORS[worst[-1]]}: its boom plane is tilted {math.degrees(sideways[worst]):.1f} deg "
                 f"sideways (more than {math.degrees(MAX_SIDEWAYS_TILT):g}): the side angle and its rate are "
-                "ill-conditioned there (gyro noise amplified as |uy| / (ux^2 + uz^2))")
+                "ill-conditioned there (gyro noise amplified as |uy| / (ux^2 + uz^2))"
+            )
         a, a_dot = side_angle(up_body), side_rate(up_body, omega_body)
         relative = np.diff(a, axis=-1)  # boom - cab, arm - boom, linkage - arm
         relative_dot = np.diff(a_dot, axis=-1)
@@ -203,8 +206,10 @@ class ImuArm:
         foot = self._pivot + along[..., None] * e
         candidates = [foot + sign * np.sqrt(across_sq)[..., None] * normal for sign in (1.0, -1.0)]
         H = [R + self._h_link * u for R in candidates]
-        branch = [np.sign(_cross(R - self._bucket_pin, h - self._bucket_pin)) == self._h_orientation
-                  for R, h in zip(candidates, H, strict=True)]
+        branch = [
+            np.sign(_cross(R - self._bucket_pin, h - self._bucket_pin)) == self._h_orientation
+            for R, h in zip(candidates, H, strict=True)
+        ]
         R = np.where(branch[0][..., None], candidates[0], candidates[1])
         H = np.where(branch[0][..., None], H[0], H[1])
         to_h, to_r, coupler = H - self._bucket_pin, R - self._pivot, H - R
@@ -219,9 +224,15 @@ def _cross(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     return p[..., 0] * q[..., 1] - p[..., 1] * q[..., 0]
 
 
-def simulated_readings(arm: ImuArm, D: ArrayLike, D_dot: ArrayLike, tilt_rpy: ArrayLike,
-                       rng: np.random.Generator | None = None, orientation_noise: float = 0.0,
-                       gyro_noise: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def simulated_readings(
+    arm: ImuArm,
+    D: ArrayLike,
+    D_dot: ArrayLike,
+    tilt_rpy: ArrayLike,
+    rng: np.random.Generator | None = None,
+    orientation_noise: float = 0.0,
+    gyro_noise: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What the four IMUs of ``arm`` read at states D (N, 4) moving at D_dot (N, 4), the machine
     standing still at roll, pitch, yaw ``tilt_rpy``: orientations [x, y, z, w] (N, 4, 4), angular
     velocities (N, 4, 3) and specific forces (N, 4, 3, gravity only) in each sensor's frame.

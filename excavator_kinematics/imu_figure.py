@@ -35,12 +35,20 @@ def draw(exc: Excavator, path: Path, pitch_percent: float = -5.0) -> None:
 
     fig, ax = plt.subplots(figsize=(11, 6.5))
     ground = np.array([[-3.0, 0.0], [10.0, 0.0]])
-    ax.plot(*np.array([level(p) for p in ground]).T, color="saddlebrown", lw=2,
-            label=f"ground, {pitch_percent:+g} % (base frame x axis)")
-    chains = [("boom_foot", "arm_pin", "bucket_pin", "bucket_tip"),
-              ("side_link_pivot", "bucket_cylinder_rod", "h_link_pin"),
-              ("bucket_pin", "h_link_pin"), ("boom_cylinder_base", "boom_cylinder_rod"),
-              ("arm_cylinder_base", "arm_cylinder_rod"), ("bucket_cylinder_base", "bucket_cylinder_rod")]
+    ax.plot(
+        *np.array([level(p) for p in ground]).T,
+        color="saddlebrown",
+        lw=2,
+        label=f"ground, {pitch_percent:+g} % (base frame x axis)",
+    )
+    chains = [
+        ("boom_foot", "arm_pin", "bucket_pin", "bucket_tip"),
+        ("side_link_pivot", "bucket_cylinder_rod", "h_link_pin"),
+        ("bucket_pin", "h_link_pin"),
+        ("boom_cylinder_base", "boom_cylinder_rod"),
+        ("arm_cylinder_base", "arm_cylinder_rod"),
+        ("bucket_cylinder_base", "bucket_cylinder_rod"),
+    ]
     for chain in chains:
         ax.plot(*np.array([level(pins[n]) for n in chain]).T, "-o", color="0.35", ms=3, lw=2)
     cab = np.array([[-1.5, 0.4], [1.3, 0.4], [1.3, 2.9], [-1.5, 2.9], [-1.5, 0.4]])
@@ -65,12 +73,19 @@ def draw(exc: Excavator, path: Path, pitch_percent: float = -5.0) -> None:
         side = turn  # a = atan2(ux, uz) of world up in the body frame: its turn from level
         ax.text(*(o + [0.12, -0.35]), f"{name}\na = {math.degrees(side):+.1f} deg", fontsize=8)
     ax.plot([], [], color="tab:red", lw=2, label="body x (sensor x at rotation_rpy [0, 0, 0])")
-    ax.plot([], [], color="tab:blue", lw=2,
-            label="body z (sensor z); body y points into the page (the machine's left)")
+    ax.plot(
+        [],
+        [],
+        color="tab:blue",
+        lw=2,
+        label="body z (sensor z); body y points into the page (the machine's left)",
+    )
     ax.plot([], [], color="tab:green", lw=1, label="world up (gravity aligned, level frame z)")
-    ax.set_title(f"{exc.name}: IMU bodies and their frames, side view from the right, on a "
-                 f"{pitch_percent:+g} % slope\n theta2 = a_boom - a_cab, theta3 = a_arm - a_boom, "
-                 "theta4 = a_bucket - a_arm (or from the H-link's angle through the four-bar)")
+    ax.set_title(
+        f"{exc.name}: IMU bodies and their frames, side view from the right, on a "
+        f"{pitch_percent:+g} % slope\n theta2 = a_boom - a_cab, theta3 = a_arm - a_boom, "
+        "theta4 = a_bucket - a_arm (or from the H-link's angle through the four-bar)"
+    )
     ax.set_xlabel("level frame x (m)")
     ax.set_ylabel("level frame z (m)")
     ax.set_aspect("equal")

@@ -41,10 +41,10 @@ from rclpy.time import Time
 from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import Header
 
-from excavator_kinematics import messages
+from excavator_kinematics import message_codec
 from excavator_kinematics.imu import GRAVITY, SENSORS, ImuArm, TiltFilter, up_from_orientation
 from excavator_kinematics.kinematics import CYLINDERS, Excavator, StrokeError
-from excavator_kinematics.node_settings import IMU_STATE, NODES_CONFIG
+from excavator_kinematics.node_schemas import IMU_STATE, NODES_CONFIG
 from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes import MachineNode, run_node
 from manipulator_kinematics.nodes.base import input_qos
@@ -90,8 +90,9 @@ class ImuState(MachineNode):
         self.upper_frame = s["frame_prefix"] + s["upper_structure_frame"]
         sensors = input_qos(s["qos_depth"], s["input_reliability"])
         for name in SENSORS:
-            self.create_subscription(Imu, topics[f"imu_{name}"], lambda msg, n=name: self.on_imu(n, msg),
-                                     sensors)
+            self.create_subscription(
+                Imu, topics[f"imu_{name}"], lambda msg, n=name: self.on_imu(n, msg), sensors
+            )
         linkage = self.exc.description.imu["bucket_linkage"]["body"]
         self.get_logger().info(
             f"{self.exc.name}: {', '.join(topics[f'imu_{n}'] for n in SENSORS)} (bucket linkage IMU on the "
@@ -135,8 +136,12 @@ class ImuState(MachineNode):
             return None
         ahead = stamp_ns - now
         if now > 0 and ahead > self.max_age_ns:
-            self.log("error", f"rejected imu {name}: stamp {ahead * 1e-9:.3f} s ahead of the node clock "
-                     f"(max_age {self.max_age_ns * 1e-9:g} s)", kind="future stamp")
+            self.log(
+                "error",
+                f"rejected imu {name}: stamp {ahead * 1e-9:.3f} s ahead of the node clock "
+                f"(max_age {self.max_age_ns * 1e-9:g} s)",
+                kind="future stamp",
+            )
             return None
         previous = self.latest[name]
         # The newest stamp this sensor's next message must pass: its previous one, or the last set's.
@@ -145,11 +150,19 @@ class ImuState(MachineNode):
             return stamp_ns
         behind = (reference - stamp_ns) * 1e-9
         if reference - stamp_ns <= self.max_age_ns:
-            self.log("warning", f"rejected imu {name}: stamp {behind:.3f} s behind (or equal to) its "
-                     "previous message or the last set", kind="stamp out of order")
+            self.log(
+                "warning",
+                f"rejected imu {name}: stamp {behind:.3f} s behind (or equal to) its "
+                "previous message or the last set",
+                kind="stamp out of order",
+            )
             return None
-        self.log("warning", f"imu {name}: stamp {behind:.3f} s behind its previous message or the last set, "
-                 "more than max_age: the clock went back, every sensor starts over", kind="clock back")
+        self.log(
+            "warning",
+            f"imu {name}: stamp {behind:.3f} s behind its previous message or the last set, "
+            "more than max_age: the clock went back, every sensor starts over",
+            kind="clock back",
+        )
         for sensor in SENSORS:
             self.latest[sensor] = None
             self.filters[sensor].up = None
@@ -165,13 +178,21 @@ class ImuState(MachineNode):
         for name in stale:
             self.latest[name] = None
             self.filters[name].up = None
-        said = [f"{name} (no message for {(now - self.arrived[name]) * 1e-9:.3f} s)" if name in self.heard
-                else f"{name} (no message since start-up)" for name in stale]
-        self.log("warning", f"no cylinder state: imu {', '.join(said)} stale, "
-                 f"max_age {self.max_age_ns * 1e-9:g} s", kind=f"stale {' '.join(stale)}")
+        said = [
+            f"{name} (no message for {(now - self.arrived[name]) * 1e-9:.3f} s)"
+            if name in self.heard
+            else f"{name} (no message since start-up)"
+            for name in stale
+        ]
+        self.log(
+            "warning",
+            f"no cylinder state: imu {', '.join(said)} stale, max_age {self.max_age_ns * 1e-9:g} s",
+            kind=f"stale {' '.join(stale)}",
+        )
 
-    def implausible(self, has_orientation: bool, q: tuple[float, ...], omega: np.ndarray,
-                    f: tuple[float, ...]) -> str:
+    def implausible(
+        self, has_orientation: bool, q: tuple[float, ...], omega: np.ndarray, f: tuple[float, ...]
+    ) -> str:
         """The reason a reading cannot be used, or ''."""
         if not np.all(np.isfinite(omega)) or float(np.max(np.abs(omega))) > self.max_rate:
             return f"angular velocity {omega.tolist()} not finite or beyond {self.max_rate:g} rad/s"
@@ -182,8 +203,10 @@ class ImuState(MachineNode):
             return ""
         magnitude = math.sqrt(sum(v * v for v in f))
         if not abs(magnitude - GRAVITY) <= self.max_dynamic:
-            return (f"no orientation and |linear_acceleration| = {magnitude:.6g} m/s^2 is more than "
-                    f"{self.max_dynamic:g} from g: no gravity direction")
+            return (
+                f"no orientation and |linear_acceleration| = {magnitude:.6g} m/s^2 is more than "
+                f"{self.max_dynamic:g} from g: no gravity direction"
+            )
         return ""
 
     def publish_if_complete(self) -> None:
@@ -195,8 +218,11 @@ class ImuState(MachineNode):
         if max(stamps) - min(stamps) > self.max_skew_ns:
             stale = SENSORS[int(np.argmin(stamps))]
             behind = (max(stamps) - min(stamps)) * 1e-9
-            self.log("warning", f"no cylinder state: imu {stale} is {behind:.3f} s "
-                     f"behind the newest sensor (max skew {self.max_skew_ns * 1e-9:g} s)")
+            self.log(
+                "warning",
+                f"no cylinder state: imu {stale} is {behind:.3f} s "
+                f"behind the newest sensor (max skew {self.max_skew_ns * 1e-9:g} s)",
+            )
             return
         if min(stamps) <= self.published_ns:
             return  # waiting for the rest of the next set
@@ -213,18 +239,24 @@ class ImuState(MachineNode):
         too_fast = np.abs(joints.rates) > self.max_rates
         if np.any(too_fast):
             i = int(np.argmax(too_fast))
-            self.log("error", f"no cylinder state: {CYLINDERS[i]} rate {joints.rates[i]:.6g} m/s from the "
-                     f"gyros is beyond {self.max_rates[i]:g} m/s ({RATE_MARGIN:g} x its speed limit): "
-                     "not a motion this machine can make (gyro fault or noise)")
+            self.log(
+                "error",
+                f"no cylinder state: {CYLINDERS[i]} rate {joints.rates[i]:.6g} m/s from the "
+                f"gyros is beyond {self.max_rates[i]:g} m/s ({RATE_MARGIN:g} x its speed limit): "
+                "not a motion this machine can make (gyro fault or noise)",
+            )
             return
         newest = max(stamps)
         self.published_ns = newest
         stamp = Time(nanoseconds=newest).to_msg()
         # The tilt first: excavator_forward pairs each cylinder message with the tilt of its stamp.
         x, y, z = joints.up_cab.tolist()
-        self.tilt_pub.publish(Vector3Stamped(header=Header(stamp=stamp, frame_id=self.upper_frame),
-                                             vector=Vector3(x=x, y=y, z=z)))
-        self.cylinder_pub.publish(messages.joint_state(stamp, CYLINDERS, joints.lengths, joints.rates))
+        self.tilt_pub.publish(
+            Vector3Stamped(
+                header=Header(stamp=stamp, frame_id=self.upper_frame), vector=Vector3(x=x, y=y, z=z)
+            )
+        )
+        self.cylinder_pub.publish(message_codec.joint_state(stamp, CYLINDERS, joints.lengths, joints.rates))
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -29,7 +29,7 @@ nearer stroke end as a fraction of the stroke (:func:`widest_margin_angles`: the
 maxima of a 2.5 deg grid, each refined to within 2e-8 rad; a feasible band of alpha narrower
 than the grid step can be missed).
 
-Speed: a batch runs vectorised in blocks of rows (:func:`manipulator_kinematics.blocks.in_blocks`),
+Speed: a batch runs vectorised in blocks of rows (:func:`manipulator_kinematics.row_blocks.in_blocks`),
 the machine's numbers folded once (:class:`Constants`); one target runs the same steps compiled
 (:mod:`excavator_kinematics.ik_kernel`, numba), the numpy path staying the reference
 (``compiled=False``). benchmarks/bench_excavator_ik.py measures both against scipy's least squares.
@@ -44,8 +44,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
-from excavator_kinematics.parameters import wrap_swing
-from manipulator_kinematics.blocks import BLOCK, in_blocks
+from excavator_kinematics.machine_file import wrap_swing
 from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.model import (
     TIE_TOLERANCE,
@@ -57,6 +56,7 @@ from manipulator_kinematics.model import (
     select,
 )
 from manipulator_kinematics.planar import Reach, wrap_angle
+from manipulator_kinematics.row_blocks import BLOCK, in_blocks
 
 if TYPE_CHECKING:
     from excavator_kinematics.kinematics import Excavator
@@ -134,24 +134,48 @@ class Constants(NamedTuple):
         pivot, pin = model._pivot, model._bucket_pin
         base = model._pins_local["bucket_cylinder_base"]
         k = cls(
-            model.l0, model.l1, model.l2, model.l3, model.l4,
-            model.l2**2 + model.l3**2, 2.0 * model.l2 * model.l3,
-            model.l2 + model.l3 + arm_tol, abs(model.l2 - model.l3) - arm_tol,
-            float(boom.orientation), boom.offset, boom.a**2 + boom.b**2, 2.0 * boom.a * boom.b,
-            float(arm.orientation), arm.offset, arm.a**2 + arm.b**2, 2.0 * arm.a * arm.b,
-            model._h_phase, model._h_radius,
-            float(pin[0] - pivot[0]), float(pin[1] - pivot[1]),
-            float(base[0] - pivot[0]), float(base[1] - pivot[1]),
-            model._side, model._side**2 - model._h_link**2, 2.0 * model._side,
-            float(model._side_triangle.orientation), float(model._h_orientation),
-            model._lo[3], model._hi[3],
-            model.limits.stroke_min, model.limits.stroke_max,
+            model.l0,
+            model.l1,
+            model.l2,
+            model.l3,
+            model.l4,
+            model.l2**2 + model.l3**2,
+            2.0 * model.l2 * model.l3,
+            model.l2 + model.l3 + arm_tol,
+            abs(model.l2 - model.l3) - arm_tol,
+            float(boom.orientation),
+            boom.offset,
+            boom.a**2 + boom.b**2,
+            2.0 * boom.a * boom.b,
+            float(arm.orientation),
+            arm.offset,
+            arm.a**2 + arm.b**2,
+            2.0 * arm.a * arm.b,
+            model._h_phase,
+            model._h_radius,
+            float(pin[0] - pivot[0]),
+            float(pin[1] - pivot[1]),
+            float(base[0] - pivot[0]),
+            float(base[1] - pivot[1]),
+            model._side,
+            model._side**2 - model._h_link**2,
+            2.0 * model._side,
+            float(model._side_triangle.orientation),
+            float(model._h_orientation),
+            model._lo[3],
+            model._hi[3],
+            model.limits.stroke_min,
+            model.limits.stroke_max,
             model.limits.stroke_max - model.limits.stroke_min,
-            1.0 / (model.joint_limits.upper - model.joint_limits.lower), np.empty(0),
+            1.0 / (model.joint_limits.upper - model.joint_limits.lower),
+            np.empty(0),
         )
         lower, upper = model.joint_limits.lower - LIMIT_TOL, model.joint_limits.upper + LIMIT_TOL
-        return k._replace(packed=np.concatenate((np.array(k[:_SCALARS], dtype=float), lower, upper, k.weights,
-                                                 k.stroke_min, k.stroke_max)))
+        return k._replace(
+            packed=np.concatenate(
+                (np.array(k[:_SCALARS], dtype=float), lower, upper, k.weights, k.stroke_min, k.stroke_max)
+            )
+        )
 
 
 def cos_sin(angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -176,8 +200,9 @@ _SWING_SIGN = np.array([1.0, -1.0])  # the same per swing (front, behind)
 _ELBOW_SIGN = np.array([1.0, -1.0, 1.0, -1.0])
 
 
-def open_chain_columns(k: Constants, x: np.ndarray, y: np.ndarray, z: np.ndarray, alpha: np.ndarray,
-                       heading: np.ndarray) -> tuple[np.ndarray, ...]:
+def open_chain_columns(
+    k: Constants, x: np.ndarray, y: np.ndarray, z: np.ndarray, alpha: np.ndarray, heading: np.ndarray
+) -> tuple[np.ndarray, ...]:
     """Steps 1-3 of the module docstring on flat targets: x, y, z, heading (N, 1), alpha (N, 1)
     or (N, 4) (one per candidate): (theta2, theta3, theta4, reach), each (N, 4) in BRANCHES
     order, NaN where the bucket pin is out of the arm's reach (reach of
@@ -221,8 +246,9 @@ def _triangle_length(theta: np.ndarray, o: float, offset: float, aa_bb: float, t
     return np.where(t > 0.0, np.sqrt(aa_bb - two_ab * (1.0 - tt) / (1.0 + tt)), np.nan)
 
 
-def linkage_length_columns(k: Constants, theta2: np.ndarray, theta3: np.ndarray,
-                           theta4: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def linkage_length_columns(
+    k: Constants, theta2: np.ndarray, theta3: np.ndarray, theta4: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The cylinder lengths d2, d3, d4 of joint angles (any one shape), NaN where a linkage cannot
     close (:meth:`Excavator.linkage_lengths`).
 
@@ -258,8 +284,9 @@ def linkage_length_columns(k: Constants, theta2: np.ndarray, theta3: np.ndarray,
     return d2, d3, d4
 
 
-def open_chain_candidates(model: Excavator, Q: np.ndarray,
-                          heading: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def open_chain_candidates(
+    model: Excavator, Q: np.ndarray, heading: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Every open-chain theta = [theta1..theta4] with eq. 3's Q(theta) = Q (..., 4), steps 1-3 of
     the module docstring: (theta (..., 4, 4) in BRANCHES order, NaN where the bucket pin is out
     of the arm's reach; reach (..., 4) of :class:`manipulator_kinematics.planar.Reach`).
@@ -283,8 +310,9 @@ def _swings(heading: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     return swing
 
 
-def _block_candidates(model: Excavator, Q: np.ndarray, alpha: np.ndarray,
-                      heading: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _block_candidates(
+    model: Excavator, Q: np.ndarray, alpha: np.ndarray, heading: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """D (N, 4, 4), reach (N, 4) and status (N, 4) of flat targets Q (N, >= 3) at bucket angles
     alpha (N, 1) or (N, 4) (one per candidate); heading (N, 1) or None."""
     k = model._ik
@@ -304,8 +332,9 @@ def candidates(model: Excavator, Q: np.ndarray, heading: np.ndarray | None = Non
     solution."""
     flat = Q.reshape(-1, 4)
     headings = None if heading is None else np.reshape(heading, (-1, 1))
-    D, reach, judged = in_blocks(lambda Q, heading: _block_candidates(model, Q, Q[:, 3:4], heading),
-                                 flat, headings)
+    D, reach, judged = in_blocks(
+        lambda Q, heading: _block_candidates(model, Q, Q[:, 3:4], heading), flat, headings
+    )
     shape = Q.shape[:-1] + (4,)
     return D.reshape(shape + (4,)), reach.reshape(shape), judged.reshape(shape)
 
@@ -324,14 +353,23 @@ def _branch_index(branch: str | None) -> int | None:
     if branch is None:
         return None
     if branch not in BRANCHES:
-        raise RequestError(f"unknown branch {branch!r}; known: {', '.join(BRANCHES)} "
-                           "(empty = closest to the seed)")
+        raise RequestError(
+            f"unknown branch {branch!r}; known: {', '.join(BRANCHES)} (empty = closest to the seed)"
+        )
     return BRANCHES.index(branch)
 
 
-def _solutions(model: Excavator, Q: np.ndarray, D: np.ndarray, reach: np.ndarray, judged: np.ndarray,
-               seed: np.ndarray | None, branch: int | None, other_heading: bool = False,
-               selection: tuple[np.ndarray, np.ndarray] | None = None) -> IKSolutions:
+def _solutions(
+    model: Excavator,
+    Q: np.ndarray,
+    D: np.ndarray,
+    reach: np.ndarray,
+    judged: np.ndarray,
+    seed: np.ndarray | None,
+    branch: int | None,
+    other_heading: bool = False,
+    selection: tuple[np.ndarray, np.ndarray] | None = None,
+) -> IKSolutions:
     """IKSolutions of candidates D (..., 4, 4) of targets Q (..., 4, 4) (one per candidate) with
     statuses ``judged``; ``other_heading``: the last two candidates are refused for facing the
     other way (a 6-D target); ``selection``: (selected, tie) when already made (the kernel)."""
@@ -342,8 +380,13 @@ def _solutions(model: Excavator, Q: np.ndarray, D: np.ndarray, reach: np.ndarray
     def explain(solutions: IKSolutions, index: tuple[int, ...]) -> str:
         chosen = int(solutions.selected[index])
         if chosen >= 0:
-            rule = ("the requested branch" if branch is not None else
-                    "closest to the seed" if seed is not None else "first valid in branch order")
+            rule = (
+                "the requested branch"
+                if branch is not None
+                else "closest to the seed"
+                if seed is not None
+                else "first valid in branch order"
+            )
             tie = " (tie: another valid solution is as close to the seed)" if solutions.tie[index] else ""
             return f"branch {BRANCHES[chosen]} ({rule}){tie}"
         parts = []
@@ -353,8 +396,9 @@ def _solutions(model: Excavator, Q: np.ndarray, D: np.ndarray, reach: np.ndarray
             if other_heading and i >= 2:
                 note = "the swing of the other heading turns the bucket frame half a turn from the target's"
             else:
-                note = _candidate_note(model, Q[index][i], D[index][i], int(reach[index][i]),
-                                       int(judged[index][i]))
+                note = _candidate_note(
+                    model, Q[index][i], D[index][i], int(reach[index][i]), int(judged[index][i])
+                )
             parts.append(f"{name}: {note}")
         return "no valid solution: " + "; ".join(parts)
 
@@ -378,8 +422,10 @@ def _candidate_note(model: Excavator, Q: np.ndarray, D: np.ndarray, reach: int, 
 def _pin_reach(model: Excavator, Q: np.ndarray, D: np.ndarray) -> str:
     r = Q[0] * math.cos(D[0]) + Q[1] * math.sin(D[0]) - model.l4 * math.cos(Q[3]) - model.l1
     distance = math.hypot(r, Q[2] - model.l4 * math.sin(Q[3]) - model.l0)
-    return (f"{distance:.6g} m from the boom foot pin, the arm reaches "
-            f"[{abs(model.l2 - model.l3):.6g}, {model.l2 + model.l3:.6g}] m")
+    return (
+        f"{distance:.6g} m from the boom foot pin, the arm reaches "
+        f"[{abs(model.l2 - model.l3):.6g}, {model.l2 + model.l3:.6g}] m"
+    )
 
 
 def _seed(seed: ArrayLike | None, model: Excavator) -> np.ndarray | None:
@@ -414,8 +460,15 @@ def compiled_kernel(model: Excavator, wait: bool = False) -> ModuleType | None:
     return KERNEL.get(model._ik.packed, wait=wait)
 
 
-def _solve_one(kernel, model: Excavator, position: np.ndarray, alpha: np.ndarray, finite: bool,
-               seed: np.ndarray | None, branch: int | None) -> IKSolutions:
+def _solve_one(
+    kernel,
+    model: Excavator,
+    position: np.ndarray,
+    alpha: np.ndarray,
+    finite: bool,
+    seed: np.ndarray | None,
+    branch: int | None,
+) -> IKSolutions:
     """One target through the kernel: tip ``position`` (3,), candidate b at bucket angle alpha[b]."""
     k = model._ik.packed
     x, y, z = position.tolist()
@@ -423,16 +476,21 @@ def _solve_one(kernel, model: Excavator, position: np.ndarray, alpha: np.ndarray
     kernel.candidates(k, x, y, z, alpha, math.atan2(y, x), D, reach)
     kernel.judge(k, x, y, finite, SWING_AXIS, D, judged)
     seeded = seed is not None
-    selected, tie = kernel.pick(k, D, judged, seed if seeded else alpha, seeded,
-                                -1 if branch is None else branch,
-                                TIE_TOLERANCE)
+    selected, tie = kernel.pick(
+        k, D, judged, seed if seeded else alpha, seeded, -1 if branch is None else branch, TIE_TOLERANCE
+    )
     Q = np.empty((4, 4))
     Q[:, :3], Q[:, 3] = position, alpha
     return _solutions(model, Q, D, reach, judged, seed, branch, selection=(np.array(selected), np.array(tie)))
 
 
-def solve_pose(model: Excavator, Q: ArrayLike, seed: ArrayLike | None = None,
-               branch: str | None = None, compiled: bool = True) -> IKSolutions:
+def solve_pose(
+    model: Excavator,
+    Q: ArrayLike,
+    seed: ArrayLike | None = None,
+    branch: str | None = None,
+    compiled: bool = True,
+) -> IKSolutions:
     """Every candidate for targets Q = [x, y, z, alpha] (..., 4) and the selected one; one target
     (4,) runs the compiled kernel (:func:`compiled_kernel`) unless not ``compiled``."""
     index = _branch_index(branch)
@@ -441,11 +499,13 @@ def solve_pose(model: Excavator, Q: ArrayLike, seed: ArrayLike | None = None,
         raise ValueError(f"expected Q = [x, y, z, alpha] of shape (..., 4), got shape {Q.shape}")
     kernel = compiled_kernel(model) if Q.shape == (4,) and compiled else None
     if kernel is not None:
-        return _solve_one(kernel, model, Q[:3], np.full(4, Q[3]), bool(np.isfinite(Q).all()),
-                          _seed(seed, model), index)
+        return _solve_one(
+            kernel, model, Q[:3], np.full(4, Q[3]), bool(np.isfinite(Q).all()), _seed(seed, model), index
+        )
     D, reach, judged = candidates(model, Q)
-    return _solutions(model, np.broadcast_to(Q[..., None, :], D.shape), D, reach, judged, _seed(seed, model),
-                      index)
+    return _solutions(
+        model, np.broadcast_to(Q[..., None, :], D.shape), D, reach, judged, _seed(seed, model), index
+    )
 
 
 def seed_bucket_angle(model: Excavator, seed: ArrayLike) -> np.ndarray:
@@ -512,8 +572,13 @@ def widest_margin_angles(model: Excavator, position: np.ndarray) -> np.ndarray:
     return np.where(found, np.take_along_axis(best, winner, axis=1)[:, 0, :], -np.pi)
 
 
-def solve_position(model: Excavator, position: ArrayLike, seed: ArrayLike | None = None,
-                   branch: str | None = None, compiled: bool = True) -> IKSolutions:
+def solve_position(
+    model: Excavator,
+    position: ArrayLike,
+    seed: ArrayLike | None = None,
+    branch: str | None = None,
+    compiled: bool = True,
+) -> IKSolutions:
     """Every candidate for tip positions (..., 3), the bucket angle free (module docstring); one
     position (3,) runs the compiled kernel unless not ``compiled``."""
     index = _branch_index(branch)
@@ -526,8 +591,15 @@ def solve_position(model: Excavator, position: ArrayLike, seed: ArrayLike | None
     if seed is not None:
         alpha = np.broadcast_to(seed_bucket_angle(model, seed), position.shape[:-1]).reshape(-1, 1)
         if kernel is not None:
-            return _solve_one(kernel, model, position, np.full(4, alpha[0, 0]),
-                              bool(np.isfinite(position).all()), seed, index)
+            return _solve_one(
+                kernel,
+                model,
+                position,
+                np.full(4, alpha[0, 0]),
+                bool(np.isfinite(position).all()),
+                seed,
+                index,
+            )
     elif kernel is not None:
         finite = bool(np.isfinite(position).all())
         x, y, z = position.tolist() if finite else (0.0, 0.0, 0.0)
@@ -542,19 +614,29 @@ def solve_position(model: Excavator, position: ArrayLike, seed: ArrayLike | None
     shape = position.shape[:-1] + (4,)
     alpha = np.broadcast_to(alpha, (len(flat), 4))
     Q = np.concatenate((np.broadcast_to(flat[:, None, :], (len(flat), 4, 3)), alpha[..., None]), axis=-1)
-    return _solutions(model, Q.reshape(shape + (4,)), D.reshape(shape + (4,)), reach.reshape(shape),
-                      judged.reshape(shape), seed, index)
+    return _solutions(
+        model,
+        Q.reshape(shape + (4,)),
+        D.reshape(shape + (4,)),
+        reach.reshape(shape),
+        judged.reshape(shape),
+        seed,
+        index,
+    )
 
 
 def bucket_rotation(theta1: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     """R = Rz(theta1) Ry(-alpha) (..., 3, 3): the bucket frame (docs/excavator.md, Frames)."""
     c1, s1, ca, sa = np.cos(theta1), np.sin(theta1), np.cos(alpha), np.sin(alpha)
     zero = np.zeros_like(c1)
-    return np.stack([
-        np.stack([c1 * ca, -s1, -c1 * sa], axis=-1),
-        np.stack([s1 * ca, c1, -s1 * sa], axis=-1),
-        np.stack([sa, zero, ca], axis=-1),
-    ], axis=-2)
+    return np.stack(
+        [
+            np.stack([c1 * ca, -s1, -c1 * sa], axis=-1),
+            np.stack([s1 * ca, c1, -s1 * sa], axis=-1),
+            np.stack([sa, zero, ca], axis=-1),
+        ],
+        axis=-2,
+    )
 
 
 def fkine(model: Excavator, D: ArrayLike) -> np.ndarray:
@@ -580,8 +662,15 @@ def jacob0(model: Excavator, D: ArrayLike) -> np.ndarray:
     return np.concatenate((jc0[..., :3, :], angular), axis=-2)
 
 
-def solve_ik(model: Excavator, target: ArrayLike, *, use_orientation: bool = True, mode: str | None = None,
-             seed: ArrayLike | None = None, branch: str | None = None) -> IKSolutions:
+def solve_ik(
+    model: Excavator,
+    target: ArrayLike,
+    *,
+    use_orientation: bool = True,
+    mode: str | None = None,
+    seed: ArrayLike | None = None,
+    branch: str | None = None,
+) -> IKSolutions:
     """The SerialModel entry (SolveIK): target poses (..., 4, 4) in the base frame.
 
     Mode ``pose`` (default with an orientation): the orientation gives the swing heading (the
@@ -595,11 +684,15 @@ def solve_ik(model: Excavator, target: ArrayLike, *, use_orientation: bool = Tru
         raise RequestError(f"unknown mode {mode!r}; known: {', '.join(MODES)}")
     index = _branch_index(branch)
     if mode == "pose" and not use_orientation:
-        raise RequestError("mode 'pose' takes the bucket angle from the target orientation: set "
-                           "use_orientation", IKStatus.INVALID)
+        raise RequestError(
+            "mode 'pose' takes the bucket angle from the target orientation: set use_orientation",
+            IKStatus.INVALID,
+        )
     if mode == "position" and use_orientation:
-        raise RequestError("mode 'position' leaves the bucket angle free: use mode 'pose' to give an "
-                           "orientation", IKStatus.INVALID)
+        raise RequestError(
+            "mode 'position' leaves the bucket angle free: use mode 'pose' to give an orientation",
+            IKStatus.INVALID,
+        )
     target = np.asarray(target, dtype=float)
     position = target[..., :3, 3]
     if mode == "position":
@@ -616,20 +709,33 @@ def solve_ik(model: Excavator, target: ArrayLike, *, use_orientation: bool = Tru
     judged[..., 2:] = _UNREACHABLE  # the other heading: not this orientation
     judged[rolled | off_plane] = _UNREACHABLE
     judged[~finite] = _INVALID
-    solutions = _solutions(model, np.broadcast_to(Q[..., None, :], D.shape), D, reach, judged,
-                           _seed(seed, model), index, other_heading=True)
+    solutions = _solutions(
+        model,
+        np.broadcast_to(Q[..., None, :], D.shape),
+        D,
+        reach,
+        judged,
+        _seed(seed, model),
+        index,
+        other_heading=True,
+    )
 
     def explain(result: IKSolutions, where: tuple[int, ...]) -> str:
         if not finite[where]:
             return "target is not finite"
         if rolled[where]:
             roll = math.degrees(math.asin(min(1.0, abs(float(R[where][2, 1])))))
-            return (f"target orientation rolls the bucket by {roll:.6g} deg: its y axis (the boom-plane "
-                    "normal) must be level")
+            return (
+                f"target orientation rolls the bucket by {roll:.6g} deg: its y axis (the boom-plane "
+                "normal) must be level"
+            )
         if off_plane[where]:
-            return (f"target position is {float(lateral[where]):.6g} m off the boom plane of the "
-                    f"orientation's heading {math.degrees(float(heading[where])):.6g} deg")
+            return (
+                f"target position is {float(lateral[where]):.6g} m off the boom plane of the "
+                f"orientation's heading {math.degrees(float(heading[where])):.6g} deg"
+            )
         return solutions.explain(result, where)
 
-    return IKSolutions(q=D, status=judged, branches=BRANCHES, selected=solutions.selected, tie=solutions.tie,
-                       explain=explain)
+    return IKSolutions(
+        q=D, status=judged, branches=BRANCHES, selected=solutions.selected, tie=solutions.tie, explain=explain
+    )

@@ -29,7 +29,7 @@ eq.   relation                                     function
 
 Everything is closed form, written once as plain vectorised numpy on (..., n) arrays: one state
 (shape (4,)) is a batch of one through the same code (the same bits as that row of a batch); a
-batch (shape (N, 4)) runs in blocks of rows (:func:`manipulator_kinematics.blocks.in_blocks`).
+batch (shape (N, 4)) runs in blocks of rows (:func:`manipulator_kinematics.row_blocks.in_blocks`).
 Rates and accelerations have D's shape or (4,), broadcast over a batch. The single call of
 :meth:`Excavator.state`, :meth:`Excavator.pose` and :meth:`Excavator.jc0` runs the same steps
 compiled (:mod:`excavator_kinematics.state_kernel`, numba) once that kernel has loaded in the
@@ -37,7 +37,7 @@ background (:class:`manipulator_kinematics.compiled.Kernel`; the numpy path answ
 stays the reference, within 1e-12). Errors: a wrong shape is a ``ValueError`` saying "shape"; a
 state the machine cannot take (outside a stroke or the swing range, not finite, a linkage that
 cannot close, a singular JC0) is a :class:`StrokeError` (also a ValueError). The machine file is
-read by :mod:`excavator_kinematics.parameters`.
+read by :mod:`excavator_kinematics.machine_file`.
 """
 
 from __future__ import annotations
@@ -52,11 +52,11 @@ from typing import Any
 import numpy as np
 
 from excavator_kinematics import inverse
-from excavator_kinematics.parameters import CYLINDERS, SECTION, Description, parse, wrap_swing
-from manipulator_kinematics.blocks import BLOCK, in_blocks
+from excavator_kinematics.machine_file import CYLINDERS, SECTION, Description, parse, wrap_swing
 from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.model import IKSolutions
-from manipulator_kinematics.params import ConfigError, config_path, load_parameters
+from manipulator_kinematics.param_files import ConfigError, config_path, load_parameters
+from manipulator_kinematics.row_blocks import BLOCK, in_blocks
 from manipulator_kinematics.serial_chain import JointLimits
 
 JOINTS = ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")
@@ -120,14 +120,26 @@ class _Triangle:
         """Eq. 1's constants, folded: cos(gamma) = (a^2 + b^2 - d^2) / (2ab) = c0 - c1 d^2, then
         ab, the orientation o, radius (cos, sin) offset and the offset (the kernel's order)."""
         ab = self.a * self.b
-        return ((self.a * self.a + self.b * self.b) / (2.0 * ab), 0.5 / ab, ab, float(self.orientation),
-                self.radius * math.cos(self.offset), self.radius * math.sin(self.offset), self.offset)
+        return (
+            (self.a * self.a + self.b * self.b) / (2.0 * ab),
+            0.5 / ab,
+            ab,
+            float(self.orientation),
+            self.radius * math.cos(self.offset),
+            self.radius * math.sin(self.offset),
+            self.offset,
+        )
 
     @classmethod
     def of(cls, name: str, first: np.ndarray, second: np.ndarray, orientation: int) -> _Triangle:
         """The triangle of a cylinder whose pins are ``first`` and ``second`` from the pivot."""
-        return cls(name, float(np.hypot(*first)), float(np.hypot(*second)),
-                   _angle(first) - _angle(second), orientation)
+        return cls(
+            name,
+            float(np.hypot(*first)),
+            float(np.hypot(*second)),
+            _angle(first) - _angle(second),
+            orientation,
+        )
 
     def closes(self, d: np.ndarray, angle: bool = True) -> tuple[np.ndarray | None, ...]:
         """Joint angle (None unless ``angle``), its derivatives w.r.t. d (eq. 1: k21, k22) and
@@ -163,9 +175,16 @@ def _warm(state_kernel: ModuleType) -> None:
     state_kernel.bucket_quaternion(0.0, 0.0, np.empty(4))
     state_kernel.bucket_angular_velocity(0.0, 0.0, 0.0, three)
     state_kernel.bucket_angular_acceleration(0.0, 0.0, 0.0, 0.0, 0.0, three)
-    for function in (state_kernel.state, state_kernel.pose, state_kernel.jc0, state_kernel.states,
-                     state_kernel.poses, state_kernel.bucket_quaternion,
-                     state_kernel.bucket_angular_velocity, state_kernel.bucket_angular_acceleration):
+    for function in (
+        state_kernel.state,
+        state_kernel.pose,
+        state_kernel.jc0,
+        state_kernel.states,
+        state_kernel.poses,
+        state_kernel.bucket_quaternion,
+        state_kernel.bucket_angular_velocity,
+        state_kernel.bucket_angular_acceleration,
+    ):
         function.disable_compile()
 
 
@@ -188,7 +207,7 @@ class Excavator:
     """
 
     def __init__(self, description: Description) -> None:
-        """Build from a machine description (:func:`excavator_kinematics.parameters.parse` makes
+        """Build from a machine description (:func:`excavator_kinematics.machine_file.parse` makes
         one from a parameters file's section); raises ConfigError unless the linkage assembles
         over the whole stroke box."""
         g = description
@@ -270,11 +289,22 @@ class Excavator:
         # The constants of the compiled single call (state_kernel): l0..l4, the boom, arm and
         # side-link triangles (7 each, _Triangle.constants), R's pivot from the bucket pin (2),
         # the bucket four-bar (8, _h_constants), the limits with the tolerance (4 + 4).
-        self._packed = np.array([
-            self.l0, self.l1, self.l2, self.l3, self.l4,
-            *self._boom.constants, *self._arm.constants, *self._side_triangle.constants,
-            *self._pivot_from_bucket_pin, *self._h_constants, *self._lo, *self._hi,
-        ])
+        self._packed = np.array(
+            [
+                self.l0,
+                self.l1,
+                self.l2,
+                self.l3,
+                self.l4,
+                *self._boom.constants,
+                *self._arm.constants,
+                *self._side_triangle.constants,
+                *self._pivot_from_bucket_pin,
+                *self._h_constants,
+                *self._lo,
+                *self._hi,
+            ]
+        )
 
     def _check_whole_stroke(self) -> None:
         """Every length in the stroke box must assemble; a bad pin or length fails here, naming it."""
@@ -300,31 +330,36 @@ class Excavator:
         hanging down behind the machine (theta2 = -164 deg, tip at r = -3.4 m)."""
         samples = np.linspace(self.limits.stroke_min, self.limits.stroke_max, 2001)
         k, _ = self.k_entries(samples)
-        for i, (name, sign, joint, what) in enumerate((
-            ("boom_cylinder", 1.0, "theta2", "raise the boom"),
-            ("arm_cylinder", -1.0, "theta3", "curl the arm in"),
-            ("bucket_cylinder", -1.0, "theta4", "curl the bucket in"),
-        )):
+        for i, (name, sign, joint, what) in enumerate(
+            (
+                ("boom_cylinder", 1.0, "theta2", "raise the boom"),
+                ("arm_cylinder", -1.0, "theta3", "curl the arm in"),
+                ("bucket_cylinder", -1.0, "theta4", "curl the bucket in"),
+            )
+        ):
             wrong = k[:, i] * sign <= 0.0
             if np.any(wrong):
                 at = samples[np.argmax(wrong), i]
                 raise ConfigError(
                     f"{SECTION}.{name}.orientation: extending the cylinder must {what} ({joint} "
                     f"{'up' if sign > 0 else 'down'}), this branch turns it the other way "
-                    f"(d{joint}/dd = {k[np.argmax(wrong), i]:.3g} rad/m at {at:.4g} m): flip the sign")
+                    f"(d{joint}/dd = {k[np.argmax(wrong), i]:.3g} rad/m at {at:.4g} m): flip the sign"
+                )
         reference = self.limits.reference
         (ex, ey), (hx, hy) = (np.ravel(v) for v in self._linkages(*(reference[1:, None]))[4])
         fx, fy = self._pivot_from_bucket_pin
         if (ex * hy - ey * hx) * (ex * fy - ey * fx) >= 0.0:
             raise ConfigError(
                 f"{SECTION}.h_link.orientation: this branch crosses the bucket linkage (the H-link "
-                "pin on the side-link pivot's side of the line bucket pin -> rod pin): flip the sign")
+                "pin on the side-link pivot's side of the line bucket pin -> rod pin): flip the sign"
+            )
         r = self.open_chain_pose(np.concatenate(([0.0], self.joint_angles(reference[1:]))))[0]
         if r <= 0.0:
             raise ConfigError(
                 f"{SECTION}.boom_cylinder.reference_length: at the reference lengths the bucket tip "
                 f"is {-r:.3g} m behind the swing axis (r = {r:.3g} m); a backhoe's tool is in front: "
-                "check the pins")
+                "check the pins"
+            )
 
     @classmethod
     def from_file(cls, path: str | Path, node_name: str = "/**") -> Excavator:
@@ -359,11 +394,19 @@ class Excavator:
         """:meth:`ik` for tip positions (..., 3): alpha the seed's, else the widest stroke margin."""
         return inverse.solve_position(self, position, seed, branch)
 
-    def solve_ik(self, target: Any, *, use_orientation: bool = True, mode: str | None = None,
-                 seed: Any = None, branch: str | None = None) -> IKSolutions:
+    def solve_ik(
+        self,
+        target: Any,
+        *,
+        use_orientation: bool = True,
+        mode: str | None = None,
+        seed: Any = None,
+        branch: str | None = None,
+    ) -> IKSolutions:
         """The SerialModel entry for bucket poses (..., 4, 4) (:func:`inverse.solve_ik`)."""
-        return inverse.solve_ik(self, target, use_orientation=use_orientation, mode=mode, seed=seed,
-                                branch=branch)
+        return inverse.solve_ik(
+            self, target, use_orientation=use_orientation, mode=mode, seed=seed, branch=branch
+        )
 
     def fkine(self, D: Any) -> np.ndarray:
         """Bucket pose (..., 4, 4): the tip, yaw theta1, then -alpha about y (eq. 3)."""
@@ -431,7 +474,6 @@ class Excavator:
                     f"{cylinder} length {_first_bad(column, inside[..., i]):.6g} m outside the stroke "
                     f"[{self.limits.stroke_min[i]:.6g}, {self.limits.stroke_max[i]:.6g}] m"
                 )
-
 
     # ------------------------------------------------------------------ closed loops (eqs. 1-2, 7)
     def _linkages(self, d2: np.ndarray, d3: np.ndarray, d4: np.ndarray) -> tuple[tuple[np.ndarray, ...], ...]:
@@ -523,15 +565,18 @@ class Excavator:
             columns = inverse.linkage_length_columns(self._ik, angles[..., 0], angles[..., 1], angles[..., 2])
         return np.stack(columns, axis=-1)
 
-
     # ------------------------------------------------------------------ open chain (eqs. 3-5)
     def pose(self, D: Any) -> np.ndarray:
         """Q = [x, y, z, alpha] of the bucket tip for D (eqs. 1-3)."""
         D = np.asarray(D, dtype=float)
         if D.shape == (4,) and (Q := self._compiled("pose", np.empty(4), D)) is not None:
             return Q
-        if D.ndim == 2 and D.shape[1] == 4 and len(D) <= _KERNEL_BATCH and (Q := self._compiled(
-                "poses", np.empty(D.shape), np.ascontiguousarray(D))) is not None:
+        if (
+            D.ndim == 2
+            and D.shape[1] == 4
+            and len(D) <= _KERNEL_BATCH
+            and (Q := self._compiled("poses", np.empty(D.shape), np.ascontiguousarray(D))) is not None
+        ):
             return Q
         D = self.validate(D)
         return in_blocks(self._poses, D.reshape(-1, 4), block=_BLOCK, rows=True).T.reshape(D.shape)
@@ -547,8 +592,9 @@ class Excavator:
         """Q = [x, y, z, alpha] from the open-chain joints theta1..theta4 (eq. 3), no limits."""
         theta = _vectors(theta, 4, "theta = [theta1, theta2, theta3, theta4]")
         t1, t2, t3, t4 = _columns(theta.reshape(-1, 4))
-        a1, _, _, b1, _, _ = self._chain_terms(np.cos(t2), np.sin(t2), np.cos(t3), np.sin(t3),
-                                               np.cos(t4), np.sin(t4))
+        a1, _, _, b1, _, _ = self._chain_terms(
+            np.cos(t2), np.sin(t2), np.cos(t3), np.sin(t3), np.cos(t4), np.sin(t4)
+        )
         return _table(self._tip(t1, a1, b1, t2 + t3 + t4), t1.shape).reshape(theta.shape)
 
     def _tip(self, t1: np.ndarray, a1: np.ndarray, b1: np.ndarray, alpha: np.ndarray) -> list[np.ndarray]:
@@ -598,9 +644,9 @@ class Excavator:
             for name, p in side.items()
         }
 
-
-    def _chain_terms(self, c2: np.ndarray, s2: np.ndarray, c3: np.ndarray, s3: np.ndarray,
-                     c4: np.ndarray, s4: np.ndarray) -> tuple[np.ndarray, ...]:
+    def _chain_terms(
+        self, c2: np.ndarray, s2: np.ndarray, c3: np.ndarray, s3: np.ndarray, c4: np.ndarray, s4: np.ndarray
+    ) -> tuple[np.ndarray, ...]:
         """a1..a3, b1..b3 of eq. 4 from cos/sin of theta2, theta3, theta4 (the sums by angle
         addition): a_i = sum of l_j sin(theta2 + .. + theta_j) over j >= i, b_i the cosines."""
         c23, s23 = c2 * c3 - s2 * s3, s2 * c3 + c2 * s3
@@ -613,14 +659,27 @@ class Excavator:
         """J0(theta) of eq. 5: Qdot = J0 thetadot, rows x, y, z, alpha; columns theta1..theta4."""
         theta = _vectors(theta, 4, "theta = [theta1, theta2, theta3, theta4]")
         t1, t2, t3, t4 = _columns(theta.reshape(-1, 4))
-        a1, a2, a3, b1, b2, b3 = self._chain_terms(np.cos(t2), np.sin(t2), np.cos(t3), np.sin(t3),
-                                                   np.cos(t4), np.sin(t4))
+        a1, a2, a3, b1, b2, b3 = self._chain_terms(
+            np.cos(t2), np.sin(t2), np.cos(t3), np.sin(t3), np.cos(t4), np.sin(t4)
+        )
         rho, c1, s1 = self.l1 + b1, np.cos(t1), np.sin(t1)
         entries = [
-            -rho * s1, -a1 * c1, -a2 * c1, -a3 * c1,
-            rho * c1, -a1 * s1, -a2 * s1, -a3 * s1,
-            0.0, b1, b2, b3,
-            0.0, 1.0, 1.0, 1.0,
+            -rho * s1,
+            -a1 * c1,
+            -a2 * c1,
+            -a3 * c1,
+            rho * c1,
+            -a1 * s1,
+            -a2 * s1,
+            -a3 * s1,
+            0.0,
+            b1,
+            b2,
+            b3,
+            0.0,
+            1.0,
+            1.0,
+            1.0,
         ]
         return _table(entries, t1.shape).reshape(theta.shape[:-1] + (4, 4))
 
@@ -659,8 +718,11 @@ class Excavator:
         t1, d2, d3, d4 = _columns(D)
         _, (k2, k3, k4), _, trig, _ = self._linkages(d2, d3, d4)
         a1, a2, a3, b1, b2, b3 = self._chain_terms(*trig)
-        return tuple(_jc0_entries(self.l1 + b1, *inverse.cos_sin(t1), a1, a2, a3, b1, b2, b3, k2, k3, k4,
-                                  np.zeros(t1.shape)))
+        return tuple(
+            _jc0_entries(
+                self.l1 + b1, *inverse.cos_sin(t1), a1, a2, a3, b1, b2, b3, k2, k3, k4, np.zeros(t1.shape)
+            )
+        )
 
     # ------------------------------------------------------------------ full state (eqs. 3-11)
     def state(self, D: Any, D_dot: Any, D_ddot: Any = None) -> BucketState:
@@ -687,9 +749,17 @@ class Excavator:
         rates = _finite(D_dot, D.shape, "D_dot").reshape(-1, 4)
         accelerations = None if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot").reshape(-1, 4)
         flat = np.ascontiguousarray(D.reshape(-1, 4))
-        table = None if len(flat) > _KERNEL_BATCH else self._compiled(
-            "states", np.empty((len(flat), 10, 4)), flat, np.ascontiguousarray(rates),
-            np.zeros((len(flat), 4)) if accelerations is None else np.ascontiguousarray(accelerations))
+        table = (
+            None
+            if len(flat) > _KERNEL_BATCH
+            else self._compiled(
+                "states",
+                np.empty((len(flat), 10, 4)),
+                flat,
+                np.ascontiguousarray(rates),
+                np.zeros((len(flat), 4)) if accelerations is None else np.ascontiguousarray(accelerations),
+            )
+        )
         if table is not None:  # (N, 10, 4): each state's table
             return BucketState(table.reshape(D.shape[:-1] + (10, 4)).swapaxes(0, -2))
         # (40, N): entry j of every state in row j.
@@ -726,12 +796,30 @@ class Excavator:
         radial = rho_ddot - rho * w1 * w1
         tangential = 2.0 * rho_dot * w1 + rho * e1
         entries = [
-            t1, t2, t3, t4,
-            w1, w2, w3, w4,
-            e1, e2, e3, e4,
-            x, y, self.l0 + a1, t2 + t3 + t4,
-            rho_dot * c1 - y * w1, rho_dot * s1 + x * w1, z_dot, alpha_dot,
-            c1 * radial - s1 * tangential, s1 * radial + c1 * tangential, z_ddot, e2 + e3 + e4,
+            t1,
+            t2,
+            t3,
+            t4,
+            w1,
+            w2,
+            w3,
+            w4,
+            e1,
+            e2,
+            e3,
+            e4,
+            x,
+            y,
+            self.l0 + a1,
+            t2 + t3 + t4,
+            rho_dot * c1 - y * w1,
+            rho_dot * s1 + x * w1,
+            z_dot,
+            alpha_dot,
+            c1 * radial - s1 * tangential,
+            s1 * radial + c1 * tangential,
+            z_ddot,
+            e2 + e3 + e4,
             *_jc0_entries(rho, c1, s1, a1, a2, a3, b1, b2, b3, k2, k3, k4, np.zeros(t1.shape)),
         ]
         return tuple(entries)
@@ -773,7 +861,6 @@ class Excavator:
         )
         return jc1, jc2
 
-
     # ------------------------------------------------------------------ inverse (eqs. 9, 12-13)
     def cylinder_rates(self, D: Any, Q_dot: Any) -> RateSolution:
         """Ddot = JC0^-1 Qdot (eq. 9), solved (LU), with the 2-norm condition number of JC0.
@@ -809,8 +896,6 @@ class Excavator:
         j0 = self.j0(free.theta)
         # free.Q_ddot = J0 K1 Ddot^2 + Jdot0 thetadot; remove the K1 part to keep Jdot0 thetadot.
         return np.linalg.solve(j0, (Q_ddot - free.Q_ddot)[..., None])[..., 0] + free.theta_ddot
-
-
 
 
 def _row(i: int, doc: str) -> property:
@@ -871,9 +956,21 @@ class RateSolution:
     condition: np.ndarray  # (...,) 2-norm condition number of JC0
 
 
-def _jc0_entries(rho: np.ndarray, c1: np.ndarray, s1: np.ndarray, a1: np.ndarray, a2: np.ndarray,
-                 a3: np.ndarray, b1: np.ndarray, b2: np.ndarray, b3: np.ndarray, k2: np.ndarray,
-                 k3: np.ndarray, k4: np.ndarray, zero: np.ndarray) -> list[np.ndarray]:
+def _jc0_entries(
+    rho: np.ndarray,
+    c1: np.ndarray,
+    s1: np.ndarray,
+    a1: np.ndarray,
+    a2: np.ndarray,
+    a3: np.ndarray,
+    b1: np.ndarray,
+    b2: np.ndarray,
+    b3: np.ndarray,
+    k2: np.ndarray,
+    k3: np.ndarray,
+    k4: np.ndarray,
+    zero: np.ndarray,
+) -> list[np.ndarray]:
     """JC0 = J0 K (eqs. 5, 7, 8), row by row; column 1 is theta1 itself (k1 = 1).
 
     The boom-plane columns are -a_i k_i (d rho / d D_i, eq. 4) turned by the swing; ``zero``
@@ -881,10 +978,22 @@ def _jc0_entries(rho: np.ndarray, c1: np.ndarray, s1: np.ndarray, a1: np.ndarray
     """
     r2, r3, r4 = a1 * k2, a2 * k3, a3 * k4
     return [
-        -s1 * rho, -c1 * r2, -c1 * r3, -c1 * r4,
-        c1 * rho, -s1 * r2, -s1 * r3, -s1 * r4,
-        zero, b1 * k2, b2 * k3, b3 * k4,
-        zero, k2, k3, k4,
+        -s1 * rho,
+        -c1 * r2,
+        -c1 * r3,
+        -c1 * r4,
+        c1 * rho,
+        -s1 * r2,
+        -s1 * r3,
+        -s1 * r4,
+        zero,
+        b1 * k2,
+        b2 * k3,
+        b3 * k4,
+        zero,
+        k2,
+        k3,
+        k4,
     ]
 
 
@@ -928,8 +1037,6 @@ def _first_bad(values: np.ndarray, good: np.ndarray) -> float:
     return float(np.asarray(values)[~np.asarray(good)].flat[0])
 
 
-
-
 # ---------------------------------------------------------------------- ROS-facing geometry
 def _last_axis(*components: np.ndarray) -> np.ndarray:
     return np.stack(np.broadcast_arrays(*components), axis=-1)
@@ -963,8 +1070,9 @@ def bucket_angular_velocity(theta1: Any, theta1_dot: Any, alpha_dot: Any) -> np.
         kernel.bucket_angular_velocity(theta1, theta1_dot, alpha_dot, out)
         return out
     theta1, alpha_dot = np.asarray(theta1, dtype=float), np.asarray(alpha_dot, dtype=float)
-    return _last_axis(alpha_dot * np.sin(theta1), -alpha_dot * np.cos(theta1),
-                      np.asarray(theta1_dot, dtype=float))
+    return _last_axis(
+        alpha_dot * np.sin(theta1), -alpha_dot * np.cos(theta1), np.asarray(theta1_dot, dtype=float)
+    )
 
 
 def bucket_angular_acceleration(
@@ -976,7 +1084,8 @@ def bucket_angular_acceleration(
         out = np.empty(3)
         kernel.bucket_angular_acceleration(*state, out)
         return out
-    theta1, w, w_dot, a_dot, a_ddot = (np.asarray(v, dtype=float)
-                                       for v in (theta1, theta1_dot, theta1_ddot, alpha_dot, alpha_ddot))
+    theta1, w, w_dot, a_dot, a_ddot = (
+        np.asarray(v, dtype=float) for v in (theta1, theta1_dot, theta1_ddot, alpha_dot, alpha_ddot)
+    )
     c, s = np.cos(theta1), np.sin(theta1)
     return _last_axis(a_ddot * s + a_dot * w * c, -a_ddot * c + a_dot * w * s, w_dot)

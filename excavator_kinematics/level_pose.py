@@ -39,16 +39,18 @@ KEPT_TILTS = 8
 class LevelPose:
     """Subscription to the machine's tilt and the level-frame bucket pose publisher of one node."""
 
-    def __init__(self, node: Node, settings: dict[str, Any], topics: dict[str, str], qos: QoSProfile,
-                 log: ThrottledLog) -> None:
+    def __init__(
+        self, node: Node, settings: dict[str, Any], topics: dict[str, str], qos: QoSProfile, log: ThrottledLog
+    ) -> None:
         self.log = log
         self.max_age_ns = int(settings["tilt_max_age"] * 1e9)
         #: (stamp ns, up) of the latest tilts, oldest first.
         self.tilts: deque[tuple[int, list[float]]] = deque(maxlen=KEPT_TILTS)
         #: A bucket pose waiting for the tilt of its stamp: (stamp ns, (sec, nanosec), theta1, pose).
         self.waiting: tuple[int, tuple[int, int], float, list[float]] | None = None
-        self.message = PackedMessage(PoseStamped(header=Header(frame_id=settings["frame"])),
-                                     ("header.stamp", "pose"))
+        self.message = PackedMessage(
+            PoseStamped(header=Header(frame_id=settings["frame"])), ("header.stamp", "pose")
+        )
         self.publisher = node.create_publisher(PoseStamped, topics["bucket_pose_level"], qos)
         node.create_subscription(Vector3Stamped, topics["machine_tilt"], self.on_tilt, qos)
 
@@ -83,8 +85,9 @@ class LevelPose:
         nearest = min(self.tilts, key=lambda tilt: abs(tilt[0] - stamp_ns), default=None)
         if nearest is None or abs(stamp_ns - nearest[0]) > self.max_age_ns:
             age = "none received" if nearest is None else f"{(stamp_ns - nearest[0]) * 1e-9:+.3f} s away"
-            self.log("warning", f"no bucket_pose_level: machine tilt {age} "
-                     f"(max age {self.max_age_ns * 1e-9:g} s)")
+            self.log(
+                "warning", f"no bucket_pose_level: machine tilt {age} (max age {self.max_age_ns * 1e-9:g} s)"
+            )
             return
         rotation = level_rotation(base_up(nearest[1], theta1))
         position = rotation @ pose[:3]

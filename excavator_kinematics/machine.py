@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from excavator_kinematics.kinematics import ACTUATORS, Excavator
-from excavator_kinematics.parameters import SCHEMA, SECTION, describe
+from excavator_kinematics.machine_file import SCHEMA, SECTION, describe
 from manipulator_kinematics.registry import Hook, Machine
 from manipulator_kinematics.serial_chain import JointLimits
 

@@ -62,8 +62,14 @@ class BucketPlan:
         return self.timing is not None
 
 
-def plan_path(exc: Excavator, waypoints: ArrayLike, step: float, tip_speed: float, acceleration: float,
-              seed: ArrayLike | None = None) -> BucketPlan:
+def plan_path(
+    exc: Excavator,
+    waypoints: ArrayLike,
+    step: float,
+    tip_speed: float,
+    acceleration: float,
+    seed: ArrayLike | None = None,
+) -> BucketPlan:
     """Plan through ``waypoints`` (K, 3) (module docstring). ValueError for a request beyond the
     bounds of every machine's plan (:func:`manipulator_kinematics.plan_bounds.check_plan`)."""
     waypoints = check_plan(waypoints, step, tip_speed, acceleration)
@@ -74,8 +80,14 @@ def plan_path(exc: Excavator, waypoints: ArrayLike, step: float, tip_speed: floa
         alpha = float(exc.pose(free.solution)[3]) if bool(free.ok) else 0.0
     first = exc.ik(np.append(waypoints[0], alpha), seed=seed)
     if not bool(first.ok):
-        return BucketPlan(waypoints[:0], alpha, None, True, -1,
-                          f"the first waypoint {_show(waypoints[0])} is not reachable: {first.note()}")
+        return BucketPlan(
+            waypoints[:0],
+            alpha,
+            None,
+            True,
+            -1,
+            f"the first waypoint {_show(waypoints[0])} is not reachable: {first.note()}",
+        )
     branch = BRANCHES[int(first.selected)]
     # Each line from its start (the previous line's end) to its end: points and D.
     lines: list[tuple[np.ndarray, np.ndarray]] = []
@@ -91,10 +103,16 @@ def plan_path(exc: Excavator, waypoints: ArrayLike, step: float, tip_speed: floa
             end = _farthest(exc, before, line[bad], alpha, branch, previous if bad == 0 else solved[bad - 1])
             line = straight_line(start, end, step)[1:]
             if len(line):
-                lines.append((np.vstack((start, line)),
-                              np.vstack((previous, _solve_line(exc, line, alpha, branch, previous)[0]))))
-            text = (f"waypoint {k} {_show(goal)} cannot be reached along the line from {_show(start)}: "
-                    f"{reason}; the path ends at the farthest reachable point of the line {_show(end)}")
+                lines.append(
+                    (
+                        np.vstack((start, line)),
+                        np.vstack((previous, _solve_line(exc, line, alpha, branch, previous)[0])),
+                    )
+                )
+            text = (
+                f"waypoint {k} {_show(goal)} cannot be reached along the line from {_show(start)}: "
+                f"{reason}; the path ends at the farthest reachable point of the line {_show(end)}"
+            )
             return _timed(exc, lines, first.solution, alpha, tip_speed, acceleration, True, k - 1, text)
         lines.append((np.vstack((start, line)), np.vstack((previous, solved))))
         start, previous = line[-1], solved[-1]
@@ -102,8 +120,9 @@ def plan_path(exc: Excavator, waypoints: ArrayLike, step: float, tip_speed: floa
     return _timed(exc, lines, first.solution, alpha, tip_speed, acceleration, False, len(waypoints) - 1, text)
 
 
-def _solve_line(exc: Excavator, line: np.ndarray, alpha: float, branch: str,
-                previous: np.ndarray) -> tuple[np.ndarray, int | None, str]:
+def _solve_line(
+    exc: Excavator, line: np.ndarray, alpha: float, branch: str, previous: np.ndarray
+) -> tuple[np.ndarray, int | None, str]:
     """D of every sample on ``branch``; the index of the first sample that fails (None: all
     pass) and why."""
     result = exc.ik(np.column_stack((line, np.full(len(line), alpha))), branch=branch)
@@ -116,12 +135,19 @@ def _solve_line(exc: Excavator, line: np.ndarray, alpha: float, branch: str,
     bad = int(np.argmax(failed))
     if not bool(result.ok[bad]):
         return D, bad, result.note(bad)
-    return D, bad, (f"the swing would jump by {np.degrees(abs(swing[bad])):.4g} deg between samples "
-                    "(the line passes the swing axis)")
+    return (
+        D,
+        bad,
+        (
+            f"the swing would jump by {np.degrees(abs(swing[bad])):.4g} deg between samples "
+            "(the line passes the swing axis)"
+        ),
+    )
 
 
-def _farthest(exc: Excavator, good: np.ndarray, bad: np.ndarray, alpha: float, branch: str,
-              previous: np.ndarray) -> np.ndarray:
+def _farthest(
+    exc: Excavator, good: np.ndarray, bad: np.ndarray, alpha: float, branch: str, previous: np.ndarray
+) -> np.ndarray:
     """The boundary between a solvable point ``good`` and an unsolvable ``bad`` (bisection)."""
     while np.linalg.norm(bad - good) > END_TOLERANCE:
         middle = 0.5 * (good + bad)
@@ -132,8 +158,17 @@ def _farthest(exc: Excavator, good: np.ndarray, bad: np.ndarray, alpha: float, b
     return good
 
 
-def _timed(exc: Excavator, lines: list[tuple[np.ndarray, np.ndarray]], first: np.ndarray, alpha: float,
-           tip_speed: float, acceleration: float, truncated: bool, last: int, text: str) -> BucketPlan:
+def _timed(
+    exc: Excavator,
+    lines: list[tuple[np.ndarray, np.ndarray]],
+    first: np.ndarray,
+    alpha: float,
+    tip_speed: float,
+    acceleration: float,
+    truncated: bool,
+    last: int,
+    text: str,
+) -> BucketPlan:
     """Time the lines, each from rest to rest where the path turns a corner (a direction change at
     speed would need an unbounded acceleration); lines in one direction are one stretch."""
     stretches: list[tuple[np.ndarray, np.ndarray]] = []
@@ -155,11 +190,15 @@ def _timed(exc: Excavator, lines: list[tuple[np.ndarray, np.ndarray]], first: np
         timings.append(time_scale(D, s, exc.limits.max_rates, tip_speed, acceleration))
     timing = _joined(timings)
     if not timing.duration <= MAX_DURATION:
-        raise ValueError(f"the path would take {timing.duration:.3g} s; at most {MAX_DURATION:g} s (a higher "
-                         "tip speed or acceleration, or a shorter path)")
+        raise ValueError(
+            f"the path would take {timing.duration:.3g} s; at most {MAX_DURATION:g} s (a higher "
+            "tip speed or acceleration, or a shorter path)"
+        )
     limited = ", ".join(f"{name} {n}" for name, n in timing.limited_by(exc.joint_names).items())
-    message = (f"{len(timing.t)} points {text}, tip speed <= {tip_speed:g} m/s, {timing.duration:.4g} s, "
-               f"{len(stretches)} stretch(es) from rest to rest; samples set by: {limited}")
+    message = (
+        f"{len(timing.t)} points {text}, tip speed <= {tip_speed:g} m/s, {timing.duration:.4g} s, "
+        f"{len(stretches)} stretch(es) from rest to rest; samples set by: {limited}"
+    )
     points = np.vstack([stretches[0][0][:1], *(p[1:] for p, _ in stretches)])
     return BucketPlan(points, alpha, timing, truncated, last, message)
 
@@ -169,8 +208,11 @@ def _joined(timings: list[TimeScaling]) -> TimeScaling:
     sample once, its acceleration the mean of the braking and the starting one (as within a
     stretch: the mean of the adjacent segments')."""
     first = timings[0]
-    t, s, rows = [first.t], [first.s], {name: [getattr(first, name)] for name in ("q", "qd", "qdd", "speed",
-                                                                                  "sdd", "active")}
+    t, s, rows = (
+        [first.t],
+        [first.s],
+        {name: [getattr(first, name)] for name in ("q", "qd", "qdd", "speed", "sdd", "active")},
+    )
     for timing in timings[1:]:
         t.append(t[-1][-1] + timing.t[1:])
         s.append(s[-1][-1] + timing.s[1:])
@@ -180,8 +222,9 @@ def _joined(timings: list[TimeScaling]) -> TimeScaling:
                 row[-1] = row[-1].copy()
                 row[-1][-1] = 0.5 * (row[-1][-1] + values[0])
             row.append(values[1:])
-    return TimeScaling(t=np.concatenate(t), s=np.concatenate(s),
-                       **{name: np.concatenate(row) for name, row in rows.items()})
+    return TimeScaling(
+        t=np.concatenate(t), s=np.concatenate(s), **{name: np.concatenate(row) for name, row in rows.items()}
+    )
 
 
 def _show(p: np.ndarray) -> str:

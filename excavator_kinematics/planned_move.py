@@ -45,16 +45,20 @@ class Trajectory:
     qd: np.ndarray
 
     @classmethod
-    def from_points(cls, names: list[str], t: list[float], q: list[list[float]],
-                    qd: list[list[float]]) -> Trajectory:
+    def from_points(
+        cls, names: list[str], t: list[float], q: list[list[float]], qd: list[list[float]]
+    ) -> Trajectory:
         """From a JointTrajectory's joint names and points, reordered to ACTUATORS (ValueError
         when a joint is missing or there is no point)."""
         missing = [n for n in ACTUATORS if n not in names]
         if missing or not t:
             raise ValueError(f"trajectory without {', '.join(missing) or 'points'}")
         order = [names.index(n) for n in ACTUATORS]
-        return cls(np.asarray(t, dtype=float), np.asarray(q, dtype=float)[:, order],
-                   np.asarray(qd, dtype=float)[:, order])
+        return cls(
+            np.asarray(t, dtype=float),
+            np.asarray(q, dtype=float)[:, order],
+            np.asarray(qd, dtype=float)[:, order],
+        )
 
     @property
     def duration(self) -> float:
@@ -91,8 +95,9 @@ def arrival(exc: Excavator, measured: np.ndarray, start: np.ndarray) -> Arrival:
     return Arrival(np.abs(np.asarray(measured) - start), float(tip))
 
 
-def plot(png: Path, exc: Excavator, t: np.ndarray, d: np.ndarray, d_dot: np.ndarray,
-         plan: Trajectory) -> Path:
+def plot(
+    png: Path, exc: Excavator, t: np.ndarray, d: np.ndarray, d_dot: np.ndarray, plan: Trajectory
+) -> Path:
     """Positions and speeds of the four actuators over the move (measured at times ``t`` (N,),
     ``d``/``d_dot`` (N, 4); planned), against the strokes and the speed limits."""
     import matplotlib.pyplot as plt
@@ -116,8 +121,10 @@ def plot(png: Path, exc: Excavator, t: np.ndarray, d: np.ndarray, d_dot: np.ndar
         bottom.set_ylabel(f"speed ({units[i]}/s)")
         bottom.set_xlabel("t (s)")
     axes[1, 0].legend(loc="best", fontsize=8)
-    fig.suptitle(f"{exc.name}: planned move back to the start (plan_path, {plan.duration:.2f} s); "
-                 "red: strokes and speed limits")
+    fig.suptitle(
+        f"{exc.name}: planned move back to the start (plan_path, {plan.duration:.2f} s); "
+        "red: strokes and speed limits"
+    )
     fig.savefig(png, dpi=90)
     plt.close(fig)
     return png

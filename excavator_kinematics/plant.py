@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from excavator_kinematics.parameters import Limits, wrap_swing
-from manipulator_kinematics.params import ConfigError
+from excavator_kinematics.machine_file import Limits, wrap_swing
+from manipulator_kinematics.param_files import ConfigError
 
 
 class Plant:

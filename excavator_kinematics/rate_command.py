@@ -40,7 +40,7 @@ import numpy as np
 # on its last command (measured: the tip 30 cm off its line across processes).
 from scipy.optimize import linprog
 
-from excavator_kinematics.parameters import Limits
+from excavator_kinematics.machine_file import Limits
 
 #: Within this distance of an end (m for a cylinder, rad for the swing) an actuator is at it: the
 #: exponential approach of the stroke horizon would otherwise take forever to get there.
@@ -153,8 +153,11 @@ def _linear_task(
     lower = -np.minimum(max_rates, stroke_room(d, -np.ones(4), limits.d_min, limits.d_max) / horizon)
     basis = np.column_stack((x, n))  # D_dot = basis @ [c, tau]
     result = linprog(
-        [-1.0, 0.0], A_ub=np.vstack((basis, -basis)), b_ub=np.r_[upper, -lower],
-        bounds=[(0.0, ceiling), (None, None)], method="highs",
+        [-1.0, 0.0],
+        A_ub=np.vstack((basis, -basis)),
+        b_ub=np.r_[upper, -lower],
+        bounds=[(0.0, ceiling), (None, None)],
+        method="highs",
     )
     if result.status != 0:
         return None
@@ -203,8 +206,17 @@ def rate_command(
         if task is not None and task[0] > scale and task[0] >= GIVE_WAY_MIN_SCALE:
             c, d_dot = task
             gives_way = not np.allclose(d_dot, c * x, rtol=0.0, atol=1e-12)
-            return RateCommand(np.clip(d_dot, -limits.max_rates, limits.max_rates), condition, damping,
-                               clamped, speed, c, limit if c < 1.0 else None, actuator, gives_way)
+            return RateCommand(
+                np.clip(d_dot, -limits.max_rates, limits.max_rates),
+                condition,
+                damping,
+                clamped,
+                speed,
+                c,
+                limit if c < 1.0 else None,
+                actuator,
+                gives_way,
+            )
     d_dot = np.clip(x * scale, -limits.max_rates, limits.max_rates) if scale < 1.0 else x
     return RateCommand(d_dot, condition, damping, clamped, speed, scale, limit, actuator)
 
@@ -214,8 +226,9 @@ def rate_command(
 LINE_RESTART = 0.05
 
 
-def toward_line(start: np.ndarray, q_dot: np.ndarray, Q: np.ndarray, gain: float,
-                hold_angle: bool = True) -> np.ndarray | None:
+def toward_line(
+    start: np.ndarray, q_dot: np.ndarray, Q: np.ndarray, gain: float, hold_angle: bool = True
+) -> np.ndarray | None:
     """Bucket rates (4,) that bring the bucket at Q back onto the commanded line: ``gain`` (1/s)
     times the way back from Q to the line Q0 + t q_dot (t >= 0) that ``start`` = Q0 began; None
     when the way back is longer than LINE_RESTART (begin a new line at Q instead).
@@ -254,9 +267,15 @@ def describe(command: RateCommand, actuators: tuple[str, ...]) -> tuple[str, str
     if command.scale >= 1.0:
         return TRACKING, TRACKING + (f": {name} near its stroke end{way}" if way else "")
     if command.scale > 0.0:
-        why = {SPEED: f"speed limit of {name}", STROKE: f"stroke end of {name} ahead",
-               SINGULAR: "JC0 near singular"}[command.limit]
+        why = {
+            SPEED: f"speed limit of {name}",
+            STROKE: f"stroke end of {name} ahead",
+            SINGULAR: "JC0 near singular",
+        }[command.limit]
         return SLOWED, f"{SLOWED}: {why}{way}"
-    why = ("JC0 singular: the target direction is not achievable here" if command.limit == SINGULAR
-           else f"{name} at its stroke end, the target direction cannot be continued")
+    why = (
+        "JC0 singular: the target direction is not achievable here"
+        if command.limit == SINGULAR
+        else f"{name} at its stroke end, the target direction cannot be continued"
+    )
     return STOPPED, f"{STOPPED}: {why}"

@@ -19,7 +19,7 @@ from itertools import pairwise
 import numpy as np
 
 from excavator_kinematics.kinematics import Excavator
-from excavator_kinematics.parameters import CYLINDERS
+from excavator_kinematics.machine_file import CYLINDERS
 from excavator_kinematics.urdf_joints import URDF_JOINTS, joint_positions
 from manipulator_kinematics.scene import Scene, Segment, Sphere
 
@@ -47,9 +47,17 @@ LINKAGE = {
     "h_link": ("bucket_cylinder_rod", "h_link_pin"),
 }
 PINS = (
-    "boom_foot", "boom_cylinder_base", "boom_cylinder_rod", "arm_pin", "arm_cylinder_base",
-    "arm_cylinder_rod", "bucket_pin", "bucket_cylinder_base", "side_link_pivot",
-    "bucket_cylinder_rod", "h_link_pin",
+    "boom_foot",
+    "boom_cylinder_base",
+    "boom_cylinder_rod",
+    "arm_pin",
+    "arm_cylinder_base",
+    "arm_cylinder_rod",
+    "bucket_pin",
+    "bucket_cylinder_base",
+    "side_link_pivot",
+    "bucket_cylinder_rod",
+    "h_link_pin",
 )
 
 
@@ -89,8 +97,15 @@ def excavator_scene(model: Excavator, D: np.ndarray) -> Scene:
     for cylinder, shortest in zip(CYLINDERS, model.limits.stroke_min.tolist()):
         base, rod = pins[f"{cylinder}_base"], pins[f"{cylinder}_rod"]
         axis = _unit(rod - base)
-        segments.append(Segment(f"{cylinder}_barrel", "barrel", base, base + BARREL_LENGTH * shortest * axis,
-                                BARREL_SHARE * body))
+        segments.append(
+            Segment(
+                f"{cylinder}_barrel",
+                "barrel",
+                base,
+                base + BARREL_LENGTH * shortest * axis,
+                BARREL_SHARE * body,
+            )
+        )
         segments.append(Segment(f"{cylinder}_rod", "rod", rod - shortest * axis, rod, ROD_SHARE * body))
     spheres = [Sphere(name, "joint", pins[name], joint) for name in PINS]
     spheres.append(Sphere("bucket_tip", "tool", pins["bucket_tip"], joint))
@@ -107,5 +122,10 @@ def excavator_scene(model: Excavator, D: np.ndarray) -> Scene:
         "bucket_tip": _frame(pins["bucket_tip"], bucket_axis, left),
     }
     joints = joint_positions(model, D)
-    return Scene(tuple(segments), tuple(spheres), frames, "bucket_tip",
-                 dict(zip(URDF_JOINTS, np.moveaxis(joints, -1, 0), strict=True)))
+    return Scene(
+        tuple(segments),
+        tuple(spheres),
+        frames,
+        "bucket_tip",
+        dict(zip(URDF_JOINTS, np.moveaxis(joints, -1, 0), strict=True)),
+    )

@@ -20,9 +20,9 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.time import Time
 from sensor_msgs.msg import JointState
 
-from excavator_kinematics import messages
+from excavator_kinematics import message_codec
 from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
-from excavator_kinematics.node_settings import NODES_CONFIG, SIM
+from excavator_kinematics.node_schemas import NODES_CONFIG, SIM
 from excavator_kinematics.plant import Plant
 from excavator_kinematics.state_input import InputError, Plausible
 from manipulator_kinematics.joint_state import joint_values
@@ -94,8 +94,8 @@ class Simulator(MachineNode):
             return
         # Swing first: a node combining the two (excavator_forward) then usually holds the swing
         # state of this very step when the cylinder message arrives.
-        self.swing_pub.publish(messages.joint_state(stamp, JOINTS[:1], d[:1], d_dot[:1]))
-        self.cylinder_pub.publish(messages.joint_state(stamp, CYLINDERS, d[1:], d_dot[1:]))
+        self.swing_pub.publish(message_codec.joint_state(stamp, JOINTS[:1], d[:1], d_dot[:1]))
+        self.cylinder_pub.publish(message_codec.joint_state(stamp, CYLINDERS, d[1:], d_dot[1:]))
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -64,8 +64,16 @@ SITE_FRAME = "site"
 def ditch(start: float = 2.0, end: float = 12.0) -> Tin:
     """The design in the site frame: the ditch along the heading, from ``start`` to ``end`` m
     ahead, following the 5 % ground; banks 4 m wide either side."""
-    offsets = np.array([-0.5 * BOTTOM - SIDE * DEPTH - 4.0, -0.5 * BOTTOM - SIDE * DEPTH, -0.5 * BOTTOM,
-                        0.5 * BOTTOM, 0.5 * BOTTOM + SIDE * DEPTH, 0.5 * BOTTOM + SIDE * DEPTH + 4.0])
+    offsets = np.array(
+        [
+            -0.5 * BOTTOM - SIDE * DEPTH - 4.0,
+            -0.5 * BOTTOM - SIDE * DEPTH,
+            -0.5 * BOTTOM,
+            0.5 * BOTTOM,
+            0.5 * BOTTOM + SIDE * DEPTH,
+            0.5 * BOTTOM + SIDE * DEPTH + 4.0,
+        ]
+    )
     depth = np.array([0.0, 0.0, DEPTH, DEPTH, 0.0, 0.0])
     along = np.linspace(start, end, 6)
     s, o = np.meshgrid(along, offsets, indexing="ij")
@@ -134,33 +142,59 @@ def run(output: Path, seconds: float = 8.0, rate: float = 50.0, seed: int = 21) 
     true, got = heights(exc, tin, site, D), heights(exc, tin, imu_site, D_imu)
     error = got - true
     stamps = (1_700_000_000 * 10**9 + np.round(t * 1e9)).astype(np.int64)
-    topics = _messages(exc, tin, stamps, q, omega, f, D_imu, estimate.rates, D_dot[:, 0], imu_site, got,
-                       estimate.up_cab)
-    write_bag(output / "bag", {
-        name: Topic(kind, np.array([_stamp_ns(m) for m in messages], dtype=np.int64),
-                    [serialize_unpadded(m) for m in messages])
-        for name, (kind, messages) in topics.items()}, overwrite=True)
+    topics = _messages(
+        exc, tin, stamps, q, omega, f, D_imu, estimate.rates, D_dot[:, 0], imu_site, got, estimate.up_cab
+    )
+    write_bag(
+        output / "bag",
+        {
+            name: Topic(
+                kind,
+                np.array([_stamp_ns(m) for m in messages], dtype=np.int64),
+                [serialize_unpadded(m) for m in messages],
+            )
+            for name, (kind, messages) in topics.items()
+        },
+        overwrite=True,
+    )
     add_visuals(output / "bag", output / "bag", extra_static=[(SITE_FRAME, LEVEL_FRAME, heading)])
     tip_x = exc.pose(D)[:, 0]
     _plot(output / "grade_heights.png", tip_x[0] - tip_x, true, got)
     # What the bucket dug: mk_asbuilt's tables and surfaces, with the forward node's settings for
     # this site (the design and where the machine stands) in a params file beside the bag.
     settings = output / "asbuilt_params.yaml"
-    settings.write_text(yaml.safe_dump({"/**/excavator_forward": {"ros__parameters": {"design_surface": {
-        "file": str(output / "ditch.xml"), "site_position": SITE.tolist(), "site_rpy": list(tilt)}}}}))
+    settings.write_text(
+        yaml.safe_dump(
+            {
+                "/**/excavator_forward": {
+                    "ros__parameters": {
+                        "design_surface": {
+                            "file": str(output / "ditch.xml"),
+                            "site_position": SITE.tolist(),
+                            "site_rpy": list(tilt),
+                        }
+                    }
+                }
+            }
+        )
+    )
     asbuilt = process_bag(output / "bag", output / "asbuilt", [settings], cell=0.1)
     if asbuilt.error:
         raise RuntimeError(f"as-built of the example's own bag: {asbuilt.error}")
-    return {"rms_m": float(np.sqrt(np.mean(error**2))), "max_m": float(np.max(np.abs(error))),
-            "samples": len(t)}
+    return {
+        "rms_m": float(np.sqrt(np.mean(error**2))),
+        "max_m": float(np.max(np.abs(error))),
+        "samples": len(t),
+    }
 
 
 def _stamp_ns(message) -> int:
     return message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
 
 
-def _messages(exc, tin, stamps, q, omega, f, D_imu, rates, swing_rate, site,
-              grade, up_cab) -> dict[str, tuple[str, list]]:
+def _messages(
+    exc, tin, stamps, q, omega, f, D_imu, rates, swing_rate, site, grade, up_cab
+) -> dict[str, tuple[str, list]]:
     """Every topic of the bag: type and messages (rclpy message objects); ``site``: the
     estimate's base_link in the site frame at each sample."""
     from builtin_interfaces.msg import Time
@@ -182,12 +216,20 @@ def _messages(exc, tin, stamps, q, omega, f, D_imu, rates, swing_rate, site,
             m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z = f[k, i].tolist()
             messages.append(m)
         out[f"/imu/{name}"] = ("sensor_msgs/msg/Imu", messages)
-    out["/joint_states"] = ("sensor_msgs/msg/JointState", [
-        JointState(header=header(s), name=[JOINTS[0]], position=[d[0]], velocity=[v])
-        for s, d, v in zip(stamps.tolist(), D_imu.tolist(), swing_rate.tolist(), strict=True)])
-    out["/cylinder_lengths"] = ("sensor_msgs/msg/JointState", [
-        JointState(header=header(s), name=list(CYLINDERS), position=d[1:].tolist(), velocity=v.tolist())
-        for s, d, v in zip(stamps.tolist(), D_imu, rates, strict=True)])
+    out["/joint_states"] = (
+        "sensor_msgs/msg/JointState",
+        [
+            JointState(header=header(s), name=[JOINTS[0]], position=[d[0]], velocity=[v])
+            for s, d, v in zip(stamps.tolist(), D_imu.tolist(), swing_rate.tolist(), strict=True)
+        ],
+    )
+    out["/cylinder_lengths"] = (
+        "sensor_msgs/msg/JointState",
+        [
+            JointState(header=header(s), name=list(CYLINDERS), position=d[1:].tolist(), velocity=v.tolist())
+            for s, d, v in zip(stamps.tolist(), D_imu, rates, strict=True)
+        ],
+    )
     Q = exc.pose(D_imu)
     poses = []
     for s, d, pose in zip(stamps.tolist(), D_imu, Q, strict=True):
@@ -197,13 +239,21 @@ def _messages(exc, tin, stamps, q, omega, f, D_imu, rates, swing_rate, site,
         p.pose.orientation.x, p.pose.orientation.y, p.pose.orientation.z, p.pose.orientation.w = o
         poses.append(p)
     out["/bucket_pose"] = ("geometry_msgs/msg/PoseStamped", poses)
-    out["/machine_tilt"] = ("geometry_msgs/msg/Vector3Stamped", [
-        Vector3Stamped(header=header(s, "upper_structure"), vector=Vector3(x=u[0], y=u[1], z=u[2]))
-        for s, u in zip(stamps.tolist(), up_cab.tolist(), strict=True)])
+    out["/machine_tilt"] = (
+        "geometry_msgs/msg/Vector3Stamped",
+        [
+            Vector3Stamped(header=header(s, "upper_structure"), vector=Vector3(x=u[0], y=u[1], z=u[2]))
+            for s, u in zip(stamps.tolist(), up_cab.tolist(), strict=True)
+        ],
+    )
     tip_site = site.apply(Q[:, None, :3])[:, 0]
     turn = Rotation.from_matrix(site.rotation)
-    in_base = Rotation.from_quat([[p.pose.orientation.x, p.pose.orientation.y, p.pose.orientation.z,
-                                   p.pose.orientation.w] for p in poses])
+    in_base = Rotation.from_quat(
+        [
+            [p.pose.orientation.x, p.pose.orientation.y, p.pose.orientation.z, p.pose.orientation.w]
+            for p in poses
+        ]
+    )
     site_poses = []
     for s, tip, o in zip(stamps.tolist(), tip_site, (turn * in_base).as_quat(), strict=True):
         m = PoseStamped(header=header(s, SITE_FRAME))
@@ -213,15 +263,28 @@ def _messages(exc, tin, stamps, q, omega, f, D_imu, rates, swing_rate, site,
     out["/bucket_pose_site"] = ("geometry_msgs/msg/PoseStamped", site_poses)
     edge = site.apply(cutting_edge(Q[:, :3], D_imu[:, 0], exc.bucket_width))
     for i, name in enumerate(("tip", "left", "right")):
-        out[f"/grade/{name}"] = ("geometry_msgs/msg/PointStamped", [
-            PointStamped(header=header(s, SITE_FRAME),
-                         point=Point(x=float(e[i, 0]), y=float(e[i, 1]), z=float(h[i])))
-            for s, e, h in zip(stamps.tolist(), edge, grade, strict=True) if np.isfinite(h[i])])
+        out[f"/grade/{name}"] = (
+            "geometry_msgs/msg/PointStamped",
+            [
+                PointStamped(
+                    header=header(s, SITE_FRAME),
+                    point=Point(x=float(e[i, 0]), y=float(e[i, 1]), z=float(h[i])),
+                )
+                for s, e, h in zip(stamps.tolist(), edge, grade, strict=True)
+                if np.isfinite(h[i])
+            ],
+        )
     # The surface as a mesh, relative to the TIN's own origin (Marker points are float64, but a
     # viewer renders in float32: UTM coordinates would lose centimetres).
     local = tin.vertices - tin.origin
-    mesh = Marker(header=header(int(stamps[0]), SITE_FRAME), ns="design_surface", id=0,
-                  type=Marker.TRIANGLE_LIST, action=Marker.ADD, frame_locked=False)
+    mesh = Marker(
+        header=header(int(stamps[0]), SITE_FRAME),
+        ns="design_surface",
+        id=0,
+        type=Marker.TRIANGLE_LIST,
+        action=Marker.ADD,
+        frame_locked=False,
+    )
     mesh.pose.position.x, mesh.pose.position.y, mesh.pose.position.z = tin.origin.tolist()
     mesh.pose.orientation.w = 1.0
     mesh.scale.x = mesh.scale.y = mesh.scale.z = 1.0
@@ -246,9 +309,12 @@ def _plot(path: Path, distance: np.ndarray, true: np.ndarray, got: np.ndarray) -
     ax.axhline(0.0, color="saddlebrown", lw=1)
     ax.set_xlabel("distance along the cut (m)")
     ax.set_ylabel("height above the design TIN (cm)")
-    ax.set_title("CET200 on a 5 % slope cutting a TIN ditch (bottom 0.2 m, sides 1:1, bucket 1.0 m) 0.15 m\n"
-                 "right of its axis: tip, left and right corner 0.05, 0.25, 0.55 m up the side slopes; "
-                 "IMU noise 0.05 deg/axis, gyro 0.005 rad/s", fontsize=10)
+    ax.set_title(
+        "CET200 on a 5 % slope cutting a TIN ditch (bottom 0.2 m, sides 1:1, bucket 1.0 m) 0.15 m\n"
+        "right of its axis: tip, left and right corner 0.05, 0.25, 0.55 m up the side slopes; "
+        "IMU noise 0.05 deg/axis, gyro 0.005 rad/s",
+        fontsize=10,
+    )
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, ncol=2)
     fig.tight_layout()
@@ -263,8 +329,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rate", type=float, default=50.0, help="IMU rate (Hz)")
     args = parser.parse_args(argv)
     result = run(args.output, args.seconds, args.rate)
-    print(f"{result['samples']} samples; grade height error of the IMU estimate: RMS "
-          f"{1000 * result['rms_m']:.1f} mm, max {1000 * result['max_m']:.1f} mm; wrote {args.output}")
+    print(
+        f"{result['samples']} samples; grade height error of the IMU estimate: RMS "
+        f"{1000 * result['rms_m']:.1f} mm, max {1000 * result['max_m']:.1f} mm; wrote {args.output}"
+    )
     return 0
 
 

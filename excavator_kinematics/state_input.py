@@ -29,7 +29,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from manipulator_kinematics.joint_state import PLAUSIBILITY_FACTOR, InputError
-from manipulator_kinematics.params import ConfigError
+from manipulator_kinematics.param_files import ConfigError
 
 #: Quickest plausible ramp (s) from standstill to PLAUSIBILITY_FACTOR x the speed limit.
 FASTEST_RAMP = 0.01
@@ -51,8 +51,9 @@ class Plausible:
         _check(names, values, self.acceleration, "acceleration", f"speed limit / {FASTEST_RAMP:g} s")
 
 
-def _check(names: Sequence[str], values: Sequence[float], bounds: dict[str, float], what: str,
-           limit: str) -> None:
+def _check(
+    names: Sequence[str], values: Sequence[float], bounds: dict[str, float], what: str, limit: str
+) -> None:
     # Plain Python: this runs on every message of a 1 kHz stream.
     for name, value in zip(names, values, strict=True):
         bound = bounds[name]

@@ -76,13 +76,30 @@ def _linkages(k: np.ndarray, d2: float, d3: float, d4: float) -> tuple:
     g1 = (cy * rx - cx * ry) / den
     wx, wy = g1 * ox - rx, g1 * oy - ry
     g2 = (g1 * g1 * (bb - fc * e2) - (cx * rx + cy * ry) - (wx * wx + wy * wy)) / den
-    return (True, t2, t3, t4, k2, k3, g1 * phi_d, dk2, dk3, g2 * phi_d * phi_d + g1 * phi_dd,
-            c2, s2, c3, s3, c4, s4)
+    return (
+        True,
+        t2,
+        t3,
+        t4,
+        k2,
+        k3,
+        g1 * phi_d,
+        dk2,
+        dk3,
+        g2 * phi_d * phi_d + g1 * phi_dd,
+        c2,
+        s2,
+        c3,
+        s3,
+        c4,
+        s4,
+    )
 
 
 @njit(cache=True, error_model="numpy")
-def _chain_terms(k: np.ndarray, c2: float, s2: float, c3: float, s3: float, c4: float,
-                 s4: float) -> tuple[float, float, float, float, float, float]:
+def _chain_terms(
+    k: np.ndarray, c2: float, s2: float, c3: float, s3: float, c4: float, s4: float
+) -> tuple[float, float, float, float, float, float]:
     """Eq. 4's a1..a3, b1..b3 (``kinematics.Excavator._chain_terms``)."""
     l2, l3, l4 = k[2], k[3], k[4]
     c23, s23 = c2 * c3 - s2 * s3, s2 * c3 + c2 * s3
@@ -108,7 +125,8 @@ def _chain(k: np.ndarray, D: np.ndarray) -> tuple:
     """(valid, theta2..4, k2..4, dk2..4, a1..a3, b1..b3) of D: valid when D is inside the
     limits and its linkages close (eqs. 1-2, 4, 7)."""
     ok, t2, t3, t4, k2, k3, k4, dk2, dk3, dk4, c2, s2, c3, s3, c4, s4 = (
-        _linkages(k, D[1], D[2], D[3]) if _inside(k, D) else _NOTHING)
+        _linkages(k, D[1], D[2], D[3]) if _inside(k, D) else _NOTHING
+    )
     a1, a2, a3, b1, b2, b3 = _chain_terms(k, c2, s2, c3, s3, c4, s4)
     return ok, t2, t3, t4, k2, k3, k4, dk2, dk3, dk4, a1, a2, a3, b1, b2, b3
 
@@ -131,8 +149,22 @@ def jc0(k: np.ndarray, D: np.ndarray, out: np.ndarray) -> bool:
 
 
 @njit(cache=True, error_model="numpy")
-def _jc0(rho: float, c1: float, s1: float, a1: float, a2: float, a3: float, b1: float, b2: float,
-         b3: float, k2: float, k3: float, k4: float, out: np.ndarray, row: int) -> None:
+def _jc0(
+    rho: float,
+    c1: float,
+    s1: float,
+    a1: float,
+    a2: float,
+    a3: float,
+    b1: float,
+    b2: float,
+    b3: float,
+    k2: float,
+    k3: float,
+    k4: float,
+    out: np.ndarray,
+    row: int,
+) -> None:
     """JC0 = J0 K (eqs. 5, 7, 8) into out[row:row + 4]; column 1 is theta1 itself (k1 = 1)."""
     r2, r3, r4 = a1 * k2, a2 * k3, a3 * k4
     _put(out, row, -s1 * rho, -c1 * r2, -c1 * r3, -c1 * r4)
@@ -219,8 +251,9 @@ def bucket_angular_velocity(theta1: float, theta1_dot: float, alpha_dot: float, 
 
 
 @njit(cache=True, error_model="numpy")
-def bucket_angular_acceleration(theta1: float, w: float, w_dot: float, a_dot: float, a_ddot: float,
-                                out: np.ndarray) -> None:
+def bucket_angular_acceleration(
+    theta1: float, w: float, w_dot: float, a_dot: float, a_ddot: float, out: np.ndarray
+) -> None:
     """kinematics.bucket_angular_acceleration of one state into ``out`` (3,)."""
     c, s = math.cos(theta1), math.sin(theta1)
     out[0], out[1], out[2] = a_ddot * s + a_dot * w * c, -a_ddot * c + a_dot * w * s, w_dot

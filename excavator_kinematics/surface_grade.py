@@ -38,29 +38,37 @@ from manipulator_kinematics.node_util import ThrottledLog
 POINTS = ("tip", "left", "right")
 _FIELDS = ("header.stamp", "point")
 _OK, _OUTSIDE, _NO_POSE = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
-_TEXT = {_OK: "on the design surface", _OUTSIDE: "outside the design surface",
-         _NO_POSE: "no site pose"}
+_TEXT = {_OK: "on the design surface", _OUTSIDE: "outside the design surface", _NO_POSE: "no site pose"}
 
 
 class SurfaceGrade:
     """Publishers, site pose and TIN of the surface grade outputs of one node."""
 
-    def __init__(self, node: Node, settings: dict[str, Any], topics: dict[str, str], width: float,
-                 qos: QoSProfile, log: ThrottledLog) -> None:
+    def __init__(
+        self,
+        node: Node,
+        settings: dict[str, Any],
+        topics: dict[str, str],
+        width: float,
+        qos: QoSProfile,
+        log: ThrottledLog,
+    ) -> None:
         self.surface: Tin = read_landxml(settings["file"], settings["surface"])
         self.frame = settings["site_frame"]
         self.width = width
         self.log = log
         self.max_age_ns = int(settings["site_pose_max_age"] * 1e9)
         self.from_topic = settings["site_pose_source"] == "topic"
-        self.pose: SitePose | None = (None if self.from_topic else
-                                      SitePose.from_rpy(settings["site_position"], settings["site_rpy"]))
+        self.pose: SitePose | None = (
+            None if self.from_topic else SitePose.from_rpy(settings["site_position"], settings["site_rpy"])
+        )
         self.pose_stamp_ns = 0
         header = Header(frame_id=self.frame)
         self.messages = [PackedMessage(PointStamped(header=header), _FIELDS) for _ in POINTS]
         self.publishers = [node.create_publisher(PointStamped, topics[f"grade_{p}"], qos) for p in POINTS]
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        latched = QoSProfile(
+            depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+        )
         self.status_pub = node.create_publisher(DiagnosticArray, topics["grade_status"], latched)
         self.status: tuple[int, ...] | None = None
         self.clock = node.get_clock()
@@ -77,8 +85,11 @@ class SurfaceGrade:
         values = (p.x, p.y, p.z, q.x, q.y, q.z, q.w)
         norm = math.sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w)
         if msg.header.frame_id != self.frame or not all(map(math.isfinite, values)) or abs(norm - 1.0) > 1e-3:
-            self.log("error", f"rejected site pose: needs frame_id {self.frame!r} (got "
-                     f"{msg.header.frame_id!r}), finite values and a unit quaternion (|q| = {norm:.6g})")
+            self.log(
+                "error",
+                f"rejected site pose: needs frame_id {self.frame!r} (got "
+                f"{msg.header.frame_id!r}), finite values and a unit quaternion (|q| = {norm:.6g})",
+            )
             return
         self.pose = SitePose.from_quaternion(values[:3], values[3:])
         self.pose_stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
@@ -88,8 +99,11 @@ class SurfaceGrade:
         outside the surface or without a site pose (the status says which)."""
         pose = self.pose
         if pose is not None and self.from_topic and abs(stamp_ns - self.pose_stamp_ns) > self.max_age_ns:
-            self.log("warning", f"no grade: the site pose is {(stamp_ns - self.pose_stamp_ns) * 1e-9:+.3f} s "
-                     f"from the cylinder stamp (max age {self.max_age_ns * 1e-9:g} s)")
+            self.log(
+                "warning",
+                f"no grade: the site pose is {(stamp_ns - self.pose_stamp_ns) * 1e-9:+.3f} s "
+                f"from the cylinder stamp (max age {self.max_age_ns * 1e-9:g} s)",
+            )
             pose = None
         if pose is None:
             self.report((_NO_POSE,) * 3)
@@ -97,8 +111,12 @@ class SurfaceGrade:
         points = pose.apply(cutting_edge(tip, theta1, self.width))
         heights = self.surface.heights(points)
         self.report(tuple(_OK if inside else _OUTSIDE for inside in heights.inside.tolist()))
-        return [[x, y, h] if inside else None for (x, y, _), h, inside in
-                zip(points.tolist(), heights.height.tolist(), heights.inside.tolist(), strict=True)]
+        return [
+            [x, y, h] if inside else None
+            for (x, y, _), h, inside in zip(
+                points.tolist(), heights.height.tolist(), heights.inside.tolist(), strict=True
+            )
+        ]
 
     def publish(self, sec_nanosec: tuple[int, int], values: list[list[float] | None]) -> None:
         for message, publisher, value in zip(self.messages, self.publishers, values, strict=True):
@@ -112,9 +130,14 @@ class SurfaceGrade:
         outside = [p for p, s in zip(POINTS, status, strict=True) if s != _OK]
         if outside:
             self.log("warning", f"no grade for {', '.join(outside)}: {_TEXT[max(status)]}")
-        self.status_pub.publish(DiagnosticArray(
-            header=Header(stamp=self.clock.now().to_msg(), frame_id=self.frame),
-            status=[DiagnosticStatus(level=s, name=f"grade {p}", message=_TEXT[s],
-                                     hardware_id=self.surface.name)
-                    for p, s in zip(POINTS, status, strict=True)],
-        ))
+        self.status_pub.publish(
+            DiagnosticArray(
+                header=Header(stamp=self.clock.now().to_msg(), frame_id=self.frame),
+                status=[
+                    DiagnosticStatus(
+                        level=s, name=f"grade {p}", message=_TEXT[s], hardware_id=self.surface.name
+                    )
+                    for p, s in zip(POINTS, status, strict=True)
+                ],
+            )
+        )

@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from excavator_kinematics.kinematics import JOINTS, Excavator
-from excavator_kinematics.parameters import CYLINDERS
+from excavator_kinematics.machine_file import CYLINDERS
 from manipulator_kinematics.serial_chain import transl
 from manipulator_kinematics.urdf import Robot
 
@@ -74,10 +74,16 @@ def joint_positions(model: Excavator, D: ArrayLike) -> np.ndarray:
     boom, arm = theta[..., 0], theta[..., 0] + theta[..., 1]
     side = heading("side_link_pivot", "bucket_cylinder_rod")
     values = [
-        D[..., 0], theta[..., 0], theta[..., 1], theta[..., 2],
-        heading("boom_cylinder_base", "boom_cylinder_rod"), D[..., 1],
-        heading("arm_cylinder_base", "arm_cylinder_rod") - boom, D[..., 2],
-        heading("bucket_cylinder_base", "bucket_cylinder_rod") - arm, D[..., 3],
+        D[..., 0],
+        theta[..., 0],
+        theta[..., 1],
+        theta[..., 2],
+        heading("boom_cylinder_base", "boom_cylinder_rod"),
+        D[..., 1],
+        heading("arm_cylinder_base", "arm_cylinder_rod") - boom,
+        D[..., 2],
+        heading("bucket_cylinder_base", "bucket_cylinder_rod") - arm,
+        D[..., 3],
         side - arm,
         heading("bucket_cylinder_rod", "h_link_pin") - side,
     ]
@@ -177,26 +183,42 @@ def excavator_urdf(model: Excavator) -> str:
     if model.limits.continuous_swing:  # open limits: URDF's joint without limits
         robot.joint("swing_joint", "continuous", "base_link", "upper_structure", axis=(0.0, 0.0, 1.0))
     else:
-        robot.joint("swing_joint", "revolute", "base_link", "upper_structure", axis=(0.0, 0.0, 1.0),
-                    limits=limits["swing_joint"])
+        robot.joint(
+            "swing_joint",
+            "revolute",
+            "base_link",
+            "upper_structure",
+            axis=(0.0, 0.0, 1.0),
+            limits=limits["swing_joint"],
+        )
     turn("boom_joint", "upper_structure", "boom", _at(*g["boom_foot"]))
     turn("arm_joint", "boom", "arm", _at(*g["arm_pin"]))
     turn("bucket_joint", "arm", "bucket", _at(*g["bucket_pin"]))
 
     # Cylinders: barrel at the base pin on ``body``; the rod body's origin is the rod pin.
-    for cylinder, body, i in (("boom_cylinder", "upper_structure", 0), ("arm_cylinder", "boom", 1),
-                              ("bucket_cylinder", "arm", 2)):
+    for cylinder, body, i in (
+        ("boom_cylinder", "upper_structure", 0),
+        ("arm_cylinder", "boom", 1),
+        ("bucket_cylinder", "arm", 2),
+    ):
         retracted, extended = model.limits.stroke_min[i], model.limits.stroke_max[i]
         robot.link(f"{cylinder}_barrel")
         turn(f"{cylinder}_barrel_joint", body, f"{cylinder}_barrel", _at(*g[f"{cylinder}_base"]))
         robot.link(f"{cylinder}_rod_body")
-        robot.joint(cylinder, "prismatic", f"{cylinder}_barrel", f"{cylinder}_rod_body", axis=(1.0, 0.0, 0.0),
-                    limits=limits[cylinder])
+        robot.joint(
+            cylinder,
+            "prismatic",
+            f"{cylinder}_barrel",
+            f"{cylinder}_rod_body",
+            axis=(1.0, 0.0, 0.0),
+            limits=limits[cylinder],
+        )
         # Display only: a barrel a little shorter than the retracted cylinder, a rod that stays
         # inside it at full extension.
         robot.segment(f"{cylinder}_barrel", (0.0, 0.0, 0.0), (0.9 * retracted, 0.0, 0.0), barrel, "steel")
-        robot.segment(f"{cylinder}_rod_body", (0.0, 0.0, 0.0), (-(extended - 0.8 * retracted), 0.0, 0.0),
-                      rod, "chrome")
+        robot.segment(
+            f"{cylinder}_rod_body", (0.0, 0.0, 0.0), (-(extended - 0.8 * retracted), 0.0, 0.0), rod, "chrome"
+        )
     robot.link("side_link")
     turn("side_link_joint", "arm", "side_link", _at(*g["side_link_pivot"]))
     robot.link("h_link")
@@ -204,16 +226,27 @@ def excavator_urdf(model: Excavator) -> str:
 
     plane = g
     outline = {
-        "upper_structure": [((0.0, 0.0), plane["boom_foot"]),
-                            (plane["boom_foot"], plane["boom_cylinder_base"])],
-        "boom": [((0.0, 0.0), plane["arm_cylinder_base"]), (plane["arm_cylinder_base"], plane["arm_pin"]),
-                 ((0.0, 0.0), plane["boom_cylinder_rod"]),
-                 (plane["boom_cylinder_rod"], plane["arm_cylinder_base"])],
-        "arm": [(plane["arm_cylinder_rod"], (0.0, 0.0)), ((0.0, 0.0), plane["bucket_pin"]),
-                (plane["arm_cylinder_rod"], plane["bucket_cylinder_base"]),
-                (plane["bucket_cylinder_base"], plane["side_link_pivot"])],
-        "bucket": [((0.0, 0.0), plane["bucket_tip"]), ((0.0, 0.0), plane["h_link_pin_on_bucket"]),
-                   (plane["h_link_pin_on_bucket"], plane["bucket_tip"])],
+        "upper_structure": [
+            ((0.0, 0.0), plane["boom_foot"]),
+            (plane["boom_foot"], plane["boom_cylinder_base"]),
+        ],
+        "boom": [
+            ((0.0, 0.0), plane["arm_cylinder_base"]),
+            (plane["arm_cylinder_base"], plane["arm_pin"]),
+            ((0.0, 0.0), plane["boom_cylinder_rod"]),
+            (plane["boom_cylinder_rod"], plane["arm_cylinder_base"]),
+        ],
+        "arm": [
+            (plane["arm_cylinder_rod"], (0.0, 0.0)),
+            ((0.0, 0.0), plane["bucket_pin"]),
+            (plane["arm_cylinder_rod"], plane["bucket_cylinder_base"]),
+            (plane["bucket_cylinder_base"], plane["side_link_pivot"]),
+        ],
+        "bucket": [
+            ((0.0, 0.0), plane["bucket_tip"]),
+            ((0.0, 0.0), plane["h_link_pin_on_bucket"]),
+            (plane["h_link_pin_on_bucket"], plane["bucket_tip"]),
+        ],
         "side_link": [((0.0, 0.0), plane["bucket_cylinder_rod"])],
         "h_link": [((0.0, 0.0), plane["h_link_pin"])],
     }

@@ -40,9 +40,9 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header
 
-from excavator_kinematics import messages
+from excavator_kinematics import message_codec
 from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
-from excavator_kinematics.node_settings import NODES_CONFIG, VELOCITY_IK
+from excavator_kinematics.node_schemas import NODES_CONFIG, VELOCITY_IK
 from excavator_kinematics.rate_command import SLOWED, STOPPED, TRACKING, describe, rate_command, toward_line
 from excavator_kinematics.state_input import PLAUSIBILITY_FACTOR, InputError, Plausible, StaleInput, SwingHold
 from excavator_kinematics.twist import split_twist
@@ -114,8 +114,9 @@ class VelocityIk(MachineNode):
             else None
         )
         # Transient local: a monitor that starts later still gets the current status.
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        latched = QoSProfile(
+            depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+        )
         self.status_pub = self.create_publisher(DiagnosticArray, s["topics"]["status"], latched)
         self.create_subscription(TwistStamped, s["topics"]["target_bucket_twist"], self.on_target, latest)
         self.create_subscription(JointState, s["topics"]["joint_states"], self.on_swing, latest)
@@ -132,12 +133,12 @@ class VelocityIk(MachineNode):
 
     def on_swing(self, msg: JointState) -> None:
         try:
-            angle, rate = messages.positions_and_rates(msg, (JOINTS[0],))
+            angle, rate = message_codec.positions_and_rates(msg, (JOINTS[0],))
             self.plausible.rates((JOINTS[0],), rate.tolist())
         except InputError as error:
             self.log("error", f"rejected joint_states: {error}")
             return
-        self.swing.update(messages.stamp_ns(msg.header.stamp), float(angle[0]), float(rate[0]), None)
+        self.swing.update(message_codec.stamp_ns(msg.header.stamp), float(angle[0]), float(rate[0]), None)
 
     def on_cylinders(self, msg: JointState) -> None:
         try:
@@ -145,7 +146,7 @@ class VelocityIk(MachineNode):
         except InputError as error:
             self.log("error", f"rejected cylinder_lengths: {error}")
             return
-        self.cylinders = (messages.stamp_ns(msg.header.stamp), self.now_ns(), lengths)
+        self.cylinders = (message_codec.stamp_ns(msg.header.stamp), self.now_ns(), lengths)
         # A target that came since the last state was already computed at the newest state but one;
         # recompute only for a target that is older than that (a slower target stream).
         if self.target is not None and not self.target_since_state:
@@ -156,7 +157,7 @@ class VelocityIk(MachineNode):
         try:
             if msg.header.frame_id not in ("", self.frame):  # empty: the base frame, as on the services
                 raise InputError(f"frame_id {msg.header.frame_id!r} is not the base frame {self.frame!r}")
-            linear, angular = messages.twist_arrays(msg)
+            linear, angular = message_codec.twist_arrays(msg)
             with np.errstate(over="ignore"):  # a norm that overflows is inf: refused just below
                 speed, turn = float(np.linalg.norm(linear)), float(np.linalg.norm(angular))
             if not (speed <= self.max_linear and turn <= self.max_angular):
@@ -244,8 +245,15 @@ class VelocityIk(MachineNode):
             self.stopped_on_line = message
         self.report(stamp, LEVELS[state], message, scale=rates.scale, condition=rates.condition)
 
-    def report(self, stamp: Time, level: bytes, message: str, scale: float = 0.0,
-               condition: float = float("nan"), log: bool = True) -> None:
+    def report(
+        self,
+        stamp: Time,
+        level: bytes,
+        message: str,
+        scale: float = 0.0,
+        condition: float = float("nan"),
+        log: bool = True,
+    ) -> None:
         """Publish the status on a change of ``message`` or after ``status_period``; log a change to
         slowed or stopped once (throttled)."""
         now = self.now_ns()
@@ -262,7 +270,10 @@ class VelocityIk(MachineNode):
             "bucket_angle_gives_way": str(self.bucket_angle_gives_way).lower(),
         }
         status = DiagnosticStatus(
-            level=level, name=self.get_fully_qualified_name(), message=message, hardware_id=self.exc.name,
+            level=level,
+            name=self.get_fully_qualified_name(),
+            message=message,
+            hardware_id=self.exc.name,
             values=[KeyValue(key=k, value=v) for k, v in values.items()],
         )
         self.status_pub.publish(DiagnosticArray(header=Header(stamp=stamp), status=[status]))
@@ -285,7 +296,7 @@ class VelocityIk(MachineNode):
         if not (np.all(np.isfinite(d_dot)) and np.all(np.abs(d_dot) <= self.max_rates)):
             self.log("error", f"command {d_dot.tolist()} not finite or beyond the speed limits: zero sent")
             d_dot = np.zeros(4)
-        self.command_pub.publish(messages.joint_state(stamp, ACTUATORS, velocities=d_dot))
+        self.command_pub.publish(message_codec.joint_state(stamp, ACTUATORS, velocities=d_dot))
         if self.array_pub is not None:
             self.array_pub.publish(Float64MultiArray(data=[float(v) for v in d_dot]))
 

@@ -44,7 +44,7 @@ import numpy as np
 from scipy import optimize
 
 from excavator_kinematics.kinematics import Excavator
-from manipulator_kinematics.params import ConfigError
+from manipulator_kinematics.param_files import ConfigError
 
 #: The table's keys, in spec-sheet order, with a label.
 QUANTITIES = {
@@ -151,13 +151,19 @@ class WorkingRanges:
         values = objective(seeds).ravel()
         order = np.argsort(values)[::-1][:starts]
         candidates = [(float(values[order[0]]), seeds.reshape(-1, 3)[order[0]])]
-        constraints = [] if equality is None else [
-            {"type": "eq", "fun": lambda u: float(equality(lengths(u)))}]
+        constraints = (
+            [] if equality is None else [{"type": "eq", "fun": lambda u: float(equality(lengths(u)))}]
+        )
         for index in order:
             u0 = (seeds.reshape(-1, 3)[index] - lo) / (hi - lo)
-            result = optimize.minimize(lambda u: -float(objective(lengths(u))), u0, method="SLSQP",
-                                       bounds=[(0.0, 1.0)] * len(u0), constraints=constraints,
-                                       options={"ftol": 1e-14, "maxiter": 500})
+            result = optimize.minimize(
+                lambda u: -float(objective(lengths(u))),
+                u0,
+                method="SLSQP",
+                bounds=[(0.0, 1.0)] * len(u0),
+                constraints=constraints,
+                options={"ftol": 1e-14, "maxiter": 500},
+            )
             L = lengths(result.x)
             if equality is None or abs(float(equality(L))) < 1e-10:
                 candidates.append((float(objective(L)), L))
@@ -175,8 +181,9 @@ class WorkingRanges:
         return {key: {"optimum": self.optimum(key), "sampled": self.sampled(key)} for key in self.problems()}
 
 
-def _crossings(equality: Callable[[np.ndarray], np.ndarray], points: np.ndarray,
-               steps: int = 60) -> np.ndarray:
+def _crossings(
+    equality: Callable[[np.ndarray], np.ndarray], points: np.ndarray, steps: int = 60
+) -> np.ndarray:
     """Points (K, 3) where ``equality`` is 0 on the grid's edges (every axis), by bisection.
 
     An edge whose two ends have opposite signs holds a root (the function is continuous there);
@@ -255,12 +262,20 @@ def draw(ranges: WorkingRanges, table: dict[str, dict[str, Range]], path: Path, 
     reach = table["max_digging_reach"]["optimum"].state
     pins = ranges.model.pins(reach)
     chain = ["boom_foot", "arm_pin", "bucket_pin", "bucket_tip"]
-    ax.plot([pins[k][0] for k in chain], [pins[k][2] + ranges.base_height for k in chain], "o-", color="0.3",
-            label="machine at max digging reach")
-    for start, end in (("boom_cylinder_base", "boom_cylinder_rod"), ("arm_cylinder_base", "arm_cylinder_rod"),
-                       ("bucket_cylinder_base", "bucket_cylinder_rod"),
-                       ("side_link_pivot", "bucket_cylinder_rod"),
-                       ("bucket_cylinder_rod", "h_link_pin")):
+    ax.plot(
+        [pins[k][0] for k in chain],
+        [pins[k][2] + ranges.base_height for k in chain],
+        "o-",
+        color="0.3",
+        label="machine at max digging reach",
+    )
+    for start, end in (
+        ("boom_cylinder_base", "boom_cylinder_rod"),
+        ("arm_cylinder_base", "arm_cylinder_rod"),
+        ("bucket_cylinder_base", "bucket_cylinder_rod"),
+        ("side_link_pivot", "bucket_cylinder_rod"),
+        ("bucket_cylinder_rod", "h_link_pin"),
+    ):
         heights = [pins[start][2] + ranges.base_height, pins[end][2] + ranges.base_height]
         ax.plot([pins[start][0], pins[end][0]], heights, "-", color="0.55", linewidth=1)
     ax.plot([0, 0], [0, 1.2 * ranges.model.l0], "k-.", linewidth=1, label="swing axis")
@@ -270,8 +285,15 @@ def draw(ranges: WorkingRanges, table: dict[str, dict[str, Range]], path: Path, 
         best = table[key]["optimum"]
         tip = ranges.tip(best.state[1:])
         point = tip if key != "min_front_swing_radius" else (best.value, tip[1])
-        ax.plot(*point, _MARKERS[n % len(_MARKERS)], color=f"C{n + 1}", markersize=14 - n,
-                markeredgecolor="white", markeredgewidth=1.0, label=f"{label}: {best.value:.3f} m")
+        ax.plot(
+            *point,
+            _MARKERS[n % len(_MARKERS)],
+            color=f"C{n + 1}",
+            markersize=14 - n,
+            markeredgecolor="white",
+            markeredgewidth=1.0,
+            label=f"{label}: {best.value:.3f} m",
+        )
     ax.set_xlabel("r: horizontal distance from the swing axis (m)")
     ax.set_ylabel("height above ground (m)")
     ax.set_title(f"{ranges.model.name}: working ranges from the geometry (optimum over the stroke box)")
@@ -291,8 +313,9 @@ def main(argv: list[str] | None = None) -> int:
     from manipulator_kinematics.registry import machine
 
     parser = argparse.ArgumentParser(prog="excavator_working_ranges", description=__doc__.splitlines()[0])
-    parser.add_argument("--params-file", type=Path,
-                        help="ROS params file with the excavator (default: CET200)")
+    parser.add_argument(
+        "--params-file", type=Path, help="ROS params file with the excavator (default: CET200)"
+    )
     parser.add_argument("--json", type=Path, help="write the table as JSON to this file")
     parser.add_argument("--plot", type=Path, help="write the envelope PNG to this file")
     args = parser.parse_args(argv)

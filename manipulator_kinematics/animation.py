@@ -133,12 +133,22 @@ def animate(
     for ax, view in panels:
         # Metres -> points of this panel (equal aspect: one scale for x and y).
         metre = (ax.transData.transform((1.0, 0.0)) - ax.transData.transform((0.0, 0.0)))[0] * 72.0 / dpi
-        lines = LineCollection([], linewidths=[2.0 * s.radius * metre for s in segments],
-                               colors=[COLORS[s.kind] for s in segments], capstyle="round")
+        lines = LineCollection(
+            [],
+            linewidths=[2.0 * s.radius * metre for s in segments],
+            colors=[COLORS[s.kind] for s in segments],
+            capstyle="round",
+        )
         ax.add_collection(lines)
         first = view.project(centres[shown[0]], shown[0])
-        discs = ax.scatter(first[:, 0], first[:, 1], s=[(2.0 * s.radius * metre) ** 2 for s in spheres],
-                           c=[COLORS[s.kind] for s in spheres], zorder=3, linewidths=0)
+        discs = ax.scatter(
+            first[:, 0],
+            first[:, 1],
+            s=[(2.0 * s.radius * metre) ** 2 for s in spheres],
+            c=[COLORS[s.kind] for s in spheres],
+            zorder=3,
+            linewidths=0,
+        )
         (trace,) = ax.plot([], [], color="tab:red", linewidth=1.0, label="tool trace", zorder=4)
         if reference is not None:
             ax.legend(loc="best", fontsize=9, framealpha=0.6)

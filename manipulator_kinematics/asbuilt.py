@@ -69,8 +69,8 @@ class AsBuilt:
         z = np.full(shape, np.nan)
         hits = np.zeros(shape, np.int64)
         ny, nx = self.z.shape
-        z[dj:dj + ny, di:di + nx] = self.z
-        hits[dj:dj + ny, di:di + nx] = self.hits
+        z[dj : dj + ny, di : di + nx] = self.z
+        hits[dj : dj + ny, di : di + nx] = self.hits
         return AsBuilt(x0, y0, self.cell, z, hits)
 
     @staticmethod
@@ -98,8 +98,9 @@ class AsBuilt:
         a, b = number[:-1, :-1], number[:-1, 1:]  # (j, i), (j, i+1)
         c, d = number[1:, :-1], number[1:, 1:]  # (j+1, i), (j+1, i+1)
         full = (a >= 0) & (b >= 0) & (c >= 0) & (d >= 0)
-        faces = np.vstack([np.column_stack([a[full], b[full], d[full]]),
-                           np.column_stack([a[full], d[full], c[full]])])
+        faces = np.vstack(
+            [np.column_stack([a[full], b[full], d[full]]), np.column_stack([a[full], d[full], c[full]])]
+        )
         return self.points(), faces
 
     def write_landxml(self, path: str | Path, name: str = "as-built") -> None:
@@ -119,8 +120,9 @@ def densify(left: ArrayLike, right: ArrayLike, max_step: float) -> tuple[np.ndar
     left, right = np.asarray(left, float), np.asarray(right, float)
     if len(left) < 2:
         return left, right
-    move = np.maximum(np.linalg.norm(np.diff(left, axis=0), axis=1),
-                      np.linalg.norm(np.diff(right, axis=0), axis=1))
+    move = np.maximum(
+        np.linalg.norm(np.diff(left, axis=0), axis=1), np.linalg.norm(np.diff(right, axis=0), axis=1)
+    )
     steps = np.maximum(np.ceil(move / max_step), 1).astype(np.int64)
     # Sample k, then steps[k] - 1 interpolated edges before sample k + 1; the last sample once.
     start = np.repeat(np.arange(len(steps)), steps)
@@ -181,7 +183,7 @@ def lowest_elevation(
     flat = np.full(ny * nx, np.inf)
     hits = np.zeros(ny * nx, np.int64)
     for start in range(0, len(left), _CHUNK):
-        i, j, z = _pieces(left[start:start + _CHUNK], right[start:start + _CHUNK], x0, y0, cell)
+        i, j, z = _pieces(left[start : start + _CHUNK], right[start : start + _CHUNK], x0, y0, cell)
         # A piece ending exactly on the far grid line of the last cell rounds into it.
         index = np.clip(j, 0, ny - 1) * nx + np.clip(i, 0, nx - 1)
         np.minimum.at(flat, index, z)

@@ -63,19 +63,36 @@ def _times(F, A):
     the product's), the terms in matmul's order (the tool transform)."""
     a, b, c = A
     (f00, f01, f02, f03), (f10, f11, f12, f13), (f20, f21, f22, f23) = F
-    return ((f00 * a[0] + f01 * b[0] + f02 * c[0], f00 * a[1] + f01 * b[1] + f02 * c[1],
-             f00 * a[2] + f01 * b[2] + f02 * c[2], f00 * a[3] + f01 * b[3] + f02 * c[3] + f03),
-            (f10 * a[0] + f11 * b[0] + f12 * c[0], f10 * a[1] + f11 * b[1] + f12 * c[1],
-             f10 * a[2] + f11 * b[2] + f12 * c[2], f10 * a[3] + f11 * b[3] + f12 * c[3] + f13),
-            (f20 * a[0] + f21 * b[0] + f22 * c[0], f20 * a[1] + f21 * b[1] + f22 * c[1],
-             f20 * a[2] + f21 * b[2] + f22 * c[2], f20 * a[3] + f21 * b[3] + f22 * c[3] + f23))
+    return (
+        (
+            f00 * a[0] + f01 * b[0] + f02 * c[0],
+            f00 * a[1] + f01 * b[1] + f02 * c[1],
+            f00 * a[2] + f01 * b[2] + f02 * c[2],
+            f00 * a[3] + f01 * b[3] + f02 * c[3] + f03,
+        ),
+        (
+            f10 * a[0] + f11 * b[0] + f12 * c[0],
+            f10 * a[1] + f11 * b[1] + f12 * c[1],
+            f10 * a[2] + f11 * b[2] + f12 * c[2],
+            f10 * a[3] + f11 * b[3] + f12 * c[3] + f13,
+        ),
+        (
+            f20 * a[0] + f21 * b[0] + f22 * c[0],
+            f20 * a[1] + f21 * b[1] + f22 * c[1],
+            f20 * a[2] + f21 * b[2] + f22 * c[2],
+            f20 * a[3] + f21 * b[3] + f22 * c[3] + f23,
+        ),
+    )
 
 
 @njit(cache=True, error_model="numpy", inline="always")
 def _constant(k, at):
     """The top three rows of the transform packed row-major at k[at:at + 16] (base or tool)."""
-    return ((k[at], k[at + 1], k[at + 2], k[at + 3]), (k[at + 4], k[at + 5], k[at + 6], k[at + 7]),
-            (k[at + 8], k[at + 9], k[at + 10], k[at + 11]))
+    return (
+        (k[at], k[at + 1], k[at + 2], k[at + 3]),
+        (k[at + 4], k[at + 5], k[at + 6], k[at + 7]),
+        (k[at + 8], k[at + 9], k[at + 10], k[at + 11]),
+    )
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -136,9 +153,11 @@ def _times_link(k, T, i, v, ct, st):
     if k[r + 6] != 0.0:  # prismatic
         d = d + v
     modified, tilted = k[2] != 0.0, sa != 0.0 or ca != 1.0
-    return (_row_times_link(T[0], ct, st, ca, sa, a, d, modified, tilted),
-            _row_times_link(T[1], ct, st, ca, sa, a, d, modified, tilted),
-            _row_times_link(T[2], ct, st, ca, sa, a, d, modified, tilted))
+    return (
+        _row_times_link(T[0], ct, st, ca, sa, a, d, modified, tilted),
+        _row_times_link(T[1], ct, st, ca, sa, a, d, modified, tilted),
+        _row_times_link(T[2], ct, st, ca, sa, a, d, modified, tilted),
+    )
 
 
 @njit(cache=True, error_model="numpy", inline="always")

@@ -118,8 +118,12 @@ class Kernel:
             job = pickle.dumps((self.module, self._warm, sample))
         except Exception:  # e.g. a lambda as warm function: compile here
             return True
-        child = subprocess.Popen([sys.executable, "-c", _CHILD], stdin=subprocess.PIPE,
-                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        child = subprocess.Popen(
+            [sys.executable, "-c", _CHILD],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
         _COMPILING.append(child)
         try:
             child.stdin.write(job)
@@ -145,8 +149,9 @@ class Kernel:
                     # A daemon (module docstring): a compile runs in a child, abandoned at exit;
                     # a load from the cache is awaited at exit only where rclpy is imported.
                     # ``wait``: compile here (set-up, tests), no child to pickle the sample to.
-                    self._thread = threading.Thread(target=self._load, args=(sample, not wait),
-                                                    daemon=True, name=f"kernel {self.module}")
+                    self._thread = threading.Thread(
+                        target=self._load, args=(sample, not wait), daemon=True, name=f"kernel {self.module}"
+                    )
                     _LOADERS.append(self._thread)
                     self._thread.start()
             if wait:
@@ -222,4 +227,3 @@ def cache_is_cold(module: str) -> bool:
         if indexes and all(index.stat().st_mtime >= stamp for index in indexes):
             return False
     return True
-

@@ -44,7 +44,7 @@ from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.task import Future
 
-from manipulator_kinematics.params import ConfigError
+from manipulator_kinematics.param_files import ConfigError
 from manipulator_kinematics.throttle import ThrottledLog
 
 EXECUTORS: dict[str, Callable[..., Any]] = {"events": EventsExecutor, "single": SingleThreadedExecutor}
@@ -151,8 +151,10 @@ _HALF_BUILT = frozenset({"Executor.__del__", "SignalHandlerGuardCondition.__del_
 
 
 def _drop_half_built(hook: Callable[[Any], None], unraisable: Any) -> None:
-    if not (isinstance(unraisable.exc_value, AttributeError)
-            and getattr(unraisable.object, "__qualname__", None) in _HALF_BUILT):
+    if not (
+        isinstance(unraisable.exc_value, AttributeError)
+        and getattr(unraisable.object, "__qualname__", None) in _HALF_BUILT
+    ):
         hook(unraisable)
 
 

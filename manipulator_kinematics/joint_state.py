@@ -16,7 +16,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from manipulator_kinematics.codec import cdr
-from manipulator_kinematics.params import shown
+from manipulator_kinematics.param_files import shown
 
 
 class InputError(ValueError):
@@ -29,8 +29,9 @@ class InputError(ValueError):
 PLAUSIBILITY_FACTOR = 1000.0
 
 
-def check_plausible_positions(q: np.ndarray, names: Sequence[str], lower: np.ndarray,
-                              upper: np.ndarray) -> None:
+def check_plausible_positions(
+    q: np.ndarray, names: Sequence[str], lower: np.ndarray, upper: np.ndarray
+) -> None:
     """InputError naming the first joint further outside [lower, upper] than PLAUSIBILITY_FACTOR
     times its range (at least one unit: a joint fixed by its limits still has a scale)."""
     margin = PLAUSIBILITY_FACTOR * np.maximum(upper - lower, 1.0)

@@ -15,14 +15,28 @@ import numpy as np
 NAMESPACE = "http://www.landxml.org/schema/LandXML-1.2"
 
 
-def write_tin(path: str | Path, vertices: np.ndarray, faces: np.ndarray, name: str,
-              application: str = "manipulator_kinematics") -> None:
+def write_tin(
+    path: str | Path,
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    name: str,
+    application: str = "manipulator_kinematics",
+) -> None:
     """A one-surface LandXML file: ``vertices`` (V, 3) site frame, ``faces`` (F, 3) 0-based."""
-    root = ET.Element("LandXML", {"xmlns": NAMESPACE, "version": "1.2", "date": "2026-01-01",
-                                  "time": "00:00:00"})
-    ET.SubElement(ET.SubElement(root, "Units"), "Metric", {
-        "areaUnit": "squareMeter", "linearUnit": "meter", "volumeUnit": "cubicMeter",
-        "temperatureUnit": "celsius", "pressureUnit": "milliBars"})
+    root = ET.Element(
+        "LandXML", {"xmlns": NAMESPACE, "version": "1.2", "date": "2026-01-01", "time": "00:00:00"}
+    )
+    ET.SubElement(
+        ET.SubElement(root, "Units"),
+        "Metric",
+        {
+            "areaUnit": "squareMeter",
+            "linearUnit": "meter",
+            "volumeUnit": "cubicMeter",
+            "temperatureUnit": "celsius",
+            "pressureUnit": "milliBars",
+        },
+    )
     ET.SubElement(root, "Application", {"name": application, "version": "1"})
     surface = ET.SubElement(ET.SubElement(root, "Surfaces"), "Surface", {"name": name})
     definition = ET.SubElement(surface, "Definition", {"surfType": "TIN"})

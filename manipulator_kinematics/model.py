@@ -43,9 +43,15 @@ QUATERNION_ZERO = 1e-12
 #   [1+m00-m11-m22, m01+m10, m02+m20, m21-m12], [m01+m10, 1-m00+m11-m22, m12+m21, m02-m20],
 #   [m02+m20, m12+m21, 1-m00-m11+m22, m10-m01], [m21-m12, m02-m20, m10-m01, 1+m00+m11+m22].
 _SHEPPERD_TERMS = {
-    (0, 0): ((0, 1), (4, -1), (8, -1)), (0, 1): ((1, 1), (3, 1)), (0, 2): ((2, 1), (6, 1)),
-    (0, 3): ((7, 1), (5, -1)), (1, 1): ((0, -1), (4, 1), (8, -1)), (1, 2): ((5, 1), (7, 1)),
-    (1, 3): ((2, 1), (6, -1)), (2, 2): ((0, -1), (4, -1), (8, 1)), (2, 3): ((3, 1), (1, -1)),
+    (0, 0): ((0, 1), (4, -1), (8, -1)),
+    (0, 1): ((1, 1), (3, 1)),
+    (0, 2): ((2, 1), (6, 1)),
+    (0, 3): ((7, 1), (5, -1)),
+    (1, 1): ((0, -1), (4, 1), (8, -1)),
+    (1, 2): ((5, 1), (7, 1)),
+    (1, 3): ((2, 1), (6, -1)),
+    (2, 2): ((0, -1), (4, -1), (8, 1)),
+    (2, 3): ((3, 1), (1, -1)),
     (3, 3): ((0, 1), (4, 1), (8, 1)),
 }
 
@@ -194,8 +200,9 @@ def select(
     near = valid & (cost <= lowest * (1.0 + TIE_TOLERANCE) + TIE_TOLERANCE)
     # A seed at infinity makes every cost inf: argmin's 0 may be an invalid candidate, the first
     # valid one is the rule's answer then.
-    chosen = np.where(np.take_along_axis(valid, chosen[..., None], axis=-1)[..., 0], chosen,
-                      np.argmax(valid, axis=-1))
+    chosen = np.where(
+        np.take_along_axis(valid, chosen[..., None], axis=-1)[..., 0], chosen, np.argmax(valid, axis=-1)
+    )
     return np.where(valid.any(axis=-1), chosen, -1), near.sum(axis=-1) > 1
 
 
@@ -207,8 +214,11 @@ def limit_status(q: np.ndarray, limits: JointLimits, tol: float = 1e-10) -> np.n
     for joint in range(1, q.shape[-1]):  # joint by joint: np.all over the short last axis costs 6x more
         exists = exists & finite[..., joint]
     inside = limits.within(q, tol)
-    return np.where(exists, np.where(inside, _STATUS8[IKStatus.SUCCESS], _STATUS8[IKStatus.JOINT_LIMITS]),
-                    _STATUS8[IKStatus.UNREACHABLE])
+    return np.where(
+        exists,
+        np.where(inside, _STATUS8[IKStatus.SUCCESS], _STATUS8[IKStatus.JOINT_LIMITS]),
+        _STATUS8[IKStatus.UNREACHABLE],
+    )
 
 
 def describe_limits(q: np.ndarray, limits: JointLimits) -> str:
@@ -250,11 +260,14 @@ def quaternion_matrix(quaternion: ArrayLike) -> np.ndarray:
     q = np.asarray(quaternion, dtype=float)
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=-1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=-1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=-1),
-    ], axis=-2)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=-1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=-1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=-1),
+        ],
+        axis=-2,
+    )
 
 
 def matrix_quaternion(rotation: ArrayLike) -> np.ndarray:

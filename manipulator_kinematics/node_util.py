@@ -21,7 +21,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from manipulator_kinematics import compiled, executor, stopping
-from manipulator_kinematics.params import ConfigError, check_ros_arguments
+from manipulator_kinematics.param_files import ConfigError, check_ros_arguments
 from manipulator_kinematics.throttle import ThrottledLog
 
 __all__ = [
@@ -53,8 +53,14 @@ def make_node(name: str) -> Node:
     return Node(name, automatically_declare_parameters_from_overrides=True)
 
 
-def param(node: Node, name: str, default: Any, description: str = "",
-          bounds: tuple[float, float] | None = None, constraints: str = "") -> Any:
+def param(
+    node: Node,
+    name: str,
+    default: Any,
+    description: str = "",
+    bounds: tuple[float, float] | None = None,
+    constraints: str = "",
+) -> Any:
     """Value of parameter ``name``, declaring it with ``default`` when no override exists; either
     way it gets a read-only descriptor, so ``ros2 param describe`` shows it as a start-up setting,
     with ``bounds`` (min, max) as its range when it is a single number and ``constraints`` (what
@@ -62,7 +68,9 @@ def param(node: Node, name: str, default: Any, description: str = "",
     given = node.get_parameter(name) if node.has_parameter(name) else None
     kind = given.type_ if given is not None else Parameter.Type.from_parameter_value(default)
     descriptor = ParameterDescriptor(
-        description=description, type=kind.value, read_only=True,
+        description=description,
+        type=kind.value,
+        read_only=True,
         additional_constraints=f"{STARTUP_ONLY}; {constraints}" if constraints else STARTUP_ONLY,
     )
     if bounds is not None and kind == Parameter.Type.DOUBLE:

@@ -35,12 +35,16 @@ def check_plan(waypoints: ArrayLike, step: float, speed: float, acceleration: fl
     ``acceleration`` is within the bounds (module docstring); else ValueError with the reason."""
     waypoints = np.asarray(waypoints, dtype=float)
     if waypoints.ndim != 2 or waypoints.shape[1] != 3 or not 1 <= len(waypoints) <= MAX_WAYPOINTS:
-        raise ValueError(f"waypoints must have shape (K, 3) with 1 <= K <= {MAX_WAYPOINTS}, "
-                         f"got {waypoints.shape}")
+        raise ValueError(
+            f"waypoints must have shape (K, 3) with 1 <= K <= {MAX_WAYPOINTS}, got {waypoints.shape}"
+        )
     if not np.all(np.isfinite(waypoints)):
         raise ValueError("waypoints must be finite")
-    bounds = (("step", step, "m", STEP_RANGE), ("tip_speed", speed, "m/s", TIP_SPEED_RANGE),
-              ("acceleration", acceleration, "m/s^2", ACCELERATION_RANGE))
+    bounds = (
+        ("step", step, "m", STEP_RANGE),
+        ("tip_speed", speed, "m/s", TIP_SPEED_RANGE),
+        ("acceleration", acceleration, "m/s^2", ACCELERATION_RANGE),
+    )
     for name, value, unit, (low, high) in bounds:
         if not low <= value <= high:  # NaN fails too
             raise ValueError(f"{name} {value:g} {unit} is outside [{low:g}, {high:g}] {unit}")
@@ -49,9 +53,13 @@ def check_plan(waypoints: ArrayLike, step: float, speed: float, acceleration: fl
         count = float(np.sum(np.ceil(lengths / step))) + 1.0
         duration = float(np.sum(lengths)) / speed + speed / acceleration
     if not count <= MAX_POINTS:
-        raise ValueError(f"the path would have {count:.3g} points at step {step:g} m; at most {MAX_POINTS} "
-                         "(a longer step, or fewer or closer waypoints)")
+        raise ValueError(
+            f"the path would have {count:.3g} points at step {step:g} m; at most {MAX_POINTS} "
+            "(a longer step, or fewer or closer waypoints)"
+        )
     if not duration <= MAX_DURATION:
-        raise ValueError(f"the path would take at least {duration:.3g} s at {speed:g} m/s; at most "
-                         f"{MAX_DURATION:g} s (a higher tip_speed, or a shorter path)")
+        raise ValueError(
+            f"the path would take at least {duration:.3g} s at {speed:g} m/s; at most "
+            f"{MAX_DURATION:g} s (a higher tip_speed, or a shorter path)"
+        )
     return waypoints

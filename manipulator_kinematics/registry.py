@@ -66,8 +66,8 @@ from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any
 
-from manipulator_kinematics.config import Schema, validate
-from manipulator_kinematics.params import ConfigError, config_path, load_parameters
+from manipulator_kinematics.param_files import ConfigError, config_path, load_parameters
+from manipulator_kinematics.schema import Schema, validate
 from manipulator_kinematics.serial_chain import JointLimits
 
 GROUP = "manipulator_kinematics.machines"

@@ -64,8 +64,10 @@ def isolated() -> Iterator[str]:
 
 
 def _note(domain_source: str) -> str:
-    return (f"ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']} ({domain_source}), "
-            f"ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE']}")
+    return (
+        f"ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']} ({domain_source}), "
+        f"ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE']}"
+    )
 
 
 __all__ = ["EXAMPLES_DOMAIN", "LOCK_DIR", "isolated", "reserved_domain"]

@@ -20,8 +20,15 @@ _SUCCESS = int(IKStatus.SUCCESS)  # globals are compile-time constants to numba
 
 
 @njit(cache=True, error_model="numpy")
-def select_one(q: np.ndarray, status: np.ndarray, seed: np.ndarray, seeded: bool, allowed: np.ndarray,
-               weights: np.ndarray, tie_tolerance: float) -> tuple[int, bool]:
+def select_one(
+    q: np.ndarray,
+    status: np.ndarray,
+    seed: np.ndarray,
+    seeded: bool,
+    allowed: np.ndarray,
+    weights: np.ndarray,
+    tie_tolerance: float,
+) -> tuple[int, bool]:
     """(selected, tie) of candidates q (m, n) with statuses (m,): of the SUCCESS candidates that
     ``allowed`` (m,) leaves, the first if not ``seeded``, else the nearest to ``seed`` (n,) in the
     ``weights`` (n,) scaled squared distance, ties within ``tie_tolerance`` reported."""

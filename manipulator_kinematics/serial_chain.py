@@ -37,8 +37,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from manipulator_kinematics.blocks import in_blocks
 from manipulator_kinematics.compiled import Kernel
+from manipulator_kinematics.row_blocks import in_blocks
 
 
 @dataclass(frozen=True)
@@ -131,11 +131,15 @@ class SerialChain:
             raise ValueError("a serial chain needs at least one D-H row")
         self.rows = tuple(rows)
         self.coupling = np.eye(len(rows)) if coupling is None else np.array(coupling, dtype=float)
-        if (self.coupling.ndim != 2 or self.coupling.shape[0] != len(rows)
-                or not np.all(np.isfinite(self.coupling))):
+        if (
+            self.coupling.ndim != 2
+            or self.coupling.shape[0] != len(rows)
+            or not np.all(np.isfinite(self.coupling))
+        ):
             raise ValueError(f"coupling must be a finite ({len(rows)}, n) matrix, got {self.coupling.shape}")
         self._identity = self.coupling.shape == (len(rows), len(rows)) and bool(
-            np.array_equal(self.coupling, np.eye(len(rows))))
+            np.array_equal(self.coupling, np.eye(len(rows)))
+        )
         self.modified = bool(modified)
         self.base = _homogeneous(base, "base")
         self.tool = _homogeneous(tool, "tool")
@@ -259,8 +263,12 @@ class SerialChain:
             kernel.fkine_jacob0(self._packed, q, pose, jacobian)
             return pose, jacobian
         pose, jacobian = np.empty(q.shape[:-1] + (4, 4)), np.empty(q.shape[:-1] + self._jacobian_shape)
-        kernel.fkine_jacob0_batch(self._packed, q.reshape(-1, self.n), pose.reshape(-1, 4, 4),
-                                  jacobian.reshape(-1, *self._jacobian_shape))
+        kernel.fkine_jacob0_batch(
+            self._packed,
+            q.reshape(-1, self.n),
+            pose.reshape(-1, 4, 4),
+            jacobian.reshape(-1, *self._jacobian_shape),
+        )
         return pose, jacobian
 
     # ---- the numpy path, on (N, n) arrays ---------------------------------------------------------
@@ -295,8 +303,19 @@ class SerialChain:
 
     def _pack(self) -> np.ndarray:
         """The chain's constants as one float array, laid out as chain_kernel reads them (BASE below)."""
-        rows = np.column_stack([self._a, np.cos(self._alpha), np.sin(self._alpha), self._d, self._theta,
-                                self._offset, self._prismatic, np.cos(self._theta), np.sin(self._theta)])
+        rows = np.column_stack(
+            [
+                self._a,
+                np.cos(self._alpha),
+                np.sin(self._alpha),
+                self._d,
+                self._theta,
+                self._offset,
+                self._prismatic,
+                np.cos(self._theta),
+                np.sin(self._theta),
+            ]
+        )
         identity = np.eye(4)
         head = [self.n_rows, self.n, self.modified, self._identity, np.array_equal(self.tool, identity)]
         constants = (head, self.base.ravel(), self.tool.ravel(), rows.ravel(), self.coupling.ravel())

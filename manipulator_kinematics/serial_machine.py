@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from manipulator_kinematics.config import Schema
 from manipulator_kinematics.registry import Hook, Machine
+from manipulator_kinematics.schema import Schema
 
 #: The topics of the generic forward node (manipulator_kinematics.nodes.forward).
 SERIAL_TOPICS = {

@@ -174,5 +174,13 @@ def _rest_to_rest(q: np.ndarray, s: np.ndarray, dq: np.ndarray, a: float, cap: f
     t = np.array([0.0, length / peak + peak / a])
     sdd = np.array([a, -a])
     zero = np.zeros_like(q)
-    return TimeScaling(t=t, q=q, qd=zero, qdd=dq * sdd[:, None], s=s, speed=np.zeros(2), sdd=sdd,
-                       active=np.full(2, ACCELERATION))
+    return TimeScaling(
+        t=t,
+        q=q,
+        qd=zero,
+        qdd=dq * sdd[:, None],
+        s=s,
+        speed=np.zeros(2),
+        sdd=sdd,
+        active=np.full(2, ACCELERATION),
+    )

@@ -42,8 +42,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from manipulator_kinematics.params import ConfigError
-from manipulator_kinematics.plain import plain
+from manipulator_kinematics.help_text import plain
+from manipulator_kinematics.param_files import ConfigError
 from manipulator_kinematics.registry import machine as find
 from manipulator_kinematics.registry import machines
 from manipulator_kinematics.serial_chain import JointLimits, SerialChain, transl, trotx, trotz
@@ -109,13 +109,21 @@ def rpy(rotation: ArrayLike) -> np.ndarray:
 def rotation_rpy(angles: ArrayLike) -> np.ndarray:
     """Rz(yaw) Ry(pitch) Rx(roll) (3, 3): URDF's origin rotation."""
     roll, pitch, yaw = np.asarray(angles, dtype=float)
-    cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch),
-                              math.cos(yaw), math.sin(yaw))
-    return np.array([
-        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-        [-sp, cp * sr, cp * cr],
-    ])
+    cr, sr, cp, sp, cy, sy = (
+        math.cos(roll),
+        math.sin(roll),
+        math.cos(pitch),
+        math.sin(pitch),
+        math.cos(yaw),
+        math.sin(yaw),
+    )
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
 
 
 def _z_towards(direction: np.ndarray) -> np.ndarray:
@@ -145,9 +153,18 @@ class Robot:
         self._links[name] = ET.SubElement(self.root, "link", name=name)
         return self._links[name]
 
-    def joint(self, name: str, kind: str, parent: str, child: str, origin: ArrayLike | None = None, *,
-              axis: ArrayLike | None = None, limits: tuple[float, float] | None = None,
-              mimic: tuple[str, float] | None = None) -> None:
+    def joint(
+        self,
+        name: str,
+        kind: str,
+        parent: str,
+        child: str,
+        origin: ArrayLike | None = None,
+        *,
+        axis: ArrayLike | None = None,
+        limits: tuple[float, float] | None = None,
+        mimic: tuple[str, float] | None = None,
+    ) -> None:
         """A joint; ``origin`` the 4x4 transform parent -> joint frame (default identity)."""
         if name in self.joints:
             raise ValueError(f"joint {name!r} defined twice")
@@ -160,8 +177,9 @@ class Robot:
             ET.SubElement(element, "axis", xyz=_numbers(axis))
         if limits is not None:
             # URDF requires effort and velocity; 0 = not modelled (robot_state_publisher ignores them).
-            ET.SubElement(element, "limit", lower=_number(limits[0]), upper=_number(limits[1]),
-                          effort="0", velocity="0")
+            ET.SubElement(
+                element, "limit", lower=_number(limits[0]), upper=_number(limits[1]), effort="0", velocity="0"
+            )
         if mimic is not None:
             ET.SubElement(element, "mimic", joint=mimic[0], multiplier=_number(mimic[1]), offset="0")
 
@@ -209,8 +227,9 @@ def affine_map(function: Callable[[np.ndarray], np.ndarray], n: int) -> tuple[np
     A = np.stack([np.asarray(function(e), dtype=float) - b for e in np.eye(n)], axis=-1)
     probe = np.linspace(-1.3, 0.7, n)  # any point: an affine map agrees there too
     if not np.allclose(function(probe), A @ probe + b, atol=1e-12, rtol=0.0):
-        raise ValueError("the map from the model's joints to the chain's is not affine: "
-                         "no URDF joint can follow it")
+        raise ValueError(
+            "the map from the model's joints to the chain's is not affine: no URDF joint can follow it"
+        )
     return A, b
 
 
@@ -225,8 +244,13 @@ def _row_parts(row: Any, modified: bool, w: float) -> tuple[np.ndarray, np.ndarr
     return np.eye(4), motion, rest @ transl(row.a, 0.0, 0.0) @ trotx(row.alpha)
 
 
-def serial_urdf(name: str, model: Any, *, to_chain: Callable[[np.ndarray], np.ndarray] | None = None,
-                limits: JointLimits | None = None) -> str:
+def serial_urdf(
+    name: str,
+    model: Any,
+    *,
+    to_chain: Callable[[np.ndarray], np.ndarray] | None = None,
+    limits: JointLimits | None = None,
+) -> str:
     """URDF of a serial D-H machine (module docstring) from ``model.chain`` and ``model.frames``.
 
     ``to_chain`` maps the model's joint values (n,) to the chain's (affine; default identity);
@@ -266,12 +290,25 @@ def serial_urdf(name: str, model: Any, *, to_chain: Callable[[np.ndarray], np.nd
         for j in np.flatnonzero(K[i - 1]):
             k = float(K[i - 1, j])
             if owners[j] == i:  # the joint itself: its value is q_j, along +-z
-                steps.append((names[j], kind, {"axis": (0.0, 0.0, math.copysign(1.0, k)),
-                                               "limits": (limits.lower[j], limits.upper[j])}))
+                steps.append(
+                    (
+                        names[j],
+                        kind,
+                        {
+                            "axis": (0.0, 0.0, math.copysign(1.0, k)),
+                            "limits": (limits.lower[j], limits.upper[j]),
+                        },
+                    )
+                )
             else:
                 span = sorted((k * limits.lower[j], k * limits.upper[j]))
-                steps.append((f"link_{i}_mimic_{names[j]}", kind, {
-                    "axis": (0.0, 0.0, 1.0), "limits": tuple(span), "mimic": (names[j], k)}))
+                steps.append(
+                    (
+                        f"link_{i}_mimic_{names[j]}",
+                        kind,
+                        {"axis": (0.0, 0.0, 1.0), "limits": tuple(span), "mimic": (names[j], k)},
+                    )
+                )
         if not steps:
             steps.append((f"link_{i}_fixed", "fixed", {}))
         origin = np.linalg.solve(J[i - 1], J[i])
@@ -295,8 +332,11 @@ def _owners(K: np.ndarray, names: Sequence[str]) -> dict[int, int]:
     """Row (1-based) of each joint: the first free row it moves with coefficient +-1."""
     owners: dict[int, int] = {}
     for j, name in enumerate(names):
-        rows = [i + 1 for i in np.flatnonzero(np.isclose(np.abs(K[:, j]), 1.0, rtol=0.0, atol=1e-12))
-                if i + 1 not in owners.values()]
+        rows = [
+            i + 1
+            for i in np.flatnonzero(np.isclose(np.abs(K[:, j]), 1.0, rtol=0.0, atol=1e-12))
+            if i + 1 not in owners.values()
+        ]
         if not rows:
             raise ValueError(f"joint {name} moves no D-H row one-to-one: it cannot be a URDF joint")
         owners[j] = rows[0]
@@ -322,15 +362,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     """``mk_urdf MACHINE [-o FILE] [--params-file FILE]`` or ``mk_urdf --all DIR``."""
     parser = argparse.ArgumentParser(prog="mk_urdf", description=plain(__doc__.splitlines()[0]))
     parser.add_argument("machine", nargs="?", help="registered machine name (omit with --all)")
-    parser.add_argument("-o", "--output", type=Path,
-                        help="URDF file to write (default: standard output)")
-    parser.add_argument("--params-file", type=Path,
-                        help="ROS params file with the machine (default: the shipped one)")
-    parser.add_argument("--frame-prefix", default="", metavar="PREFIX",
-                        help="put PREFIX before every link name (e.g. m1/: two machines in one TF tree; "
-                             "robot_state_publisher's frame_prefix does this for /tf itself)")
-    parser.add_argument("--all", type=Path, metavar="DIR",
-                        help="write <machine>.urdf of every registered machine (shipped configs) into DIR")
+    parser.add_argument("-o", "--output", type=Path, help="URDF file to write (default: standard output)")
+    parser.add_argument(
+        "--params-file", type=Path, help="ROS params file with the machine (default: the shipped one)"
+    )
+    parser.add_argument(
+        "--frame-prefix",
+        default="",
+        metavar="PREFIX",
+        help="put PREFIX before every link name (e.g. m1/: two machines in one TF tree; "
+        "robot_state_publisher's frame_prefix does this for /tf itself)",
+    )
+    parser.add_argument(
+        "--all",
+        type=Path,
+        metavar="DIR",
+        help="write <machine>.urdf of every registered machine (shipped configs) into DIR",
+    )
     args = parser.parse_args(argv)
     if (args.all is None) == (args.machine is None):
         parser.error("give a machine name or --all DIR")
@@ -345,8 +393,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                     path.write_text(machine_urdf(name))
                     print(f"wrote {path}")
             return 0
-        text = prefixed_urdf(machine_urdf(args.machine, find(args.machine).model(args.params_file)),
-                             args.frame_prefix)
+        text = prefixed_urdf(
+            machine_urdf(args.machine, find(args.machine).model(args.params_file)), args.frame_prefix
+        )
     except (KeyError, LookupError, ConfigError, ValueError) as error:
         print(f"mk_urdf: {error}", file=sys.stderr)
         return 2

@@ -39,8 +39,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from manipulator_kinematics.config import Number, Numbers, Schema, Text, require, validate
-from manipulator_kinematics.params import ConfigError, read_document
+from manipulator_kinematics.param_files import ConfigError, read_document
+from manipulator_kinematics.schema import Number, Numbers, Schema, Text, require, validate
 
 KINDS = ("ceiling", "floor", "wall", "box", "sector", "surface")
 FRAMES = ("base", "site")
@@ -58,10 +58,17 @@ SCHEMAS: dict[str, Schema] = {
     "floor": {**_COMMON, "height": Number(min=-1e4, max=1e4, unit="m")},
     "wall": {**_COMMON, "point": Numbers(2, _COORD), "normal": Numbers(2, Number(min=-1e3, max=1e3))},
     "box": {**_COMMON, "min": Numbers(3, _COORD), "max": Numbers(3, _COORD)},
-    "sector": {**_COMMON, "from": Number(min=-2 * math.pi, max=2 * math.pi, unit="rad"),
-               "to": Number(min=-2 * math.pi, max=2 * math.pi, unit="rad")},
-    "surface": {**_COMMON, "file": Text(empty=False), "surface": Text(default=""),
-                "side": Text(choices=("below", "above"))},
+    "sector": {
+        **_COMMON,
+        "from": Number(min=-2 * math.pi, max=2 * math.pi, unit="rad"),
+        "to": Number(min=-2 * math.pi, max=2 * math.pi, unit="rad"),
+    },
+    "surface": {
+        **_COMMON,
+        "file": Text(empty=False),
+        "surface": Text(default=""),
+        "side": Text(choices=("below", "above")),
+    },
 }
 
 
@@ -117,8 +124,9 @@ class Zone:
         return np.where(np.isfinite(h), sign * h - m, np.inf), g
 
 
-def _sector(p: np.ndarray, start: float, end: float, margin: float,
-            g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _sector(
+    p: np.ndarray, start: float, end: float, margin: float, g: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Clearance from the swing sector [start, end] (ccw), as arc length at each point's radius."""
     r = np.hypot(p[..., 0], p[..., 1])
     bearing = np.arctan2(p[..., 1], p[..., 0])
@@ -141,8 +149,11 @@ def load_zones(path: str | Path, read_surface: Callable[[str, str], Surface] | N
     (a relative ``file`` is relative to the zone file); ``surface`` zones need it."""
     path = Path(path)
     document = read_document(path)
-    require(isinstance(document, Mapping) and set(document) == {"zones"}, "zones",
-            f"{path}: expected one top-level key 'zones' (a mapping of zone names to zones)")
+    require(
+        isinstance(document, Mapping) and set(document) == {"zones"},
+        "zones",
+        f"{path}: expected one top-level key 'zones' (a mapping of zone names to zones)",
+    )
     entries = document["zones"]
     require(isinstance(entries, Mapping) and entries, "zones", "expected a mapping of zone names to zones")
     require(len(entries) <= MAX_ZONES, "zones", f"{len(entries)} zones; at most {MAX_ZONES}")
@@ -157,12 +168,18 @@ def load_zones(path: str | Path, read_surface: Callable[[str, str], Surface] | N
         if kind == "wall":
             require(math.hypot(*values["normal"]) > 1e-9, f"{key}.normal", "must not be zero")
         elif kind == "box":
-            require(all(a < b for a, b in zip(values["min"], values["max"], strict=True)), f"{key}.max",
-                    "every coordinate must be above min's")
+            require(
+                all(a < b for a, b in zip(values["min"], values["max"], strict=True)),
+                f"{key}.max",
+                "every coordinate must be above min's",
+            )
         elif kind == "sector":
             require(values["frame"] == "base", f"{key}.frame", "a swing sector is in the base frame")
-            require(np.mod(values["to"] - values["from"], 2 * np.pi) > 0.0, f"{key}.to",
-                    "must differ from 'from' (the sector runs counter-clockwise from 'from' to 'to')")
+            require(
+                np.mod(values["to"] - values["from"], 2 * np.pi) > 0.0,
+                f"{key}.to",
+                "must differ from 'from' (the sector runs counter-clockwise from 'from' to 'to')",
+            )
         elif kind == "surface":
             require(read_surface is not None, key, "surface zones are not supported by this machine")
             file = Path(values["file"])
@@ -200,8 +217,9 @@ def scale_for(clearance: np.ndarray, approach: np.ndarray, stop_time: float, per
     c, u = np.broadcast_to(c, s.shape)[near], np.broadcast_to(u, s.shape)[near]
     a, b = 0.5 * u * stop_time, u * period
     with np.errstate(divide="ignore", invalid="ignore"):
-        root = np.where(a > 0.0, (np.sqrt(b * b + 4.0 * a * np.maximum(c, 0.0)) - b) / (2.0 * a),
-                        np.maximum(c, 0.0) / b)
+        root = np.where(
+            a > 0.0, (np.sqrt(b * b + 4.0 * a * np.maximum(c, 0.0)) - b) / (2.0 * a), np.maximum(c, 0.0) / b
+        )
     s[near] = np.clip(np.where(c > 0.0, root, 0.0), 0.0, 1.0)
     return s
 
@@ -212,8 +230,14 @@ class Monitor:
     def __init__(self, zones: Sequence[Zone], points: Sequence[str]) -> None:
         self.zones, self.points = list(zones), list(points)
 
-    def check(self, positions: np.ndarray, velocities: np.ndarray, stop_time: float, period: float,
-              site: tuple[np.ndarray, np.ndarray] | None = None) -> Check:
+    def check(
+        self,
+        positions: np.ndarray,
+        velocities: np.ndarray,
+        stop_time: float,
+        period: float,
+        site: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> Check:
         """``positions``, ``velocities`` (P, 3) of the monitored points in the base frame (the
         velocities at full command); ``stop_time`` T and ``period`` dt (module docstring);
         ``site`` = (R, t) with p_site = R p + t, needed by site-frame zones (without it they are

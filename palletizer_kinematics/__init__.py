@@ -2,7 +2,7 @@
 
 numpy core in :mod:`palletizer_kinematics.kinematics` (chain, IK, axis angles) and
 :mod:`palletizer_kinematics.statics` (axis 2/3 holding torques); no module here imports rclpy
-except :mod:`palletizer_kinematics.messages` and :mod:`palletizer_kinematics.nodes`.
+except :mod:`palletizer_kinematics.trajectory_message` and :mod:`palletizer_kinematics.nodes`.
 """
 
 from manipulator_kinematics.stopping import install_for

@@ -55,17 +55,28 @@ def _is_pose(k: np.ndarray, pose: np.ndarray) -> bool:
             dot = pose[i] * pose[j] + pose[4 + i] * pose[4 + j] + pose[8 + i] * pose[8 + j]
             if not abs(dot - (1.0 if i == j else 0.0)) < k[18]:
                 return False
-    det = (pose[0] * (pose[5] * pose[10] - pose[6] * pose[9])
-           - pose[1] * (pose[4] * pose[10] - pose[6] * pose[8])
-           + pose[2] * (pose[4] * pose[9] - pose[5] * pose[8]))
+    det = (
+        pose[0] * (pose[5] * pose[10] - pose[6] * pose[9])
+        - pose[1] * (pose[4] * pose[10] - pose[6] * pose[8])
+        + pose[2] * (pose[4] * pose[9] - pose[5] * pose[8])
+    )
     bottom = abs(pose[12]) + abs(pose[13]) + abs(pose[14]) + abs(pose[15] - 1.0)
     return det > 0.0 and bottom < k[19]
 
 
 @njit(cache=True, error_model="numpy")
-def solve(k: np.ndarray, pose: np.ndarray, seed: np.ndarray, seeded: bool, allowed: np.ndarray,
-          oriented: bool, axis_mode: bool, q: np.ndarray, status: np.ndarray,
-          extra: np.ndarray) -> tuple[int, bool, bool]:
+def solve(
+    k: np.ndarray,
+    pose: np.ndarray,
+    seed: np.ndarray,
+    seeded: bool,
+    allowed: np.ndarray,
+    oriented: bool,
+    axis_mode: bool,
+    q: np.ndarray,
+    status: np.ndarray,
+    extra: np.ndarray,
+) -> tuple[int, bool, bool]:
     """Every candidate of one target pose (16,), row-major: q (8, 4) in the mode's angles (NaN
     where UNREACHABLE or INVALID), status (8,), extra = [cos(tilt), c3 front, c3 back]; returns
     (selected, tie, the home elbow branch was selected). ``seed`` (4,) in the mode's angles,
@@ -123,8 +134,12 @@ def solve(k: np.ndarray, pose: np.ndarray, seed: np.ndarray, seeded: bool, allow
                 elif blocked or not reach:
                     status[c] = _UNREACHABLE
                 else:
-                    inside = (k[6] <= axis1 <= k[10] and k[7] <= axis2 <= k[11] and k[8] <= axis3 <= k[12]
-                              and k[9] <= theta5 <= k[13])
+                    inside = (
+                        k[6] <= axis1 <= k[10]
+                        and k[7] <= axis2 <= k[11]
+                        and k[8] <= axis3 <= k[12]
+                        and k[9] <= theta5 <= k[13]
+                    )
                     status[c] = (_SINGULAR if singular else _SUCCESS) if inside else _LIMITS
                 if status[c] >= _UNREACHABLE:
                     q[c, 0] = q[c, 1] = q[c, 2] = q[c, 3] = math.nan
@@ -146,11 +161,24 @@ def solve(k: np.ndarray, pose: np.ndarray, seed: np.ndarray, seeded: bool, allow
 
 
 @njit(cache=True, error_model="numpy")
-def solve_batch(k: np.ndarray, poses: np.ndarray, seeds: np.ndarray, seeded: bool, allowed: np.ndarray,
-                oriented: bool, axis_mode: bool, q: np.ndarray, status: np.ndarray, extra: np.ndarray,
-                selected: np.ndarray, tie: np.ndarray, home: np.ndarray) -> None:
+def solve_batch(
+    k: np.ndarray,
+    poses: np.ndarray,
+    seeds: np.ndarray,
+    seeded: bool,
+    allowed: np.ndarray,
+    oriented: bool,
+    axis_mode: bool,
+    q: np.ndarray,
+    status: np.ndarray,
+    extra: np.ndarray,
+    selected: np.ndarray,
+    tie: np.ndarray,
+    home: np.ndarray,
+) -> None:
     """:func:`solve` for every row of poses (N, 16) with seeds (N, 4) (read if ``seeded``): q (N, 8,
     4), status (N, 8), extra (N, 3), selected, tie and home (N,)."""
     for i in range(poses.shape[0]):
-        selected[i], tie[i], home[i] = solve(k, poses[i], seeds[i], seeded, allowed, oriented, axis_mode,
-                                             q[i], status[i], extra[i])
+        selected[i], tie[i], home[i] = solve(
+            k, poses[i], seeds[i], seeded, allowed, oriented, axis_mode, q[i], status[i], extra[i]
+        )

@@ -59,7 +59,7 @@ The IK is plain numpy on (..., 8, 4) candidate arrays (:meth:`Palletizer._closed
 (3)-(8) on every branch at once; statuses by the shared
 :func:`~manipulator_kinematics.model.limit_status` on the axis angles plus this machine's
 SINGULAR/UNREACHABLE/INVALID rules; the shared :func:`~manipulator_kinematics.model.select`), one
-target being a batch of one, large batches in blocks (:func:`manipulator_kinematics.blocks.in_blocks`).
+target being a batch of one, large batches in blocks (:func:`manipulator_kinematics.row_blocks.in_blocks`).
 The same steps run compiled (:mod:`palletizer_kinematics.ik_kernel`, numba, loaded in the
 background by the first call: :func:`compiled_kernel`), for one target and, as a loop, for a batch;
 numpy is the reference, a test compares the two. Returned angles A2, A3 and theta2, theta3 lie in
@@ -81,9 +81,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from manipulator_kinematics.blocks import in_blocks
 from manipulator_kinematics.compiled import Kernel
-from manipulator_kinematics.config import Names, Number, Numbers, Schema, Text, require, validate
 from manipulator_kinematics.model import (
     TIE_TOLERANCE,
     IKSolutions,
@@ -93,8 +91,10 @@ from manipulator_kinematics.model import (
     limit_status,
     select,
 )
-from manipulator_kinematics.params import config_path, load_parameters
+from manipulator_kinematics.param_files import config_path, load_parameters
 from manipulator_kinematics.planar import wrap_angle
+from manipulator_kinematics.row_blocks import in_blocks
+from manipulator_kinematics.schema import Names, Number, Numbers, Schema, Text, require, validate
 from manipulator_kinematics.serial_chain import JointLimits, SerialChain, revolute, transl
 from palletizer_kinematics.statics import MASS_SCHEMA, MassModel
 
@@ -134,7 +134,7 @@ _NO_SEED = np.zeros(4)
 _BOTTOM_ROW = np.array([0.0, 0.0, 0.0, 1.0])
 _ANGLE = Number(min=-2 * math.tau, max=2 * math.tau, unit="rad")
 
-#: The ``palletizer:`` section of a parameters file (manipulator_kinematics.config).
+#: The ``palletizer:`` section of a parameters file (manipulator_kinematics.schema).
 SCHEMA: Schema = {
     "name": Text(empty=False, default="palletizer", doc="the machine's name: the robot name of its URDF"),
     "variant": Text(choices=VARIANTS, doc="single or double parallelogram: which axis angles the motors see"),
@@ -218,8 +218,9 @@ def _is_pose(target: np.ndarray) -> np.ndarray:
     def dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
         return np.einsum("...i,...i->...", u, v)
 
-    gram = np.stack([dot(n, n) - 1.0, dot(o, o) - 1.0, dot(a, a) - 1.0, dot(n, o), dot(n, a), dot(o, a)],
-                    axis=-1)
+    gram = np.stack(
+        [dot(n, n) - 1.0, dot(o, o) - 1.0, dot(a, a) - 1.0, dot(n, o), dot(n, a), dot(o, a)], axis=-1
+    )
     bottom = np.abs(target[..., 3, :] - _BOTTOM_ROW).sum(axis=-1)
     return (np.abs(gram) < ROTATION_TOL).all(axis=-1) & (dot(n, np.cross(o, a)) > 0.0) & (bottom < BOTTOM_TOL)
 
@@ -232,8 +233,21 @@ def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
     home[1:3, 1:3] = -home[1:3, 1:3]  # z down
     ik_kernel.solve(packed, home.reshape(16), _NO_SEED, False, _ALL_BRANCHES, True, True, q, status, extra)
     one = np.ones(1, dtype=bool)
-    ik_kernel.solve_batch(packed, home.reshape(1, 16), np.zeros((1, 4)), False, _ALL_BRANCHES, True, True,
-                          q[None], status[None], extra[None], np.empty(1, dtype=np.intp), one, one.copy())
+    ik_kernel.solve_batch(
+        packed,
+        home.reshape(1, 16),
+        np.zeros((1, 4)),
+        False,
+        _ALL_BRANCHES,
+        True,
+        True,
+        q[None],
+        status[None],
+        extra[None],
+        np.empty(1, dtype=np.intp),
+        one,
+        one.copy(),
+    )
 
 
 #: The single-target kernel (:mod:`palletizer_kinematics.ik_kernel`), see manipulator_kinematics.compiled.
@@ -285,12 +299,27 @@ class Palletizer:
         self._to_dh = np.linalg.inv(AXIS_MATRIX[self.variant])
         self._lean_min = math.cos(self.tilt_tolerance)  # cos of the largest tilt taken
         # The compiled kernel's constants (palletizer_kinematics.ik_kernel), in its order.
-        self._packed = np.array([
-            geometry.a1, geometry.a2, geometry.a3, geometry.a4, geometry.d1, geometry.d6,
-            *(limits.lower - LIMIT_TOL), *(limits.upper + LIMIT_TOL),
-            self.singular_elbow, self.singular_radius, self._lean_min, float(self.variant == "double"),
-            ROTATION_TOL, BOTTOM_TOL, REACH_TOL, TIE_TOLERANCE,
-        ], dtype=float)
+        self._packed = np.array(
+            [
+                geometry.a1,
+                geometry.a2,
+                geometry.a3,
+                geometry.a4,
+                geometry.d1,
+                geometry.d6,
+                *(limits.lower - LIMIT_TOL),
+                *(limits.upper + LIMIT_TOL),
+                self.singular_elbow,
+                self.singular_radius,
+                self._lean_min,
+                float(self.variant == "double"),
+                ROTATION_TOL,
+                BOTTOM_TOL,
+                REACH_TOL,
+                TIE_TOLERANCE,
+            ],
+            dtype=float,
+        )
 
     # ---- construction -------------------------------------------------------------------------
     @classmethod
@@ -511,15 +540,17 @@ class Palletizer:
                 seed = np.broadcast_to(seed, shape + (4,))
         kernel = compiled_kernel(self) if compiled else None
         if kernel is not None and shape == ():
-            q, status, selected, tie, home, lean, c3 = self._solve_one(kernel, target, seed, allowed,
-                                                                      use_orientation, mode)
+            q, status, selected, tie, home, lean, c3 = self._solve_one(
+                kernel, target, seed, allowed, use_orientation, mode
+            )
         elif kernel is not None:
             seeds = None if seed is None else seed.reshape(-1, 4)
             flat = self._solve_many(kernel, target.reshape(-1, 16), seeds, allowed, use_orientation, mode)
             q, status, selected, tie, home, lean, c3 = (out.reshape(shape + out.shape[1:]) for out in flat)
         else:
-            block = functools.partial(self._solve_block, allowed=allowed, use_orientation=use_orientation,
-                                      mode=mode)
+            block = functools.partial(
+                self._solve_block, allowed=allowed, use_orientation=use_orientation, mode=mode
+            )
             flat = in_blocks(block, target.reshape(-1, 4, 4), None if seed is None else seed.reshape(-1, 4))
             q, status, selected, tie, home, lean, c3 = (out.reshape(shape + out.shape[1:]) for out in flat)
         context = {
@@ -540,8 +571,15 @@ class Palletizer:
             explain=lambda solutions, index: self._explain(solutions, index, context),
         )
 
-    def _solve_block(self, target: np.ndarray, seed: np.ndarray | None, *, allowed: np.ndarray,
-                     use_orientation: bool, mode: str) -> tuple[np.ndarray, ...]:
+    def _solve_block(
+        self,
+        target: np.ndarray,
+        seed: np.ndarray | None,
+        *,
+        allowed: np.ndarray,
+        use_orientation: bool,
+        mode: str,
+    ) -> tuple[np.ndarray, ...]:
         """Targets (N, 4, 4), seeds (N, 4) or None: eqs. (3)-(8), the statuses and the selection
         rule (module docstring). Returns q (N, 8, 4) in the ``mode``'s angles (NaN where
         UNREACHABLE or INVALID), status (N, 8), selected (N,), tie (N,), whether the home elbow
@@ -580,28 +618,61 @@ class Palletizer:
         selected, tie = select(q, np.where(choice, status, IKStatus.UNREACHABLE), seed=seed)
         return q, status, selected, tie, home, lean, c3
 
-    def _solve_one(self, kernel: ModuleType, target: np.ndarray, seed: np.ndarray | None,
-                   allowed: np.ndarray, use_orientation: bool, mode: str) -> tuple[np.ndarray, ...]:
+    def _solve_one(
+        self,
+        kernel: ModuleType,
+        target: np.ndarray,
+        seed: np.ndarray | None,
+        allowed: np.ndarray,
+        use_orientation: bool,
+        mode: str,
+    ) -> tuple[np.ndarray, ...]:
         """:meth:`_solve_block`'s outputs for one target (4, 4) through the compiled kernel."""
         q, status, extra = np.empty((8, 4)), np.empty(8, dtype=np.int8), np.empty(3)
         selected, tie, home = kernel.solve(
-            self._packed, np.ascontiguousarray(target).reshape(16),
-            _NO_SEED if seed is None else np.ascontiguousarray(seed), seed is not None, allowed,
-            bool(use_orientation), mode == "axis", q, status, extra,
+            self._packed,
+            np.ascontiguousarray(target).reshape(16),
+            _NO_SEED if seed is None else np.ascontiguousarray(seed),
+            seed is not None,
+            allowed,
+            bool(use_orientation),
+            mode == "axis",
+            q,
+            status,
+            extra,
         )
         selection = np.array(selected, dtype=np.intp), np.array(tie), np.array(home)
         return q, status, *selection, extra[0], extra[1:]
 
-    def _solve_many(self, kernel: ModuleType, poses: np.ndarray, seeds: np.ndarray | None,
-                    allowed: np.ndarray, use_orientation: bool, mode: str) -> tuple[np.ndarray, ...]:
+    def _solve_many(
+        self,
+        kernel: ModuleType,
+        poses: np.ndarray,
+        seeds: np.ndarray | None,
+        allowed: np.ndarray,
+        use_orientation: bool,
+        mode: str,
+    ) -> tuple[np.ndarray, ...]:
         """:meth:`_solve_block`'s outputs for targets (N, 16) through the kernel's loop."""
         n = len(poses)
         q, status, extra = np.empty((n, 8, 4)), np.empty((n, 8), dtype=np.int8), np.empty((n, 3))
         selected, tie, home = np.empty(n, dtype=np.intp), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
         seeded = seeds is not None
-        kernel.solve_batch(self._packed, np.ascontiguousarray(poses),
-                           np.ascontiguousarray(seeds) if seeded else np.zeros((n, 4)), seeded, allowed,
-                           bool(use_orientation), mode == "axis", q, status, extra, selected, tie, home)
+        kernel.solve_batch(
+            self._packed,
+            np.ascontiguousarray(poses),
+            np.ascontiguousarray(seeds) if seeded else np.zeros((n, 4)),
+            seeded,
+            allowed,
+            bool(use_orientation),
+            mode == "axis",
+            q,
+            status,
+            extra,
+            selected,
+            tie,
+            home,
+        )
         return q, status, selected, tie, home, extra[:, 0], extra[:, 1:]
 
     def _mode(self, mode: str | None) -> str:

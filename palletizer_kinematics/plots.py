@@ -33,7 +33,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from manipulator_kinematics.bag.synthetic import START_NS, serial_topics, write_bag
-from manipulator_kinematics.plain import plain
+from manipulator_kinematics.help_text import plain
 from palletizer_kinematics.door import DOOR_POINTS, DoorTrajectory, door_trajectory
 from palletizer_kinematics.kinematics import VARIANTS, Palletizer, axis_from_dh, dh_from_axis
 from palletizer_kinematics.statics import holding_torques
@@ -193,7 +193,7 @@ def write_csv(trajectory: DoorTrajectory, path: Path) -> None:
 def write_trajectory_yaml(model: Palletizer, trajectory: DoorTrajectory, path: Path) -> bool:
     """The JointTrajectory as YAML; False when trajectory_msgs cannot be imported."""
     try:
-        from palletizer_kinematics.messages import joint_trajectory, trajectory_dict
+        from palletizer_kinematics.trajectory_message import joint_trajectory, trajectory_dict
     except ImportError:
         return False
     import yaml
@@ -210,10 +210,16 @@ def animate_door(model: Palletizer, trajectory: DoorTrajectory, path: Path) -> P
     from manipulator_kinematics.animation import View, animate, view_xy, view_xz
     from palletizer_kinematics.machine import MACHINE
 
-    return animate(MACHINE.scene(model, trajectory.axis[model.variant]), path,
-                   [View(view_xz, "x (m)", "z (m)", "side"), View(view_xy, "x (m)", "y (m)", "top")],
-                   times=trajectory.t, reference=trajectory.position, size=(7.0, 3.6), ground=0.0,
-                   title=f"Palletizer ({model.variant}): door path P0..P4")
+    return animate(
+        MACHINE.scene(model, trajectory.axis[model.variant]),
+        path,
+        [View(view_xz, "x (m)", "z (m)", "side"), View(view_xy, "x (m)", "y (m)", "top")],
+        times=trajectory.t,
+        reference=trajectory.position,
+        size=(7.0, 3.6),
+        ground=0.0,
+        title=f"Palletizer ({model.variant}): door path P0..P4",
+    )
 
 
 def write_door_bag(model: Palletizer, trajectory: DoorTrajectory, path: Path) -> int:

@@ -45,7 +45,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 
-from manipulator_kinematics.config import Number
+from manipulator_kinematics.schema import Number
 
 _KG = Number(min=0.0, max=10_000.0, unit="kg")
 _M = Number(min=-10.0, max=10.0, unit="m")

@@ -68,9 +68,9 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
-from manipulator_kinematics.blocks import in_blocks
-from manipulator_kinematics.params import CONFIG_DIR, ConfigError, config_path, load_parameters
+from manipulator_kinematics.param_files import CONFIG_DIR, ConfigError, config_path, load_parameters
 from manipulator_kinematics.planar import two_link_ik, wrap_angle
+from manipulator_kinematics.row_blocks import in_blocks
 from pump_boom_kinematics.kinematics import CONFIG_FILE, LIMIT_TOL, SECTION, PumpBoom
 from pump_boom_kinematics.regions import FOLDED, Grid, RegionTable, family
 
@@ -249,8 +249,9 @@ def build_table(
         searched[level] += 1
         margin = margin_of(key)
         tries = max(MAX_TRIES // 4**level, 10)
-        if np.any(margin >= 0.0) and _choose(boom, grid, triples, margin, key, chosen, buckets, min_margin,
-                                              check_spacing, max_step, tries):
+        if np.any(margin >= 0.0) and _choose(
+            boom, grid, triples, margin, key, chosen, buckets, min_margin, check_spacing, max_step, tries
+        ):
             continue
         unserved[level] += 1
         if level < levels:
@@ -260,14 +261,26 @@ def build_table(
                     heapq.heappush(queue, (_distance(grid, child, centre), child))
     if progress is not None:
         for level in range(levels + 1):
-            progress(f"level {level} ({float(grid.side(level)):g} m): {searched[level]} squares searched, "
-                     f"{unserved[level]} not served")
+            progress(
+                f"level {level} ({float(grid.side(level)):g} m): {searched[level]} squares searched, "
+                f"{unserved[level]} not served"
+            )
     if not chosen:
         raise RuntimeError("no square of the grid can be covered: check the geometry and limits")
     keys = _repair(boom, grid, sorted(chosen), chosen, triples, check_spacing, max_step, progress)
     for _ in range(FILLS):
-        added = _fill(boom, grid, area, keys, chosen, triples, margin_of, centre, levels,
-                      (min_margin, check_spacing, max_step))
+        added = _fill(
+            boom,
+            grid,
+            area,
+            keys,
+            chosen,
+            triples,
+            margin_of,
+            centre,
+            levels,
+            (min_margin, check_spacing, max_step),
+        )
         if progress is not None:
             progress(f"fill: {len(added)} squares of {float(grid.side(levels)):g} m added in the gaps")
         if not added:
@@ -352,8 +365,9 @@ def _choose(
         cost = -margin[pool]
     limit = max_step * check_spacing / 0.1
     corner = np.array(grid.corner(*key), dtype=float)
-    for k in _alone(boom, triples, pool[np.lexsort((pool, -margin[pool], cost))], points, corner, side, limit,
-                    tries):
+    for k in _alone(
+        boom, triples, pool[np.lexsort((pool, -margin[pool], cost))], points, corner, side, limit, tries
+    ):
         draft = _table(grid, [*near, key], {**chosen, key: (int(k), 0.0)}, triples)
         result = boom.region_ik(tips, table=draft)
         inside = draft.contains(points[..., 0], points[..., 1])
@@ -480,8 +494,9 @@ def _fill(
     for key in gaps:
         chosen.pop(key, None)
         margin = margin_of(key)
-        if np.any(margin >= 0.0) and _choose(boom, grid, triples, margin, key, chosen, buckets, *rules,
-                                              FILL_TRIES):
+        if np.any(margin >= 0.0) and _choose(
+            boom, grid, triples, margin, key, chosen, buckets, *rules, FILL_TRIES
+        ):
             added.append(key)
     return added
 
@@ -611,6 +626,7 @@ def _plane_ik(boom: PumpBoom, plane: np.ndarray, table: RegionTable) -> tuple[np
     """The region IK of boom-plane points (..., 2) (r, z) at theta1 = 0 with ``table``: q (..., 6)
     (NaN where it fails) and ok (...,), in blocks (the final check's lattices hold millions of
     points: in one piece their temporaries took 3.8 GB)."""
+
     def solve(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         tips = np.stack([points[:, 0], np.zeros(len(points)), points[:, 1]], axis=-1)
         result = boom.region_ik(tips, table=table)
@@ -699,8 +715,9 @@ def _certifies(boom: PumpBoom, plane: np.ndarray, triples: np.ndarray, envelope:
     q = np.concatenate([np.zeros((len(plane), 1)), triples, np.full((len(plane), 2), np.pi)], axis=-1)
     shoulder = boom.plane_points(q)[:, 3]
     phi3 = boom.section_angles(q)[:, 2]
-    arm = two_link_ik(plane[:, 0] - shoulder[:, 0], plane[:, 1] - shoulder[:, 1], boom.lengths[3],
-                      boom.lengths[4], tol=1e-9)
+    arm = two_link_ik(
+        plane[:, 0] - shoulder[:, 0], plane[:, 1] - shoulder[:, 1], boom.lengths[3], boom.lengths[4], tol=1e-9
+    )
     ok = np.zeros(len(plane), dtype=bool)
     for branch in (0, 1):
         q[:, 4] = wrap_angle(arm.theta1[:, branch] - phi3) + np.pi
@@ -764,12 +781,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="largest joint change per 100 mm in any direction (deg)",
     )
     parser.add_argument("--levels", type=int, default=LEVELS, help="splittings below the 5 m squares")
-    parser.add_argument("--min-theta3-deg", type=float, default=math.degrees(MIN_THETA3),
-                        help="smallest theta3 searched (deg)")
-    parser.add_argument("--fold-width", type=float, default=FOLD_WIDTH,
-                        help="folded shapes (theta3 < 15 deg) only this near the points needing them (m)")
-    parser.add_argument("--list", action="store_true",
-                        help="print the squares of the table file (--output) and exit, building nothing")
+    parser.add_argument(
+        "--min-theta3-deg",
+        type=float,
+        default=math.degrees(MIN_THETA3),
+        help="smallest theta3 searched (deg)",
+    )
+    parser.add_argument(
+        "--fold-width",
+        type=float,
+        default=FOLD_WIDTH,
+        help="folded shapes (theta3 < 15 deg) only this near the points needing them (m)",
+    )
+    parser.add_argument(
+        "--list",
+        action="store_true",
+        help="print the squares of the table file (--output) and exit, building nothing",
+    )
     args = parser.parse_args(argv)
     config = args.config if args.config is not None else config_path(CONFIG_FILE)
     try:

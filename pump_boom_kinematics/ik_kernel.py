@@ -45,8 +45,9 @@ _REACH_TOL = 1e-9  # m: region_ik's reach check
 
 
 @njit(cache=True, error_model="numpy")
-def _window_mean(owner: np.ndarray, squares: np.ndarray, square: int, u: float, v: float, half: float,
-                 q: np.ndarray) -> None:
+def _window_mean(
+    owner: np.ndarray, squares: np.ndarray, square: int, u: float, v: float, half: float, q: np.ndarray
+) -> None:
     """RegionTable._window_mean of one point in cells into q[1:4] (the same weights, the squares
     of the point's family only; numpy's matrix product adds them in its own order: the same to
     round-off); the square's own triple where every square of its family under the window holds it."""
@@ -107,8 +108,17 @@ def _envelope_margin(k: np.ndarray, q: np.ndarray) -> float:
 
 
 @njit(cache=True, error_model="numpy")
-def region_ik(k: np.ndarray, owner: np.ndarray, squares: np.ndarray, x: float, y: float,
-              z: float, seed_slew: float, seeded: bool, q: np.ndarray) -> tuple[int, bool]:
+def region_ik(
+    k: np.ndarray,
+    owner: np.ndarray,
+    squares: np.ndarray,
+    x: float,
+    y: float,
+    z: float,
+    seed_slew: float,
+    seeded: bool,
+    q: np.ndarray,
+) -> tuple[int, bool]:
     """Region IK of the pour point (x, y, z) (module docstring): the failure code and whether a
     transition band set the triple; q (6,) the joints (the limits applied within LIMIT_TOL) where
     the failure is 0, else as far as the steps got (NaN beyond)."""

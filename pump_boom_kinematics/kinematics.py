@@ -54,11 +54,11 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from manipulator_kinematics.compiled import Kernel
-from manipulator_kinematics.config import Names, Number, Numbers, Schema, Text, require, validate
 from manipulator_kinematics.model import IKSolutions, IKStatus, RequestError, describe_limits
-from manipulator_kinematics.params import ConfigError, config_path, load_parameters
+from manipulator_kinematics.param_files import ConfigError, config_path, load_parameters
 from manipulator_kinematics.plan_bounds import STEP_RANGE, TIP_SPEED_RANGE
 from manipulator_kinematics.planar import ELBOW_NEGATIVE, two_link_ik, wrap_angle
+from manipulator_kinematics.schema import Names, Number, Numbers, Schema, Text, require, validate
 from manipulator_kinematics.serial_chain import JointLimits, SerialChain, revolute
 from pump_boom_kinematics.regions import Grid, RegionTable
 
@@ -495,8 +495,12 @@ class PumpBoom:
         theta5 = wrap_angle(phi4 - phi3) + np.pi
         theta6 = arm.theta2[..., ELBOW_NEGATIVE] + np.pi
         q = np.concatenate(
-            [np.zeros(theta5.shape + (1,)), np.broadcast_to(triple, theta5.shape + (3,)), theta5[..., None],
-             theta6[..., None]],
+            [
+                np.zeros(theta5.shape + (1,)),
+                np.broadcast_to(triple, theta5.shape + (3,)),
+                theta5[..., None],
+                theta6[..., None],
+            ],
             axis=-1,
         )
         within = self.limits.within(q, LIMIT_TOL)
@@ -523,16 +527,24 @@ class PumpBoom:
             return (tuple(result.q.tolist()) if failure is Failure.NONE else None), failure
         q = np.empty(6)
         seeded = seed_slew is not None
-        failure, _ = kernel.region_ik(*self._kernel_args, float(x), float(y), float(z),
-                                      float(seed_slew) if seeded else 0.0, seeded, q)
+        failure, _ = kernel.region_ik(
+            *self._kernel_args, float(x), float(y), float(z), float(seed_slew) if seeded else 0.0, seeded, q
+        )
         return (None if failure else tuple(q.tolist())), _FAILURES[failure]
 
     @cached_property
     def _kernel_args(self) -> tuple[np.ndarray, ...]:
         """The kernel's machine constants and the region table's lookup arrays (:mod:`.ik_kernel`)."""
         constants, owner, squares = self.table.lookup
-        machine = [*self.root, *self.lengths, self.reach, LIMIT_TOL, ENVELOPE_TOL, *self.limits.lower,
-                   *self.limits.upper]
+        machine = [
+            *self.root,
+            *self.lengths,
+            self.reach,
+            LIMIT_TOL,
+            ENVELOPE_TOL,
+            *self.limits.lower,
+            *self.limits.upper,
+        ]
         return np.array([*machine, *constants], dtype=float), owner, squares
 
     def solve_ik(
@@ -593,8 +605,9 @@ class PumpBoom:
         :meth:`region_ik` of the point, when asked for."""
         q = np.empty(6)
         seeded = seed is not None
-        failure, _ = kernel.region_ik(*self._kernel_args, *point.tolist(), float(seed[0]) if seeded else 0.0,
-                                      seeded, q)
+        failure, _ = kernel.region_ik(
+            *self._kernel_args, *point.tolist(), float(seed[0]) if seeded else 0.0, seeded, q
+        )
         if failure:
             q[:] = np.nan
 

@@ -29,10 +29,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from manipulator_kinematics.config import Number
 from manipulator_kinematics.nodes import forward_main, run_node
 from manipulator_kinematics.nodes.ik_server import SETTINGS, PlanPathServer, Rejected
 from manipulator_kinematics.registry import Machine
+from manipulator_kinematics.schema import Number
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes
 from manipulator_kinematics_interfaces.srv import PlanPath, SolveIK
 from pump_boom_kinematics.kinematics import MODES, RegionTableError
@@ -40,8 +40,12 @@ from pump_boom_kinematics.pour import ACCELERATION_RANGE, PathPlan, plan_path
 
 SERVER_SETTINGS = {
     **SETTINGS,
-    "tip_acceleration": Number(min=ACCELERATION_RANGE[0], max=ACCELERATION_RANGE[1], unit="m/s^2",
-                               doc="bound of the tip's acceleration along a plan_path pour"),
+    "tip_acceleration": Number(
+        min=ACCELERATION_RANGE[0],
+        max=ACCELERATION_RANGE[1],
+        unit="m/s^2",
+        doc="bound of the tip's acceleration along a plan_path pour",
+    ),
 }
 
 

@@ -61,15 +61,29 @@ def plot_regions(boom: PumpBoom, out: Path, area: Coverage | None = None) -> Pat
     for (i, j, level), t in zip(table.index.tolist(), np.degrees(table.triples)):
         r, z = table.grid.corner(i, j, level)
         s = float(table.grid.side(level))
-        ax.add_patch(Rectangle((r, z), s, s, fill=False, ec="tab:green" if level else "darkgreen",
-                               lw=0.8 if level == 0 else 0.3))
+        ax.add_patch(
+            Rectangle(
+                (r, z),
+                s,
+                s,
+                fill=False,
+                ec="tab:green" if level else "darkgreen",
+                lw=0.8 if level == 0 else 0.3,
+            )
+        )
         if level == 0:
             core = Rectangle((r + half, z + half), s - 2 * half, s - 2 * half, fill=False, ec="darkgreen")
             core.set_linestyle(":")
             core.set_linewidth(0.4)
             ax.add_patch(core)
-            ax.text(r + s / 2, z + s / 2, f"{t[0]:.0f}/{t[1]:.0f}/{t[2]:.0f}", ha="center", va="center",
-                    fontsize=6.5)
+            ax.text(
+                r + s / 2,
+                z + s / 2,
+                f"{t[0]:.0f}/{t[1]:.0f}/{t[2]:.0f}",
+                ha="center",
+                va="center",
+                fontsize=6.5,
+            )
     _truck(ax, boom)
     ax.plot(*boom.root, "k^")
     c = table.coverage
@@ -113,9 +127,13 @@ def plot_example_area(boom: PumpBoom, out: Path) -> Path:
     )
     # The tips are drawn as single pixels: the legend gets markers of its own (markerscale does
     # not scale the pixel marker).
-    ax.legend(handles=[Line2D([], [], ls="", marker="s", ms=9, color=c, label=label) for c, label in
-                       (("tab:blue", "positive envelope"), ("tab:orange", "not positive envelope"))],
-              loc="lower right")
+    ax.legend(
+        handles=[
+            Line2D([], [], ls="", marker="s", ms=9, color=c, label=label)
+            for c, label in (("tab:blue", "positive envelope"), ("tab:orange", "not positive envelope"))
+        ],
+        loc="lower right",
+    )
     ax.set_xlabel("r (m)")
     ax.set_ylabel("z (m)")
     ax.set_aspect("equal")
@@ -183,11 +201,21 @@ def animate_pour(boom: PumpBoom, plan: PathPlan, name: str, title: str, out: Pat
     root = scene.frames["frame_1"][:, :3, 3]  # the root pin: in the boom's vertical plane
     heading = np.arctan2(root[:, 1], root[:, 0])
     speed = max(1.0, float(plan.t[-1] - plan.t[0]) / 12.0)
-    views = [View(boom_plane(heading), "r (m)", "z (m)", "boom plane"),
-             View(view_xy, "x (m)", "y (m)", "top")]
-    return animate(scene, out / f"{PREFIX}{name}.gif", views,
-                   times=plan.t, reference=plan.points, ground=0.0, speed=speed, size=(8.0, 3.8),
-                   title=f"{title} ({speed:.0f}x speed)")
+    views = [
+        View(boom_plane(heading), "r (m)", "z (m)", "boom plane"),
+        View(view_xy, "x (m)", "y (m)", "top"),
+    ]
+    return animate(
+        scene,
+        out / f"{PREFIX}{name}.gif",
+        views,
+        times=plan.t,
+        reference=plan.points,
+        ground=0.0,
+        speed=speed,
+        size=(8.0, 3.8),
+        title=f"{title} ({speed:.0f}x speed)",
+    )
 
 
 def _save(fig: plt.Figure, path: Path) -> Path:

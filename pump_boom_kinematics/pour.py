@@ -154,12 +154,30 @@ def plan_path(
             f"waypoint {k} {_show(goal)} cannot be reached along the line from {_show(start)}: {reason}; "
             f"the path ends at the farthest reachable point of the line {_show(end)}"
         )
-        return _plan(boom, np.vstack(points), np.vstack(q), np.concatenate(blended), (speed, acceleration),
-                     True, k - 1, end, text)
+        return _plan(
+            boom,
+            np.vstack(points),
+            np.vstack(q),
+            np.concatenate(blended),
+            (speed, acceleration),
+            True,
+            k - 1,
+            end,
+            text,
+        )
     pts = np.vstack(points)
     text = f"{len(pts)} points through {len(waypoints)} waypoint(s), step {step:g} m"
-    return _plan(boom, pts, np.vstack(q), np.concatenate(blended), (speed, acceleration), False,
-                 len(waypoints) - 1, pts[-1], text)
+    return _plan(
+        boom,
+        pts,
+        np.vstack(q),
+        np.concatenate(blended),
+        (speed, acceleration),
+        False,
+        len(waypoints) - 1,
+        pts[-1],
+        text,
+    )
 
 
 def pour_line(
@@ -202,21 +220,50 @@ def _plan(
     speed, acceleration = limits
     if not len(q):
         empty = np.empty((0, 6))
-        return PathPlan(points=points, q=q, s=np.empty(0), t=np.empty(0), ok=False, truncated=truncated,
-                        last_waypoint=last, end=np.asarray(end, dtype=float), message=message,
-                        blended=blended, qd=empty, qdd=empty, speed=np.empty(0), active=np.empty(0, int),
-                        timing=None)
+        return PathPlan(
+            points=points,
+            q=q,
+            s=np.empty(0),
+            t=np.empty(0),
+            ok=False,
+            truncated=truncated,
+            last_waypoint=last,
+            end=np.asarray(end, dtype=float),
+            message=message,
+            blended=blended,
+            qd=empty,
+            qdd=empty,
+            speed=np.empty(0),
+            active=np.empty(0, int),
+            timing=None,
+        )
     # Unwrap the slew angle along the path: each point's turn follows the previous one.
     q = q.copy()
     q[:, 0] = q[0, 0] + np.concatenate([[0.0], np.cumsum(wrap_angle(np.diff(q[:, 0])))])
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
     timing = time_scale(q, s, boom.joint_speed, speed, acceleration)
     counts = ", ".join(f"{name} {count}" for name, count in timing.limited_by(boom.joint_names).items())
-    message = (f"{message}; tip speed up to {speed:g} m/s, acceleration {acceleration:g} m/s^2, "
-               f"{timing.duration:.4g} s; speed set at (points): {counts}")
-    return PathPlan(points=points, q=q, s=s, t=timing.t, ok=True, truncated=truncated, last_waypoint=last,
-                    end=np.asarray(end, dtype=float), message=message, blended=blended, qd=timing.qd,
-                    qdd=timing.qdd, speed=timing.speed, active=timing.active, timing=timing)
+    message = (
+        f"{message}; tip speed up to {speed:g} m/s, acceleration {acceleration:g} m/s^2, "
+        f"{timing.duration:.4g} s; speed set at (points): {counts}"
+    )
+    return PathPlan(
+        points=points,
+        q=q,
+        s=s,
+        t=timing.t,
+        ok=True,
+        truncated=truncated,
+        last_waypoint=last,
+        end=np.asarray(end, dtype=float),
+        message=message,
+        blended=blended,
+        qd=timing.qd,
+        qdd=timing.qdd,
+        speed=timing.speed,
+        active=timing.active,
+        timing=timing,
+    )
 
 
 def _show(p: np.ndarray) -> str:

@@ -49,9 +49,9 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike
 
-from manipulator_kinematics.blocks import in_blocks
-from manipulator_kinematics.config import ConfigError, Number, Numbers, Text, require, validate
-from manipulator_kinematics.params import load_parameters, shown
+from manipulator_kinematics.param_files import load_parameters, shown
+from manipulator_kinematics.row_blocks import in_blocks
+from manipulator_kinematics.schema import ConfigError, Number, Numbers, Text, require, validate
 
 #: Section of the table file under ``/**: ros__parameters``.
 TABLE_SECTION = "pump_boom_regions"
@@ -78,8 +78,10 @@ TABLE_SCHEMA = {
         # Tables from before this key had no fold rule (folded shapes wherever min_theta3 allowed): 1000 m.
         "fold_width": Number(min=0.0, max=1000.0, unit="m", default=1000.0),
     },
-    "squares": Text(doc="base64 of the squares, little-endian: column, row (int32), level (uint8), "
-                        "theta2 theta3 theta4 (rad, float64), margin (m, float32)"),
+    "squares": Text(
+        doc="base64 of the squares, little-endian: column, row (int32), level (uint8), "
+        "theta2 theta3 theta4 (rad, float64), margin (m, float32)"
+    ),
     "coverage": {
         "squares": Number(min=0, integer=True),
         "covered_area": Number(min=0.0, unit="m^2"),
@@ -102,8 +104,9 @@ TABLE_SCHEMA = {
 #: 0.4 ms, and inflating them 0.25 ms. As text, 7 numbers a square, Python took 1.5-2.3 ms to read
 #: 1500 squares and libyaml 1.5 ms more for the listing in the comments;
 #: ``pump_boom_regions --list`` prints that listing.
-SQUARE_DTYPE = np.dtype([("column", "<i4"), ("row", "<i4"), ("level", "u1"), ("triple", "<f8", 3),
-                         ("margin", "<f4")])
+SQUARE_DTYPE = np.dtype(
+    [("column", "<i4"), ("row", "<i4"), ("level", "u1"), ("triple", "<f8", 3), ("margin", "<f4")]
+)
 SQUARE_LINE = 100
 INDEX_RANGE = 100_000  # |column|, |row| at most this
 MAX_LEVEL = 12
@@ -187,8 +190,10 @@ class RegionTable:
         lower0 = top.min(axis=0) if len(index) else np.zeros(2, dtype=int)
         rows, columns = ((top.max(axis=0) - lower0 + 1) << depth).tolist() if len(index) else (0, 0)
         if rows * columns > MAX_CELLS:  # squares far apart, or a deep level: refused, not a MemoryError
-            raise ValueError(f"region table: the squares span {rows} x {columns} cells of {cell:g} m, "
-                             f"more than {MAX_CELLS} (columns or rows far apart, or levels too deep)")
+            raise ValueError(
+                f"region table: the squares span {rows} x {columns} cells of {cell:g} m, "
+                f"more than {MAX_CELLS} (columns or rows far apart, or levels too deep)"
+            )
         owner = np.full((rows, columns), -1, dtype=np.int32)
         for level in range(depth + 1):
             side = 1 << (depth - level)
@@ -200,8 +205,9 @@ class RegionTable:
         low = index[:, :2] * scale[:, None] - lower
         if np.count_nonzero(owner >= 0) != int(np.sum(scale**2)):  # a cell claimed twice
             a, b = _overlap(low, scale, owner.shape)
-            raise ValueError(f"region table: square {tuple(index[a].tolist())} overlaps square "
-                             f"{tuple(index[b].tolist())}")
+            raise ValueError(
+                f"region table: square {tuple(index[a].tolist())} overlaps square {tuple(index[b].tolist())}"
+            )
         # Per square (triple, 1), and a row of zeros for the cells of no square (owner -1): the
         # window sums of the blend; per square its family, -1 for no square.
         values = np.zeros((len(index) + 1, 4))
@@ -221,8 +227,9 @@ class RegionTable:
     def _extent(self) -> np.ndarray:
         """Per square its extent (m, 4) (r low, z low, r high, z high) m, for :meth:`nearest`."""
         side = self.grid.side(self.index[:, 2])
-        corner = np.stack(self.grid.corner(self.index[:, 0], self.index[:, 1], self.index[:, 2]),
-                          axis=-1).reshape(-1, 2)
+        corner = np.stack(
+            self.grid.corner(self.index[:, 0], self.index[:, 1], self.index[:, 2]), axis=-1
+        ).reshape(-1, 2)
         return np.concatenate([corner, corner + side[:, None]], axis=1)
 
     def __len__(self) -> int:
@@ -287,8 +294,9 @@ class RegionTable:
         triple = self.triples[k.reshape(-1)]  # a copy (an index of one point would be a view)
         band = np.flatnonzero(inside & ~core)
         if len(band):  # points in a band: the window mean, in blocks (its cells' temporaries)
-            triple[band] = in_blocks(self._window_mean, u.reshape(-1)[band], v.reshape(-1)[band],
-                                     k.reshape(-1)[band], block=1024)
+            triple[band] = in_blocks(
+                self._window_mean, u.reshape(-1)[band], v.reshape(-1)[band], k.reshape(-1)[band], block=1024
+            )
         return np.where(inside[..., None], triple.reshape(u.shape + (3,)), np.nan), inside
 
     def _window_mean(self, u: np.ndarray, v: np.ndarray, own: np.ndarray) -> np.ndarray:
@@ -335,19 +343,35 @@ class RegionTable:
         (:mod:`.ik_kernel`): the constants (grid origin r, z; the cell; the arrays' lower cell
         column, row; half the band and EDGE in cells), the cell owners (int32) and per square its
         bounds in cells, its triple and its family (m, 8)."""
-        constants = np.array([*self.grid.origin, self._cell, *self._lower, 0.5 * self.grid.band / self._cell,
-                              EDGE / self._cell], dtype=float)
-        return constants, self._owner, np.concatenate([self._bounds, self.triples, self._family[:-1, None]],
-                                                      axis=1)
+        constants = np.array(
+            [
+                *self.grid.origin,
+                self._cell,
+                *self._lower,
+                0.5 * self.grid.band / self._cell,
+                EDGE / self._cell,
+            ],
+            dtype=float,
+        )
+        return (
+            constants,
+            self._owner,
+            np.concatenate([self._bounds, self.triples, self._family[:-1, None]], axis=1),
+        )
 
-    def random_lines(self, count: int, rng: np.random.Generator, steps: int = 40,
-                     step: float = 0.1) -> np.ndarray:
+    def random_lines(
+        self, count: int, rng: np.random.Generator, steps: int = 40, step: float = 0.1
+    ) -> np.ndarray:
         """Straight lines (k, steps + 1, 2) of (r, z) points ``step`` apart inside the covered area:
         of ``count`` lines in random directions, half starting in squares drawn by count (mostly
         the small squares at the rim), half by area, the k that stay inside (continuity checks)."""
         side = self.grid.side(self.index[:, 2])
-        rows = np.concatenate([rng.integers(0, len(self), count // 2),
-                               rng.choice(len(self), count - count // 2, p=side**2 / np.sum(side**2))])
+        rows = np.concatenate(
+            [
+                rng.integers(0, len(self), count // 2),
+                rng.choice(len(self), count - count // 2, p=side**2 / np.sum(side**2)),
+            ]
+        )
         corner = np.stack(self.grid.corner(*self.index[rows].T), axis=-1)
         start = corner + side[rows, None] * rng.random((count, 2))
         angle = rng.uniform(0.0, 2.0 * math.pi, count)
@@ -416,23 +440,29 @@ class RegionTable:
         squares["column"], squares["row"], squares["level"] = self.index.T
         squares["triple"], squares["margin"] = self.triples, self.margin
         encoded = base64.b64encode(zlib.compress(squares.tobytes(), 9)).decode("ascii")
-        text += (f"      squares: |  # base64 of zlib: {', '.join(SQUARE_DTYPE.names)} "
-                 "(pump_boom_regions --list)\n")
+        text += (
+            f"      squares: |  # base64 of zlib: {', '.join(SQUARE_DTYPE.names)} "
+            "(pump_boom_regions --list)\n"
+        )
         for start in range(0, len(encoded), SQUARE_LINE):
-            text += f"        {encoded[start:start + SQUARE_LINE]}\n"
+            text += f"        {encoded[start : start + SQUARE_LINE]}\n"
         Path(path).write_text(text, encoding="utf-8")
 
     def listing(self) -> list[str]:
         """The squares as a person reads them: a line each with its extent in r and z (m), its
         triple (deg) and its margin (m), after a line of column titles."""
-        lines = ["square (i, j, level)  r from, to (m)    z from, to (m)    theta2  theta3  theta4 (deg)"
-                 "  margin (m)"]
+        lines = [
+            "square (i, j, level)  r from, to (m)    z from, to (m)    theta2  theta3  theta4 (deg)"
+            "  margin (m)"
+        ]
         degrees = np.degrees(self.triples).tolist()
         for (i, j, level), t, m in zip(self.index.tolist(), degrees, self.margin.tolist()):
             r, z = (float(c) for c in self.grid.corner(i, j, level))
             s = float(self.grid.side(level))
-            lines.append(f"({i:4d}, {j:4d}, {level})     {r:7.3f} {r + s:7.3f}  {z:8.3f} {z + s:8.3f}"
-                         f"  {t[0]:6.1f}  {t[1]:6.1f}  {t[2]:6.1f}       {m:.3f}")
+            lines.append(
+                f"({i:4d}, {j:4d}, {level})     {r:7.3f} {r + s:7.3f}  {z:8.3f} {z + s:8.3f}"
+                f"  {t[0]:6.1f}  {t[1]:6.1f}  {t[2]:6.1f}       {m:.3f}"
+            )
         return lines
 
 
@@ -460,8 +490,9 @@ def _squares(text: str, key: str) -> np.ndarray:
     inflate = zlib.decompressobj()
     try:
         # At most MAX_SQUARES squares: a few KB of deflated zeros would inflate to gigabytes.
-        data = inflate.decompress(binascii.a2b_base64(text.replace("\n", ""), strict_mode=True),
-                                  MAX_SQUARES * SQUARE_DTYPE.itemsize)  # base64.b64decode: a regex
+        data = inflate.decompress(
+            binascii.a2b_base64(text.replace("\n", ""), strict_mode=True), MAX_SQUARES * SQUARE_DTYPE.itemsize
+        )  # base64.b64decode: a regex
         if inflate.unconsumed_tail:
             raise ConfigError(f"{key}: more than {MAX_SQUARES} squares")
         if not inflate.eof:

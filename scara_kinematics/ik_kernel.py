@@ -104,8 +104,18 @@ def _allowed(branch: int) -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
-def solve_phi(k: np.ndarray, px: float, py: float, phi: float, seed: np.ndarray, seeded: bool, branch: int,
-              tie_tolerance: float, q: np.ndarray, status: np.ndarray) -> tuple[int, bool]:
+def solve_phi(
+    k: np.ndarray,
+    px: float,
+    py: float,
+    phi: float,
+    seed: np.ndarray,
+    seeded: bool,
+    branch: int,
+    tie_tolerance: float,
+    q: np.ndarray,
+    status: np.ndarray,
+) -> tuple[int, bool]:
     """Both branches q (2, 3) and their statuses (2,) at heading phi, then (selected, tie)."""
     _heading(k, px, py, phi, q, status)
     # The shared rule (model.select): a requested branch alone, else the nearest to the seed, else the first.
@@ -141,9 +151,18 @@ def _candidate_headings(k: np.ndarray, px: float, py: float, preferred: float) -
 
 
 @njit(cache=True, error_model="numpy")
-def solve_position(k: np.ndarray, px: float, py: float, preferred: float, seed: np.ndarray, seeded: bool,
-                   branch: int, tie_tolerance: float, q: np.ndarray, status: np.ndarray
-                   ) -> tuple[float, int, bool, int]:
+def solve_position(
+    k: np.ndarray,
+    px: float,
+    py: float,
+    preferred: float,
+    seed: np.ndarray,
+    seeded: bool,
+    branch: int,
+    tie_tolerance: float,
+    q: np.ndarray,
+    status: np.ndarray,
+) -> tuple[float, int, bool, int]:
     """Mode position: (phi, selected, tie, outcome), with both branches q (2, 3) and their statuses
     (2,) at the admissible heading phi nearest ``preferred`` (none admissible: the preferred one)."""
     allowed = _allowed(branch)

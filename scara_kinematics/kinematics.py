@@ -40,6 +40,7 @@ singular when the upper arm is perpendicular to the rail. A configuration counts
 |cos theta1| < ``singularity_threshold`` (default 0.01; joint rates there exceed 100 v / l2 for a
 tool speed v).
 """
+
 from __future__ import annotations
 
 import math
@@ -53,7 +54,6 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from manipulator_kinematics.compiled import Kernel
-from manipulator_kinematics.config import Names, Number, Numbers, Schema, Text, require, validate
 from manipulator_kinematics.model import (
     TIE_TOLERANCE,
     IKSolutions,
@@ -63,8 +63,9 @@ from manipulator_kinematics.model import (
     limit_status,
     select,
 )
-from manipulator_kinematics.params import config_path, load_parameters
+from manipulator_kinematics.param_files import config_path, load_parameters
 from manipulator_kinematics.planar import two_link_ik, wrap_angle
+from manipulator_kinematics.schema import Names, Number, Numbers, Schema, Text, require, validate
 from manipulator_kinematics.serial_chain import JointLimits, SerialChain, prismatic, revolute, troty
 
 BRANCHES = ("elbow_a", "elbow_b")
@@ -81,7 +82,7 @@ HEADING_TIE = 1e-12
 PLANE_TOL = 1e-6
 CONFIG_FILE = "scara.yaml"
 
-#: The ``scara:`` section of a parameters file (manipulator_kinematics.config).
+#: The ``scara:`` section of a parameters file (manipulator_kinematics.schema).
 SCHEMA: Schema = {
     "name": Text(empty=False, default="scara", doc="the machine's name: the robot name of its URDF"),
     "l1": Number(min=0.0, max=100.0, unit="m", doc="base offset: shoulder x at rail_joint = 0 (m)"),
@@ -158,8 +159,15 @@ class HeadingIK:
 class Scara:
     """The P-R-R arm: geometry l1, l2, l3 (m), joint limits, singularity threshold."""
 
-    def __init__(self, l1: float, l2: float, l3: float, limits: JointLimits,
-                 singularity_threshold: float = 0.01, name: str = "scara") -> None:
+    def __init__(
+        self,
+        l1: float,
+        l2: float,
+        l3: float,
+        limits: JointLimits,
+        singularity_threshold: float = 0.01,
+        name: str = "scara",
+    ) -> None:
         if not (l1 >= 0.0 and l2 > 0.0 and l3 > 0.0):
             raise ValueError(f"need l1 >= 0, l2 > 0, l3 > 0; got {l1}, {l2}, {l3}")
         if len(limits.names) != 3:
@@ -178,15 +186,24 @@ class Scara:
         p = validate(params, SCHEMA, prefix)
         names, lower, upper = p["joint_names"], p["joint_min"], p["joint_max"]
         for i in range(3):
-            require(lower[i] < upper[i], f"{prefix}.joint_min[{i}]",
-                    f"{lower[i]} must be below {prefix}.joint_max[{i}] = {upper[i]} ({names[i]})")
+            require(
+                lower[i] < upper[i],
+                f"{prefix}.joint_min[{i}]",
+                f"{lower[i]} must be below {prefix}.joint_max[{i}] = {upper[i]} ({names[i]})",
+            )
         for i in (1, 2):
             for key, value in (("joint_min", lower[i]), ("joint_max", upper[i])):
-                require(abs(value) <= math.pi, f"{prefix}.{key}[{i}]",
-                        f"{value} rad ({names[i]}) is outside [-pi, pi]: limits are radians and the "
-                        "solver returns angles in [-pi, pi)")
-        require(p["singularity_threshold"] < 1.0, f"{prefix}.singularity_threshold",
-                f"{p['singularity_threshold']} must be below 1 (it bounds |cos theta1|)")
+                require(
+                    abs(value) <= math.pi,
+                    f"{prefix}.{key}[{i}]",
+                    f"{value} rad ({names[i]}) is outside [-pi, pi]: limits are radians and the "
+                    "solver returns angles in [-pi, pi)",
+                )
+        require(
+            p["singularity_threshold"] < 1.0,
+            f"{prefix}.singularity_threshold",
+            f"{p['singularity_threshold']} must be below 1 (it bounds |cos theta1|)",
+        )
         limits = JointLimits(tuple(names), np.array(lower), np.array(upper), prismatic=(True, False, False))
         return cls(p["l1"], p["l2"], p["l3"], limits, p["singularity_threshold"], p["name"])
 
@@ -230,11 +247,14 @@ class Scara:
         s1, c1 = np.sin(t1), np.cos(t1)
         s12, c12 = np.sin(t1 + t2), np.cos(t1 + t2)
         one, zero = np.ones_like(t1), np.zeros_like(t1)
-        return np.stack([
-            np.stack([one, -self.l2 * s1 - self.l3 * s12, -self.l3 * s12], axis=-1),
-            np.stack([zero, self.l2 * c1 + self.l3 * c12, self.l3 * c12], axis=-1),
-            np.stack([zero, one, one], axis=-1),
-        ], axis=-2)
+        return np.stack(
+            [
+                np.stack([one, -self.l2 * s1 - self.l3 * s12, -self.l3 * s12], axis=-1),
+                np.stack([zero, self.l2 * c1 + self.l3 * c12, self.l3 * c12], axis=-1),
+                np.stack([zero, one, one], axis=-1),
+            ],
+            axis=-2,
+        )
 
     def manipulability(self, q: ArrayLike) -> np.ndarray:
         """det J = l2 cos theta1 (...,)."""
@@ -299,8 +319,15 @@ class Scara:
         out[..., 0, :], out[..., 1, :], out[..., 5, :] = rows[..., 0, :], rows[..., 1, :], rows[..., 2, :]
         return out
 
-    def solve_ik(self, target: ArrayLike, *, use_orientation: bool = True, mode: str | None = None,
-                 seed: ArrayLike | None = None, branch: str | None = None) -> IKSolutions:
+    def solve_ik(
+        self,
+        target: ArrayLike,
+        *,
+        use_orientation: bool = True,
+        mode: str | None = None,
+        seed: ArrayLike | None = None,
+        branch: str | None = None,
+    ) -> IKSolutions:
         """:meth:`ik` for target poses (..., 4, 4): the protocol's entry (SolveIK).
 
         Mode default: ``phi`` with an orientation, ``position`` without. A target off the plane
@@ -311,14 +338,19 @@ class Scara:
         if mode not in MODES:
             raise RequestError(f"unknown mode {mode!r}; known: {', '.join(MODES)}")
         if branch is not None and branch not in BRANCHES:
-            raise RequestError(f"unknown branch {branch!r}; known: {', '.join(BRANCHES)} "
-                               "(empty = closest to the seed)")
+            raise RequestError(
+                f"unknown branch {branch!r}; known: {', '.join(BRANCHES)} (empty = closest to the seed)"
+            )
         if mode == "phi" and not use_orientation:
-            raise RequestError("mode 'phi' takes the heading from the target orientation: set "
-                               "use_orientation", IKStatus.INVALID)
+            raise RequestError(
+                "mode 'phi' takes the heading from the target orientation: set use_orientation",
+                IKStatus.INVALID,
+            )
         if mode == "position" and use_orientation:
-            raise RequestError("mode 'position' leaves the heading free: use mode 'phi' to give an "
-                               "orientation", IKStatus.INVALID)
+            raise RequestError(
+                "mode 'position' leaves the heading free: use mode 'phi' to give an orientation",
+                IKStatus.INVALID,
+            )
         target = np.asarray(target, dtype=float)
         requested = None if branch is None else BRANCHES.index(branch)
         if target.shape == (4, 4):
@@ -334,11 +366,15 @@ class Scara:
         if mode == "fixed_phi" and use_orientation:
             off = finite & (np.abs(wrap_angle(heading - PAPER_PHI)) > PLANE_TOL)
             if np.any(off):
-                raise RequestError(f"mode 'fixed_phi' holds phi = 90 deg but the target heading is "
-                                   f"{np.degrees(heading[off]).ravel()[0]:.6g} deg: use mode 'phi' or clear "
-                                   "use_orientation", IKStatus.INVALID)
-        result = self.ik(position[..., :2], mode=mode, phi=heading if mode == "phi" else None,
-                         seed=seed, branch=branch)
+                raise RequestError(
+                    f"mode 'fixed_phi' holds phi = 90 deg but the target heading is "
+                    f"{np.degrees(heading[off]).ravel()[0]:.6g} deg: use mode 'phi' or clear "
+                    "use_orientation",
+                    IKStatus.INVALID,
+                )
+        result = self.ik(
+            position[..., :2], mode=mode, phi=heading if mode == "phi" else None, seed=seed, branch=branch
+        )
         off_plane = finite & (np.abs(position[..., 2]) > PLANE_TOL)
         tilted = finite & (tilt > PLANE_TOL) if use_orientation else np.zeros_like(off_plane)
         refused = off_plane | tilted
@@ -358,11 +394,24 @@ class Scara:
                 return _tilted_text(float(tilt[index]))
             return solved.note(index)
 
-        return IKSolutions(q=solved.q, status=status, branches=BRANCHES, selected=selected,
-                           tie=answered & solved.tie, explain=explain)
+        return IKSolutions(
+            q=solved.q,
+            status=status,
+            branches=BRANCHES,
+            selected=selected,
+            tie=answered & solved.tie,
+            explain=explain,
+        )
 
-    def _solve_ik_one(self, kernel: ModuleType, target: np.ndarray, use_orientation: bool, mode: str,
-                      seed: np.ndarray | None, requested: int | None) -> IKSolutions:
+    def _solve_ik_one(
+        self,
+        kernel: ModuleType,
+        target: np.ndarray,
+        use_orientation: bool,
+        mode: str,
+        seed: np.ndarray | None,
+        requested: int | None,
+    ) -> IKSolutions:
         """:meth:`solve_ik` of one target (4, 4), mode and branch checked: the same steps in Python
         floats around the compiled kernel (:meth:`_kernel_one`). Issue #32: on 0-d arrays they cost
         2.5x :meth:`ik`, more than the kernel itself (a reduction over two axes alone 9 us)."""
@@ -371,13 +420,16 @@ class Scara:
         x, y, z = rows[0][3], rows[1][3], rows[2][3]
         heading = math.atan2(rows[1][0], rows[0][0])
         tilt = math.acos(min(max(rows[2][2], -1.0), 1.0))  # NaN stays NaN
-        if (mode == "fixed_phi" and use_orientation and finite
-                and abs(_wrap(heading - PAPER_PHI)) > PLANE_TOL):
-            raise RequestError(f"mode 'fixed_phi' holds phi = 90 deg but the target heading is "
-                               f"{math.degrees(heading):.6g} deg: use mode 'phi' or clear "
-                               "use_orientation", IKStatus.INVALID)
+        if mode == "fixed_phi" and use_orientation and finite and abs(_wrap(heading - PAPER_PHI)) > PLANE_TOL:
+            raise RequestError(
+                f"mode 'fixed_phi' holds phi = 90 deg but the target heading is "
+                f"{math.degrees(heading):.6g} deg: use mode 'phi' or clear "
+                "use_orientation",
+                IKStatus.INVALID,
+            )
         q, found, selected, tie, outcome, phi_used, preferred = self._kernel_one(
-            kernel, mode, x, y, heading if mode == "phi" else None, seed, requested)
+            kernel, mode, x, y, heading if mode == "phi" else None, seed, requested
+        )
         off_plane = finite and abs(z) > PLANE_TOL
         tilted = finite and use_orientation and tilt > PLANE_TOL
         status = found.copy()
@@ -394,23 +446,41 @@ class Scara:
                 return _off_plane_text(z)
             if tilted:
                 return _tilted_text(tilt)
-            solved = IKSolutions(q=q, status=found, branches=BRANCHES, selected=np.array(selected),
-                                 tie=np.array(tie))  # what ik answered, for its text
-            return self._explain(solved, index, mode, phi_used, preferred, outcome, seed is not None,
-                                 requested)
+            solved = IKSolutions(
+                q=q, status=found, branches=BRANCHES, selected=np.array(selected), tie=np.array(tie)
+            )  # what ik answered, for its text
+            return self._explain(
+                solved, index, mode, phi_used, preferred, outcome, seed is not None, requested
+            )
 
-        return IKSolutions(q=q, status=status, branches=BRANCHES,
-                           selected=np.array(selected if answered else -1, dtype=np.int8),
-                           tie=np.array(answered and bool(tie)), explain=explain)
+        return IKSolutions(
+            q=q,
+            status=status,
+            branches=BRANCHES,
+            selected=np.array(selected if answered else -1, dtype=np.int8),
+            tie=np.array(answered and bool(tie)),
+            explain=explain,
+        )
 
     def state_note(self, q: ArrayLike) -> str:
         """A remark on one joint state for FK answers: near the singularity, or nothing."""
-        return (f"near the singularity: |cos theta1| = {abs(math.cos(float(np.asarray(q)[1]))):.3g}"
-                if self.singular(q) else "")
+        return (
+            f"near the singularity: |cos theta1| = {abs(math.cos(float(np.asarray(q)[1]))):.3g}"
+            if self.singular(q)
+            else ""
+        )
 
     # ---- inverse kinematics -------------------------------------------------------------------
-    def ik(self, position: ArrayLike, *, mode: str = "phi", phi: ArrayLike | None = None,
-           seed: ArrayLike | None = None, branch: str | None = None, compiled: bool = True) -> HeadingIK:
+    def ik(
+        self,
+        position: ArrayLike,
+        *,
+        mode: str = "phi",
+        phi: ArrayLike | None = None,
+        seed: ArrayLike | None = None,
+        branch: str | None = None,
+        compiled: bool = True,
+    ) -> HeadingIK:
         """Joint solutions for tool positions (..., 2) = [px, py] (module docstring: modes, rule).
 
         ``phi`` (...,) is required in mode ``phi`` and refused otherwise; ``seed`` (3,) or (..., 3)
@@ -438,11 +508,15 @@ class Scara:
         one = px.ndim == 0 and compiled and (seed is None or seed.shape == (3,))
         kernel = compiled_kernel(self) if one else None
         if kernel is not None:
-            return self._ik_one(kernel, mode, float(px), float(py), None if phi is None else float(phi),
-                                seed, requested)
+            return self._ik_one(
+                kernel, mode, float(px), float(py), None if phi is None else float(phi), seed, requested
+            )
         if mode == "position":
-            preferred = (np.full(px.shape, PAPER_PHI) if seed is None
-                         else wrap_angle(np.broadcast_to(seed[..., 1] + seed[..., 2], px.shape)))
+            preferred = (
+                np.full(px.shape, PAPER_PHI)
+                if seed is None
+                else wrap_angle(np.broadcast_to(seed[..., 1] + seed[..., 2], px.shape))
+            )
             phi_used, q, status, outcome = self._position_ik(px, py, preferred, requested)
             selected, tie = select(q, status, seed=seed, branch=requested, weights=self._weights)
         else:
@@ -451,35 +525,58 @@ class Scara:
             selected, tie = select(q, status, seed=seed, branch=requested, weights=self._weights)
             # The best status of the branches that may answer (np.minimum: a reduction over an axis of
             # two costs several times more on a batch).
-            outcome = (np.minimum(status[..., 0], status[..., 1]) if requested is None
-                       else status[..., requested])
+            outcome = (
+                np.minimum(status[..., 0], status[..., 1]) if requested is None else status[..., requested]
+            )
         finite = np.isfinite(px) & np.isfinite(py) & np.isfinite(phi_used)
         outcome = np.where(finite, outcome, _INVALID).astype(np.int8)
         if not finite.all():
             status = np.where(finite[..., None], status, _INVALID).astype(np.int8)
 
         def explain(solutions: IKSolutions, index: tuple[int, ...]) -> str:
-            return self._explain(solutions, index, mode, float(phi_used[index]), float(preferred[index]),
-                                 int(outcome[index]), seed is not None, requested)
+            return self._explain(
+                solutions,
+                index,
+                mode,
+                float(phi_used[index]),
+                float(preferred[index]),
+                int(outcome[index]),
+                seed is not None,
+                requested,
+            )
 
-        solutions = IKSolutions(q=q, status=status, branches=BRANCHES, selected=selected, tie=tie,
-                                explain=explain)
+        solutions = IKSolutions(
+            q=q, status=status, branches=BRANCHES, selected=selected, tie=tie, explain=explain
+        )
         return HeadingIK(solutions=solutions, status=outcome, phi=phi_used, preferred_phi=preferred)
 
     def describe(self, q: np.ndarray, status: IKStatus, phi: float) -> str:
         """Why one branch's joint values ``q`` (3,) have ``status`` (for messages)."""
         if status is IKStatus.UNREACHABLE:
-            return (f"wrist point out of the upper arm's reach (|wy| > l2 = {self.l2:.6g} m with "
-                    f"phi = {math.degrees(phi):.6g} deg)")
+            return (
+                f"wrist point out of the upper arm's reach (|wy| > l2 = {self.l2:.6g} m with "
+                f"phi = {math.degrees(phi):.6g} deg)"
+            )
         if status is IKStatus.JOINT_LIMITS:
             return describe_limits(q, self.limits)
         if status is IKStatus.SINGULAR:
-            return (f"singular: |cos theta1| = {abs(math.cos(q[1])):.3g} < {self.singularity_threshold:g} "
-                    "(upper arm perpendicular to the rail)")
+            return (
+                f"singular: |cos theta1| = {abs(math.cos(q[1])):.3g} < {self.singularity_threshold:g} "
+                "(upper arm perpendicular to the rail)"
+            )
         return f"solution {', '.join(f'{n} = {_show(i, q[i])}' for i, n in enumerate(self.joint_names))}"
 
-    def _explain(self, solutions: IKSolutions, index: tuple[int, ...], mode: str, phi: float,
-                 preferred: float, outcome: int, seeded: bool, requested: int | None) -> str:
+    def _explain(
+        self,
+        solutions: IKSolutions,
+        index: tuple[int, ...],
+        mode: str,
+        phi: float,
+        preferred: float,
+        outcome: int,
+        seeded: bool,
+        requested: int | None,
+    ) -> str:
         """The text of one target: the branch and rule used, or why it failed."""
         status = IKStatus(outcome)
         if status is IKStatus.SUCCESS:
@@ -490,8 +587,10 @@ class Scara:
                 if abs(wrap_angle(phi - preferred)) < 1e-12:
                     text += f" (kept {source} heading)"
                 else:
-                    text += (f" (moved from {source} heading {math.degrees(preferred):.6g} deg: the nearest"
-                             " one with a solution inside the joint limits, away from the singularity)")
+                    text += (
+                        f" (moved from {source} heading {math.degrees(preferred):.6g} deg: the nearest"
+                        " one with a solution inside the joint limits, away from the singularity)"
+                    )
             return text
         if status is IKStatus.INVALID:
             return "target is not finite"
@@ -504,8 +603,9 @@ class Scara:
             head = f"{mode} mode, phi = {math.degrees(phi):.6g} deg"
         q, branch_status = solutions.q[index], solutions.status[index]
         branches = range(2) if requested is None else (requested,)
-        parts = [f"{BRANCHES[b]}: {self.describe(q[b], IKStatus(int(branch_status[b])), phi)}"
-                 for b in branches]
+        parts = [
+            f"{BRANCHES[b]}: {self.describe(q[b], IKStatus(int(branch_status[b])), phi)}" for b in branches
+        ]
         return f"{head}: " + "; ".join(parts)
 
     @cached_property
@@ -539,23 +639,51 @@ class Scara:
         status[inside & singular[..., None]] = _SINGULAR
         return q, status
 
-    def _ik_one(self, kernel: ModuleType, mode: str, px: float, py: float, phi: float | None,
-                seed: np.ndarray | None, requested: int | None) -> HeadingIK:
+    def _ik_one(
+        self,
+        kernel: ModuleType,
+        mode: str,
+        px: float,
+        py: float,
+        phi: float | None,
+        seed: np.ndarray | None,
+        requested: int | None,
+    ) -> HeadingIK:
         """:meth:`ik` of one target through the compiled kernel (:meth:`_kernel_one`)."""
         q, status, selected, tie, outcome, phi_used, preferred = self._kernel_one(
-            kernel, mode, px, py, phi, seed, requested)
+            kernel, mode, px, py, phi, seed, requested
+        )
 
         def explain(solutions: IKSolutions, index: tuple[int, ...]) -> str:
-            return self._explain(solutions, index, mode, phi_used, preferred, outcome, seed is not None,
-                                 requested)
+            return self._explain(
+                solutions, index, mode, phi_used, preferred, outcome, seed is not None, requested
+            )
 
-        solutions = IKSolutions(q=q, status=status, branches=BRANCHES, selected=np.array(selected),
-                                tie=np.array(tie), explain=explain)
-        return HeadingIK(solutions=solutions, status=np.array(outcome, dtype=np.int8), phi=np.array(phi_used),
-                         preferred_phi=np.array(preferred))
+        solutions = IKSolutions(
+            q=q,
+            status=status,
+            branches=BRANCHES,
+            selected=np.array(selected),
+            tie=np.array(tie),
+            explain=explain,
+        )
+        return HeadingIK(
+            solutions=solutions,
+            status=np.array(outcome, dtype=np.int8),
+            phi=np.array(phi_used),
+            preferred_phi=np.array(preferred),
+        )
 
-    def _kernel_one(self, kernel: ModuleType, mode: str, px: float, py: float, phi: float | None,
-                    seed: np.ndarray | None, requested: int | None) -> tuple[Any, ...]:
+    def _kernel_one(
+        self,
+        kernel: ModuleType,
+        mode: str,
+        px: float,
+        py: float,
+        phi: float | None,
+        seed: np.ndarray | None,
+        requested: int | None,
+    ) -> tuple[Any, ...]:
         """:meth:`ik`'s steps for one target in Python floats around the compiled kernel (on 0-d
         arrays they cost several times the kernel, issue #32): q (2, 3), status (2,), and the
         selection, tie, outcome, heading used and preferred heading as Python numbers."""
@@ -566,11 +694,13 @@ class Scara:
         if mode == "position":
             preferred = PAPER_PHI if seed is None else _wrap(float(seed[1]) + float(seed[2]))
             phi_used, selected, tie, outcome = kernel.solve_position(
-                self._packed, px, py, preferred, start, seeded, chosen, TIE_TOLERANCE, q, status)
+                self._packed, px, py, preferred, start, seeded, chosen, TIE_TOLERANCE, q, status
+            )
         else:
             phi_used = preferred = PAPER_PHI if phi is None else _wrap(phi)
-            selected, tie = kernel.solve_phi(self._packed, px, py, phi_used, start, seeded, chosen,
-                                             TIE_TOLERANCE, q, status)
+            selected, tie = kernel.solve_phi(
+                self._packed, px, py, phi_used, start, seeded, chosen, TIE_TOLERANCE, q, status
+            )
             first, second = status.tolist()
             outcome = min(first, second) if requested is None else (first, second)[requested]
         if not (math.isfinite(px) and math.isfinite(py) and math.isfinite(phi_used)):
@@ -587,13 +717,25 @@ class Scara:
         HEADING_TIE."""
         lower, upper = self.limits.lower, self.limits.upper
         wrist_heights, elbow_r2, elbow_turn, _ = self._constraint_constants
-        return np.concatenate([[self.l1, self.l2, self.l3], lower - LIMIT_TOL, upper + LIMIT_TOL, lower,
-                               upper, [self.singularity_threshold * (1.0 - 1e-9)], self._weights,
-                               wrist_heights, elbow_r2, elbow_turn[:2], [self.l2 + self.l3 + LIMIT_TOL,
-                                                                         HEADING_TIE]])
+        return np.concatenate(
+            [
+                [self.l1, self.l2, self.l3],
+                lower - LIMIT_TOL,
+                upper + LIMIT_TOL,
+                lower,
+                upper,
+                [self.singularity_threshold * (1.0 - 1e-9)],
+                self._weights,
+                wrist_heights,
+                elbow_r2,
+                elbow_turn[:2],
+                [self.l2 + self.l3 + LIMIT_TOL, HEADING_TIE],
+            ]
+        )
 
-    def _position_ik(self, px: np.ndarray, py: np.ndarray, preferred: np.ndarray,
-                     requested: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _position_ik(
+        self, px: np.ndarray, py: np.ndarray, preferred: np.ndarray, requested: int | None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Position mode: the admissible heading nearest ``preferred`` (module docstring); the
         heading, both branches there and their statuses, and the target's outcome over every heading."""
         headings = self._candidate_headings(px, py, preferred)
@@ -637,7 +779,7 @@ class Scara:
         and the shoulder limits (4,); shoulder-to-tool distance^2 at the elbow limits (2,); phi minus the
         direction shoulder -> tool at those limits, for dx >= 0 then dx <= 0 (4,); the rail ends (2,)."""
         lower, upper = self.limits.lower, self.limits.upper
-        sin_singular = math.sqrt(1.0 - self.singularity_threshold ** 2)
+        sin_singular = math.sqrt(1.0 - self.singularity_threshold**2)
         wrist = self.l2 * np.array([sin_singular, -sin_singular, math.sin(lower[1]), math.sin(upper[1])])
         t2 = np.array([lower[2], upper[2]])
         r2 = self.l2**2 + self.l3**2 + 2.0 * self.l2 * self.l3 * np.cos(t2)
@@ -681,8 +823,10 @@ def _off_plane_text(z: float) -> str:
 
 
 def _tilted_text(tilt: float) -> str:
-    return (f"target orientation tilts the tool z axis by {math.degrees(tilt):.6g} deg: the arm only turns "
-            "about base z")
+    return (
+        f"target orientation tilts the tool z axis by {math.degrees(tilt):.6g} deg: the arm only turns "
+        "about base z"
+    )
 
 
 def _allowed(requested: int | None) -> np.ndarray:

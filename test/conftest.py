@@ -12,6 +12,7 @@ running, removes that directory, and fails the run if the system's temporary dir
 new file named like ours (``<console script>-*``). Only our own names are compared: other
 programs use that directory too.
 """
+
 from __future__ import annotations
 
 import fcntl

@@ -134,18 +134,27 @@ IK_FK = ((SolveIK, "solve_ik"), (SolveFK, "solve_fk"))
 
 
 def start_with_services(
-    probe: Probe, exe: str, *ros_args: str, services: Sequence[tuple[type, str]], timeout: float,
+    probe: Probe,
+    exe: str,
+    *ros_args: str,
+    services: Sequence[tuple[type, str]],
+    timeout: float,
     namespace: str = "",
 ) -> tuple[NodeProcess, list[Any]]:
     """Start ``exe`` and wait until it serves every (type, name) of ``services`` to the probe;
     the process and one client per service. A node that dies or never serves is stopped and the
     failure shows its log."""
     process = NodeProcess(exe, *ros_args)
-    clients = [probe.node.create_client(kind, f"{namespace}/{name}" if namespace else name)
-               for kind, name in services]
+    clients = [
+        probe.node.create_client(kind, f"{namespace}/{name}" if namespace else name)
+        for kind, name in services
+    ]
     try:
-        probe.wait_until(lambda: all(c.service_is_ready() for c in clients) or not process.alive(), timeout,
-                         " and ".join(name for _, name in services))
+        probe.wait_until(
+            lambda: all(c.service_is_ready() for c in clients) or not process.alive(),
+            timeout,
+            " and ".join(name for _, name in services),
+        )
         assert process.alive(), process.log()
     except BaseException:
         print(process.stop())
@@ -170,8 +179,9 @@ class Probe:
                 raise TimeoutError(f"timed out after {timeout} s waiting for {what}")
             self.executor.spin_once(timeout_sec=0.01)
 
-    def call(self, client, request, timeout: float, what: str = "service response",
-             resend_after: float = 2.0):
+    def call(
+        self, client, request, timeout: float, what: str = "service response", resend_after: float = 2.0
+    ):
         """One service round trip, re-sending the request every ``resend_after`` seconds without a reply.
 
         rmw_fastrtps drops a response when the client's response reader has not matched the server

@@ -8,8 +8,15 @@ import pytest
 from manipulator_kinematics.asbuilt import AsBuilt, densify, lowest_elevation
 
 
-def brute_force(left: np.ndarray, right: np.ndarray, x0: float, y0: float, cell: float,
-                shape: tuple[int, int], step: float = 2e-4) -> np.ndarray:
+def brute_force(
+    left: np.ndarray,
+    right: np.ndarray,
+    x0: float,
+    y0: float,
+    cell: float,
+    shape: tuple[int, int],
+    step: float = 2e-4,
+) -> np.ndarray:
     """Every sample's edge as points ``step`` apart (ends included), the lowest per cell."""
     n = int(np.ceil(np.max(np.linalg.norm(right - left, axis=1)) / step)) + 1
     s = np.linspace(0.0, 1.0, n)[None, :, None]
@@ -26,9 +33,13 @@ def sweep(n: int, seconds: float, origin=(512_300.0, 4_123_400.0)) -> tuple[np.n
     """A 1.2 m edge dragged along a curved, sloped, swinging path (site frame, UTM-sized)."""
     t = np.linspace(0.0, seconds, n)
     heading = 0.4 + 0.6 * np.sin(0.3 * t)
-    mid = np.column_stack([origin[0] + 0.5 * t + 0.7 * np.sin(0.5 * t),
-                           origin[1] + 1.1 * np.cos(0.4 * t),
-                           102.0 - 0.08 * t + 0.3 * np.sin(0.9 * t)])
+    mid = np.column_stack(
+        [
+            origin[0] + 0.5 * t + 0.7 * np.sin(0.5 * t),
+            origin[1] + 1.1 * np.cos(0.4 * t),
+            102.0 - 0.08 * t + 0.3 * np.sin(0.9 * t),
+        ]
+    )
     across = 0.6 * np.column_stack([-np.sin(heading), np.cos(heading), 0.1 * np.sin(t)])
     return mid + across, mid - across
 
@@ -74,8 +85,9 @@ def test_a_fast_sweep_is_densified_and_leaves_no_holes() -> None:
 def test_densify_keeps_the_samples_and_bounds_the_step() -> None:
     left, right = sweep(11, 10.0)
     dl, dr = densify(left, right, 0.05)
-    step = np.maximum(np.linalg.norm(np.diff(dl, axis=0), axis=1),
-                      np.linalg.norm(np.diff(dr, axis=0), axis=1))
+    step = np.maximum(
+        np.linalg.norm(np.diff(dl, axis=0), axis=1), np.linalg.norm(np.diff(dr, axis=0), axis=1)
+    )
     assert step.max() <= 0.05 + 1e-12
     for p in left:  # every sample is among the edges used
         assert np.min(np.linalg.norm(dl - p, axis=1)) < 1e-9

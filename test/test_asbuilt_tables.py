@@ -41,16 +41,19 @@ def test_the_table_holds_every_accepted_input_with_its_kinematics(tmp_path: Path
     D = np.column_stack([rows[c] for c in actuators])
     exc = Excavator.default()
     Q = exc.pose(D)
-    np.testing.assert_allclose(np.column_stack([rows[c] for c in ("tip_x", "tip_y", "tip_z", "alpha")]), Q,
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        np.column_stack([rows[c] for c in ("tip_x", "tip_y", "tip_z", "alpha")]), Q, atol=1e-12
+    )
     edge = cutting_edge(Q[:, :3], D[:, 0], exc.bucket_width)
-    np.testing.assert_allclose(np.column_stack([rows[c] for c in ("left_x", "left_y", "left_z")]), edge[:, 1],
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        np.column_stack([rows[c] for c in ("left_x", "left_y", "left_z")]), edge[:, 1], atol=1e-12
+    )
     # The shipped settings place base_link at the site origin: the site frame is the base frame.
     np.testing.assert_allclose(rows["right_site_z"], edge[:, 2, 2], atol=1e-12)
     assert rows["published"].all()  # the synthetic bag carries the node's bucket_pose for each
-    units = json.loads(duckdb.sql(
-        f"select value from parquet_kv_metadata('{file}') where key = 'units'").fetchall()[0][0])
+    units = json.loads(
+        duckdb.sql(f"select value from parquet_kv_metadata('{file}') where key = 'units'").fetchall()[0][0]
+    )
     assert units["boom_cylinder"] == "m" and units["stamp_ns"] == "ns"
     assert units["left_site_z"] == "m (site frame)"
 
@@ -60,8 +63,10 @@ def test_the_as_built_surface_is_the_lowest_edge_per_cell(tmp_path: Path) -> Non
     result = process_bag(bag, tmp_path / "out", [], 0.1)
     grid = result.grids["excavator"]
     file = result.tables[0]["file"]
-    cols = duckdb.sql(f"select left_site_x, left_site_y, left_site_z, right_site_x, right_site_y, "
-                      f"right_site_z from '{file}' order by stamp_ns").fetchnumpy()
+    cols = duckdb.sql(
+        f"select left_site_x, left_site_y, left_site_z, right_site_x, right_site_y, "
+        f"right_site_z from '{file}' order by stamp_ns"
+    ).fetchnumpy()
     left = np.column_stack([cols[c] for c in ("left_site_x", "left_site_y", "left_site_z")])
     right = np.column_stack([cols[c] for c in ("right_site_x", "right_site_y", "right_site_z")])
     again = lowest_elevation(left, right, 0.1)
@@ -75,8 +80,9 @@ def test_the_as_built_surface_is_the_lowest_edge_per_cell(tmp_path: Path) -> Non
         assert (tmp_path / "out" / "run1" / f"excavator_asbuilt{suffix}").stat().st_size > 0
 
 
-def test_fleet_merges_tables_skips_a_corrupt_bag_and_reports_per_day(tmp_path: Path,
-                                                                      capsys: pytest.CaptureFixture) -> None:
+def test_fleet_merges_tables_skips_a_corrupt_bag_and_reports_per_day(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
     bags = tmp_path / "bags"
     for name in ("a", "b"):
         make_bag(bags / name, 100)
@@ -91,8 +97,9 @@ def test_fleet_merges_tables_skips_a_corrupt_bag_and_reports_per_day(tmp_path: P
     assert report["skipped"] == 1 and report["rows"] == 200
     assert report["machines"]["excavator"] == {"rows": 200, "bags": 2}
     assert sum(d["rows"] for d in report["days"].values()) == 200
-    merged = duckdb.sql(f"select bag, count(*) as n from '{out / 'fleet.parquet'}' group by bag order by bag"
-                        ).fetchall()
+    merged = duckdb.sql(
+        f"select bag, count(*) as n from '{out / 'fleet.parquet'}' group by bag order by bag"
+    ).fetchall()
     assert [(Path(b).name, n) for b, n in merged] == [("a", 100), ("b", 100)]
     assert (out / "fleet_asbuilt.xml").stat().st_size > 0
 
@@ -115,8 +122,9 @@ def test_the_slope_example_maps_its_cut_against_the_design(tmp_path: Path) -> No
 
     run(tmp_path, seconds=2.0, rate=25.0)
     file = tmp_path / "asbuilt" / "bag" / "excavator.parquet"
-    table = duckdb.sql(f"select stamp_ns, grade_tip, grade_left, grade_right from '{file}' order by stamp_ns"
-                       ).fetchnumpy()
+    table = duckdb.sql(
+        f"select stamp_ns, grade_tip, grade_left, grade_right from '{file}' order by stamp_ns"
+    ).fetchnumpy()
     recorded = BagReader(tmp_path / "bag").arrays(["/grade/tip", "/grade/left", "/grade/right"])
     for point in ("tip", "left", "right"):
         grade = recorded[f"/grade/{point}"]

@@ -57,9 +57,9 @@ def record_time_beyond_int64(bag: Path, rng: random.Random) -> str:
 def damage(bag: Path, rng: random.Random) -> tuple[str, bool]:
     """Corrupt ``bag`` in place: (what was done, whether reading it must fail)."""
     data, meta = data_file(bag), bag / "metadata.yaml"
-    kind = rng.choices(
-        ["flip", "cut", "meta flip", "meta cut", "meta junk", "log time"], [8, 4, 3, 3, 1, 1]
-    )[0]
+    kind = rng.choices(["flip", "cut", "meta flip", "meta cut", "meta junk", "log time"], [8, 4, 3, 3, 1, 1])[
+        0
+    ]
     if kind == "log time":
         return record_time_beyond_int64(bag, rng), True
     target = meta if kind.startswith("meta") else data

@@ -31,7 +31,7 @@ from manipulator_kinematics.bag.synthetic import (
 from manipulator_kinematics.bag.topics import SETTINGS_KEY, encode_recorded_settings
 from manipulator_kinematics.bag.types import BagError, decode_messages, encode_messages
 from manipulator_kinematics.bag.writer import BagWriter
-from manipulator_kinematics.params import config_path
+from manipulator_kinematics.param_files import config_path
 from manipulator_kinematics.planar import yaw_quaternion
 from manipulator_kinematics.registry import Machine, machines
 from scara_kinematics.kinematics import Scara
@@ -403,15 +403,20 @@ def test_node_settings_come_from_the_bag_else_are_named_as_assumed(tmp_path: Pat
     """Without settings in the bag the report says it assumed the package's defaults; with them
     (a filtered acceleration, as the demo runs) it uses them; ``--params`` wins over the bag."""
     result = evaluate_cli(str(DATA / "excavator_forward_golden"), "-o", str(tmp_path / "a"), "--no-plots")
-    assert ("node settings of excavator_forward, excavator_velocity_ik: not in the bag, assumed the "
-            "package's defaults") in result.stdout, result.stdout
+    assert (
+        "node settings of excavator_forward, excavator_velocity_ik: not in the bag, assumed the "
+        "package's defaults"
+    ) in result.stdout, result.stdout
     assert "excavator_forward.acceleration_time_constant 0," in result.stdout, result.stdout
 
     shutil.copytree(DATA / "excavator_forward_golden", tmp_path / "bag")
-    bag = with_settings(tmp_path / "bag", {
-        "/excavator_forward": {"acceleration_time_constant": 0.03, "grade": {"enabled": False}},
-        "/elsewhere/excavator_forward": {"acceleration_time_constant": 7.0},  # another namespace
-    })
+    bag = with_settings(
+        tmp_path / "bag",
+        {
+            "/excavator_forward": {"acceleration_time_constant": 0.03, "grade": {"enabled": False}},
+            "/elsewhere/excavator_forward": {"acceleration_time_constant": 7.0},  # another namespace
+        },
+    )
     report, _ = evaluate_bag(BagReader(bag), SETUP)
     machine = only(report, "excavator")
     assert machine["settings_sources"] == {
@@ -442,7 +447,12 @@ def test_inputs_without_outputs_are_counted_and_a_shortfall_flagged(tmp_path: Pa
     machine = json.loads((tmp_path / "out" / "report.json").read_text())["machines"][0]
     counts = machine["inputs_to_outputs"]
     assert counts["bucket_pose"] == {
-        "recorded": 100, "accepted": 100, "due": 97, "answered": 92, "missing": 5, "outside_recording": 3
+        "recorded": 100,
+        "accepted": 100,
+        "due": 97,
+        "answered": 92,
+        "missing": 5,
+        "outside_recording": 3,
     }
     assert counts["bucket_twist"]["missing"] == 0 and counts["bucket_accel"]["due"] == 99
     assert "SHORTFALL: 5 of 97 due inputs have no bucket_pose" in result.stdout, result.stdout

@@ -41,7 +41,7 @@ from manipulator_kinematics.bag.types import BagError, decode_messages, encode_m
 from manipulator_kinematics.bag.visual import add_visuals
 from manipulator_kinematics.bag.writer import BagWriter
 from manipulator_kinematics.node_util import console_script
-from manipulator_kinematics.params import flatten, unflatten
+from manipulator_kinematics.param_files import flatten, unflatten
 from manipulator_kinematics.registry import Machine, machines
 
 pytestmark = pytest.mark.ros
@@ -151,6 +151,7 @@ def split_golden(bag: Path) -> tuple[list[str], list[str]]:
 
 def output_differences(a: dict[str, Topic], b: dict[str, Topic]) -> dict[str, float]:
     """Per topic the largest difference of the values of equal stamps of two synthetic bags."""
+
     def arrays(topic: str, t: Topic) -> TopicArrays:
         return TopicArrays(topic, t.msgtype, t.log_time, decode_messages(t.msgtype, t.raw))
 
@@ -320,8 +321,14 @@ def test_record_writes_at_once_and_adds_a_late_topic_with_its_first_message(
     (sent once the recorder's reader matched it) is in the bag."""
     bag = tmp_path / "bag"
     args = (
-        "-o", str(bag), "--topics", "late_rel", "/late_abs", "/late/typed",
-        "--type", "typed:=std_msgs/msg/Int64",
+        "-o",
+        str(bag),
+        "--topics",
+        "late_rel",
+        "/late_abs",
+        "/late/typed",
+        "--type",
+        "typed:=std_msgs/msg/Int64",
     )
     with NodeProcess("mk_record", "-r", "__ns:=/late", args=args) as recorder:
         probe.wait_until(lambda: started(recorder), TIMEOUT, "the recorder's first line")
@@ -405,7 +412,9 @@ def test_record_discovers_types_resolves_namespaces_and_refuses_to_overwrite(
     # A topic nobody publishes: an empty bag and a line saying so, at once and at the end.
     result = subprocess.run(
         [console_script("mk_record"), "-o", str(tmp_path / "d"), "--topics", "nobody", "--duration", "0.5"],
-        capture_output=True, text=True, timeout=TIMEOUT,
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT,
     )
     assert result.returncode == 0, result.stderr
     assert "no publisher of /nobody appeared: not in the bag" in result.stderr, result.stderr
@@ -496,8 +505,9 @@ def test_replay_refuses_a_gap_longer_than_the_limit_or_skips_it(probe: Probe, tm
     flipped = flip_a_record_time(tmp_path / "bag", 2, 36)
     times = sorted(BagReader(tmp_path / "bag").log_times("/gap").tolist())
     assert flipped in times and 68.0 < max(np.diff(times)) * 1e-9 < 69.0
-    refused = subprocess.run([console_script("mk_replay"), str(tmp_path / "bag")],
-                             capture_output=True, text=True, timeout=TIMEOUT)
+    refused = subprocess.run(
+        [console_script("mk_replay"), str(tmp_path / "bag")], capture_output=True, text=True, timeout=TIMEOUT
+    )
     assert refused.returncode == 1, refused.stderr
     [line] = refused.stderr.splitlines()
     assert line.startswith("mk_replay: error: ") and "68.7 s of record time without a message" in line, line
@@ -505,14 +515,16 @@ def test_replay_refuses_a_gap_longer_than_the_limit_or_skips_it(probe: Probe, tm
     numbers: list[float] = []
     probe.node.create_subscription(JointState, "/gap", lambda m: numbers.append(m.position[0]), QOS)
     # A limit above the gap plays it as recorded: what comes before it, then a wait of 68.7 s.
-    with NodeProcess("mk_replay", args=(str(tmp_path / "bag"), "--max-gap", "100", "--wait-for-subscribers",
-                                        "30")) as patient:
+    with NodeProcess(
+        "mk_replay", args=(str(tmp_path / "bag"), "--max-gap", "100", "--wait-for-subscribers", "30")
+    ) as patient:
         probe.wait_until(lambda: len(numbers) >= 1 or not patient.alive(), TIMEOUT, "the first message")
         assert patient.alive() and len(numbers) < 5, patient.log()
     numbers.clear()
     # Skipped, the whole bag is played within TIMEOUT (60 s), less than the gap.
-    with NodeProcess("mk_replay", args=(str(tmp_path / "bag"), "--skip-gaps", "--wait-for-subscribers",
-                                        "30")) as player:
+    with NodeProcess(
+        "mk_replay", args=(str(tmp_path / "bag"), "--skip-gaps", "--wait-for-subscribers", "30")
+    ) as player:
         probe.wait_until(lambda: len(numbers) == 5 or not player.alive(), TIMEOUT, "all five messages")
         probe.wait_until(lambda: not player.alive(), TIMEOUT, "the end of the replay")
     assert sorted(numbers) == [0, 1, 2, 3, 4]
@@ -568,7 +580,8 @@ def test_replay_takes_bag_topics_with_or_without_the_leading_slash(tmp_path: Pat
     ):
         playlist = replay.load(replay.parse_args([str(tmp_path / "run1"), "--rate", "2", *args]))
         assert playlist.names == {
-            "/cylinder_lengths": "/cylinder_lengths", "/joint_states": "/m1/joint_states"
+            "/cylinder_lengths": "/cylinder_lengths",
+            "/joint_states": "/m1/joint_states",
         }
         assert {topic for topic, _, _ in playlist.messages} == {"/cylinder_lengths", "/joint_states"}
     playlist = replay.load(replay.parse_args([str(tmp_path / "run1"), "--remap", "bucket_pose:=pose"]))
@@ -595,14 +608,17 @@ def demo_like_bag(path: Path) -> Path:
     golden_bag = BagReader(golden("excavator"))
     chosen = ["/cylinder_lengths", "/joint_states"]
     messages = list(golden_bag.messages(chosen))
-    write_bag(path.parent / "inputs", {
-        topic: Topic(
-            golden_bag.topics[topic].msgtype,
-            np.array([t for name, t, _ in messages if name == topic]),
-            [raw for name, _, raw in messages if name == topic],
-        )
-        for topic in chosen
-    })
+    write_bag(
+        path.parent / "inputs",
+        {
+            topic: Topic(
+                golden_bag.topics[topic].msgtype,
+                np.array([t for name, t, _ in messages if name == topic]),
+                [raw for name, _, raw in messages if name == topic],
+            )
+            for topic in chosen
+        },
+    )
     add_visuals(path.parent / "inputs", path)
     return path
 
@@ -636,40 +652,64 @@ def test_demo_bag_replays_skipping_tf_and_the_recorded_settings_reach_evaluate(
     stand_ins = [probe.node.create_publisher(JointState, topic, QOS) for topic in inputs]
     chosen = ("cylinder_lengths", "joint_states", "bucket_pose", "bucket_accel")
     with NodeProcess("excavator_forward", *RELIABLE_INPUTS, params=settings) as node:
-        probe.wait_until(lambda: probe.node.count_publishers("/bucket_accel") > 0 or not node.alive(),
-                         TIMEOUT, "the forward node")
+        probe.wait_until(
+            lambda: probe.node.count_publishers("/bucket_accel") > 0 or not node.alive(),
+            TIMEOUT,
+            "the forward node",
+        )
         recorder = NodeProcess("mk_record", args=("-o", str(recorded), "--topics", *chosen))
         try:
             probe.wait_until(
                 # This probe, the forward node and the recorder.
-                lambda: ("parameters of /excavator_forward" in recorder.log()
-                         and all(p.get_subscription_count() >= 3 for p in stand_ins)) or not recorder.alive(),
-                TIMEOUT, "the recorder's subscriptions and the forward node's settings")
+                lambda: (
+                    (
+                        "parameters of /excavator_forward" in recorder.log()
+                        and all(p.get_subscription_count() >= 3 for p in stand_ins)
+                    )
+                    or not recorder.alive()
+                ),
+                TIMEOUT,
+                "the recorder's subscriptions and the forward node's settings",
+            )
             player = subprocess.run(
                 [console_script("mk_replay"), str(demo), "--wait-for-subscribers", "30"],
-                capture_output=True, text=True, timeout=2 * TIMEOUT,
+                capture_output=True,
+                text=True,
+                timeout=2 * TIMEOUT,
             )
             assert player.returncode == 0, player.stderr
             try:
-                probe.wait_until(lambda: all(heard[t] >= i.count for t, i in playable.items()), TIMEOUT,
-                                 "every playable message")
+                probe.wait_until(
+                    lambda: all(heard[t] >= i.count for t, i in playable.items()),
+                    TIMEOUT,
+                    "every playable message",
+                )
                 # The replay waits for one subscriber per topic (this probe): on a loaded machine the
                 # forward node may match the replayer later and miss the first inputs. Its outputs
                 # come in order: the last input's pose is the last one.
                 probe.wait_until(lambda: poses and stamp_ns(poses[-1]) == last, TIMEOUT, "the last pose")
-                probe.wait_until(lambda: recorded_count(recorded, "/bucket_pose") == len(poses), TIMEOUT,
-                                 "the forward node's poses recorded")
+                probe.wait_until(
+                    lambda: recorded_count(recorded, "/bucket_pose") == len(poses),
+                    TIMEOUT,
+                    "the forward node's poses recorded",
+                )
             except TimeoutError as error:
                 counts = {t: recorded_count(recorded, t) for t in ("/cylinder_lengths", "/bucket_pose")}
-                raise AssertionError(f"{error}: heard {heard}, {len(poses)} poses, recorded {counts}\n"
-                                     f"{player.stderr}\n{recorder.log()}\n{node.log()}") from None
+                raise AssertionError(
+                    f"{error}: heard {heard}, {len(poses)} poses, recorded {counts}\n"
+                    f"{player.stderr}\n{recorder.log()}\n{node.log()}"
+                ) from None
         finally:
             log = recorder.stop()
     skipped = [line for line in player.stderr.splitlines() if "skipping" in line]
     tf = "tf2_msgs/msg/TFMessage"
-    assert skipped == [] if tf_here else [
-        f"mk_replay: skipping /tf [{tf}], /tf_static [{tf}]: no Python message module for its type here"
-    ], player.stderr
+    assert (
+        skipped == []
+        if tf_here
+        else [
+            f"mk_replay: skipping /tf [{tf}], /tf_static [{tf}]: no Python message module for its type here"
+        ]
+    ), player.stderr
     assert f"published {sum(i.count for i in playable.values())} messages on {len(playable)} topics" in (
         player.stderr
     )

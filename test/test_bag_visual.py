@@ -1,6 +1,7 @@
 """Foxglove-ready bags (manipulator_kinematics.bag.visual, ``record --visuals``): the added
 /robot_description, /tf, /tf_static and machine_markers read back with mcap-ros2-support (an
 independent reader) and checked against the package's FK of the recorded states."""
+
 from __future__ import annotations
 
 import shutil
@@ -55,8 +56,9 @@ def matrix(transform) -> np.ndarray:
     return out
 
 
-def chain(tf_message, static: dict[str, tuple[str, np.ndarray]], frame: str, root: str = "base_link"
-          ) -> np.ndarray:
+def chain(
+    tf_message, static: dict[str, tuple[str, np.ndarray]], frame: str, root: str = "base_link"
+) -> np.ndarray:
     """Pose of ``frame`` in ``root`` from one /tf message and the /tf_static transforms."""
     edges = dict(static)
     edges.update({t.child_frame_id: (t.header.frame_id, matrix(t.transform)) for t in tf_message.transforms})
@@ -68,8 +70,9 @@ def chain(tf_message, static: dict[str, tuple[str, np.ndarray]], frame: str, roo
 
 
 def static_edges(messages: list) -> dict[str, tuple[str, np.ndarray]]:
-    return {t.child_frame_id: (t.header.frame_id, matrix(t.transform))
-            for m in messages for t in m.transforms}
+    return {
+        t.child_frame_id: (t.header.frame_id, matrix(t.transform)) for m in messages for t in m.transforms
+    }
 
 
 def joint_positions(messages: list, names: list[str]) -> dict[int, np.ndarray]:
@@ -166,15 +169,27 @@ def test_record_visuals_flag(tmp_path: Path) -> None:
     """``mk_record --visuals`` across processes: SCARA joint states recorded, then /tf added."""
     model = machine("scara").model()
     output = tmp_path / "recorded"
-    command = [console_script("mk_record"), "-o", str(output), "--topics", "joint_states",
-               "--type", "joint_states:=sensor_msgs/msg/JointState", "--visuals"]
+    command = [
+        console_script("mk_record"),
+        "-o",
+        str(output),
+        "--topics",
+        "joint_states",
+        "--type",
+        "joint_states:=sensor_msgs/msg/JointState",
+        "--visuals",
+    ]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     probe = Probe("record_visuals_probe")
     try:
-        pub = probe.node.create_publisher(JointState, "joint_states",
-                                          QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
-        probe.wait_until(lambda: pub.get_subscription_count() > 0 or process.poll() is not None, 30.0,
-                         "the recorder's subscription")
+        pub = probe.node.create_publisher(
+            JointState, "joint_states", QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        )
+        probe.wait_until(
+            lambda: pub.get_subscription_count() > 0 or process.poll() is not None,
+            30.0,
+            "the recorder's subscription",
+        )
         assert process.poll() is None
         lo, hi = np.asarray(model.limits.lower), np.asarray(model.limits.upper)
         states = lo + (hi - lo) * np.linspace(0.1, 0.9, 20)[:, None]
@@ -186,7 +201,8 @@ def test_record_visuals_flag(tmp_path: Path) -> None:
         def stored() -> bool:  # metadata.yaml is rewritten on every flush (0.5 s)
             meta = output / "metadata.yaml"
             return meta.is_file() and (yaml.safe_load(meta.read_text()) or {}).get(
-                "rosbag2_bagfile_information", {}).get("message_count", 0) >= len(states)
+                "rosbag2_bagfile_information", {}
+            ).get("message_count", 0) >= len(states)
 
         probe.wait_until(stored, 30.0, "the recorder to store every message")
     finally:

@@ -20,7 +20,7 @@ from scipy.spatial.transform import Rotation
 from manipulator_kinematics.hydraulic import HydraulicModel, parse, read
 from manipulator_kinematics.hydraulic.calibration import CalibrationError, Geometry, calibrate
 from manipulator_kinematics.hydraulic.measure_up import main, read_points
-from manipulator_kinematics.params import ConfigError, config_path, load_parameters
+from manipulator_kinematics.param_files import ConfigError, config_path, load_parameters
 
 FILES = {"CET200": "excavator_cet200_family.yaml", "WL20": "wheel_loader_wl20.yaml"}
 EDGE = ["tip", "left_corner", "right_corner"]

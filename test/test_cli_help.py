@@ -1,5 +1,6 @@
 """Every executable of the package answers -h and --help with what it does and exits 0, without
 starting ROS (issue: a node that ignored --help started and served instead)."""
+
 from __future__ import annotations
 
 import contextlib
@@ -11,13 +12,15 @@ from importlib.metadata import distribution
 
 import pytest
 
+from manipulator_kinematics.help_text import plain
 from manipulator_kinematics.node_util import console_script
-from manipulator_kinematics.plain import plain
 
 pytestmark = pytest.mark.ros
 
-ENTRY_POINTS = sorted((e for e in distribution("manipulator_kinematics").entry_points
-                       if e.group == "console_scripts"), key=lambda e: e.name)
+ENTRY_POINTS = sorted(
+    (e for e in distribution("manipulator_kinematics").entry_points if e.group == "console_scripts"),
+    key=lambda e: e.name,
+)
 
 
 def in_process(entry, flag: str, monkeypatch: pytest.MonkeyPatch) -> tuple[int, str]:
@@ -50,8 +53,12 @@ def test_the_console_scripts_answer_help_too() -> None:
 def test_a_node_help_lists_its_parameters_with_defaults_and_topics(monkeypatch: pytest.MonkeyPatch) -> None:
     entries = {e.name: e for e in ENTRY_POINTS}
     text = in_process(entries["excavator_forward"], "--help", monkeypatch)[1]
-    for line in ("excavator.boom.length = ", "swing_max_age = 0.1", "topics.bucket_pose = 'bucket_pose'",
-                 "qos_depth = 400"):
+    for line in (
+        "excavator.boom.length = ",
+        "swing_max_age = 0.1",
+        "topics.bucket_pose = 'bucket_pose'",
+        "qos_depth = 400",
+    ):
         assert line in text, line
     server = in_process(entries["tool_changer_ik_server"], "-h", monkeypatch)[1]
     assert "solve_ik" in server and "solve_fk" in server and "base_frame = 'base_link'" in server
@@ -68,4 +75,5 @@ def test_help_is_plain_text(entry, monkeypatch: pytest.MonkeyPatch) -> None:
 
 def test_plain_reduces_roles_and_literals() -> None:
     assert plain("A :meth:`Excavator.state` on ``joint_states``; :class:`~a.b.Scene`, :func:`f <g.h>`") == (
-        "A Excavator.state on joint_states; Scene, f")
+        "A Excavator.state on joint_states; Scene, f"
+    )

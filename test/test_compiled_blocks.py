@@ -1,4 +1,4 @@
-"""The shared block helper and kernel loader (manipulator_kinematics.blocks / .compiled)."""
+"""The shared block helper and kernel loader (manipulator_kinematics.row_blocks / .compiled)."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from manipulator_kinematics.blocks import in_blocks
 from manipulator_kinematics.compiled import Kernel, cache_is_cold
+from manipulator_kinematics.row_blocks import in_blocks
 
 
 def _work(a: np.ndarray, b: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
@@ -56,16 +56,20 @@ def test_the_compiled_selection_is_the_numpy_rule() -> None:
     for trial in range(4000):
         m, n = int(rng.integers(1, 9)), int(rng.integers(1, 7))
         q = rng.integers(-2, 3, size=(m, n)).astype(float)  # small integers: exact ties happen
-        status = rng.choice([int(IKStatus.SUCCESS), int(IKStatus.JOINT_LIMITS), int(IKStatus.SINGULAR)],
-                            size=m, p=[0.6, 0.3, 0.1]).astype(np.int8)
+        status = rng.choice(
+            [int(IKStatus.SUCCESS), int(IKStatus.JOINT_LIMITS), int(IKStatus.SINGULAR)],
+            size=m,
+            p=[0.6, 0.3, 0.1],
+        ).astype(np.int8)
         seed = rng.integers(-2, 3, size=n).astype(float)
         if trial % 10 == 0:
             seed[rng.integers(n)] = rng.choice([np.nan, np.inf, -np.inf])
         weights = rng.choice([1.0, 0.5, 2.0], size=n)
         seeded = trial % 7 != 0
         branch = int(rng.integers(m)) if trial % 5 == 0 else None
-        expected, expected_tie = select(q, status, seed=seed if seeded else None, branch=branch,
-                                        weights=weights)
+        expected, expected_tie = select(
+            q, status, seed=seed if seeded else None, branch=branch, weights=weights
+        )
         allowed = np.full(m, branch is None)
         if branch is not None:
             allowed[branch] = True
@@ -110,8 +114,13 @@ def test_a_process_with_rclpy_ends_after_its_kernel_load_one_without_does_not_wa
     handle destructors (its garbage collection): a signalled node aborted (exit -6). Where rclpy
     is imported the process waits for the load at exit (a node leaves with os._exit instead,
     test_node_shutdown); without rclpy it does not. The cache is warm (the set-up compiles)."""
-    done = subprocess.run([sys.executable, "-c", EXIT_DURING_THE_LOAD, imported], capture_output=True,
-                          text=True, timeout=120, env={**os.environ, "MK_COMPILED": "1"})
+    done = subprocess.run(
+        [sys.executable, "-c", EXIT_DURING_THE_LOAD, imported],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "MK_COMPILED": "1"},
+    )
     assert done.returncode == 0, done.stderr
     loaded = imported == "rclpy"
     assert f"loaded at exit: {loaded}" in done.stdout, (done.stdout, done.stderr)
@@ -141,8 +150,9 @@ def test_a_compile_on_a_cold_cache_is_abandoned_at_exit(tmp_path: Path) -> None:
     """With an empty cache the kernel compiles in a child process (seconds to tens of seconds);
     a process whose main thread ends kills it and ends at once, exit 0 (issue 28 item 2: 2 s)."""
     env = {**os.environ, "MK_COMPILED": "1", "NUMBA_CACHE_DIR": str(tmp_path)}
-    done = subprocess.run([sys.executable, "-c", EXIT_DURING_THE_COMPILE], capture_output=True, text=True,
-                          timeout=120, env=env)
+    done = subprocess.run(
+        [sys.executable, "-c", EXIT_DURING_THE_COMPILE], capture_output=True, text=True, timeout=120, env=env
+    )
     ended = time.time()
     assert done.returncode == 0, done.stderr
     children, main_ended = done.stdout.splitlines()
@@ -159,12 +169,17 @@ def test_the_cold_cache_guess_follows_numba(tmp_path: Path, monkeypatch: pytest.
     package.mkdir()
     (package / "__init__.py").write_text("")
     (package / "kernel.py").write_text(
-        "import numba\n\n@numba.njit(cache=True)\ndef f(x):\n    return x + 1\n")
+        "import numba\n\n@numba.njit(cache=True)\ndef f(x):\n    return x + 1\n"
+    )
     cache = tmp_path / "cache"
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
     monkeypatch.syspath_prepend(str(tmp_path))
     assert cache_is_cold("mk_cold_guess.kernel")
-    subprocess.run([sys.executable, "-c", "import mk_cold_guess.kernel as k; k.f(1.0)"], check=True,
-                   timeout=120, env={**os.environ, "PYTHONPATH": str(tmp_path)})
+    subprocess.run(
+        [sys.executable, "-c", "import mk_cold_guess.kernel as k; k.f(1.0)"],
+        check=True,
+        timeout=120,
+        env={**os.environ, "PYTHONPATH": str(tmp_path)},
+    )
     assert not cache_is_cold("mk_cold_guess.kernel")
     assert not cache_is_cold("math") and not cache_is_cold("no_such_module_anywhere")

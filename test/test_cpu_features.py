@@ -56,8 +56,14 @@ def regenerated(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[st
     features = optional_features()
     env = dict(os.environ, NPY_DISABLE_CPU_FEATURES=" ".join(features))
     code = REGENERATE.format(script=str(REPO / "scripts" / "make_golden_bags.py"))
-    done = subprocess.run([sys.executable, "-c", code, str(out), *features], env=env, capture_output=True,
-                          text=True, timeout=300, check=False)
+    done = subprocess.run(
+        [sys.executable, "-c", code, str(out), *features],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     return out, features, json.loads(done.stdout.splitlines()[-1])
 

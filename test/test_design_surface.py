@@ -11,9 +11,9 @@ import pytest
 from matplotlib.tri import Triangulation
 
 from excavator_kinematics.design_surface import SitePose, Tin, cutting_edge, read_landxml, write_landxml
-from excavator_kinematics.display import DesignPlane
+from excavator_kinematics.display_outputs import DesignPlane
 from excavator_kinematics.kinematics import Excavator
-from manipulator_kinematics.params import ConfigError
+from manipulator_kinematics.param_files import ConfigError
 
 DITCH = Path(__file__).parent / "data" / "landxml" / "ditch.xml"
 E0, N0 = 500100.0, 5400200.0
@@ -33,8 +33,9 @@ def two_triangles(plane: DesignPlane, half: float = 50.0) -> Tin:
     return Tin(np.column_stack([corners, z]), np.array([[0, 1, 2], [0, 2, 3]]))
 
 
-@pytest.mark.parametrize("grade", [{}, {"slope": -2.0, "cross_slope": 1.5}, {"slope": 100.0},
-                                   {"normal": [0.3, -0.2, 1.0]}])
+@pytest.mark.parametrize(
+    "grade", [{}, {"slope": -2.0, "cross_slope": 1.5}, {"slope": 100.0}, {"normal": [0.3, -0.2, 1.0]}]
+)
 def test_two_triangle_tin_equals_the_design_plane(grade):
     """The plane's perpendicular height h times 1/n_z is the vertical height (same plane, same
     points); for a level plane the two are the same number."""
@@ -69,10 +70,14 @@ def test_landxml_ditch_loads_in_site_order_and_matches_hand_geometry():
 
 def test_points_outside_and_in_the_hole_have_a_status_not_a_number():
     tin = read_landxml(DITCH, "Ditch design")
-    points = np.array([[E0 + 1.0, N0 + 28.0, 99.0],  # the invisible face (i="1"): a hole
-                       [E0 + 8.5, N0 + 5.0, 99.0],  # beyond the east bank
-                       [E0, N0 - 0.1, 99.0],  # before the start
-                       [E0, N0 + 10.0, 99.0]])  # on the axis: inside
+    points = np.array(
+        [
+            [E0 + 1.0, N0 + 28.0, 99.0],  # the invisible face (i="1"): a hole
+            [E0 + 8.5, N0 + 5.0, 99.0],  # beyond the east bank
+            [E0, N0 - 0.1, 99.0],  # before the start
+            [E0, N0 + 10.0, 99.0],
+        ]
+    )  # on the axis: inside
     got = tin.heights(points)
     np.testing.assert_array_equal(got.inside, [False, False, False, True])
     np.testing.assert_array_equal(got.triangle[:3], [-1, -1, -1])
@@ -93,8 +98,10 @@ def test_surface_chosen_by_name_and_refused_by_reason(tmp_path):
         "point": (text.replace(">5400215.000 500097.000 99.850<", ">5400215.000 500097.000<"), "id='7'"),
         "face": (text.replace("<F>9 15 14</F>", "<F>9 15 99</F>"), "unknown: \\['99'\\]"),
         "xml": (text[:500], "cannot read"),
-        "duplicate": (text.replace(">5400215.000 500097.000 99.850<", ">5400200.000 500097.000 99.850<"),
-                      "share x, y"),
+        "duplicate": (
+            text.replace(">5400215.000 500097.000 99.850<", ">5400200.000 500097.000 99.850<"),
+            "share x, y",
+        ),
     }
     for name, (content, message) in cases.items():
         path = tmp_path / f"{name}.xml"
@@ -103,8 +110,11 @@ def test_surface_chosen_by_name_and_refused_by_reason(tmp_path):
             read_landxml(path, "Ditch design")
     feet = tmp_path / "feet.xml"
     feet.write_text(text.replace('linearUnit="meter"', 'linearUnit="USSurveyFoot"'))
-    np.testing.assert_allclose(read_landxml(feet, "Ditch design").vertices,
-                               read_landxml(DITCH, "Ditch design").vertices * 1200 / 3937, rtol=1e-15)
+    np.testing.assert_allclose(
+        read_landxml(feet, "Ditch design").vertices,
+        read_landxml(DITCH, "Ditch design").vertices * 1200 / 3937,
+        rtol=1e-15,
+    )
 
 
 def test_written_file_reads_back(tmp_path):
@@ -157,8 +167,12 @@ def test_cutting_edge_ends_and_site_pose():
     by_rpy = SitePose.from_rpy([E0, N0, 100.0], rpy)
     half = [0.5 * a for a in rpy]
     cr, sr, cp, sp, cy, sy = (f(h) for h in half for f in (math.cos, math.sin))
-    q = [sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy,
-         cr * cp * cy + sr * sp * sy]
+    q = [
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+        cr * cp * cy + sr * sp * sy,
+    ]
     by_q = SitePose.from_quaternion([E0, N0, 100.0], q)
     np.testing.assert_allclose(by_q.apply(edge), by_rpy.apply(edge), rtol=0, atol=1e-9)
     turned = SitePose.from_rpy([1.0, 2.0, 3.0], [0.0, 0.0, math.pi / 2]).apply([1.0, 0.0, 0.0])
@@ -178,18 +192,28 @@ def test_forward_node_publishes_cutting_edge_grade_over_the_tin():
     from sensor_msgs.msg import JointState
 
     from excavator_kinematics.kinematics import CYLINDERS, JOINTS
-    from manipulator_kinematics.params import config_path
+    from manipulator_kinematics.param_files import config_path
 
     exc = Excavator.default()
-    surface = {"file": str(DITCH), "surface": "Ditch design", "site_frame": "site",
-               "site_pose_source": "topic", "site_pose_max_age": 0.5}
+    surface = {
+        "file": str(DITCH),
+        "surface": "Ditch design",
+        "site_frame": "site",
+        "site_pose_source": "topic",
+        "site_pose_max_age": 0.5,
+    }
     files = [config_path("excavator_cet200.yaml"), config_path("excavator_nodes.yaml")]
-    process = NodeProcess("excavator_forward", *[a for f in files for a in ("--params-file", str(f))],
-                          "-r", "__ns:=/tin",
-                          params={"/tin/excavator_forward": {"ros__parameters": {"design_surface": surface}}})
+    process = NodeProcess(
+        "excavator_forward",
+        *[a for f in files for a in ("--params-file", str(f))],
+        "-r",
+        "__ns:=/tin",
+        params={"/tin/excavator_forward": {"ros__parameters": {"design_surface": surface}}},
+    )
     qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
-    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    latched = QoSProfile(
+        depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+    )
     probe = Probe("tin_probe")
     node = probe.node
     got: dict[str, list] = {p: [] for p in ("tip", "left", "right", "status")}
@@ -219,9 +243,15 @@ def test_forward_node_publishes_cutting_edge_grade_over_the_tin():
         cylinder_pub.publish(cylinders)
 
     try:
-        probe.wait_until(lambda: node.count_publishers("/tin/grade/tip")
-                         and cylinder_pub.get_subscription_count() and pose_pub.get_subscription_count(),
-                         30.0, "excavator_forward")
+        probe.wait_until(
+            lambda: (
+                node.count_publishers("/tin/grade/tip")
+                and cylinder_pub.get_subscription_count()
+                and pose_pub.get_subscription_count()
+            ),
+            30.0,
+            "excavator_forward",
+        )
         # No site pose yet: every point ERROR.
         for stamp in range(1, 30):
             send(stamp, with_pose=False)
@@ -247,8 +277,9 @@ def test_forward_node_publishes_cutting_edge_grade_over_the_tin():
         for stamp in range(60, 90):
             send(stamp, with_pose=True)
             try:
-                probe.wait_until(lambda: got["status"][-1].status[0].level == DiagnosticStatus.WARN,
-                                 1.0, "WARN")
+                probe.wait_until(
+                    lambda: got["status"][-1].status[0].level == DiagnosticStatus.WARN, 1.0, "WARN"
+                )
                 break
             except TimeoutError:
                 continue
@@ -267,8 +298,12 @@ def test_forward_node_publishes_cutting_edge_grade_over_the_tin():
     for i, p in enumerate(("tip", "left", "right")):
         message = got[p][0]
         assert message.header.frame_id == "site"
-        np.testing.assert_allclose([message.point.x, message.point.y, message.point.z],
-                                   [*edge[i, :2], expected.height[i]], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(
+            [message.point.x, message.point.y, message.point.z],
+            [*edge[i, :2], expected.height[i]],
+            rtol=0,
+            atol=1e-9,
+        )
     # By hand for the tip: the ditch surface below it from the V-ditch formula.
     e, n = edge[0, 0] - E0, edge[0, 1] - N0
     assert got["tip"][0].point.z == pytest.approx(edge[0, 2] - float(ditch_by_hand(e, n)), abs=1e-9)

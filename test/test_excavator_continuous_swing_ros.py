@@ -19,19 +19,24 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe, start_with_services
 from sensor_msgs.msg import JointState
 
-from excavator_kinematics import messages
+from excavator_kinematics import message_codec
 from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
 from excavator_kinematics.twist import bucket_angles, twist_from_q_dot
-from manipulator_kinematics.params import config_path, load_parameters
+from manipulator_kinematics.param_files import config_path, load_parameters
 from manipulator_kinematics_interfaces.srv import SolveIK
 
 QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-PARAMS = ("--params-file", str(config_path("excavator_cet200.yaml")),
-          "--params-file", str(config_path("excavator_nodes.yaml")))
+PARAMS = (
+    "--params-file",
+    str(config_path("excavator_cet200.yaml")),
+    "--params-file",
+    str(config_path("excavator_nodes.yaml")),
+)
 OPEN = {"excavator": {"swing": {"min_angle": -math.inf, "max_angle": math.inf}}}
 SECTION = load_parameters(config_path("excavator_cet200.yaml"))["excavator"]
-CONTINUOUS = Excavator.from_parameters({**SECTION, "swing": {**SECTION["swing"], "min_angle": -math.inf,
-                                                             "max_angle": math.inf}})
+CONTINUOUS = Excavator.from_parameters(
+    {**SECTION, "swing": {**SECTION["swing"], "min_angle": -math.inf, "max_angle": math.inf}}
+)
 LIMITED = Excavator.default()
 START_SWING = 2.9  # rad, 0.24 rad before the +-pi heading
 SWING_RATE = 0.5  # rad/s of the driver
@@ -58,8 +63,13 @@ def drive_through_pi(probe: Probe, namespace: str, continuous: bool) -> tuple[li
     topics begin at different moments, included; issue 28 item 7)."""
     reference = CONTINUOUS.limits.reference
     processes = [
-        start("excavator_sim", namespace, continuous, initial_swing_angle=START_SWING,
-              initial_cylinder_lengths=[float(v) for v in reference[1:]]),
+        start(
+            "excavator_sim",
+            namespace,
+            continuous,
+            initial_swing_angle=START_SWING,
+            initial_cylinder_lengths=[float(v) for v in reference[1:]],
+        ),
         start("excavator_forward", namespace, continuous),
         start("excavator_velocity_ik", namespace, continuous),
     ]
@@ -75,18 +85,22 @@ def drive_through_pi(probe: Probe, namespace: str, continuous: bool) -> tuple[li
 
         def drive(msg: PoseStamped) -> None:
             if not started:
-                started.append(messages.stamp_ns(msg.header.stamp))
+                started.append(message_codec.stamp_ns(msg.header.stamp))
             o, p = msg.pose.orientation, msg.pose.position
             theta1, _ = bucket_angles(np.array([o.x, o.y, o.z, o.w]))
             headings.append(float(theta1))
             tip = np.array([p.x, p.y, p.z])
             q_dot = np.array([-SWING_RATE * tip[1], SWING_RATE * tip[0], 0.0, 0.0])  # turn about z
-            target.publish(messages.bucket_twist(msg.header.stamp, "base_link",
-                                                 *twist_from_q_dot(theta1, tip, q_dot)))
+            target.publish(
+                message_codec.bucket_twist(
+                    msg.header.stamp, "base_link", *twist_from_q_dot(theta1, tip, q_dot)
+                )
+            )
 
         n.create_subscription(JointState, f"{namespace}/joint_states", on_swing, QOS)
         n.create_subscription(PoseStamped, f"{namespace}/bucket_pose", drive, 1)
         probe.wait_until(lambda: bool(started), 30.0, f"bucket_pose from {namespace}")
+
         def done() -> bool:
             if continuous:
                 return any(s < -2.9 for s in swings) and any(h < -2.9 for h in headings)
@@ -121,23 +135,35 @@ def test_the_forward_node_and_ik_server_take_a_wound_up_swing(probe: Probe) -> N
     wrapped = D.copy()
     wrapped[0] = 3.3 - 2.0 * math.pi
     forward = start("excavator_forward", "/fwdopen", True)
-    server, (ik,) = start_with_services(probe, "excavator_ik_server", *PARAMS, "-r", "__ns:=/ikopen", "-p",
-                                        "excavator.swing.min_angle:=-.inf", "-p",
-                                        "excavator.swing.max_angle:=.inf",
-                                        services=[(SolveIK, "/ikopen/solve_ik")], timeout=60.0)
+    server, (ik,) = start_with_services(
+        probe,
+        "excavator_ik_server",
+        *PARAMS,
+        "-r",
+        "__ns:=/ikopen",
+        "-p",
+        "excavator.swing.min_angle:=-.inf",
+        "-p",
+        "excavator.swing.max_angle:=.inf",
+        services=[(SolveIK, "/ikopen/solve_ik")],
+        timeout=60.0,
+    )
     try:
         n = probe.node
         cylinders = n.create_publisher(JointState, "/fwdopen/cylinder_lengths", QOS)
         swing = n.create_publisher(JointState, "/fwdopen/joint_states", QOS)
         poses: list[PoseStamped] = []
         n.create_subscription(PoseStamped, "/fwdopen/bucket_pose", poses.append, QOS)
-        probe.wait_until(lambda: min(cylinders.get_subscription_count(), swing.get_subscription_count()) > 0,
-                         30.0, "the forward node's inputs")
+        probe.wait_until(
+            lambda: min(cylinders.get_subscription_count(), swing.get_subscription_count()) > 0,
+            30.0,
+            "the forward node's inputs",
+        )
 
         def send() -> bool:
             when = Time(sec=1)
-            swing.publish(messages.joint_state(when, JOINTS[:1], D[:1], [0.0]))
-            cylinders.publish(messages.joint_state(when, CYLINDERS, D[1:], [0.0, 0.0, 0.0]))
+            swing.publish(message_codec.joint_state(when, JOINTS[:1], D[:1], [0.0]))
+            cylinders.publish(message_codec.joint_state(when, CYLINDERS, D[1:], [0.0, 0.0, 0.0]))
             probe.executor.spin_once(timeout_sec=0.2)
             return bool(poses)
 
@@ -147,7 +173,8 @@ def test_the_forward_node_and_ik_server_take_a_wound_up_swing(probe: Probe) -> N
 
         request = SolveIK.Request(mode="position", use_orientation=False)
         request.target.pose.position.x, request.target.pose.position.y, request.target.pose.position.z = (
-            float(v) for v in CONTINUOUS.pose(D)[:3])
+            float(v) for v in CONTINUOUS.pose(D)[:3]
+        )
         seed = D.copy()
         seed[0] = 3.3 + 2.0 * math.pi
         request.seed = JointState(name=list(ACTUATORS), position=[float(v) for v in seed])

@@ -1,4 +1,4 @@
-"""Grade indication and the URDF joints' rates (excavator_kinematics.display) against hand geometry,
+"""Grade indication and the URDF joints' rates (excavator_kinematics.display_outputs) against hand geometry,
 finite differences and the forward node across processes."""
 
 from __future__ import annotations
@@ -13,10 +13,10 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe
 from sensor_msgs.msg import JointState
 
-from excavator_kinematics.display import DesignPlane, urdf_joint_states
+from excavator_kinematics.display_outputs import DesignPlane, urdf_joint_states
 from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator
 from excavator_kinematics.urdf_joints import URDF_JOINTS, joint_positions
-from manipulator_kinematics.params import ConfigError, config_path
+from manipulator_kinematics.param_files import ConfigError, config_path
 
 EXC = Excavator.default()
 LIM = EXC.limits
@@ -65,12 +65,15 @@ def test_slopes_and_normal_agree_and_frame_is_orthonormal():
     np.testing.assert_allclose(by_slope.height(on), 0.0, atol=1e-13)
 
 
-@pytest.mark.parametrize("grade, key", [
-    ({"normal": [0.0, 0.0, 1.0], "slope": 1.0}, "grade.normal"),
-    ({"normal": [1.0, 0.0, 0.0]}, "grade.normal"),
-    ({"normal": [0.0, 0.0, -1.0]}, "grade.normal"),
-    ({"normal": [0.0, 0.0, 0.0]}, "grade.normal"),
-])
+@pytest.mark.parametrize(
+    "grade, key",
+    [
+        ({"normal": [0.0, 0.0, 1.0], "slope": 1.0}, "grade.normal"),
+        ({"normal": [1.0, 0.0, 0.0]}, "grade.normal"),
+        ({"normal": [0.0, 0.0, -1.0]}, "grade.normal"),
+        ({"normal": [0.0, 0.0, 0.0]}, "grade.normal"),
+    ],
+)
 def test_inconsistent_planes_name_the_key(grade, key):
     with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
         plane(**grade)
@@ -99,16 +102,20 @@ def test_urdf_joint_rates_match_finite_differences():
 @pytest.mark.ros
 def test_forward_node_publishes_grade_and_urdf_joints(tmp_path):
     """The forward node across processes: grade_height and urdf_joint_states for a state."""
-    grade = {"enabled": True, "point": [5.0, 0.5, -1.0], "slope": -3.0, "cross_slope": 2.0,
-             "frame": "design"}
+    grade = {"enabled": True, "point": [5.0, 0.5, -1.0], "slope": -3.0, "cross_slope": 2.0, "frame": "design"}
     settings = tmp_path / "grade.yaml"
     settings.write_text(yaml.safe_dump({"/gr/excavator_forward": {"ros__parameters": {"grade": grade}}}))
     files = [config_path("excavator_cet200.yaml"), config_path("excavator_nodes.yaml"), settings]
     qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
     probe = Probe("grade_probe")
     node = probe.node
-    process = NodeProcess("excavator_forward", *[a for f in files for a in ("--params-file", str(f))],
-                          *RELIABLE_INPUTS, "-r", "__ns:=/gr")
+    process = NodeProcess(
+        "excavator_forward",
+        *[a for f in files for a in ("--params-file", str(f))],
+        *RELIABLE_INPUTS,
+        "-r",
+        "__ns:=/gr",
+    )
     got: dict[str, list] = {"grade": [], "urdf": []}
     node.create_subscription(PointStamped, "/gr/grade_height", got["grade"].append, qos)
     node.create_subscription(JointState, "/gr/urdf_joint_states", got["urdf"].append, qos)
@@ -118,13 +125,20 @@ def test_forward_node_publishes_grade_and_urdf_joints(tmp_path):
     D_dot = np.array([0.1, 0.03, -0.02, 0.04])
     try:
         outputs = ("/gr/grade_height", "/gr/urdf_joint_states")
-        probe.wait_until(lambda: all(node.count_publishers(t) for t in outputs)
-                         and cylinder_pub.get_subscription_count() and swing_pub.get_subscription_count(),
-                         30.0, "excavator_forward")
+        probe.wait_until(
+            lambda: (
+                all(node.count_publishers(t) for t in outputs)
+                and cylinder_pub.get_subscription_count()
+                and swing_pub.get_subscription_count()
+            ),
+            30.0,
+            "excavator_forward",
+        )
         for _ in range(20):
             swing_pub.publish(JointState(name=[JOINTS[0]], position=[D[0]], velocity=[D_dot[0]]))
-            cylinder_pub.publish(JointState(name=list(CYLINDERS), position=list(D[1:]),
-                                            velocity=list(D_dot[1:])))
+            cylinder_pub.publish(
+                JointState(name=list(CYLINDERS), position=list(D[1:]), velocity=list(D_dot[1:]))
+            )
             try:
                 probe.wait_until(lambda: got["grade"] and got["urdf"], 1.0, "the outputs")
                 break
@@ -143,7 +157,8 @@ def test_forward_node_publishes_grade_and_urdf_joints(tmp_path):
     normal = np.array([0.03, -0.02, 1.0]) / math.sqrt(1 + 0.03**2 + 0.02**2)
     assert p.z == pytest.approx(float((tip - [5.0, 0.5, -1.0]) @ normal), abs=1e-12)
     assert math.hypot(p.x, p.y) == pytest.approx(
-        float(np.linalg.norm(tip - [5.0, 0.5, -1.0] - p.z * normal)), abs=1e-12)
+        float(np.linalg.norm(tip - [5.0, 0.5, -1.0] - p.z * normal)), abs=1e-12
+    )
     joints = got["urdf"][0]
     assert tuple(joints.name) == URDF_JOINTS
     positions, rates = urdf_joint_states(EXC, D, D_dot)

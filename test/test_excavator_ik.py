@@ -2,6 +2,7 @@
 over 10^4 random states (the generating state among the solutions), eq. 3 of every open-chain
 candidate, a multi-start bounded least-squares solve giving the same solution set, the stroke-box
 boundary (a wider machine's states just outside), and one target = a batch of one (same bits)."""
+
 from __future__ import annotations
 
 import copy
@@ -21,7 +22,7 @@ from excavator_kinematics.inverse import (
 )
 from excavator_kinematics.kinematics import Excavator
 from manipulator_kinematics.model import IKStatus, RequestError, matrix_quaternion, quaternion_matrix
-from manipulator_kinematics.params import config_path, load_parameters
+from manipulator_kinematics.param_files import config_path, load_parameters
 from manipulator_kinematics.planar import wrap_angle
 
 EXC = Excavator.default()
@@ -97,9 +98,18 @@ def mixed_targets(n: int, seed: int) -> np.ndarray:
     """Reachable targets, random ones (mostly out of reach or outside a stroke), NaN ones and
     targets on the swing axis: every status."""
     rng = np.random.default_rng(seed)
-    Q = np.concatenate((EXC.pose(random_states(n // 2, seed)),
-                        np.column_stack((rng.uniform(-9, 9, (n - n // 2, 2)), rng.uniform(-5, 7, n - n // 2),
-                                         rng.uniform(-np.pi, np.pi, n - n // 2)))))
+    Q = np.concatenate(
+        (
+            EXC.pose(random_states(n // 2, seed)),
+            np.column_stack(
+                (
+                    rng.uniform(-9, 9, (n - n // 2, 2)),
+                    rng.uniform(-5, 7, n - n // 2),
+                    rng.uniform(-np.pi, np.pi, n - n // 2),
+                )
+            ),
+        )
+    )
     Q[::997] = np.nan
     Q[5::1999, :2] = 0.0
     return Q
@@ -141,6 +151,7 @@ def test_the_compiled_position_search_is_the_numpy_one() -> None:
 
 def numerical_solutions(Q: np.ndarray, starts: np.ndarray) -> np.ndarray:
     """Distinct D inside the limits with pose(D) = Q, by bounded least squares from every start."""
+
     def residual(D: np.ndarray) -> np.ndarray:
         error = EXC.pose(D) - Q
         error[3] = wrap_angle(error[3])
@@ -156,9 +167,14 @@ def numerical_solutions(Q: np.ndarray, starts: np.ndarray) -> np.ndarray:
 
 def test_a_numerical_solve_finds_the_same_solution_set() -> None:
     rng = np.random.default_rng(22)
-    targets = np.concatenate((EXC.pose(random_states(24, 7)),  # reachable, and random targets
-                              np.column_stack((rng.uniform(-9, 9, (8, 2)), rng.uniform(-5, 7, 8),
-                                               rng.uniform(-np.pi, np.pi, 8)))))
+    targets = np.concatenate(
+        (
+            EXC.pose(random_states(24, 7)),  # reachable, and random targets
+            np.column_stack(
+                (rng.uniform(-9, 9, (8, 2)), rng.uniform(-5, 7, 8), rng.uniform(-np.pi, np.pi, 8))
+            ),
+        )
+    )
     lengths = random_states(4, 8)
     matched = closed_total = numeric_total = 0
     for Q in targets:
@@ -175,8 +191,10 @@ def test_a_numerical_solve_finds_the_same_solution_set() -> None:
             assert np.abs(mine - solution).max(axis=-1).min(initial=np.inf) < 1e-6, (Q, solution, mine)
             matched += 1
         assert len(theirs) == len(mine), (Q, theirs, mine)
-    print(f"\nsolution sets of {len(targets)} targets: closed form {closed_total}, least squares "
-          f"{numeric_total}, matched {matched}")
+    print(
+        f"\nsolution sets of {len(targets)} targets: closed form {closed_total}, least squares "
+        f"{numeric_total}, matched {matched}"
+    )
     assert matched == closed_total == numeric_total and closed_total >= 24
 
 
@@ -258,18 +276,23 @@ def test_fkine_jacob0_and_the_six_d_pose_solve() -> None:
     state = EXC.state(D, D_dot)
     np.testing.assert_allclose(pose[:, :3, 3], state.Q[:, :3], atol=1e-12)
     from excavator_kinematics.kinematics import bucket_angular_velocity, bucket_quaternion
-    np.testing.assert_allclose(pose[:, :3, :3], quaternion_matrix(bucket_quaternion(D[:, 0], state.Q[:, 3])),
-                               atol=1e-12)
+
+    np.testing.assert_allclose(
+        pose[:, :3, :3], quaternion_matrix(bucket_quaternion(D[:, 0], state.Q[:, 3])), atol=1e-12
+    )
     twist = np.einsum("nij,nj->ni", EXC.jacob0(D), D_dot)
     np.testing.assert_allclose(twist[:, :3], state.Q_dot[:, :3], atol=1e-12)
-    np.testing.assert_allclose(twist[:, 3:], bucket_angular_velocity(D[:, 0], D_dot[:, 0], state.Q_dot[:, 3]),
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        twist[:, 3:], bucket_angular_velocity(D[:, 0], D_dot[:, 0], state.Q_dot[:, 3]), atol=1e-12
+    )
     result = EXC.solve_ik(pose)
     assert result.ok.all() and np.abs(result.solution - D).max() < 1e-9
     assert np.all(result.status[:, 2:] == UNREACHABLE)  # the other heading is another orientation
     # Position mode of the protocol = position_ik; the modes refuse a contradicting orientation flag.
-    np.testing.assert_array_equal(EXC.solve_ik(pose[:5], use_orientation=False, seed=D[:5]).solution,
-                                  EXC.position_ik(pose[:5, :3, 3], seed=D[:5]).solution)
+    np.testing.assert_array_equal(
+        EXC.solve_ik(pose[:5], use_orientation=False, seed=D[:5]).solution,
+        EXC.position_ik(pose[:5, :3, 3], seed=D[:5]).solution,
+    )
     with pytest.raises(RequestError, match="use_orientation"):
         EXC.solve_ik(pose[0], use_orientation=False, mode="pose")
     with pytest.raises(RequestError, match="unknown mode"):

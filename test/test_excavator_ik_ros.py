@@ -1,6 +1,7 @@
 """excavator_ik_server across processes: SolveIK / SolveFK round trips against the library,
 plan_path against the library's plan, and bad requests answered with success = false, a code and
 a reason (isolated domain)."""
+
 from __future__ import annotations
 
 import copy
@@ -18,7 +19,7 @@ from sensor_msgs.msg import JointState
 from excavator_kinematics.kinematics import ACTUATORS, Excavator
 from excavator_kinematics.path import plan_path
 from manipulator_kinematics.model import matrix_quaternion
-from manipulator_kinematics.params import config_path, load_parameters
+from manipulator_kinematics.param_files import config_path, load_parameters
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
 from manipulator_kinematics_interfaces.srv import PlanPath, SolveFK, SolveIK
 
@@ -26,16 +27,21 @@ pytestmark = pytest.mark.ros
 
 EXC = Excavator.default()
 NAMES = list(ACTUATORS)
-PARAMS = ("--params-file", str(config_path("excavator_cet200.yaml")),
-          "--params-file", str(config_path("excavator_nodes.yaml")))
+PARAMS = (
+    "--params-file",
+    str(config_path("excavator_cet200.yaml")),
+    "--params-file",
+    str(config_path("excavator_nodes.yaml")),
+)
 TIMEOUT = 15.0
 REFERENCE = EXC.limits.reference
 
 
 @pytest.fixture(scope="module")
 def server(probe: Probe) -> Iterator[tuple[NodeProcess, object, object, object]]:
-    process, (ik, fk, plan) = start_with_services(probe, "excavator_ik_server", *PARAMS,
-                                                  services=(*IK_FK, (PlanPath, "plan_path")), timeout=TIMEOUT)
+    process, (ik, fk, plan) = start_with_services(
+        probe, "excavator_ik_server", *PARAMS, services=(*IK_FK, (PlanPath, "plan_path")), timeout=TIMEOUT
+    )
     try:
         yield process, ik, fk, plan
     finally:
@@ -47,8 +53,14 @@ def call(probe: Probe, client, request):
     return probe.call(client, request, TIMEOUT)
 
 
-def ik_request(pose: np.ndarray, orientation: bool = True, mode: str = "", seed: list[float] | None = None,
-               branch: str = "", frame: str = "") -> SolveIK.Request:
+def ik_request(
+    pose: np.ndarray,
+    orientation: bool = True,
+    mode: str = "",
+    seed: list[float] | None = None,
+    branch: str = "",
+    frame: str = "",
+) -> SolveIK.Request:
     request = SolveIK.Request(mode=mode, branch=branch, use_orientation=orientation)
     request.target.header.frame_id = frame
     p, o = request.target.pose.position, request.target.pose.orientation
@@ -120,18 +132,30 @@ def test_bad_requests_fail_with_a_code_and_a_reason(probe: Probe, server) -> Non
     cases = {
         "nan": (ik_request(nan), Codes.INVALID_GOAL_CONSTRAINTS, "not finite"),
         "far": (ik_request(far), Codes.NO_IK_SOLUTION, "out of the boom and arm's reach"),
-        "stroke": (ik_request(outside_stroke_pose()), Codes.JOINT_LIMITS_VIOLATED,
-                   "boom_cylinder = 3.22 m above its limit 3.2 m"),
+        "stroke": (
+            ik_request(outside_stroke_pose()),
+            Codes.JOINT_LIMITS_VIOLATED,
+            "boom_cylinder = 3.22 m above its limit 3.2 m",
+        ),
         "rolled": (ik_request(rolled), Codes.NO_IK_SOLUTION, "rolls the bucket by 90 deg"),
         "mode": (ik_request(pose, mode="sideways"), Codes.INVALID_MODE, "unknown mode 'sideways'"),
         "branch": (ik_request(pose, branch="up"), Codes.INVALID_MODE, "unknown branch 'up'"),
-        "pose without orientation": (ik_request(pose, orientation=False, mode="pose"),
-                                     Codes.INVALID_GOAL_CONSTRAINTS, "set use_orientation"),
+        "pose without orientation": (
+            ik_request(pose, orientation=False, mode="pose"),
+            Codes.INVALID_GOAL_CONSTRAINTS,
+            "set use_orientation",
+        ),
         "frame": (ik_request(pose, frame="map"), Codes.FRAME_TRANSFORM_FAILURE, "'map'"),
-        "seed nan": (ik_request(pose, seed=[0.0, math.nan, 3.0, 2.0]), Codes.INVALID_ROBOT_STATE,
-                     "non-finite"),
-        "branch not valid": (ik_request(pose, branch="front_elbow_down"), Codes.NO_IK_SOLUTION,
-                             "arm cylinder cannot close"),
+        "seed nan": (
+            ik_request(pose, seed=[0.0, math.nan, 3.0, 2.0]),
+            Codes.INVALID_ROBOT_STATE,
+            "non-finite",
+        ),
+        "branch not valid": (
+            ik_request(pose, branch="front_elbow_down"),
+            Codes.NO_IK_SOLUTION,
+            "arm cylinder cannot close",
+        ),
     }
     for name, (request, code, text) in cases.items():
         response = call(probe, ik, request)
@@ -140,11 +164,17 @@ def test_bad_requests_fail_with_a_code_and_a_reason(probe: Probe, server) -> Non
         assert text in response.message, (name, response.message)
         assert len(response.solution.position) == 0 and len(response.solutions) == 0, name
     fk_cases = {
-        "stroke": (fk_request([0.0, 3.5, 3.0, 2.0]), Codes.JOINT_LIMITS_VIOLATED,
-                   "boom_cylinder = 3.5 m above its limit"),
+        "stroke": (
+            fk_request([0.0, 3.5, 3.0, 2.0]),
+            Codes.JOINT_LIMITS_VIOLATED,
+            "boom_cylinder = 3.5 m above its limit",
+        ),
         "nan": (fk_request([0.0, math.nan, 3.0, 2.0]), Codes.INVALID_ROBOT_STATE, "non-finite position"),
-        "missing": (SolveFK.Request(joint_state=JointState(name=NAMES[:3], position=[0.0, 2.5, 3.0])),
-                    Codes.INVALID_ROBOT_STATE, "['bucket_cylinder'] missing"),
+        "missing": (
+            SolveFK.Request(joint_state=JointState(name=NAMES[:3], position=[0.0, 2.5, 3.0])),
+            Codes.INVALID_ROBOT_STATE,
+            "['bucket_cylinder'] missing",
+        ),
     }
     for name, (request, code, text) in fk_cases.items():
         response = call(probe, fk, request)
@@ -157,8 +187,9 @@ def test_bad_requests_fail_with_a_code_and_a_reason(probe: Probe, server) -> Non
     assert process.alive()
 
 
-def path_request(waypoints, step: float = 0.0, tip_speed: float = 0.0, seed=None,
-                 mode: str = "") -> PlanPath.Request:
+def path_request(
+    waypoints, step: float = 0.0, tip_speed: float = 0.0, seed=None, mode: str = ""
+) -> PlanPath.Request:
     request = PlanPath.Request(step=step, tip_speed=tip_speed, mode=mode)
     request.waypoints = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in waypoints]
     if seed is not None:
@@ -181,13 +212,19 @@ def test_plan_path_is_the_librarys_plan_and_stops_at_the_workspace(probe: Probe,
     assert len(points) == len(expected.t)
     t = [p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in points]
     np.testing.assert_allclose(t, expected.t, atol=1e-9)
-    for name, values in (("positions", expected.q), ("velocities", expected.qd),
-                         ("accelerations", expected.qdd)):
+    for name, values in (
+        ("positions", expected.q),
+        ("velocities", expected.qd),
+        ("accelerations", expected.qdd),
+    ):
         np.testing.assert_allclose([getattr(p, name) for p in points], values, atol=1e-12)
     assert np.all(np.abs(expected.qd) <= EXC.limits.max_rates * (1 + 1e-12))
     # Out of the workspace: the reachable part, the reason and the last waypoint reached.
-    short = call(probe, planner, path_request([start, start + [0.5, 0.0, 0.0], start + [8.5, 0.0, 0.0]],
-                                              seed=REFERENCE))
+    short = call(
+        probe,
+        planner,
+        path_request([start, start + [0.5, 0.0, 0.0], start + [8.5, 0.0, 0.0]], seed=REFERENCE),
+    )
     assert not short.success and short.error_code.val == Codes.NO_IK_SOLUTION
     assert short.last_reachable_waypoint == 1 and "farthest reachable point" in short.message, short.message
     last = short.trajectory.points[-1]
@@ -199,16 +236,28 @@ def test_plan_path_is_the_librarys_plan_and_stops_at_the_workspace(probe: Probe,
         "step": (path_request([start], step=-1.0), Codes.INVALID_GOAL_CONSTRAINTS, "step -1 m is outside"),
         "mode": (path_request([start], mode="region"), Codes.INVALID_MODE, "unknown mode 'region'"),
         "slow": (path_request([start], tip_speed=1e-300), Codes.INVALID_GOAL_CONSTRAINTS, "outside [0.001"),
-        "fast": (path_request([start], tip_speed=1e300), Codes.INVALID_GOAL_CONSTRAINTS,
-                 "tip_speed 1e+300 m/s is outside"),
-        "long step": (path_request([start], step=1e300), Codes.INVALID_GOAL_CONSTRAINTS,
-                      "step 1e+300 m is outside"),
+        "fast": (
+            path_request([start], tip_speed=1e300),
+            Codes.INVALID_GOAL_CONSTRAINTS,
+            "tip_speed 1e+300 m/s is outside",
+        ),
+        "long step": (
+            path_request([start], step=1e300),
+            Codes.INVALID_GOAL_CONSTRAINTS,
+            "step 1e+300 m is outside",
+        ),
         "far": (path_request([start, [1e300, 0.0, 0.0]]), Codes.INVALID_GOAL_CONSTRAINTS, "implausible"),
-        "points": (path_request([start, start + [1000.0, 0.0, 0.0]], step=0.01),
-                   Codes.INVALID_GOAL_CONSTRAINTS, "at most 10000"),
+        "points": (
+            path_request([start, start + [1000.0, 0.0, 0.0]], step=0.01),
+            Codes.INVALID_GOAL_CONSTRAINTS,
+            "at most 10000",
+        ),
         # Issue 29: a 0.45 m line at a 4.53e-7 m step (10^6 points) took 63.5 s and 1.85 GB.
-        "million": (path_request([start, start + [0.45, 0.0, 0.0]], step=4.53e-7),
-                    Codes.INVALID_GOAL_CONSTRAINTS, "step 4.53e-07 m is outside [0.001, 10] m"),
+        "million": (
+            path_request([start, start + [0.45, 0.0, 0.0]], step=4.53e-7),
+            Codes.INVALID_GOAL_CONSTRAINTS,
+            "step 4.53e-07 m is outside [0.001, 10] m",
+        ),
         "first": (path_request([[30.0, 0.0, 0.0]]), Codes.NO_IK_SOLUTION, "first waypoint"),
         "seed": (path_request([start], seed=[0.0, 1.0]), Codes.INVALID_ROBOT_STATE, "seed"),
     }
@@ -261,8 +310,12 @@ def test_solve_ik_is_answered_while_a_long_plan_runs(probe: Probe, server) -> No
         asked = time.monotonic()
         assert call(probe, ik, ik_request(pose)).success
         baseline.append(time.monotonic() - asked)
-    client = subprocess.Popen([sys.executable, "-c", PLAN_CLIENT, *map(str, [*start, *REFERENCE])],
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    client = subprocess.Popen(
+        [sys.executable, "-c", PLAN_CLIENT, *map(str, [*start, *REFERENCE])],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
         assert client.stdout.readline().startswith("sent")
         sent = time.monotonic()
@@ -281,7 +334,9 @@ def test_solve_ik_is_answered_while_a_long_plan_runs(probe: Probe, server) -> No
     assert output.startswith(f"done True {49 * 200 + 1} "), output
     took = finished - sent
     assert took > 0.3 and len(waits) >= 3, (took, len(waits))
-    print(f"\nplan of {49 * 200 + 1} points: {took:.2f} s, {len(waits)} solve_ik answered meanwhile, "
-          f"longest {max(waits):.3f} s, median {np.median(waits):.3f} s; without a plan longest "
-          f"{max(baseline):.3f} s, median {np.median(baseline):.3f} s")
+    print(
+        f"\nplan of {49 * 200 + 1} points: {took:.2f} s, {len(waits)} solve_ik answered meanwhile, "
+        f"longest {max(waits):.3f} s, median {np.median(waits):.3f} s; without a plan longest "
+        f"{max(baseline):.3f} s, median {np.median(baseline):.3f} s"
+    )
     assert max(waits) < max(baseline) + 0.5, (took, max(waits), max(baseline))

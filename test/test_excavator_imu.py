@@ -28,13 +28,19 @@ from excavator_kinematics.kinematics import Excavator, StrokeError
 EXC = Excavator.default()
 LIM = EXC.limits
 RNG = np.random.default_rng(2101)
-MOUNTINGS = {"cab": [0.03, -0.02, 1.2], "boom": [-math.pi / 2, 0.1, 0.05], "arm": [math.pi, 0.0, -0.3],
-             "bucket_linkage": [0.2, -0.4, 2.5]}
+MOUNTINGS = {
+    "cab": [0.03, -0.02, 1.2],
+    "boom": [-math.pi / 2, 0.1, 0.05],
+    "arm": [math.pi, 0.0, -0.3],
+    "bucket_linkage": [0.2, -0.4, 2.5],
+}
 
 
 def imu_section(body: str) -> dict:
-    return {name: {"rotation_rpy": MOUNTINGS[name], **({"body": body} if name == "bucket_linkage" else {})}
-            for name in SENSORS}
+    return {
+        name: {"rotation_rpy": MOUNTINGS[name], **({"body": body} if name == "bucket_linkage" else {})}
+        for name in SENSORS
+    }
 
 
 def side_angles(D: np.ndarray, body: str, step: float = 0.0, D_dot: np.ndarray | None = None) -> np.ndarray:
@@ -131,8 +137,10 @@ def test_noise_bound():
     noisy_q = (Rotation.from_quat(np.tile(q, (n, 1))) * noise).as_quat()
     sigma_f = 0.02
     noisy_f = f + RNG.normal(0.0, sigma_f, (n, 4, 3))
-    for up, sigma_a in ((up_from_orientation(noisy_q.reshape(n, 4, 4)), sigma),
-                        (up_from_acceleration(noisy_f), sigma_f / GRAVITY)):
+    for up, sigma_a in (
+        (up_from_orientation(noisy_q.reshape(n, 4, 4)), sigma),
+        (up_from_acceleration(noisy_f), sigma_f / GRAVITY),
+    ):
         error = arm.joints(up, np.tile(omega, (n, 1, 1))).lengths - D[1:]
         predicted = math.sqrt(2.0) * sigma_a / np.abs(k)
         rms = np.sqrt(np.mean(error**2, axis=0))
@@ -231,16 +239,19 @@ def test_imu_state_node_publishes_cylinder_lengths_and_refuses_bad_sensors():
     from sensor_msgs.msg import Imu, JointState
 
     from excavator_kinematics.kinematics import CYLINDERS
-    from manipulator_kinematics.params import config_path
+    from manipulator_kinematics.param_files import config_path
 
     D = LIM.reference + np.array([0.5, 0.12, -0.3, 0.2])
     D_dot = np.array([0.3, 0.05, -0.08, 0.1])
     q, omega, f = readings(D, D_dot, "h_link", mountings={key: [0.0, 0.0, 0.0] for key in SENSORS})
     files = [config_path("excavator_cet200.yaml"), config_path("excavator_nodes.yaml")]
-    process = NodeProcess("excavator_imu_state", *[a for p in files for a in ("--params-file", str(p))],
-                          "-r", "__ns:=/imu_t",
-                          params={"/imu_t/excavator_imu_state":
-                                  {"ros__parameters": {"gravity_time_constant": 0.0}}})
+    process = NodeProcess(
+        "excavator_imu_state",
+        *[a for p in files for a in ("--params-file", str(p))],
+        "-r",
+        "__ns:=/imu_t",
+        params={"/imu_t/excavator_imu_state": {"ros__parameters": {"gravity_time_constant": 0.0}}},
+    )
     qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
     probe = Probe("imu_probe")
     node = probe.node
@@ -256,8 +267,14 @@ def test_imu_state_node_publishes_cylinder_lengths_and_refuses_bad_sensors():
             pub.publish(imu_message(stamp_ns, q[i], w, f[i], with_orientation))
 
     try:
-        probe.wait_until(lambda: all(p.get_subscription_count() for p in pubs)
-                         and node.count_publishers("/imu_t/cylinder_lengths"), 30.0, "excavator_imu_state")
+        probe.wait_until(
+            lambda: (
+                all(p.get_subscription_count() for p in pubs)
+                and node.count_publishers("/imu_t/cylinder_lengths")
+            ),
+            30.0,
+            "excavator_imu_state",
+        )
         for k in range(1, 40):
             send(k * 10_000_000, with_orientation=k % 2 == 0)
             try:
@@ -297,22 +314,28 @@ def test_imu_state_node_says_which_sensors_fell_silent():
     from ros_harness import NodeProcess, Probe
     from sensor_msgs.msg import Imu, JointState
 
-    from manipulator_kinematics.params import config_path
+    from manipulator_kinematics.param_files import config_path
 
     D = LIM.reference + np.array([0.5, 0.12, -0.3, 0.2])
     q, omega, f = readings(D, np.zeros(4), "h_link", mountings={key: [0.0, 0.0, 0.0] for key in SENSORS})
     files = [config_path("excavator_cet200.yaml"), config_path("excavator_nodes.yaml")]
-    process = NodeProcess("excavator_imu_state", *[a for p in files for a in ("--params-file", str(p))],
-                          "-r", "__ns:=/imu_stale",
-                          params={"/imu_stale/excavator_imu_state": {"ros__parameters": {
-                              "max_age": 0.3, "warning_period": 0.2}}})
+    process = NodeProcess(
+        "excavator_imu_state",
+        *[a for p in files for a in ("--params-file", str(p))],
+        "-r",
+        "__ns:=/imu_stale",
+        params={
+            "/imu_stale/excavator_imu_state": {"ros__parameters": {"max_age": 0.3, "warning_period": 0.2}}
+        },
+    )
     qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
     probe = Probe("imu_stale_probe")
     node = probe.node
     got: list[JointState] = []
     node.create_subscription(JointState, "/imu_stale/cylinder_lengths", got.append, qos)
-    pubs = dict(zip(SENSORS, (node.create_publisher(Imu, f"/imu_stale/imu/{n}", qos) for n in SENSORS),
-                    strict=True))
+    pubs = dict(
+        zip(SENSORS, (node.create_publisher(Imu, f"/imu_stale/imu/{n}", qos) for n in SENSORS), strict=True)
+    )
     clock = {"k": 0}
 
     def send(names) -> bool:
@@ -336,8 +359,9 @@ def test_imu_state_node_says_which_sensors_fell_silent():
 
     try:
         probe.wait_until(lambda: "no message since start-up" in process.log(), 15.0, "the start-up reason")
-        probe.wait_until(lambda: all(p.get_subscription_count() for p in pubs.values()), 30.0,
-                         "subscriptions")
+        probe.wait_until(
+            lambda: all(p.get_subscription_count() for p in pubs.values()), 30.0, "subscriptions"
+        )
         probe.wait_until(lambda: send(SENSORS) or len(got) >= 3, 15.0, "cylinder states")
         last_full = clock["k"] * 10_000_000
         # The boom falls silent, the others go on: the boom is named (twice: time passes), no output.
@@ -348,8 +372,10 @@ def test_imu_state_node_says_which_sensors_fell_silent():
         probe.wait_until(lambda: send(SENSORS) or len(got) > count + 2, 15.0, "output after recovery")
         last_full = clock["k"] * 10_000_000
         # All four fall silent: one reason names all of them.
-        all_four = (r"imu cab \(no message for [\d.]+ s\), boom \(.*\), arm \(.*\), "
-                    r"bucket_linkage \(.*\) stale")
+        all_four = (
+            r"imu cab \(no message for [\d.]+ s\), boom \(.*\), arm \(.*\), "
+            r"bucket_linkage \(.*\) stale"
+        )
         keep_sending((), all_four, 2)
         assert all(stamp_ns(m) <= last_full for m in got)
         assert process.alive()
@@ -395,7 +421,7 @@ def test_whole_chain_on_imus_across_processes():
     from sensor_msgs.msg import Imu, JointState
 
     from excavator_kinematics.kinematics import JOINTS
-    from manipulator_kinematics.params import config_path
+    from manipulator_kinematics.param_files import config_path
 
     tilt = (math.atan(0.02), -math.atan(0.05), 0.0)
     D = LIM.reference + np.array([0.3, 0.1, -0.2, 0.1])
@@ -404,8 +430,13 @@ def test_whole_chain_on_imus_across_processes():
     files = [config_path("excavator_cet200.yaml"), config_path("excavator_nodes.yaml")]
     args = [a for p in files for a in ("--params-file", str(p))]
     imu_node = NodeProcess("excavator_imu_state", *args, "-r", "__ns:=/chain")
-    forward = NodeProcess("excavator_forward", *args, "-r", "__ns:=/chain", params={
-        "/chain/excavator_forward": {"ros__parameters": {"level": {"enabled": True}}}})
+    forward = NodeProcess(
+        "excavator_forward",
+        *args,
+        "-r",
+        "__ns:=/chain",
+        params={"/chain/excavator_forward": {"ros__parameters": {"level": {"enabled": True}}}},
+    )
     qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
     probe = Probe("chain_probe")
     node = probe.node
@@ -415,9 +446,16 @@ def test_whole_chain_on_imus_across_processes():
     pubs = [node.create_publisher(Imu, f"/chain/imu/{name}", qos) for name in SENSORS]
     swing_pub = node.create_publisher(JointState, "/chain/joint_states", qos)
     try:
-        probe.wait_until(lambda: all(p.get_subscription_count() for p in pubs)
-                         and swing_pub.get_subscription_count()
-                         and node.count_publishers("/chain/bucket_pose_level"), 30.0, "both nodes")
+        probe.wait_until(
+            lambda: (
+                all(p.get_subscription_count() for p in pubs)
+                and swing_pub.get_subscription_count()
+                and node.count_publishers("/chain/bucket_pose_level")
+            ),
+            30.0,
+            "both nodes",
+        )
+
         def send(stamp: int) -> bool:
             swing = JointState(name=[JOINTS[0]], position=[D[0]], velocity=[0.0])
             swing.header.stamp.sec, swing.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
@@ -436,8 +474,11 @@ def test_whole_chain_on_imus_across_processes():
         sets = [start + k * 200_000_000 for k in range(10)]
         for stamp in sets:
             send(stamp)
-            probe.wait_until(lambda stamp=stamp: any(stamp_of(m) == stamp for m in got["level"]), 5.0,
-                             f"the level pose of the set at {stamp} ns")
+            probe.wait_until(
+                lambda stamp=stamp: any(stamp_of(m) == stamp for m in got["level"]),
+                5.0,
+                f"the level pose of the set at {stamp} ns",
+            )
         assert [stamp_of(m) for m in got["level"] if stamp_of(m) >= start] == sets
     finally:
         logs = imu_node.stop() + forward.stop()
@@ -469,18 +510,26 @@ def test_mk_evaluate_checks_bucket_pose_level(tmp_path):
     up_cab = Rotation.from_euler("xyz", [0.04, -0.06, 0.0]).inv().apply([0.0, 0.0, 1.0])
     cylinders = decode_messages("sensor_msgs/msg/JointState", topics["/cylinder_lengths"].raw)
     stamp = {k: np.asarray(cylinders[k]) for k in ("header.stamp.sec", "header.stamp.nanosec")}
-    tilt = {**stamp, "header.frame_id": "upper_structure",
-            **{f"vector.{a}": np.full(n, up_cab[i]) for i, a in enumerate("xyz")}}
-    topics["/machine_tilt"] = Topic("geometry_msgs/msg/Vector3Stamped", pose.log_time,
-                                    encode_messages("geometry_msgs/msg/Vector3Stamped", n, tilt))
+    tilt = {
+        **stamp,
+        "header.frame_id": "upper_structure",
+        **{f"vector.{a}": np.full(n, up_cab[i]) for i, a in enumerate("xyz")},
+    }
+    topics["/machine_tilt"] = Topic(
+        "geometry_msgs/msg/Vector3Stamped",
+        pose.log_time,
+        encode_messages("geometry_msgs/msg/Vector3Stamped", n, tilt),
+    )
     joints = decode_messages("sensor_msgs/msg/JointState", topics["/open_chain_joint_states"].raw)
     theta1 = np.asarray(joints["position"])[:, 0]
     tip = np.column_stack([np.asarray(fields[f"pose.position.{a}"]) for a in "xyz"])
     level = np.einsum("nij,nj->ni", level_rotation(base_up(up_cab, theta1)), tip)
     level[10:15, 2] += 2e-3
-    values = {**{k: np.asarray(v) for k, v in fields.items() if k != "header.frame_id"},
-              "header.frame_id": "base_level",
-              **{f"pose.position.{a}": level[:, i] for i, a in enumerate("xyz")}}
+    values = {
+        **{k: np.asarray(v) for k, v in fields.items() if k != "header.frame_id"},
+        "header.frame_id": "base_level",
+        **{f"pose.position.{a}": level[:, i] for i, a in enumerate("xyz")},
+    }
     raw = encode_messages(pose.msgtype, n, values)
     topics["/bucket_pose_level"] = Topic(pose.msgtype, pose.log_time, raw)
     write_bag(tmp_path / "bag", topics, overwrite=True)
@@ -521,8 +570,14 @@ def test_slope_example_writes_bag_and_png(tmp_path):
     # Height noise: the tip moves by about r sigma_theta2 (r ~ 7 m, sigma_theta2 = sqrt(2) 0.05 deg).
     assert result["rms_m"] < 4 * 7.0 * math.sqrt(2) * math.radians(0.05)
     topics = BagReader(tmp_path / "bag").topics
-    for name in ("/design_surface", "/grade/tip", "/grade/left", "/grade/right", "/imu/cab",
-                 "/cylinder_lengths"):
+    for name in (
+        "/design_surface",
+        "/grade/tip",
+        "/grade/left",
+        "/grade/right",
+        "/imu/cab",
+        "/cylinder_lengths",
+    ):
         assert name in topics, sorted(topics)
     assert imread(tmp_path / "grade_heights.png").shape[1] > 500
     assert read_landxml(tmp_path / "ditch.xml").faces.shape == (50, 3)
@@ -576,13 +631,21 @@ def test_slope_example_bag_is_one_tf_tree(tmp_path):
     bag = tmp_path / "bag"
     static, dynamic = tf_tree(bag)
     store = get_typestore(Stores.ROS2_JAZZY)
-    poses = [store.deserialize_cdr(raw, "geometry_msgs/msg/PoseStamped")
-             for _, _, raw in BagReader(bag).messages(["/bucket_pose_site"])]
-    tilts = [store.deserialize_cdr(raw, "geometry_msgs/msg/Vector3Stamped")
-             for _, _, raw in BagReader(bag).messages(["/machine_tilt"])]
-    joints = {m.header.stamp.sec * 10**9 + m.header.stamp.nanosec: m.position[0]
-              for _, _, m in ((t, x, store.deserialize_cdr(raw, "sensor_msgs/msg/JointState"))
-                              for t, x, raw in BagReader(bag).messages(["/joint_states"]))}
+    poses = [
+        store.deserialize_cdr(raw, "geometry_msgs/msg/PoseStamped")
+        for _, _, raw in BagReader(bag).messages(["/bucket_pose_site"])
+    ]
+    tilts = [
+        store.deserialize_cdr(raw, "geometry_msgs/msg/Vector3Stamped")
+        for _, _, raw in BagReader(bag).messages(["/machine_tilt"])
+    ]
+    joints = {
+        m.header.stamp.sec * 10**9 + m.header.stamp.nanosec: m.position[0]
+        for _, _, m in (
+            (t, x, store.deserialize_cdr(raw, "sensor_msgs/msg/JointState"))
+            for t, x, raw in BagReader(bag).messages(["/joint_states"])
+        )
+    }
     assert len(poses) == len(tilts) == 21
     links = {j.child for j in urdf_joints(machine("excavator").urdf(EXC))}
     for pose, tilt in zip(poses, tilts, strict=True):
@@ -596,9 +659,11 @@ def test_slope_example_bag_is_one_tf_tree(tmp_path):
         p = pose.pose.position
         np.testing.assert_allclose(tip[:3, 3], [p.x, p.y, p.z], rtol=0, atol=1e-6)
         o = pose.pose.orientation
-        np.testing.assert_allclose(Rotation.from_matrix(tip[:3, :3]).as_quat(canonical=True),
-                                   Rotation.from_quat([o.x, o.y, o.z, o.w]).as_quat(canonical=True),
-                                   atol=1e-9)
+        np.testing.assert_allclose(
+            Rotation.from_matrix(tip[:3, :3]).as_quat(canonical=True),
+            Rotation.from_quat([o.x, o.y, o.z, o.w]).as_quat(canonical=True),
+            atol=1e-9,
+        )
         # base_level -> base_link: world up in base_link is the tilt turned by the swing, and
         # base_level's z is that up (independent of level_rotation: the third row of R^T).
         parent, level = dynamic[stamp]["base_link"]
@@ -634,19 +699,28 @@ def test_bag_visuals_write_the_level_frame_from_machine_tilt(tmp_path):
 
     def topics(with_tilt: bool) -> dict[str, Topic]:
         out = {
-            "/joint_states": [JointState(header=header(s), name=[JOINTS[0]], position=[swing])
-                              for s in stamps],
-            "/cylinder_lengths": [JointState(header=header(s), name=list(CYLINDERS), position=D[1:].tolist())
-                                  for s in stamps],
+            "/joint_states": [
+                JointState(header=header(s), name=[JOINTS[0]], position=[swing]) for s in stamps
+            ],
+            "/cylinder_lengths": [
+                JointState(header=header(s), name=list(CYLINDERS), position=D[1:].tolist()) for s in stamps
+            ],
         }
         if with_tilt:  # from the third state on: the first two have no level frame
             x, y, z = up_upper.tolist()
-            out["/machine_tilt"] = [Vector3Stamped(header=header(s, "upper_structure"),
-                                                   vector=Vector3(x=x, y=y, z=z)) for s in stamps[2:]]
+            out["/machine_tilt"] = [
+                Vector3Stamped(header=header(s, "upper_structure"), vector=Vector3(x=x, y=y, z=z))
+                for s in stamps[2:]
+            ]
         kinds = {"/machine_tilt": "geometry_msgs/msg/Vector3Stamped"}
-        return {name: Topic(kinds.get(name, "sensor_msgs/msg/JointState"),
-                            np.array([m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in msgs]),
-                            [serialize_unpadded(m) for m in msgs]) for name, msgs in out.items()}
+        return {
+            name: Topic(
+                kinds.get(name, "sensor_msgs/msg/JointState"),
+                np.array([m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in msgs]),
+                [serialize_unpadded(m) for m in msgs],
+            )
+            for name, msgs in out.items()
+        }
 
     for with_tilt in (True, False):
         source, output = tmp_path / f"rec{with_tilt}", tmp_path / f"vis{with_tilt}"
@@ -686,15 +760,18 @@ def test_imu_state_node_refuses_bad_stamps_and_answers_the_sets_after_them():
     from ros_harness import NodeProcess, Probe
     from sensor_msgs.msg import Imu, JointState
 
-    from manipulator_kinematics.params import config_path
+    from manipulator_kinematics.param_files import config_path
 
     D = LIM.reference + np.array([0.5, 0.12, -0.3, 0.2])
     q, omega, f = readings(D, np.zeros(4), "h_link", mountings={key: [0.0, 0.0, 0.0] for key in SENSORS})
     files = [config_path("excavator_cet200.yaml"), config_path("excavator_nodes.yaml")]
-    process = NodeProcess("excavator_imu_state", *[a for p in files for a in ("--params-file", str(p))],
-                          "-r", "__ns:=/imu_stamps",
-                          params={"/imu_stamps/excavator_imu_state":
-                                  {"ros__parameters": {"warning_period": 0.1}}})
+    process = NodeProcess(
+        "excavator_imu_state",
+        *[a for p in files for a in ("--params-file", str(p))],
+        "-r",
+        "__ns:=/imu_stamps",
+        params={"/imu_stamps/excavator_imu_state": {"ros__parameters": {"warning_period": 0.1}}},
+    )
     qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
     probe = Probe("imu_stamps_probe")
     node = probe.node
@@ -722,9 +799,11 @@ def test_imu_state_node_refuses_bad_stamps_and_answers_the_sets_after_them():
         last = sent[-1]
         # The last warm-up set is the reference the out-of-order case must be behind.
         probe.wait_until(lambda: answered(last), 10.0, "the answer to the last warm-up set")
-        cases = ((time.time_ns() + 3600 * 1_000_000_000, None, "s ahead of the node clock"),
-                 (0, -1, "negative stamp (sec -1)"),
-                 (last - 50_000_000, None, "s behind (or equal to)"))  # the previous message is newer
+        cases = (
+            (time.time_ns() + 3600 * 1_000_000_000, None, "s ahead of the node clock"),
+            (0, -1, "negative stamp (sec -1)"),
+            (last - 50_000_000, None, "s behind (or equal to)"),
+        )  # the previous message is newer
         for stamp, sec, pattern in cases:
             send(stamp, sec)
             try:
@@ -744,8 +823,9 @@ def test_imu_state_node_refuses_bad_stamps_and_answers_the_sets_after_them():
         for i, pub in enumerate(pubs):
             w = [0.0, 5.0, 0.0] if SENSORS[i] == "arm" else omega[i]
             pub.publish(imu_message(fast, q[i], w, f[i], True))
-        probe.wait_until(lambda: "not a motion this machine can make" in process.log(), 10.0,
-                         "the rate refusal")
+        probe.wait_until(
+            lambda: "not a motion this machine can make" in process.log(), 10.0, "the rate refusal"
+        )
         assert not answered(fast)
         # The clock goes back 60 s: the sets start over from there.
         back = sets[-1] - 60 * 1_000_000_000

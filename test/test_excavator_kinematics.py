@@ -21,10 +21,10 @@ from excavator_kinematics.kinematics import (
     bucket_quaternion,
 )
 from excavator_kinematics.machine import MACHINE
-from excavator_kinematics.parameters import SCHEMA
+from excavator_kinematics.machine_file import SCHEMA
 from manipulator_kinematics.bag.topics import ACCEL, JOINT_STATE, POSE, TWIST
-from manipulator_kinematics.config import validate
-from manipulator_kinematics.params import ConfigError, config_path, load_parameters
+from manipulator_kinematics.param_files import ConfigError, config_path, load_parameters
+from manipulator_kinematics.schema import validate
 
 EXC = Excavator.default()
 LIM = EXC.limits
@@ -416,7 +416,9 @@ INVALID = {
     "missing key": (_pop("boom", "length"), "boom.length", "missing"),
     "missing reference angle": (_pop("swing", "reference_angle"), "swing.reference_angle", "missing"),
     "missing reference length": (
-        _pop("arm_cylinder", "reference_length"), "arm_cylinder.reference_length", "missing"
+        _pop("arm_cylinder", "reference_length"),
+        "arm_cylinder.reference_length",
+        "missing",
     ),
     "missing section": (lambda d: d.pop("side_link"), "side_link", "missing"),
     "missing name": (lambda d: d.pop("name"), "name", "missing"),
@@ -438,11 +440,15 @@ INVALID = {
     "orientation 2": (_set("boom_cylinder", "orientation", 2), "boom_cylinder.orientation", "outside"),
     "fractional orientation": (_set("arm_cylinder", "orientation", 0.5), "arm_cylinder.orientation", "whole"),
     "reference angle outside the swing limits": (
-        _set("swing", "reference_angle", 3.5), "swing.reference_angle", "outside [min_angle, max_angle]"
+        _set("swing", "reference_angle", 3.5),
+        "swing.reference_angle",
+        "outside [min_angle, max_angle]",
     ),
     "swing limits reversed": (_set("swing", "min_angle", 3.2), "swing.max_angle", "above min_angle"),
     "reference length outside the stroke": (
-        _set("boom_cylinder", "reference_length", 3.5), "boom_cylinder.reference_length", "outside the stroke"
+        _set("boom_cylinder", "reference_length", 3.5),
+        "boom_cylinder.reference_length",
+        "outside the stroke",
     ),
     "stroke reversed": (_set("bucket_cylinder", "min_length", 3.0), "bucket_cylinder.max_length", "above"),
     # Whole-stroke assembly: every length of the stroke box must close the linkages.

@@ -18,7 +18,7 @@ import yaml
 from excavator_kinematics.kinematics import Excavator
 from excavator_kinematics.plant import Plant
 from excavator_kinematics.urdf_joints import excavator_urdf
-from manipulator_kinematics.params import ConfigError, config_path, load_parameters
+from manipulator_kinematics.param_files import ConfigError, config_path, load_parameters
 
 LIMITED = Excavator.default()
 
@@ -36,12 +36,15 @@ def _continuous() -> dict:
 CONTINUOUS = Excavator.from_parameters(_continuous())
 
 
-@pytest.mark.parametrize(("key", "says"), [
-    ("boom_cylinder", "raise the boom"),
-    ("arm_cylinder", "curl the arm in"),
-    ("bucket_cylinder", "curl the bucket in"),
-    ("h_link", "crosses the bucket linkage"),
-])
+@pytest.mark.parametrize(
+    ("key", "says"),
+    [
+        ("boom_cylinder", "raise the boom"),
+        ("arm_cylinder", "curl the arm in"),
+        ("bucket_cylinder", "curl the bucket in"),
+        ("h_link", "crosses the bucket linkage"),
+    ],
+)
 def test_a_flipped_orientation_is_refused_in_one_line_naming_the_key(key: str, says: str) -> None:
     section = _section()
     section[key]["orientation"] *= -1
@@ -73,10 +76,13 @@ def test_a_tip_behind_the_swing_axis_is_refused() -> None:
         Excavator.from_parameters(section)
 
 
-@pytest.mark.parametrize(("limits", "key"), [
-    ((-math.inf, 3.0), "excavator.swing.max_angle"),  # the finite one is named
-    ((-3.0, math.inf), "excavator.swing.min_angle"),
-])
+@pytest.mark.parametrize(
+    ("limits", "key"),
+    [
+        ((-math.inf, 3.0), "excavator.swing.max_angle"),  # the finite one is named
+        ((-3.0, math.inf), "excavator.swing.min_angle"),
+    ],
+)
 def test_a_half_open_swing_is_refused(limits: tuple[float, float], key: str) -> None:
     section = _section()
     section["swing"].update(min_angle=limits[0], max_angle=limits[1])

@@ -21,7 +21,7 @@ from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from excavator_kinematics import messages
+from excavator_kinematics import message_codec
 from excavator_kinematics.bucket_path import follow
 from excavator_kinematics.kinematics import (
     CYLINDERS,
@@ -32,7 +32,7 @@ from excavator_kinematics.kinematics import (
     bucket_quaternion,
 )
 from excavator_kinematics.twist import bucket_angles, twist_from_q_dot
-from manipulator_kinematics.params import config_path
+from manipulator_kinematics.param_files import config_path
 
 pytestmark = pytest.mark.ros
 
@@ -65,7 +65,7 @@ class Collector:
         probe.node.create_subscription(msg_type, topic, self.messages.append, QOS)
 
     def stamped(self, stamp_ns: int) -> list:
-        return [m for m in self.messages if messages.stamp_ns(m.header.stamp) == stamp_ns]
+        return [m for m in self.messages if message_codec.stamp_ns(m.header.stamp) == stamp_ns]
 
 
 def wait_connected(probe: Probe, publishers: list, collectors: list[Collector]) -> None:
@@ -90,8 +90,8 @@ def stamp(ns: int) -> Time:
 def state_messages(when: Time, D: np.ndarray, D_dot: np.ndarray) -> tuple[JointState, JointState]:
     """(cylinder_lengths, joint_states) of state D with rates D_dot."""
     return (
-        messages.joint_state(when, CYLINDERS, D[1:], D_dot[1:]),
-        messages.joint_state(when, JOINTS[:1], D[:1], D_dot[:1]),
+        message_codec.joint_state(when, CYLINDERS, D[1:], D_dot[1:]),
+        message_codec.joint_state(when, JOINTS[:1], D[:1], D_dot[:1]),
     )
 
 
@@ -184,7 +184,7 @@ class TestForwardNode:
             cylinders, swing = state_messages(when, D, D_dot)
             forward.swing.publish(swing)
             forward.cylinders.publish(cylinders)
-            expected[messages.stamp_ns(when)] = (D, D_dot, EXC.state(D, D_dot, a))
+            expected[message_codec.stamp_ns(when)] = (D, D_dot, EXC.state(D, D_dot, a))
         forward.probe.wait_until(
             lambda: (
                 all(forward.pose.stamped(s) and forward.joints.stamped(s) for s in expected)
@@ -246,12 +246,12 @@ class TestForwardNode:
             ),
             (
                 "names",
-                lambda D: (messages.joint_state(stamp(0), ["boom_cylinder"], [2.5], [0.0]), None),
+                lambda D: (message_codec.joint_state(stamp(0), ["boom_cylinder"], [2.5], [0.0]), None),
                 "missing from the message",
             ),
             (
                 "no rates",
-                lambda D: (messages.joint_state(stamp(0), CYLINDERS, D[1:]), None),
+                lambda D: (message_codec.joint_state(stamp(0), CYLINDERS, D[1:]), None),
                 "no velocity values",
             ),
             (
@@ -269,8 +269,14 @@ class TestForwardNode:
     def test_forward_rejects_bad_input_and_keeps_serving(
         self, forward: Forward, name: str, make: Callable, reason: str
     ) -> None:
-        base = {"nan": 1_100, "stroke": 1_200, "names": 1_300, "no rates": 1_400, "stale swing": 1_500,
-                "not cdr": 1_600}[name]
+        base = {
+            "nan": 1_100,
+            "stroke": 1_200,
+            "names": 1_300,
+            "no rates": 1_400,
+            "stale swing": 1_500,
+            "not cdr": 1_600,
+        }[name]
         primed_ns = base * 1_000_000_000
         # The stale case comes 0.5 s after the swing state (swing_max_age 0.1 s), the others 1 ms.
         bad_ns = primed_ns + (500_000_000 if name == "stale swing" else 1_000_000)
@@ -325,14 +331,14 @@ class VelocityIk:
         self.cylinders.publish(cylinders)
         # A state counts once the tick before it had the same D: the swing of either tick is then right.
         if self.previous is not None and np.array_equal(self.previous, self.D):
-            self.states[messages.stamp_ns(now)] = self.D.copy()
+            self.states[message_codec.stamp_ns(now)] = self.D.copy()
         self.previous = self.D.copy()
 
     def send(self, linear: np.ndarray, angular: np.ndarray, frame: str = "base_link") -> int:
         """Publish a target twist with a unique stamp; returns the stamp (ns)."""
         self.next_ns += 1_000_000
         self.sent_at = self.probe.node.get_clock().now().nanoseconds  # the node receives it later
-        self.target.publish(messages.bucket_twist(stamp(self.next_ns), frame, linear, angular))
+        self.target.publish(message_codec.bucket_twist(stamp(self.next_ns), frame, linear, angular))
         return self.next_ns
 
     def command(self, D: np.ndarray, linear: np.ndarray, angular: np.ndarray) -> np.ndarray:
@@ -347,7 +353,7 @@ class VelocityIk:
             return [
                 m
                 for m in self.commands.messages[after:]
-                if np.array_equal(self.states.get(messages.stamp_ns(m.header.stamp), np.nan), D)
+                if np.array_equal(self.states.get(message_codec.stamp_ns(m.header.stamp), np.nan), D)
             ]
 
         deadline = time.monotonic() + 10.0
@@ -588,7 +594,7 @@ class TestClosedLoop:
 
         def drive(msg: PoseStamped) -> None:
             # The reference is taken at the pose's stamp, so delivery delays do not look like errors.
-            measured_ns = messages.stamp_ns(msg.header.stamp)
+            measured_ns = message_codec.stamp_ns(msg.header.stamp)
             if not started:
                 started.append(measured_ns)
             poses.append(msg)
@@ -600,7 +606,9 @@ class TestClosedLoop:
             tip = vec(msg.pose.position)
             q_dot = follow(reference, rate, np.r_[tip, alpha], gain=4.0)
             target.publish(
-                messages.bucket_twist(msg.header.stamp, "base_link", *twist_from_q_dot(theta1, tip, q_dot))
+                message_codec.bucket_twist(
+                    msg.header.stamp, "base_link", *twist_from_q_dot(theta1, tip, q_dot)
+                )
             )
 
         # Depth 1: a controller wants the latest pose, never a backlog.
@@ -609,7 +617,7 @@ class TestClosedLoop:
         probe.wait_until(lambda: bool(started), 20.0, "bucket_pose from the loop")
         duration = LINE_LENGTH / LINE_SPEED
         probe.wait_until(
-            lambda: (messages.stamp_ns(poses[-1].header.stamp) - started[0]) * 1e-9 > duration + 0.5,
+            lambda: (message_codec.stamp_ns(poses[-1].header.stamp) - started[0]) * 1e-9 > duration + 0.5,
             duration + 10.0,
             "the line to be driven",
         )
@@ -673,7 +681,7 @@ class TestLineAtStrokeEnds:
         def send() -> None:
             if linear:
                 when = n.get_clock().now().to_msg()
-                target.publish(messages.bucket_twist(when, "base_link", linear[0], np.zeros(3)))
+                target.publish(message_codec.bucket_twist(when, "base_link", linear[0], np.zeros(3)))
 
         n.create_timer(0.02, send)
         wait_connected(probe, [target], [poses, statuses])
@@ -692,17 +700,26 @@ class TestLineAtStrokeEnds:
                 moving = next((i for i, t in enumerate(texts) if not t.startswith("stopped")), None)
                 if moving is None:
                     return None
-                return next((statuses.messages[after + i] for i, t in enumerate(texts) if i > moving
-                             and "at its stroke end" in t), None)
+                return next(
+                    (
+                        statuses.messages[after + i]
+                        for i, t in enumerate(texts)
+                        if i > moving and "at its stroke end" in t
+                    ),
+                    None,
+                )
 
             probe.wait_until(lambda: stop() is not None, 20.0, f"the stopped status of the leg {leg}")
             # By stamps, not by arrival: on a loaded machine the poses reach the probe 0.1 s after the
             # status. The status has the stamp of the state the stop was decided at; the sim (100 Hz)
             # gets the zero rates within 5 of its steps.
-            settled = messages.stamp_ns(stop().header.stamp) + 50_000_000
+            settled = message_codec.stamp_ns(stop().header.stamp) + 50_000_000
             later = settled + 500_000_000
-            probe.wait_until(lambda t=later: messages.stamp_ns(poses.messages[-1].header.stamp) > t, 5.0,
-                             "0.5 s more poses")
+            probe.wait_until(
+                lambda t=later: message_codec.stamp_ns(poses.messages[-1].header.stamp) > t,
+                5.0,
+                "0.5 s more poses",
+            )
             tips = np.array([vec(m.pose.position) for m in poses.messages[first_pose:]])
             u = np.array(leg) / np.linalg.norm(leg)
             offsets = tips - start_tip
@@ -712,8 +729,13 @@ class TestLineAtStrokeEnds:
             assert along.max() > (4.0 if gives_way else 3.0) if number == 0 else along.max() > 0.1, (
                 f"leg {leg}: only {along.max():.3f} m along the line"
             )
-            after = np.array([vec(m.pose.position) for m in poses.messages[first_pose:]
-                              if messages.stamp_ns(m.header.stamp) >= settled])
+            after = np.array(
+                [
+                    vec(m.pose.position)
+                    for m in poses.messages[first_pose:]
+                    if message_codec.stamp_ns(m.header.stamp) >= settled
+                ]
+            )
             assert len(after) >= 40 and np.abs(after - after[0]).max() <= 1e-3  # stopped for good
             last = statuses.messages[-1].status[0]
             assert last.level == DiagnosticStatus.WARN and "at its stroke end" in last.message, last.message
@@ -723,7 +745,11 @@ class TestLineAtStrokeEnds:
         linear.clear()
         probe.wait_until(lambda: statuses.messages[-1].status[0].message.startswith("idle"), 5.0, "idle")
         assert all(np.all(np.isfinite(m.velocity)) for m in commands.messages)
-        assert all(np.isfinite(float(v.value)) for m in statuses.messages for v in m.status[0].values
-                   if v.key == "scale")
+        assert all(
+            np.isfinite(float(v.value))
+            for m in statuses.messages
+            for v in m.status[0].values
+            if v.key == "scale"
+        )
         assert any("bucket angle gives way" in m.status[0].message for m in statuses.messages) == gives_way
         assert all(p.alive() for p in processes)

@@ -1,6 +1,7 @@
 """Excavator plan_path (excavator_kinematics.path): straight tip lines at a constant bucket angle,
 timed within every actuator's max speed, the tip speed and the acceleration bound; a path that
 leaves the workspace ends at the farthest reachable point."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -56,15 +57,19 @@ def test_straight_lines_at_the_seed_angle_within_every_limit(tip_speed: float, a
         assert (timing.active == TIP_SPEED).sum() > 100
     # Velocities and accelerations are the time derivatives of the positions (finite differences).
     dt = np.diff(timing.t)
-    np.testing.assert_allclose(np.diff(timing.q, axis=0) / dt[:, None],
-                               0.5 * (timing.qd[1:] + timing.qd[:-1]), atol=2e-3)
+    np.testing.assert_allclose(
+        np.diff(timing.q, axis=0) / dt[:, None], 0.5 * (timing.qd[1:] + timing.qd[:-1]), atol=2e-3
+    )
     # At a corner the path is at rest and the acceleration jumps (braking -> starting): the
     # intervals next to it are left out of the acceleration check.
     corner = np.flatnonzero(timing.speed[1:-1] == 0.0) + 1
     assert len(corner) == 2  # the two corners of the three lines
     smooth = ~np.isin(np.arange(len(dt)), np.concatenate((corner - 1, corner)))
-    np.testing.assert_allclose((np.diff(timing.qd, axis=0) / dt[:, None])[smooth],
-                               (0.5 * (timing.qdd[1:] + timing.qdd[:-1]))[smooth], atol=0.05 * acceleration)
+    np.testing.assert_allclose(
+        (np.diff(timing.qd, axis=0) / dt[:, None])[smooth],
+        (0.5 * (timing.qdd[1:] + timing.qdd[:-1]))[smooth],
+        atol=0.05 * acceleration,
+    )
     # Tip velocity along the line = the timed speed (JC0 Ddot, eq. 8), to the O(step^2) of the
     # sampled path derivative (2e-6 m/s measured at 0.02 m).
     tip = EXC.state(timing.q, timing.qd).Q_dot[:, :3]

@@ -8,7 +8,7 @@ import pytest
 from excavator_kinematics.kinematics import Excavator
 from excavator_kinematics.plant import Plant
 from excavator_kinematics.state_input import InputError, RateDifferentiator, SwingHold
-from manipulator_kinematics.params import ConfigError
+from manipulator_kinematics.param_files import ConfigError
 
 LIMITS = Excavator.default().limits
 REF = LIMITS.reference

@@ -149,8 +149,9 @@ def test_stroke_scale() -> None:
     assert beyond == 0.0  # already beyond an end: never further out
     back, _ = stroke_scale(outside, np.array([0.0, -0.3, 0.3, 0.0]), lower, upper, 0.1)
     assert back == 1.0  # but back inside
-    near, _ = stroke_scale(np.array([0.0, 2.0 - 0.9 * END_ZONE, 1.5, 1.5]), np.array([0.0, 1e-6, 0.0, 0.0]),
-                           lower, upper, 0.1)
+    near, _ = stroke_scale(
+        np.array([0.0, 2.0 - 0.9 * END_ZONE, 1.5, 1.5]), np.array([0.0, 1e-6, 0.0, 0.0]), lower, upper, 0.1
+    )
     assert near == 0.0  # within END_ZONE of the end counts as at it: the approach ends
     free, clamped = stroke_scale(d, rates, np.full(4, -np.inf), np.full(4, np.inf), 0.1)
     assert free == 1.0 and not clamped.any()
@@ -189,7 +190,8 @@ def test_stroke_end_stops_the_whole_command_in_its_direction() -> None:
     assert cmd.clamped.tolist() == [False, True, False, False] and cmd.speed_scale == 1.0
     assert (cmd.limit, cmd.actuator) == (STROKE, 1)
     assert describe(cmd, ACTUATORS) == (
-        "stopped", "stopped: boom_cylinder at its stroke end, the target direction cannot be continued"
+        "stopped",
+        "stopped: boom_cylinder at its stroke end, the target direction cannot be continued",
     )
     D[1] = LIMITS.stroke_max[0] - 0.002  # 2 mm before the end: 0.05 m/s would take 0.04 s < 0.1 s
     cmd = rate_command(EXC.jc0(D), D, EXC.jc0(D) @ wanted, LIMITS, 50.0, 0.1)
@@ -309,8 +311,14 @@ def test_a_direction_a_singular_jacobian_cannot_give_stops() -> None:
 
 # The table (constant linear target twist from the reference state), plus a slow oblique one
 # that stays inside the stroke box for a while and a fast sideways one (swing at its speed limit).
-LINES = [(2.0, 0.0, 0.0), (0.0, 0.0, -1.0), (0.0, 0.0, 1.0), (-1.0, 0.0, 0.0), (0.3, 0.3, -0.3),
-         (0.0, 3.0, 0.0)]
+LINES = [
+    (2.0, 0.0, 0.0),
+    (0.0, 0.0, -1.0),
+    (0.0, 0.0, 1.0),
+    (-1.0, 0.0, 0.0),
+    (0.3, 0.3, -0.3),
+    (0.0, 3.0, 0.0),
+]
 
 
 def drive(linear: tuple[float, ...], gives_way: bool, seconds: float = 12.0, dt: float = 0.01):
@@ -358,7 +366,7 @@ def test_the_tip_keeps_the_commanded_line_past_the_stroke_ends(linear: tuple[flo
     assert "stopped" in states
     first = states.index("stopped")
     assert set(states[first:]) == {"stopped"}  # stopped for good: no creeping on in another direction
-    assert np.all(tips[first + 1:] == tips[first + 1]) and np.all(commands[-1].d_dot == 0.0)
+    assert np.all(tips[first + 1 :] == tips[first + 1]) and np.all(commands[-1].d_dot == 0.0)
 
 
 @pytest.mark.parametrize("linear", LINES[:4])
@@ -382,8 +390,9 @@ def test_the_way_back_to_the_line() -> None:
     start, q_dot = np.array([1.0, 0.0, 1.0, -2.0]), np.array([2.0, 0.0, 0.0, 1.0])
     Q = np.array([1.5, 0.01, 0.98, -2.0 + 0.25 + 0.02])  # 0.5 m along: the angle should be -1.75
     np.testing.assert_allclose(toward_line(start, q_dot, Q, 2.0), [0.0, -0.02, 0.04, -0.04], atol=1e-15)
-    np.testing.assert_allclose(toward_line(start, q_dot, Q, 2.0, hold_angle=False), [0.0, -0.02, 0.04, 0.0],
-                               atol=1e-15)
+    np.testing.assert_allclose(
+        toward_line(start, q_dot, Q, 2.0, hold_angle=False), [0.0, -0.02, 0.04, 0.0], atol=1e-15
+    )
     assert toward_line(start, q_dot, Q + [0.0, 0.06, 0.0, 0.0], 2.0) is None  # moved, not drifted
     np.testing.assert_allclose(toward_line(start, q_dot, start + q_dot * 0.3, 2.0), 0.0, atol=1e-15)
     np.testing.assert_array_equal(toward_line(start, np.array([0.0, 0.0, 0.0, 1.0]), Q, 2.0), 0.0)

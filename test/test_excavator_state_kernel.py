@@ -43,17 +43,17 @@ def test_kernel_equals_numpy_over_random_states_in_and_out_of_the_limits(monkeyp
     refused = 0
     for i in range(N):
         try:  # the numpy path on a batch of one
-            reference = EXC.state(D[i:i + 1], rates[i:i + 1], accelerations[i:i + 1])
+            reference = EXC.state(D[i : i + 1], rates[i : i + 1], accelerations[i : i + 1])
         except StrokeError:
             reference = None
         try:
-            pose = EXC.pose(D[i:i + 1])[0]
+            pose = EXC.pose(D[i : i + 1])[0]
         except StrokeError:
             pose = None
         assert kernel.state(EXC._packed, D[i], rates[i], accelerations[i], table) == (reference is not None)
         assert kernel.pose(EXC._packed, D[i], Q) == kernel.jc0(EXC._packed, D[i], jc0) == (pose is not None)
         if pose is not None:
-            assert _close(Q, pose) and _close(jc0, EXC.jc0(D[i:i + 1])[0]), D[i]
+            assert _close(Q, pose) and _close(jc0, EXC.jc0(D[i : i + 1])[0]), D[i]
         if reference is None:
             refused += 1
             continue
@@ -140,14 +140,16 @@ def test_the_single_call_returns_the_kernel_result_and_refuses_as_the_numpy_path
     strided = np.tile(D, (2, 1)).T.copy().T[0]
     assert not strided.flags.c_contiguous
     np.testing.assert_allclose(EXC.pose(strided), EXC.pose(D), rtol=1e-12)
-    np.testing.assert_allclose(EXC.state(D, np.tile(V, (2, 1)).T.copy().T[0]).Q_dot, EXC.state(D, V).Q_dot,
-                               rtol=1e-12)
+    np.testing.assert_allclose(
+        EXC.state(D, np.tile(V, (2, 1)).T.copy().T[0]).Q_dot, EXC.state(D, V).Q_dot, rtol=1e-12
+    )
     assert [len(f.signatures) for f in (kernel.state, kernel.pose, kernel.jc0)] == [1, 1, 1]
 
 
 @pytest.mark.parametrize("path", ["kernel", "numpy"])
-def test_the_record_reads_like_a_named_tuple_from_a_new_table_per_call(monkeypatch: pytest.MonkeyPatch,
-                                                                       path: str):
+def test_the_record_reads_like_a_named_tuple_from_a_new_table_per_call(
+    monkeypatch: pytest.MonkeyPatch, path: str
+):
     """BucketState of one state, a batch in the kernel's loop and one on numpy: by name = by
     position = unpacked, the shapes, JC0's axes (Qdot = JC0 Ddot, eq. 8), Q = the pose, theta =
     the joint angles, and a call leaves the fields of the one before alone (a table of its own)."""

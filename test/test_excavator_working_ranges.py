@@ -76,9 +76,11 @@ def test_states_attain_their_values(ranges: WorkingRanges, table: dict) -> None:
 def test_ground_moves_with_base_height(ranges: WorkingRanges, table: dict) -> None:
     raised = WorkingRanges(ranges.model, ranges.base_height + 0.5)
     assert raised.optimum("max_cutting_height").value == pytest.approx(
-        table["max_cutting_height"]["optimum"].value + 0.5, abs=1e-9)
+        table["max_cutting_height"]["optimum"].value + 0.5, abs=1e-9
+    )
     assert raised.optimum("max_digging_depth").value == pytest.approx(
-        table["max_digging_depth"]["optimum"].value - 0.5, abs=1e-9)
+        table["max_digging_depth"]["optimum"].value - 0.5, abs=1e-9
+    )
 
 
 def test_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -29,7 +29,7 @@ from manipulator_kinematics.bag.evaluate import load_setup
 from manipulator_kinematics.bag.reader import MAX_BAG_BYTES, BagReader
 from manipulator_kinematics.bag.types import BagError
 from manipulator_kinematics.node_util import console_script
-from manipulator_kinematics.params import MAX_DEPTH, ConfigError, check_ros_arguments, config_path
+from manipulator_kinematics.param_files import MAX_DEPTH, ConfigError, check_ros_arguments, config_path
 from manipulator_kinematics.registry import machine
 from manipulator_kinematics_interfaces.srv import SolveFK, SolveIK
 from pump_boom_kinematics import build_regions
@@ -41,9 +41,32 @@ HERE = Path(__file__).resolve().parent
 READ_LIMIT = 5.0
 MUTATIONS = 60
 #: Tokens spliced into the shipped files by the mutations.
-TOKENS = [b"&a ", b"*a", b"!!python/object/apply:os.system ['true'] ", b"\t", b"\xff\xfe", b"[" * 40,
-          b"{", b": ", b"\x00", b"1e999", b"- ", b"? ", b"!!binary aGk= ", b"2001-13-45", b"9" * 5000,
-          b"---\n", b"'", b'"', b"\n  ", b"<<: {a: 1}", b"nan", b"-.inf", b"~", b"!x "]
+TOKENS = [
+    b"&a ",
+    b"*a",
+    b"!!python/object/apply:os.system ['true'] ",
+    b"\t",
+    b"\xff\xfe",
+    b"[" * 40,
+    b"{",
+    b": ",
+    b"\x00",
+    b"1e999",
+    b"- ",
+    b"? ",
+    b"!!binary aGk= ",
+    b"2001-13-45",
+    b"9" * 5000,
+    b"---\n",
+    b"'",
+    b'"',
+    b"\n  ",
+    b"<<: {a: 1}",
+    b"nan",
+    b"-.inf",
+    b"~",
+    b"!x ",
+]
 
 
 def alias_bomb() -> bytes:
@@ -107,13 +130,14 @@ def mutations(text: bytes, count: int, seed: int) -> Iterator[bytes]:
             else:
                 lines = bytes(data).split(b"\n")
                 k = int(rng.integers(len(lines)))
-                lines[k:k + 1] = [lines[k]] * 2 if kind == 3 else []
+                lines[k : k + 1] = [lines[k]] * 2 if kind == 3 else []
                 data = bytearray(b"\n".join(lines))
         yield bytes(data)
 
 
-def cases(seeds: dict[str, bytes | Callable[[Path], Path]], shipped: bytes, directory: Path,
-          seed: int) -> Iterator[tuple[str, Path]]:
+def cases(
+    seeds: dict[str, bytes | Callable[[Path], Path]], shipped: bytes, directory: Path, seed: int
+) -> Iterator[tuple[str, Path]]:
     for name, seed_input in seeds.items():
         if callable(seed_input):
             yield name, seed_input(directory)
@@ -127,8 +151,9 @@ def cases(seeds: dict[str, bytes | Callable[[Path], Path]], shipped: bytes, dire
         yield f"mutation {k}", path
 
 
-def read_or_refuse(name: str, path: Path, read: Callable[[], object], errors: tuple[type, ...],
-                   names_file: bool = True) -> str | None:
+def read_or_refuse(
+    name: str, path: Path, read: Callable[[], object], errors: tuple[type, ...], names_file: bool = True
+) -> str | None:
     """Run ``read``: it returns, or raises one of ``errors`` with one line (naming the file unless
     not ``names_file``: a machine's validation names the key), within READ_LIMIT, warning nothing;
     the line (None if it read)."""
@@ -154,20 +179,31 @@ def test_yaml_seeds_are_refused_by_their_reason(tmp_path: Path) -> None:
         "alias_in_params": "/**: scara.l1 (line 4): anchor &a",
         "python_tag": "tag 'tag:yaml.org,2002:python/object/apply:os.system'",
         "deep_nesting": f"nested deeper than the {MAX_DEPTH} levels",
-        "deep_mapping": f"nested deeper than the {MAX_DEPTH} levels", "tabs": "not valid YAML (line 2)",
-        "not_utf8": "not UTF-8 text (byte 46)", "utf16": "not UTF-8 text (byte 0)",
+        "deep_mapping": f"nested deeper than the {MAX_DEPTH} levels",
+        "tabs": "not valid YAML (line 2)",
+        "not_utf8": "not UTF-8 text (byte 46)",
+        "utf16": "not UTF-8 text (byte 0)",
         "long_list": "/**: scara.l1 (line 4): more than the 10000 items",
-        "wide_mapping": "line 1: more than the 10000 items", "huge_int": "a value cannot be read",
+        "wide_mapping": "line 1: more than the 10000 items",
+        "huge_int": "a value cannot be read",
         "bad_date": "a value cannot be read: month must be in 1..12",
         "two_documents": "not valid YAML (line 2)",
-        "nul": "not valid YAML", "garbage": "not UTF-8 text", "fifo": "a FIFO, not a regular file",
-        "dev_zero": "a character device, not a regular file", "directory": "a directory, not a regular file",
-        "missing": "No such file or directory", "over_4_mib": "5.0 MiB, more than the 4 MiB",
+        "nul": "not valid YAML",
+        "garbage": "not UTF-8 text",
+        "fifo": "a FIFO, not a regular file",
+        "dev_zero": "a character device, not a regular file",
+        "directory": "a directory, not a regular file",
+        "missing": "No such file or directory",
+        "over_4_mib": "5.0 MiB, more than the 4 MiB",
     }
     for name, path in cases(YAML_SEEDS, b"", tmp_path, 0):
         if name in reasons:
-            line = read_or_refuse(name, path, lambda p=path: check_ros_arguments(
-                ["exe", "--ros-args", "--params-file", str(p)]), (ConfigError,))
+            line = read_or_refuse(
+                name,
+                path,
+                lambda p=path: check_ros_arguments(["exe", "--ros-args", "--params-file", str(p)]),
+                (ConfigError,),
+            )
             assert line is not None and reasons[name] in line, (name, line)
 
 
@@ -178,8 +214,12 @@ def test_fuzzed_params_and_machine_files_are_read_or_refused_in_one_line(tmp_pat
     kind = machine(name)
     shipped = config_path(kind.config_file).read_bytes()
     for case, path in cases(YAML_SEEDS, shipped, tmp_path, hash(name) % 1000):
-        read_or_refuse(case, path, lambda p=path: check_ros_arguments(
-            ["exe", "--ros-args", "--params-file", str(p)]), (ConfigError,))
+        read_or_refuse(
+            case,
+            path,
+            lambda p=path: check_ros_arguments(["exe", "--ros-args", "--params-file", str(p)]),
+            (ConfigError,),
+        )
         read_or_refuse(case, path, lambda p=path: kind.model(p), (ConfigError,), names_file=False)
         read_or_refuse(case, path, lambda p=path: load_setup([p]), (BagError,), names_file=False)
 
@@ -190,8 +230,9 @@ def test_fuzzed_region_tables_are_read_or_refused_in_one_line(tmp_path: Path, ca
     shipped = config_path("pump_boom_regions.yaml").read_bytes()
     lines = 0
     for case, path in cases(YAML_SEEDS, shipped, tmp_path, 29):
-        if read_or_refuse(case, path, lambda p=path: RegionTable.load(p, boom.table_key()), (ConfigError,),
-                          names_file=False):
+        if read_or_refuse(
+            case, path, lambda p=path: RegionTable.load(p, boom.table_key()), (ConfigError,), names_file=False
+        ):
             lines += 1
             code = build_regions.main(["--list", "--output", str(path)])
             err = capsys.readouterr().err
@@ -199,32 +240,42 @@ def test_fuzzed_region_tables_are_read_or_refused_in_one_line(tmp_path: Path, ca
     assert lines >= len(YAML_SEEDS)
 
 
-def landxml(points: list[tuple[float, float, float]], faces: list[tuple[int, int, int]],
-            head: str = "") -> str:
+def landxml(
+    points: list[tuple[float, float, float]], faces: list[tuple[int, int, int]], head: str = ""
+) -> str:
     """A LandXML TIN (x, y, z points; 1-based faces), written by hand: Tin refuses these."""
     p = "".join(f'<P id="{i + 1}">{y} {x} {z}</P>' for i, (x, y, z) in enumerate(points))
     f = "".join(f"<F>{a} {b} {c}</F>" for a, b, c in faces)
-    return (f'<?xml version="1.0"?>{head}<LandXML xmlns="http://www.landxml.org/schema/LandXML-1.2">'
-            f'<Surfaces><Surface name="Ditch design"><Definition surfType="TIN"><Pnts>{p}</Pnts>'
-            f"<Faces>{f}</Faces></Definition></Surface></Surfaces></LandXML>")
+    return (
+        f'<?xml version="1.0"?>{head}<LandXML xmlns="http://www.landxml.org/schema/LandXML-1.2">'
+        f'<Surfaces><Surface name="Ditch design"><Definition surfType="TIN"><Pnts>{p}</Pnts>'
+        f"<Faces>{f}</Faces></Definition></Surface></Surfaces></LandXML>"
+    )
 
 
 SQUARE = [(0.0, 0.0, 0.0), (10.0, 0.0, 0.0), (10.0, 10.0, 0.0), (0.0, 10.0, 0.0)]
-LAUGHS = ('<!DOCTYPE l [<!ENTITY b0 "aaaaaaaaaa">'
-          + "".join(f'<!ENTITY b{i} "{f"&b{i - 1};" * 10}">' for i in range(1, 10)) + "]>")
+LAUGHS = (
+    '<!DOCTYPE l [<!ENTITY b0 "aaaaaaaaaa">'
+    + "".join(f'<!ENTITY b{i} "{f"&b{i - 1};" * 10}">' for i in range(1, 10))
+    + "]>"
+)
 LANDXML_SEEDS: dict[str, bytes | Callable[[Path], Path]] = {
     "duplicate_face": landxml(SQUARE, [(1, 2, 3), (1, 3, 4), (1, 2, 3)]).encode(),
     "reversed_duplicate": landxml(SQUARE, [(1, 2, 3), (1, 3, 4), (3, 2, 1)]).encode(),
     "fold": landxml([*SQUARE, (5.0, 2.0, 0.0)], [(1, 2, 3), (1, 3, 4), (1, 2, 5)]).encode(),
-    "crossing": landxml([(0, 0, 0), (10, 0, 0), (5, 9, 0), (0, 6, 1), (10, 6, 1), (5, -3, 1)],
-                        [(1, 2, 3), (4, 5, 6)]).encode(),
+    "crossing": landxml(
+        [(0, 0, 0), (10, 0, 0), (5, 9, 0), (0, 6, 1), (10, 6, 1), (5, -3, 1)], [(1, 2, 3), (4, 5, 6)]
+    ).encode(),
     "coordinates_1e300": landxml([(0, 0, 0), (1e300, 0, 0), (0, 1e300, 0)], [(1, 2, 3)]).encode(),
     "elevation_1e300": landxml([(0, 0, 0), (1, 0, 1e300), (0, 1, 0)], [(1, 2, 3)]).encode(),
     "billion_laughs": landxml(SQUARE, [(1, 2, 3)], LAUGHS).replace('"Ditch design"', '"&b9;"').encode(),
     "external_entity": landxml(SQUARE, [(1, 2, 3)], '<!DOCTYPE l [<!ENTITY x SYSTEM "file:///etc/passwd">]>')
-    .replace('"Ditch design"', '"&x;"').encode(),
-    "too_many_elements": ('<LandXML><Surfaces><Surface name="Ditch design"><Definition surfType="TIN"><Faces>'
-                          + "<F>1 2 3</F>" * (MAX_ELEMENTS + 1)).encode(),
+    .replace('"Ditch design"', '"&x;"')
+    .encode(),
+    "too_many_elements": (
+        '<LandXML><Surfaces><Surface name="Ditch design"><Definition surfType="TIN"><Faces>'
+        + "<F>1 2 3</F>" * (MAX_ELEMENTS + 1)
+    ).encode(),
     "not_xml": b"/**:\n  ros__parameters: {}\n",
     "fifo": lambda d: (os.mkfifo(d / "fifo.xml"), d / "fifo.xml")[1],
     "dev_zero": lambda d: Path("/dev/zero"),
@@ -241,11 +292,14 @@ def test_fuzzed_design_surfaces_are_read_or_refused_in_one_line(tmp_path: Path) 
         "crossing": "faces overlap in plan view (edges of two faces cross)",
         "coordinates_1e300": "vertex 1 at [1e+300, 0.0, 0.0] m is no place on a site",
         "elevation_1e300": "vertex 1 at [1.0, 0.0, 1e+300] m is no place on a site",
-        "billion_laughs": "cannot read a LandXML file", "external_entity": "reference to external entity",
+        "billion_laughs": "cannot read a LandXML file",
+        "external_entity": "reference to external entity",
         "too_many_elements": f"more than the {MAX_ELEMENTS} XML elements",
         "not_xml": "cannot read a LandXML file",
-        "fifo": "a FIFO, not a regular file", "dev_zero": "a character device, not a regular file",
-        "directory": "a directory, not a regular file", "over_32_mib": "33.0 MiB, more than the 32 MiB",
+        "fifo": "a FIFO, not a regular file",
+        "dev_zero": "a character device, not a regular file",
+        "directory": "a directory, not a regular file",
+        "over_32_mib": "33.0 MiB, more than the 32 MiB",
     }
     shipped = (HERE / "data" / "landxml" / "ditch.xml").read_bytes()
     for case, path in cases(LANDXML_SEEDS, shipped, tmp_path, 5):
@@ -278,8 +332,20 @@ def one_line(command: list[str], code: int = 2) -> str:
     return result.stderr
 
 
-@pytest.mark.parametrize("seed", ["missing", "directory", "tabs", "not_utf8", "python_tag", "deep_nesting",
-                                  "alias_bomb", "fifo", "dev_zero"])
+@pytest.mark.parametrize(
+    "seed",
+    [
+        "missing",
+        "directory",
+        "tabs",
+        "not_utf8",
+        "python_tag",
+        "deep_nesting",
+        "alias_bomb",
+        "fifo",
+        "dev_zero",
+    ],
+)
 def test_mk_urdf_refuses_a_bad_params_file_in_one_line(tmp_path: Path, seed: str) -> None:
     path = next(p for name, p in cases({seed: YAML_SEEDS[seed]}, b"", tmp_path, 0) if name == seed)
     assert str(path) in one_line([console_script("mk_urdf"), "scara", "--params-file", str(path)])
@@ -289,8 +355,17 @@ def test_mk_urdf_refuses_a_bad_params_file_in_one_line(tmp_path: Path, seed: str
 def test_mk_evaluate_refuses_a_bad_params_file_in_one_line(tmp_path: Path, seed: str) -> None:
     path = tmp_path / "params.yaml"
     path.write_bytes(YAML_SEEDS[seed])
-    line = one_line([console_script("mk_evaluate"), str(HERE / "data" / "scara_forward_golden"),
-                     "--params", str(path), "--output", str(tmp_path / "out")], code=1)
+    line = one_line(
+        [
+            console_script("mk_evaluate"),
+            str(HERE / "data" / "scara_forward_golden"),
+            "--params",
+            str(path),
+            "--output",
+            str(tmp_path / "out"),
+        ],
+        code=1,
+    )
     assert str(path) in line, line
 
 
@@ -312,9 +387,14 @@ def test_pump_boom_ik_server_given_a_table_that_is_not_yaml_serves_fk(tmp_path: 
     serves, IK answers failure with that reason (kinematics.PumpBoom.table)."""
     table = tmp_path / "table.yaml"
     table.write_bytes(b"\x89PNG\r\n\x1a\n not a table")
-    process, (ik, fk) = start_with_services(probe, "pump_boom_ik_server", "-p",
-                                            f"pump_boom.regions.table_file:={table}", services=IK_FK,
-                                            timeout=20.0)
+    process, (ik, fk) = start_with_services(
+        probe,
+        "pump_boom_ik_server",
+        "-p",
+        f"pump_boom.regions.table_file:={table}",
+        services=IK_FK,
+        timeout=20.0,
+    )
     try:
         request = SolveIK.Request()
         request.target.pose.position.x, request.target.pose.position.z = 20.0, 17.5

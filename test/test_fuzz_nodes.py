@@ -47,14 +47,14 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import Header
 
-from excavator_kinematics import messages
-from excavator_kinematics.display import DesignPlane
+from excavator_kinematics import message_codec
+from excavator_kinematics.display_outputs import DesignPlane
 from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator, bucket_angular_velocity
 from excavator_kinematics.plant import Plant
 from excavator_kinematics.rate_command import rate_command
 from excavator_kinematics.twist import split_twist
 from manipulator_kinematics.model import RequestError, matrix_quaternion
-from manipulator_kinematics.params import config_path, load_parameters
+from manipulator_kinematics.param_files import config_path, load_parameters
 from manipulator_kinematics.registry import machine
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
 from manipulator_kinematics_interfaces.srv import PlanPath, SolveFK, SolveIK
@@ -108,8 +108,9 @@ class Outputs:
         return sum(not all_finite(m) for ms in self.messages.values() for m in ms)
 
 
-def start(exe: str, namespace: str, tmp: Path, params: tuple[str, ...] = (),
-          **settings: object) -> NodeProcess:
+def start(
+    exe: str, namespace: str, tmp: Path, params: tuple[str, ...] = (), **settings: object
+) -> NodeProcess:
     """``exe`` in ``namespace`` with the package's params files and ``settings`` for the node."""
     args = [a for p in params for a in ("--params-file", p)]
     if settings:
@@ -141,28 +142,73 @@ def nodes(tmp: Path) -> Iterator[dict[str, NodeProcess]]:
     started = {
         # Reliable inputs (the default is best_effort): each burst is checked to arrive whole, and
         # the empty-payload limit pinned below is one of reliable readers.
-        "excavator_forward": start("excavator_forward", "/fz_fwd", tmp, EXCAVATOR_PARAMS, qos_depth=400,
-                                   urdf_joint_states_rate=0.0, **FUZZ_SETTINGS,
-                                   grade=GRADE_SETTINGS, input_reliability="reliable"),
-        "excavator_velocity_ik": start("excavator_velocity_ik", "/fz_vik", tmp, EXCAVATOR_PARAMS,
-                                       input_queue_depth=400, command_timeout=30.0, state_timeout=30.0,
-                                       input_reliability="reliable", **FUZZ_SETTINGS),
-        "excavator_sim": start("excavator_sim", "/fz_sim", tmp, EXCAVATOR_PARAMS, input_queue_depth=400,
-                               rate=100.0, **FUZZ_SETTINGS),
+        "excavator_forward": start(
+            "excavator_forward",
+            "/fz_fwd",
+            tmp,
+            EXCAVATOR_PARAMS,
+            qos_depth=400,
+            urdf_joint_states_rate=0.0,
+            **FUZZ_SETTINGS,
+            grade=GRADE_SETTINGS,
+            input_reliability="reliable",
+        ),
+        "excavator_velocity_ik": start(
+            "excavator_velocity_ik",
+            "/fz_vik",
+            tmp,
+            EXCAVATOR_PARAMS,
+            input_queue_depth=400,
+            command_timeout=30.0,
+            state_timeout=30.0,
+            input_reliability="reliable",
+            **FUZZ_SETTINGS,
+        ),
+        "excavator_sim": start(
+            "excavator_sim",
+            "/fz_sim",
+            tmp,
+            EXCAVATOR_PARAMS,
+            input_queue_depth=400,
+            rate=100.0,
+            **FUZZ_SETTINGS,
+        ),
         "excavator_ik_server": start("excavator_ik_server", "/fz_eik", tmp, EXCAVATOR_PARAMS),
         # The IMU chain: the IMU node and a forward node with the level pose (reads machine_tilt).
-        "excavator_imu_state": start("excavator_imu_state", "/fz_imu", tmp, EXCAVATOR_PARAMS,
-                                     qos_depth=400, input_reliability="reliable", **FUZZ_SETTINGS),
-        "excavator_imu_forward": start("excavator_forward", "/fz_imu", tmp, EXCAVATOR_PARAMS,
-                                       qos_depth=400, input_reliability="reliable",
-                                       level={"enabled": True}, **FUZZ_SETTINGS),
-        "machine_markers": start("machine_markers", "/fz_mk", tmp, (str(config_path("scara.yaml")),),
-                                 qos_depth=400, input_reliability="reliable", **FUZZ_SETTINGS),
+        "excavator_imu_state": start(
+            "excavator_imu_state",
+            "/fz_imu",
+            tmp,
+            EXCAVATOR_PARAMS,
+            qos_depth=400,
+            input_reliability="reliable",
+            **FUZZ_SETTINGS,
+        ),
+        "excavator_imu_forward": start(
+            "excavator_forward",
+            "/fz_imu",
+            tmp,
+            EXCAVATOR_PARAMS,
+            qos_depth=400,
+            input_reliability="reliable",
+            level={"enabled": True},
+            **FUZZ_SETTINGS,
+        ),
+        "machine_markers": start(
+            "machine_markers",
+            "/fz_mk",
+            tmp,
+            (str(config_path("scara.yaml")),),
+            qos_depth=400,
+            input_reliability="reliable",
+            **FUZZ_SETTINGS,
+        ),
     }
     for name in SERIAL:
         params = (str(config_path(machine(name).config_file)),)
-        started[f"{name}_forward"] = start(f"{name}_forward", f"/fz_{name}", tmp, params, qos_depth=400,
-                                           input_reliability="reliable")
+        started[f"{name}_forward"] = start(
+            f"{name}_forward", f"/fz_{name}", tmp, params, qos_depth=400, input_reliability="reliable"
+        )
         started[f"{name}_ik_server"] = start(f"{name}_ik_server", f"/fz_{name}", tmp, params)
     yield started
     for process in started.values():
@@ -182,10 +228,12 @@ def until_logged(probe: Probe, process: NodeProcess, text: str, send) -> None:
 
 
 # ------------------------------------------------------------------------------ malformed input
-def joint_state(names, position=(), velocity=(), sec: int = 0, nanosec: int = 0,
-                frame: str = "") -> JointState:
-    msg = JointState(name=list(names), position=[float(v) for v in position],
-                     velocity=[float(v) for v in velocity])
+def joint_state(
+    names, position=(), velocity=(), sec: int = 0, nanosec: int = 0, frame: str = ""
+) -> JointState:
+    msg = JointState(
+        name=list(names), position=[float(v) for v in position], velocity=[float(v) for v in velocity]
+    )
     msg.header.stamp, msg.header.frame_id = Time(sec=sec, nanosec=nanosec), frame
     return msg
 
@@ -199,13 +247,19 @@ def extreme(rng: np.random.Generator, n: int, scale: np.ndarray | float) -> list
     return [float(v) for v in values]
 
 
-def bad_joint_states(rng: np.random.Generator, names: tuple[str, ...], lower: np.ndarray, upper: np.ndarray,
-                     rate_scale: np.ndarray | float, k: int) -> JointState:
+def bad_joint_states(
+    rng: np.random.Generator,
+    names: tuple[str, ...],
+    lower: np.ndarray,
+    upper: np.ndarray,
+    rate_scale: np.ndarray | float,
+    k: int,
+) -> JointState:
     """One malformed or extreme JointState of ``names`` (kind by ``k``)."""
     n = len(names)
     position = rng.uniform(lower, upper)
     velocity = rng.uniform(-1.0, 1.0, n) * rate_scale
-    sec = int(rng.integers(-2**31, 2**31)) if rng.random() < 0.2 else 1000 - k  # stamps going backwards
+    sec = int(rng.integers(-(2**31), 2**31)) if rng.random() < 0.2 else 1000 - k  # stamps going backwards
     kind = k % 9
     if kind == 0:
         position = extreme(rng, n, upper - lower)
@@ -224,8 +278,9 @@ def bad_joint_states(rng: np.random.Generator, names: tuple[str, ...], lower: np
         velocity = velocity[: rng.integers(0, n)]
     elif kind == 7:  # many names, now and then 5000
         extra = [f"j{i}" for i in range(5000 if k % 5 == 0 else int(rng.integers(10, 60)))]
-        return joint_state([*extra, *names], [0.0] * len(extra) + list(position),
-                           [0.0] * len(extra) + list(velocity), sec)
+        return joint_state(
+            [*extra, *names], [0.0] * len(extra) + list(position), [0.0] * len(extra) + list(velocity), sec
+        )
     else:  # plausible but fast: up to 100 x the speed limits, a stamp 1 ns after the previous one
         velocity = rng.uniform(-100.0, 100.0, n) * rate_scale
         return joint_state(names, position, velocity, 2000, int(k))
@@ -246,7 +301,7 @@ def bad_bytes(rng: np.random.Generator, valid: bytes, k: int) -> bytes:
             data[int(rng.integers(0, len(data)))] = int(rng.integers(0, 256))
     else:  # a length or count field (4-aligned) set to 0xFFFFFFFF
         pos = 4 + 4 * int(rng.integers(2, (len(data) - 4) // 4))
-        data[pos:pos + 4] = struct.pack("<I", 0xFFFFFFFF)
+        data[pos : pos + 4] = struct.pack("<I", 0xFFFFFFFF)
     return bytes(data)
 
 
@@ -257,9 +312,14 @@ def test_excavator_forward_survives_any_input(probe: Probe, nodes: dict[str, Nod
     node = probe.node
     cylinders = node.create_publisher(JointState, f"{ns}/cylinder_lengths", QOS)
     swing = node.create_publisher(JointState, f"{ns}/joint_states", QOS)
-    topics = {f"{ns}/bucket_pose": PoseStamped, f"{ns}/bucket_twist": TwistStamped,
-              f"{ns}/bucket_accel": AccelStamped, f"{ns}/open_chain_joint_states": JointState,
-              f"{ns}/urdf_joint_states": JointState, f"{ns}/grade_height": PointStamped}
+    topics = {
+        f"{ns}/bucket_pose": PoseStamped,
+        f"{ns}/bucket_twist": TwistStamped,
+        f"{ns}/bucket_accel": AccelStamped,
+        f"{ns}/open_chain_joint_states": JointState,
+        f"{ns}/urdf_joint_states": JointState,
+        f"{ns}/grade_height": PointStamped,
+    }
     out = Outputs(probe, topics)
     pose_topic = f"{ns}/bucket_pose"
     rng = np.random.default_rng(9001)
@@ -268,14 +328,23 @@ def test_excavator_forward_survives_any_input(probe: Probe, nodes: dict[str, Nod
     try:
         # Start-up first: the module's nodes all start at once, this test usually meets them first.
         probe.wait_until(lambda: "->" in process.log(), 4 * TIMEOUT, "start-up")
-        probe.wait_until(lambda: cylinders.get_subscription_count() > 0 and swing.get_subscription_count() > 0
-                         and all(node.count_publishers(t) > 0 for t in topics), TIMEOUT, "excavator_forward")
+        probe.wait_until(
+            lambda: (
+                cylinders.get_subscription_count() > 0
+                and swing.get_subscription_count() > 0
+                and all(node.count_publishers(t) > 0 for t in topics)
+            ),
+            TIMEOUT,
+            "excavator_forward",
+        )
 
         def marker(sec: int, D: np.ndarray, D_dot: np.ndarray) -> PoseStamped:
             """A valid swing + cylinder pair stamped ``sec``, re-sent until its pose is out (the two
             topics are not ordered with respect to each other)."""
-            pair = (joint_state(JOINTS[:1], D[:1], D_dot[:1], sec),
-                    joint_state(CYLINDERS, D[1:], D_dot[1:], sec))
+            pair = (
+                joint_state(JOINTS[:1], D[:1], D_dot[:1], sec),
+                joint_state(CYLINDERS, D[1:], D_dot[1:], sec),
+            )
 
             def seen() -> list:
                 return [m for m in out.messages[pose_topic] if m.header.stamp.sec == sec]
@@ -296,8 +365,14 @@ def test_excavator_forward_survives_any_input(probe: Probe, nodes: dict[str, Nod
                 i, j = burst * BURST + k, (burst * BURST + k) // 2
                 on_swing = i % 2 == 1
                 columns = slice(0, 1) if on_swing else slice(1, 4)
-                msg = bad_joint_states(rng, (JOINTS[0],) if on_swing else CYLINDERS,
-                                       lower[columns], upper[columns], rates[columns], j)
+                msg = bad_joint_states(
+                    rng,
+                    (JOINTS[0],) if on_swing else CYLINDERS,
+                    lower[columns],
+                    upper[columns],
+                    rates[columns],
+                    j,
+                )
                 data = serialize_message(msg)
                 if rng.random() < 0.4:
                     data = bad_bytes(rng, data, j)
@@ -305,24 +380,47 @@ def test_excavator_forward_survives_any_input(probe: Probe, nodes: dict[str, Nod
                 sent += 1
             marker(100_000 + burst, LIMITS.reference, np.zeros(4))
             assert process.alive(), process.log()[-3000:]
-        until_logged(probe, process, "implausible", lambda: cylinders.publish(
-            joint_state(CYLINDERS, LIMITS.reference[1:], [1e9, 0.0, 0.0], 150_000)))
+        until_logged(
+            probe,
+            process,
+            "implausible",
+            lambda: cylinders.publish(joint_state(CYLINDERS, LIMITS.reference[1:], [1e9, 0.0, 0.0], 150_000)),
+        )
         # The library's numbers afterwards.
         D = LIMITS.reference + np.array([0.1, 0.05, -0.04, 0.03])
         D_dot = np.array([0.05, 0.02, -0.03, 0.04])
         pose = marker(200_000, D, D_dot)
         s = EXC.state(D, D_dot)
         p, o = pose.pose.position, pose.pose.orientation
-        np.testing.assert_allclose([p.x, p.y, p.z, o.x, o.y, o.z, o.w],
-                                   messages.bucket_pose_values(D[0], s.Q.tolist()), atol=1e-12)
+        np.testing.assert_allclose(
+            [p.x, p.y, p.z, o.x, o.y, o.z, o.w],
+            message_codec.bucket_pose_values(D[0], s.Q.tolist()),
+            atol=1e-12,
+        )
         # Each output topic arrives on its own: wait for the twist and the grade of that marker too.
         twists, grades = out.messages[f"{ns}/bucket_twist"], out.messages[f"{ns}/grade_height"]
-        probe.wait_until(lambda: any(m.header.stamp.sec == 200_000 for m in twists)
-                         and any(m.header.stamp.sec == 200_000 for m in grades), TIMEOUT, "twist and grade")
+        probe.wait_until(
+            lambda: (
+                any(m.header.stamp.sec == 200_000 for m in twists)
+                and any(m.header.stamp.sec == 200_000 for m in grades)
+            ),
+            TIMEOUT,
+            "twist and grade",
+        )
         twist = next(m for m in twists if m.header.stamp.sec == 200_000).twist
         expected = [*s.Q_dot[:3], *bucket_angular_velocity(float(D[0]), float(D_dot[0]), float(s.Q_dot[3]))]
-        np.testing.assert_allclose([twist.linear.x, twist.linear.y, twist.linear.z,
-                                    twist.angular.x, twist.angular.y, twist.angular.z], expected, atol=1e-12)
+        np.testing.assert_allclose(
+            [
+                twist.linear.x,
+                twist.linear.y,
+                twist.linear.z,
+                twist.angular.x,
+                twist.angular.y,
+                twist.angular.z,
+            ],
+            expected,
+            atol=1e-12,
+        )
         grade = next(m for m in grades if m.header.stamp.sec == 200_000)
         assert grade.point.z == pytest.approx(float(GRADE.height(s.Q[:3])), abs=1e-12)
         # The transport limit of the module docstring, pinned: the node's reader never acknowledges
@@ -331,8 +429,11 @@ def test_excavator_forward_survives_any_input(probe: Probe, nodes: dict[str, Nod
         # first assertion fails, Fast DDS carries empty payloads now: drop the limit from the docs
         # and let bad_bytes send them again.
         empty, one_byte = (node.create_publisher(JointState, f"{ns}/joint_states", QOS) for _ in range(2))
-        probe.wait_until(lambda: empty.get_subscription_count() > 0 and one_byte.get_subscription_count() > 0,
-                         TIMEOUT, "the extra writers matched")
+        probe.wait_until(
+            lambda: empty.get_subscription_count() > 0 and one_byte.get_subscription_count() > 0,
+            TIMEOUT,
+            "the extra writers matched",
+        )
         one_byte.publish(b"\x00")
         empty.publish(b"")
         assert one_byte.wait_for_all_acked(Duration(seconds=TIMEOUT))
@@ -410,8 +511,9 @@ def test_excavator_imu_state_survives_any_input(probe: Probe, nodes: dict[str, N
     def valid_set() -> int:
         stamp_ns = time.time_ns()
         stamp = Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)
-        swing.publish(JointState(header=Header(stamp=stamp), name=[JOINTS[0]], position=[float(D[0])],
-                                 velocity=[0.0]))
+        swing.publish(
+            JointState(header=Header(stamp=stamp), name=[JOINTS[0]], position=[float(D[0])], velocity=[0.0])
+        )
         for i, pub in enumerate(imus):
             msg = Imu(header=Header(stamp=stamp))
             msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = map(float, q[i])
@@ -436,9 +538,15 @@ def test_excavator_imu_state_survives_any_input(probe: Probe, nodes: dict[str, N
         # Start-up first: run alone (-k), this test meets all the module's nodes starting at once.
         probe.wait_until(lambda: "->" in imu_node.log() and "->" in forward.log(), 4 * TIMEOUT, "start-up")
         try:
-            probe.wait_until(lambda: all(p.get_subscription_count() > 0 for p in imus)
-                             and swing.get_subscription_count() > 0 and tilt.get_subscription_count() > 0,
-                             TIMEOUT, "excavator_imu_state and excavator_forward")
+            probe.wait_until(
+                lambda: (
+                    all(p.get_subscription_count() > 0 for p in imus)
+                    and swing.get_subscription_count() > 0
+                    and tilt.get_subscription_count() > 0
+                ),
+                TIMEOUT,
+                "excavator_imu_state and excavator_forward",
+            )
         except TimeoutError:
             raise AssertionError(f"{imu_node.log()[-2000:]}\n{forward.log()[-2000:]}") from None
         probe.wait_until(lambda: paced_set() is None and bool(levels), TIMEOUT, "a first level pose")
@@ -463,9 +571,17 @@ def test_excavator_imu_state_survives_any_input(probe: Probe, nodes: dict[str, N
                 sent += 5
             after = time.time_ns()
             try:
-                probe.wait_until(lambda after=after: paced_set() is None and any(
-                    stamp >= after and answered(stamp, lengths) and answered(stamp, levels)
-                    for stamp in sets), TIMEOUT, f"a valid set after burst {burst}")
+                probe.wait_until(
+                    lambda after=after: (
+                        paced_set() is None
+                        and any(
+                            stamp >= after and answered(stamp, lengths) and answered(stamp, levels)
+                            for stamp in sets
+                        )
+                    ),
+                    TIMEOUT,
+                    f"a valid set after burst {burst}",
+                )
             except TimeoutError:
                 raise AssertionError(f"{imu_node.log()[-2000:]}\n{forward.log()[-2000:]}") from None
             assert imu_node.alive() and forward.alive()
@@ -473,8 +589,9 @@ def test_excavator_imu_state_survives_any_input(probe: Probe, nodes: dict[str, N
         np.testing.assert_allclose(got.position, D[1:], atol=1e-9)
     finally:
         imu_log, forward_log = imu_node.stop(), forward.stop()
-    report("excavator_imu_state", sent=sent, outputs_checked=out.count(), non_finite=out.non_finite(),
-           alive=1)
+    report(
+        "excavator_imu_state", sent=sent, outputs_checked=out.count(), non_finite=out.non_finite(), alive=1
+    )
     assert out.non_finite() == 0
     bound = RATE_MARGIN * LIMITS.max_rates[1:]
     assert all(np.all(np.abs(m.velocity) <= bound) for m in lengths)
@@ -545,12 +662,18 @@ def test_excavator_velocity_ik_survives_any_input(probe: Probe, nodes: dict[str,
     D = LIMITS.reference + np.array([0.2, 0.1, -0.1, 0.05])
     sent = 0
     try:
-        probe.wait_until(lambda: all(p.get_subscription_count() > 0 for p in (cylinders, swing, target))
-                         and node.count_publishers(topic) > 0, TIMEOUT, "excavator_velocity_ik")
+        probe.wait_until(
+            lambda: (
+                all(p.get_subscription_count() > 0 for p in (cylinders, swing, target))
+                and node.count_publishers(topic) > 0
+            ),
+            TIMEOUT,
+            "excavator_velocity_ik",
+        )
 
         def marker(sec: int, linear: np.ndarray, angular: np.ndarray) -> JointState:
             """State D and a target stamped ``sec``, re-sent until the command for it is out."""
-            twist = messages.bucket_twist(Time(sec=sec), "base_link", linear, angular)
+            twist = message_codec.bucket_twist(Time(sec=sec), "base_link", linear, angular)
 
             def seen() -> list:
                 return [m for m in out.messages[topic] if m.header.stamp.sec == sec and any(m.velocity)]
@@ -572,8 +695,12 @@ def test_excavator_velocity_ik_survives_any_input(probe: Probe, nodes: dict[str,
                 j = i // 3  # each topic gets every kind
                 if i % 3 == 0:
                     twist = extreme(rng, 6, 1.0)
-                    msg = messages.bucket_twist(Time(sec=i), "base_link" if rng.random() < 0.8 else "map",
-                                                np.array(twist[:3]), np.array(twist[3:]))
+                    msg = message_codec.bucket_twist(
+                        Time(sec=i),
+                        "base_link" if rng.random() < 0.8 else "map",
+                        np.array(twist[:3]),
+                        np.array(twist[3:]),
+                    )
                     target.publish(msg)
                 elif i % 3 == 1:
                     cylinders.publish(bad_joint_states(rng, CYLINDERS, lower[1:], upper[1:], rates[1:], j))
@@ -582,8 +709,16 @@ def test_excavator_velocity_ik_survives_any_input(probe: Probe, nodes: dict[str,
                 sent += 1
             marker(100_000 + burst, rng.uniform(-0.3, 0.3, 3), np.zeros(3))
             assert process.alive(), process.log()[-3000:]
-        until_logged(probe, process, "implausible", lambda: target.publish(
-            messages.bucket_twist(Time(sec=150_000), "base_link", np.array([1e9, 0.0, 0.0]), np.zeros(3))))
+        until_logged(
+            probe,
+            process,
+            "implausible",
+            lambda: target.publish(
+                message_codec.bucket_twist(
+                    Time(sec=150_000), "base_link", np.array([1e9, 0.0, 0.0]), np.zeros(3)
+                )
+            ),
+        )
         # The library's numbers afterwards (a fast target: the speed scaling is in it).
         linear = np.array([0.8, -0.4, 0.5])
         command = marker(200_000, linear, np.zeros(3))
@@ -595,8 +730,14 @@ def test_excavator_velocity_ik_survives_any_input(probe: Probe, nodes: dict[str,
         log = process.stop()
     commands = np.array([m.velocity for m in out.messages[topic] if len(m.velocity) == 4])
     over = int(np.sum(np.abs(commands) > rates)) if len(commands) else 0
-    report("excavator_velocity_ik", sent=sent, outputs_checked=out.count(), non_finite=out.non_finite(),
-           above_speed_limit=over, alive=1)
+    report(
+        "excavator_velocity_ik",
+        sent=sent,
+        outputs_checked=out.count(),
+        non_finite=out.non_finite(),
+        above_speed_limit=over,
+        alive=1,
+    )
     assert out.non_finite() == 0 and over == 0 and len(commands) == out.count()
     assert "Traceback" not in log and "failed on" not in log, log[-3000:]
 
@@ -613,17 +754,25 @@ def test_excavator_sim_survives_any_input(probe: Probe, nodes: dict[str, NodePro
     rates = LIMITS.max_rates
     sent = 0
     try:
-        probe.wait_until(lambda: commands.get_subscription_count() > 0
-                         and all(node.count_publishers(t) > 0 for t in topics), TIMEOUT, "excavator_sim")
+        probe.wait_until(
+            lambda: (
+                commands.get_subscription_count() > 0 and all(node.count_publishers(t) > 0 for t in topics)
+            ),
+            TIMEOUT,
+            "excavator_sim",
+        )
 
         def state() -> tuple[np.ndarray, np.ndarray]:
             swing_msg = out.messages[f"{ns}/joint_states"][-1]
             cylinder_msg = out.messages[f"{ns}/cylinder_lengths"][-1]
-            return (np.array([*swing_msg.position, *cylinder_msg.position]),
-                    np.array([*swing_msg.velocity, *cylinder_msg.velocity]))
+            return (
+                np.array([*swing_msg.position, *cylinder_msg.position]),
+                np.array([*swing_msg.velocity, *cylinder_msg.velocity]),
+            )
 
         def marker(command: np.ndarray) -> None:
             """Send a valid command until the simulator moves at it (where no stroke end stops it)."""
+
             def moving() -> bool:
                 if not (out.messages[f"{ns}/joint_states"] and out.messages[f"{ns}/cylinder_lengths"]):
                     return False
@@ -649,8 +798,12 @@ def test_excavator_sim_survives_any_input(probe: Probe, nodes: dict[str, NodePro
                 sent += 1
             marker(np.full(4, 0.001 * (-1) ** burst) * (1 + burst / 100))
             assert process.alive(), process.log()[-3000:]
-        until_logged(probe, process, "implausible", lambda: commands.publish(
-            joint_state(ACTUATORS, velocity=[1e9, 0.0, 0.0, 0.0])))
+        until_logged(
+            probe,
+            process,
+            "implausible",
+            lambda: commands.publish(joint_state(ACTUATORS, velocity=[1e9, 0.0, 0.0, 0.0])),
+        )
         # The library's numbers afterwards: the plant's response to a command beyond the limits.
         command = np.array([0.3, -0.2, 0.2, 0.25])
         plant = Plant(LIMITS, LIMITS.reference)
@@ -662,10 +815,17 @@ def test_excavator_sim_survives_any_input(probe: Probe, nodes: dict[str, NodePro
     states = out.messages[f"{ns}/cylinder_lengths"]
     d = np.array([m.position for m in states])
     d_dot = np.array([m.velocity for m in states])
-    outside = int(np.sum((d < LIMITS.stroke_min) | (d > LIMITS.stroke_max))
-                  + np.sum(np.abs(d_dot) > rates[1:]))
-    report("excavator_sim", sent=sent, outputs_checked=out.count(), non_finite=out.non_finite(),
-           outside_limits=outside, alive=1)
+    outside = int(
+        np.sum((d < LIMITS.stroke_min) | (d > LIMITS.stroke_max)) + np.sum(np.abs(d_dot) > rates[1:])
+    )
+    report(
+        "excavator_sim",
+        sent=sent,
+        outputs_checked=out.count(),
+        non_finite=out.non_finite(),
+        outside_limits=outside,
+        alive=1,
+    )
     assert out.non_finite() == 0 and outside == 0
     assert "Traceback" not in log and "failed on" not in log, log[-3000:]
 
@@ -681,8 +841,13 @@ def random_request(rng: np.random.Generator, model, limits, k: int) -> SolveIK.R
     if kind == 1:
         position = np.array(extreme(rng, 3, 1.0))
     elif kind == 2:
-        quaternions = [np.zeros(4), np.full(4, np.nan), np.full(4, 1e308), np.full(4, 1e-300),
-                       np.array([np.inf, 0, 0, 1])]
+        quaternions = [
+            np.zeros(4),
+            np.full(4, np.nan),
+            np.full(4, 1e308),
+            np.full(4, 1e-300),
+            np.array([np.inf, 0, 0, 1]),
+        ]
         quaternion = quaternions[rng.integers(len(quaternions))]
         request.use_orientation = True
     elif kind == 3:
@@ -737,20 +902,26 @@ def check_ik_answers(requests: list, responses: list, limits) -> int:
     problems = 0
     for response in responses:
         if response.success:
-            ok = (response.error_code.val == Codes.SUCCESS and all_finite(response.solution)
-                  and len(response.solution.position) == len(response.solution.name) > 0
-                  and all(all_finite(s) for s in response.solutions))
+            ok = (
+                response.error_code.val == Codes.SUCCESS
+                and all_finite(response.solution)
+                and len(response.solution.position) == len(response.solution.name) > 0
+                and all(all_finite(s) for s in response.solutions)
+            )
         else:
             ok = response.error_code.val != Codes.SUCCESS and bool(response.message)
         if not ok and problems < 3:
-            print(f"\nIK problem: success {response.success}, code {response.error_code.val}, "
-                  f"message {response.message[:200]!r}, solution {list(response.solution.position)}")
+            print(
+                f"\nIK problem: success {response.success}, code {response.error_code.val}, "
+                f"message {response.message[:200]!r}, solution {list(response.solution.position)}"
+            )
         problems += not ok
     return problems
 
 
-def fuzz_ik_server(probe: Probe, ik, fk, model, limits, rng: np.random.Generator,
-                   targets=None) -> dict[str, int]:
+def fuzz_ik_server(
+    probe: Probe, ik, fk, model, limits, rng: np.random.Generator, targets=None
+) -> dict[str, int]:
     """Every kind of request 60 times (8 kinds of IK request, 3 of FK request, frame every 7th),
     then the library's numbers; the counts of the answers. ``targets``: the model whose fkine
     makes the valid targets (default ``model``)."""
@@ -760,10 +931,12 @@ def fuzz_ik_server(probe: Probe, ik, fk, model, limits, rng: np.random.Generator
     fk_responses = calls(probe, fk, fk_requests)
     ik_problems = check_ik_answers(ik_requests, ik_responses, limits)
     fk_problems = sum(
-        not ((r.success and r.error_code.val == Codes.SUCCESS
-              and all_finite(r.pose) and all_finite(r.twist))
-             or (not r.success and r.error_code.val != Codes.SUCCESS and r.message))
-        for r in fk_responses)
+        not (
+            (r.success and r.error_code.val == Codes.SUCCESS and all_finite(r.pose) and all_finite(r.twist))
+            or (not r.success and r.error_code.val != Codes.SUCCESS and r.message)
+        )
+        for r in fk_responses
+    )
     q_good = 0.5 * (limits.lower + limits.upper)
     pose = model.fkine(q_good)
     orientation = True
@@ -785,8 +958,13 @@ def fuzz_ik_server(probe: Probe, ik, fk, model, limits, rng: np.random.Generator
     fk_answer = probe.call(fk, SolveFK.Request(joint_state=joint_state(limits.names, q_good)), TIMEOUT)
     got = fk_answer.pose.pose.position
     np.testing.assert_allclose([got.x, got.y, got.z], pose[:3, 3], atol=1e-12)
-    return {"ik_requests": len(ik_requests), "ik_successes": sum(r.success for r in ik_responses),
-            "ik_problems": ik_problems, "fk_requests": len(fk_requests), "fk_problems": fk_problems}
+    return {
+        "ik_requests": len(ik_requests),
+        "ik_successes": sum(r.success for r in ik_responses),
+        "ik_problems": ik_problems,
+        "fk_requests": len(fk_requests),
+        "fk_problems": fk_problems,
+    }
 
 
 @pytest.mark.parametrize("name", SERIAL)
@@ -805,10 +983,19 @@ def test_serial_nodes_survive_any_input(probe: Probe, nodes: dict[str, NodeProce
     rng = np.random.default_rng(9100 + SERIAL.index(name))
     sent = 0
     try:
-        probe.wait_until(lambda: (states.get_subscription_count() > 0
-                                  and all(node.count_publishers(t) > 0 for t in topics)
-                                  and ik.service_is_ready() and fk.service_is_ready())
-                         or not (forward.alive() and server.alive()), TIMEOUT, f"{name} nodes")
+        probe.wait_until(
+            lambda: (
+                (
+                    states.get_subscription_count() > 0
+                    and all(node.count_publishers(t) > 0 for t in topics)
+                    and ik.service_is_ready()
+                    and fk.service_is_ready()
+                )
+                or not (forward.alive() and server.alive())
+            ),
+            TIMEOUT,
+            f"{name} nodes",
+        )
         assert forward.alive() and server.alive(), forward.log() + server.log()
         q_good = 0.5 * (limits.lower + limits.upper)
         # Both services answer once before the bursts (a first response can be lost to discovery).
@@ -818,8 +1005,11 @@ def test_serial_nodes_survive_any_input(probe: Probe, nodes: dict[str, NodeProce
         def marker(sec: int) -> None:
             msg = joint_state(limits.names, q_good, np.zeros(len(q_good)), sec)
             states.publish(msg)
-            probe.wait_until(lambda: any(m.header.stamp.sec == sec for m in out.messages[f"{ns}/tool_pose"]),
-                             TIMEOUT, f"pose of marker {sec}")
+            probe.wait_until(
+                lambda: any(m.header.stamp.sec == sec for m in out.messages[f"{ns}/tool_pose"]),
+                TIMEOUT,
+                f"pose of marker {sec}",
+            )
 
         for burst in range(6):
             for k in range(BURST):
@@ -839,8 +1029,14 @@ def test_serial_nodes_survive_any_input(probe: Probe, nodes: dict[str, NodeProce
         alive = forward.alive() + server.alive()
     finally:
         forward_log, server_log = forward.stop(), server.stop()
-    report(f"{name}", topic_sent=sent, outputs_checked=out.count(), non_finite=out.non_finite(), **counts,
-           alive=alive)
+    report(
+        f"{name}",
+        topic_sent=sent,
+        outputs_checked=out.count(),
+        non_finite=out.non_finite(),
+        **counts,
+        alive=alive,
+    )
     assert alive == 2 and out.non_finite() == 0 and counts["ik_problems"] == 0 and counts["fk_problems"] == 0
     for log in (forward_log, server_log):
         assert "Traceback" not in log and "failed on" not in log and "unexpectedly" not in log, log[-3000:]
@@ -869,9 +1065,11 @@ def random_path(rng: np.random.Generator, model: Excavator, k: int) -> PlanPath.
     start = model.pose(model.limits.reference)[:3]
     count = int(rng.integers(0, 5)) if k % 5 else int(rng.integers(0, 200))
     waypoints = start + rng.normal(scale=2.0, size=(count, 3))
-    request = PlanPath.Request(step=float(rng.choice([0.0, 0.05, 0.5, 1e-300, -1.0, math.nan, math.inf])),
-                               tip_speed=float(rng.choice([0.0, 0.2, 3.0, 1e-300, -0.5, math.nan, 1e308])),
-                               mode=str(rng.choice(["", "", "pose", "region", "x" * 300])))
+    request = PlanPath.Request(
+        step=float(rng.choice([0.0, 0.05, 0.5, 1e-300, -1.0, math.nan, math.inf])),
+        tip_speed=float(rng.choice([0.0, 0.2, 3.0, 1e-300, -0.5, math.nan, 1e308])),
+        mode=str(rng.choice(["", "", "pose", "region", "x" * 300])),
+    )
     if k % 3 == 1 and count:
         waypoints[rng.integers(count)] = extreme(rng, 3, 10.0)
     request.waypoints = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in waypoints]
@@ -891,20 +1089,33 @@ def test_excavator_ik_server_survives_any_input(probe: Probe, nodes: dict[str, N
     rng = np.random.default_rng(9200)
     try:
         clients = (ik, fk, planner)
-        probe.wait_until(lambda: all(c.service_is_ready() for c in clients) or not server.alive(), TIMEOUT,
-                         "excavator_ik_server")
+        probe.wait_until(
+            lambda: all(c.service_is_ready() for c in clients) or not server.alive(),
+            TIMEOUT,
+            "excavator_ik_server",
+        )
         assert server.alive(), server.log()
         probe.call(ik, SolveIK.Request(), TIMEOUT)
         counts = fuzz_ik_server(probe, ik, fk, model, record.limits(model), rng, targets=WideExcavator())
         plans = calls(probe, planner, [random_path(rng, model, k) for k in range(150)], window=2)
         plan_problems = sum(
-            not ((r.success and r.error_code.val == Codes.SUCCESS and len(r.trajectory.points) > 0)
-                 or (not r.success and r.error_code.val != Codes.SUCCESS and r.message))
-            or not all_finite(r.trajectory) for r in plans)
+            not (
+                (r.success and r.error_code.val == Codes.SUCCESS and len(r.trajectory.points) > 0)
+                or (not r.success and r.error_code.val != Codes.SUCCESS and r.message)
+            )
+            or not all_finite(r.trajectory)
+            for r in plans
+        )
         alive = server.alive()
     finally:
         log = server.stop()
-    report("excavator_ik_server", **counts, plan_requests=len(plans),
-           plan_successes=sum(r.success for r in plans), plan_problems=plan_problems, alive=int(alive))
+    report(
+        "excavator_ik_server",
+        **counts,
+        plan_requests=len(plans),
+        plan_successes=sum(r.success for r in plans),
+        plan_problems=plan_problems,
+        alive=int(alive),
+    )
     assert alive and counts["ik_problems"] == 0 and counts["fk_problems"] == 0 and plan_problems == 0
     assert "Traceback" not in log and "failed on" not in log and "unexpectedly" not in log, log[-3000:]

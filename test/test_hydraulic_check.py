@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from manipulator_kinematics.params import config_path
+from manipulator_kinematics.param_files import config_path
 
 
 def test_machine_check_prints_margins_ranges_and_draws(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:

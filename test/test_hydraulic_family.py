@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from manipulator_kinematics.hydraulic import HydraulicModel, StrokeError
-from manipulator_kinematics.params import config_path
+from manipulator_kinematics.param_files import config_path
 
 LOADER = HydraulicModel.from_file(config_path("wheel_loader_wl20.yaml"))
 CRANE = HydraulicModel.from_file(config_path("knuckle_crane_kc100.yaml"))
@@ -461,7 +461,7 @@ def test_crane_velocity_ik_is_the_smallest_speed_scaled_solution() -> None:
 def _loader_section() -> dict:
     import copy
 
-    from manipulator_kinematics.params import load_parameters
+    from manipulator_kinematics.param_files import load_parameters
 
     return copy.deepcopy(load_parameters(config_path("wheel_loader_wl20.yaml"))["hydraulic_machine"])
 
@@ -539,7 +539,7 @@ def _edit(section: dict, path: str, value: object) -> None:
 )
 def test_malformed_machine_file_refused_with_the_key(path: str, value: object, message: str) -> None:
     from manipulator_kinematics.hydraulic import parse
-    from manipulator_kinematics.params import ConfigError
+    from manipulator_kinematics.param_files import ConfigError
 
     section = _loader_section()
     _edit(section, path, value)
@@ -609,7 +609,7 @@ def test_old_excavator_file_converts_to_the_family_form() -> None:
     """config/excavator_cet200.yaml (old form) converted equals the family file of the CET200."""
     from manipulator_kinematics.hydraulic import parse
     from manipulator_kinematics.hydraulic.convert import from_excavator_section
-    from manipulator_kinematics.params import load_parameters
+    from manipulator_kinematics.param_files import load_parameters
 
     old = load_parameters(config_path("excavator_cet200.yaml"))["excavator"]
     converted = HydraulicModel(parse(from_excavator_section(old)))

@@ -34,9 +34,16 @@ NOT_FINITE = (math.inf, -math.inf, math.nan)
 # Valid numbers: the answer is a solution or a geometric failure, never an input error.
 SMALL = (0.0, -0.0, 5e-324, -5e-324, 2.2250738585072014e-308, 1e-300, -1e-20)
 GEOMETRIC = {Codes.SUCCESS, Codes.NO_IK_SOLUTION, Codes.JOINT_LIMITS_VIOLATED, Codes.SINGULAR}
-NOT_A_ROTATION = ((0.0, 0.0, 0.0, 0.0), (1e-10, 0.0, 0.0, 0.0), (5e-324, 5e-324, 0.0, 5e-324),
-                  (1e-160, 1e-160, 0.0, 0.0), (MAX, MAX, MAX, MAX), (0.0, 0.0, 0.0, math.inf),
-                  (math.nan, 0.0, 0.0, 1.0), (1.0, -math.inf, 0.0, 0.0))
+NOT_A_ROTATION = (
+    (0.0, 0.0, 0.0, 0.0),
+    (1e-10, 0.0, 0.0, 0.0),
+    (5e-324, 5e-324, 0.0, 5e-324),
+    (1e-160, 1e-160, 0.0, 0.0),
+    (MAX, MAX, MAX, MAX),
+    (0.0, 0.0, 0.0, math.inf),
+    (math.nan, 0.0, 0.0, 1.0),
+    (1.0, -math.inf, 0.0, 0.0),
+)
 # Not unit but rotations all the same (normalised): no input error.
 SCALED = ((0.0, 0.0, 0.0, 2.0), (0.0, 0.0, 1e-9, 1e-9), (1e150, 0.0, 0.0, 1e150), (0.0, 0.0, 0.0, -1.0))
 
@@ -52,8 +59,13 @@ def server(request: pytest.FixtureRequest, probe: Probe) -> Iterator[tuple[str, 
         assert "Traceback" not in log and not runtime_warnings(log), log
 
 
-def target(position, quaternion=(0.0, 0.0, 0.0, 1.0), *, use_orientation: bool = False,
-           seed: JointState | None = None) -> SolveIK.Request:
+def target(
+    position,
+    quaternion=(0.0, 0.0, 0.0, 1.0),
+    *,
+    use_orientation: bool = False,
+    seed: JointState | None = None,
+) -> SolveIK.Request:
     request = SolveIK.Request(use_orientation=use_orientation)
     p, o = request.target.pose.position, request.target.pose.orientation
     p.x, p.y, p.z = (float(v) for v in position)
@@ -74,9 +86,14 @@ def check(responses: list, requests: list, codes: set[int], text: str = "") -> N
         assert response.success == (response.error_code.val == Codes.SUCCESS), what
         assert "internal error" not in response.message and len(response.message) < 2000, what
         if response.success:
-            fields = [*response.solution.position] if hasattr(response, "solution") else [
-                *(getattr(response.pose.pose.position, a) for a in "xyz"),
-                *(getattr(response.twist.twist.linear, a) for a in "xyz")]
+            fields = (
+                [*response.solution.position]
+                if hasattr(response, "solution")
+                else [
+                    *(getattr(response.pose.pose.position, a) for a in "xyz"),
+                    *(getattr(response.twist.twist.linear, a) for a in "xyz"),
+                ]
+            )
             assert fields and all(map(math.isfinite, fields)), what
         else:
             assert text in response.message and response.message, what
@@ -86,9 +103,11 @@ def test_targets_at_the_edges_of_float64(probe: Probe, server) -> None:
     name, ik, _ = server
     home = machine(name).model().fkine(_inside(name))[:3, 3]
     for axis in range(3):
-        for values, codes, text in ((HUGE, {Codes.INVALID_GOAL_CONSTRAINTS}, "implausible"),
-                                    (NOT_FINITE, {Codes.INVALID_GOAL_CONSTRAINTS}, "not finite"),
-                                    (SMALL, GEOMETRIC, "")):
+        for values, codes, text in (
+            (HUGE, {Codes.INVALID_GOAL_CONSTRAINTS}, "implausible"),
+            (NOT_FINITE, {Codes.INVALID_GOAL_CONSTRAINTS}, "not finite"),
+            (SMALL, GEOMETRIC, ""),
+        ):
             requests = []
             for value in values:
                 position = home.copy()
@@ -131,14 +150,22 @@ def test_seeds_and_joint_states_at_the_edges_of_float64(probe: Probe, server) ->
                 q[j] = value
                 seeds.append(target(home, seed=JointState(name=names, position=q.tolist())))
                 states.append(SolveFK.Request(joint_state=JointState(name=names, position=q.tolist())))
-                rates.append(SolveFK.Request(joint_state=JointState(
-                    name=names, position=inside.tolist(), velocity=[value] * len(names))))
+                rates.append(
+                    SolveFK.Request(
+                        joint_state=JointState(
+                            name=names, position=inside.tolist(), velocity=[value] * len(names)
+                        )
+                    )
+                )
         check(answers(probe, ik, seeds), seeds, seed_codes)
         check(answers(probe, fk, states), states, fk_codes)
         # A non-finite rate is no state; a huge one is refused where the twist overflows (finite
         # twists are answered: there are no rate limits); a tiny one is a twist.
-        rate_codes = {Codes.INVALID_ROBOT_STATE} if values is NOT_FINITE else (
-            {Codes.SUCCESS} if values is SMALL else {Codes.SUCCESS, Codes.INVALID_ROBOT_STATE})
+        rate_codes = (
+            {Codes.INVALID_ROBOT_STATE}
+            if values is NOT_FINITE
+            else ({Codes.SUCCESS} if values is SMALL else {Codes.SUCCESS, Codes.INVALID_ROBOT_STATE})
+        )
         check(answers(probe, fk, rates), rates, rate_codes)
 
 
@@ -151,9 +178,11 @@ def _inside(name: str) -> np.ndarray:
 def test_a_dropped_response_is_no_runtime_warning_of_the_node() -> None:
     """The filter of the servers' logs above keeps numpy's warnings and leaves out only rclpy's
     dropped response (a CI run's log: DDS discovery, answered by ``Probe.call`` re-sending)."""
-    dropped = ("/venv/lib/python3.11/site-packages/rclpy/service.py:78: RuntimeWarning: failed to send "
-               "response (timeout): client will not receive response, at /project/src/rmw_response.cpp:153\n"
-               "  self.__service.service_send_response(response, header.request_id)\n")
+    dropped = (
+        "/venv/lib/python3.11/site-packages/rclpy/service.py:78: RuntimeWarning: failed to send "
+        "response (timeout): client will not receive response, at /project/src/rmw_response.cpp:153\n"
+        "  self.__service.service_send_response(response, header.request_id)\n"
+    )
     overflow = "/src/scara_kinematics/core.py:80: RuntimeWarning: overflow encountered in multiply\n"
     assert runtime_warnings(dropped) == []
     assert runtime_warnings(dropped + overflow) == [overflow.strip()]

@@ -5,6 +5,7 @@ it), into a temporary directory, so the repo gets no build/, install/ or log/. T
 space is used the way a sourced workspace would be: a shell that exported AMENT_PREFIX_PATH to
 the venv and sourced install/setup.bash (platform notes, item 6).
 """
+
 from __future__ import annotations
 
 import ast
@@ -54,7 +55,10 @@ def _sourced_env(install: Path) -> dict[str, str]:
             base[key] = os.environ[key]
     dump = subprocess.run(
         ["bash", "-c", f'. "{install}/setup.bash" && env -0'],
-        env=base, capture_output=True, check=True, timeout=60,
+        env=base,
+        capture_output=True,
+        check=True,
+        timeout=60,
     ).stdout.decode()
     return dict(item.split("=", 1) for item in dump.split("\0") if "=" in item)
 
@@ -75,15 +79,33 @@ def colcon_install(tmp_path_factory: pytest.TempPathFactory) -> Path:
         PYTHONDONTWRITEBYTECODE="1",  # no __pycache__ in the source tree from setup.py
     )
     command = [
-        str(colcon), "--log-base", str(work / "log"), "build",
-        "--base-paths", str(REPO), str(REPO / IFACE),
-        "--build-base", str(work / "build"), "--install-base", str(work / "install"),
-        "--event-handlers", "console_direct-", "console_cohesion-", "status-", "summary+",
-        "--cmake-args", "-DBUILD_TESTING=OFF",
+        str(colcon),
+        "--log-base",
+        str(work / "log"),
+        "build",
+        "--base-paths",
+        str(REPO),
+        str(REPO / IFACE),
+        "--build-base",
+        str(work / "build"),
+        "--install-base",
+        str(work / "install"),
+        "--event-handlers",
+        "console_direct-",
+        "console_cohesion-",
+        "status-",
+        "summary+",
+        "--cmake-args",
+        "-DBUILD_TESTING=OFF",
     ]
     started = time.monotonic()
     result = subprocess.run(
-        command, cwd=work, env=env, stdin=subprocess.DEVNULL, capture_output=True, text=True,
+        command,
+        cwd=work,
+        env=env,
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
         timeout=900,
     )
     elapsed = time.monotonic() - started
@@ -100,8 +122,13 @@ def install_env(colcon_install: Path) -> dict[str, str]:
 
 def _run_python(env: dict[str, str], code: str) -> str:
     result = subprocess.run(
-        [str(VENV / "bin" / "python"), "-c", code], env=env, cwd="/", capture_output=True,
-        text=True, timeout=120, stdin=subprocess.DEVNULL,
+        [str(VENV / "bin" / "python"), "-c", code],
+        env=env,
+        cwd="/",
+        capture_output=True,
+        text=True,
+        timeout=120,
+        stdin=subprocess.DEVNULL,
     )
     assert result.returncode == 0, f"python -c failed:\n{result.stdout}\n{result.stderr}"
     return result.stdout
@@ -158,12 +185,15 @@ def test_launch_files_and_urdfs_are_installed(colcon_install: Path) -> None:
 
 
 def test_ament_index_resolves_to_install(colcon_install: Path, install_env: dict[str, str]) -> None:
-    out = _run_python(install_env, (
-        "from ament_index_python.packages import get_package_prefix, get_package_share_directory\n"
-        f"print(get_package_prefix('{PKG}'))\n"
-        f"print(get_package_share_directory('{PKG}'))\n"
-        f"print(get_package_prefix('{IFACE}'))\n"
-    ))
+    out = _run_python(
+        install_env,
+        (
+            "from ament_index_python.packages import get_package_prefix, get_package_share_directory\n"
+            f"print(get_package_prefix('{PKG}'))\n"
+            f"print(get_package_share_directory('{PKG}'))\n"
+            f"print(get_package_prefix('{IFACE}'))\n"
+        ),
+    )
     prefix, share, iface_prefix = out.split()
     assert Path(prefix) == colcon_install / PKG
     assert Path(share) == colcon_install / PKG / "share" / PKG
@@ -177,16 +207,19 @@ def test_python_packages_and_config_come_from_install(
     site = colcon_install / PKG / "lib" / PYVER / "site-packages"
     targets = sorted(set(console_scripts().values()))
     config = sorted(p.name for p in (REPO / "config").glob("*.yaml"))[0]
-    out = _run_python(install_env, (
-        "import importlib\n"
-        f"for target in {targets!r}:\n"
-        "    module_name, function = target.split(':')\n"
-        "    module = importlib.import_module(module_name)\n"
-        "    assert callable(getattr(module, function, None)), f'{target}: no such function'\n"
-        "    print(module.__file__)\n"
-        "from manipulator_kinematics.params import config_path\n"
-        f"print(config_path({config!r}))\n"
-    ))
+    out = _run_python(
+        install_env,
+        (
+            "import importlib\n"
+            f"for target in {targets!r}:\n"
+            "    module_name, function = target.split(':')\n"
+            "    module = importlib.import_module(module_name)\n"
+            "    assert callable(getattr(module, function, None)), f'{target}: no such function'\n"
+            "    print(module.__file__)\n"
+            "from manipulator_kinematics.param_files import config_path\n"
+            f"print(config_path({config!r}))\n"
+        ),
+    )
     *files, config_file = out.split()
     assert len(files) == len(targets)
     for file in files:
@@ -196,14 +229,17 @@ def test_python_packages_and_config_come_from_install(
 
 
 def test_interfaces_import_from_install(colcon_install: Path, install_env: dict[str, str]) -> None:
-    out = _run_python(install_env, (
-        f"import {IFACE}\n"
-        f"from {IFACE}.srv import SolveIK, SolveFK\n"
-        f"from {IFACE}.msg import KinematicsErrorCodes\n"
-        "request = SolveIK.Request(mode='position')\n"
-        "assert SolveFK.Response() is not None and KinematicsErrorCodes() is not None\n"
-        f"print({IFACE}.__file__)\n"
-    ))
+    out = _run_python(
+        install_env,
+        (
+            f"import {IFACE}\n"
+            f"from {IFACE}.srv import SolveIK, SolveFK\n"
+            f"from {IFACE}.msg import KinematicsErrorCodes\n"
+            "request = SolveIK.Request(mode='position')\n"
+            "assert SolveFK.Response() is not None and KinematicsErrorCodes() is not None\n"
+            f"print({IFACE}.__file__)\n"
+        ),
+    )
     assert Path(out.strip()).is_relative_to(colcon_install / IFACE), out
 
 
@@ -229,7 +265,10 @@ def test_installed_executable_runs_like_ros2_run(
     with open(log_path, "w", encoding="utf-8") as log:
         process = subprocess.Popen(
             [str(exe), "--ros-args", "-r", f"__node:={node_name}"],
-            env=install_env, cwd=tmp_path, stdout=log, stderr=subprocess.STDOUT,
+            env=install_env,
+            cwd=tmp_path,
+            stdout=log,
+            stderr=subprocess.STDOUT,
             stdin=subprocess.DEVNULL,
         )
     try:

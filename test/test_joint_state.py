@@ -1,5 +1,6 @@
 """manipulator_kinematics.joint_state: the raw JointState decoder against rclpy's own serializer (the
 independent reference), and joint_values' reasons."""
+
 from __future__ import annotations
 
 import math
@@ -22,11 +23,17 @@ def message(**fields: object) -> JointState:
 @pytest.mark.parametrize(
     "fields",
     [
-        {"name": ["boom_cylinder", "arm_cylinder", "bucket_cylinder"], "position": [2.9, 3.3, 2.3],
-         "velocity": [0.01, -0.02, 0.015]},
+        {
+            "name": ["boom_cylinder", "arm_cylinder", "bucket_cylinder"],
+            "position": [2.9, 3.3, 2.3],
+            "velocity": [0.01, -0.02, 0.015],
+        },
         {"name": ["swing_joint"], "velocity": [0.25]},  # an empty sequence before a full one
-        {"name": ["a", "bb", "ccc", "dddd", "eeeee"], "position": [1.0, 2.0, 3.0, 4.0, 5.0],
-         "effort": [-1.0, 0.5, 0.0, 1e300, -1e-300]},
+        {
+            "name": ["a", "bb", "ccc", "dddd", "eeeee"],
+            "position": [1.0, 2.0, 3.0, 4.0, 5.0],
+            "effort": [-1.0, 0.5, 0.0, 1e300, -1e-300],
+        },
         {},
     ],
 )

@@ -9,6 +9,7 @@ used, and every $(var ...) declared; namespace, params_file and frame_prefix are
 every file; every node of ours that publishes or accepts frame_ids, and robot_state_publisher,
 gets frame_prefix; includes name existing files and declared arguments.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -130,7 +131,7 @@ def test_includes_name_existing_files_and_their_arguments(path: Path) -> None:
     for include in ET.parse(path).getroot().iter("include"):
         target = include.get("file")
         assert target.startswith(SHARE + "launch/"), target
-        included = ET.parse(REPO / target[len(SHARE):]).getroot()
+        included = ET.parse(REPO / target[len(SHARE) :]).getroot()
         known = {a.get("name") for a in included.findall("arg")}
         passed = {a.get("name") for a in include.findall("arg")}
         assert passed <= known, passed - known

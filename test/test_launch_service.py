@@ -11,6 +11,7 @@ The package is found as after a colcon build: a prefix with its ament index entr
 publishes its ``robot_description`` parameter on ``robot_description`` (transient local), so
 the test sees which URDF the launch file gave it.
 """
+
 from __future__ import annotations
 
 import importlib.util
@@ -31,18 +32,20 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from manipulator_kinematics.node_util import console_script
-from manipulator_kinematics.params import config_path
+from manipulator_kinematics.param_files import config_path
 from manipulator_kinematics.registry import machines
 from manipulator_kinematics_interfaces.srv import SolveFK
 
 pytestmark = pytest.mark.skipif(
     importlib.util.find_spec("launch_ros") is None or importlib.util.find_spec("launch_xml") is None,
-    reason="launch and launch_ros (jazzy) are not installed: bash scripts/install_launch.sh (README)")
+    reason="launch and launch_ros (jazzy) are not installed: bash scripts/install_launch.sh (README)",
+)
 
 TIMEOUT = 60.0  # a launch starts 3-5 Python processes: several seconds each on a loaded machine
 QOS = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+LATCHED = QoSProfile(
+    depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+)
 PKG = "manipulator_kinematics"
 
 # What ``ros2 launch FILE ARG:=VALUE ...`` does, without the ros2 CLI (not on PyPI either).
@@ -100,6 +103,7 @@ def prefixes(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
         (ours / "share" / PKG / folder).symlink_to(REPO / folder)
     (ours / "share" / PKG / "package.xml").symlink_to(REPO / "package.xml")
     from importlib.metadata import distribution
+
     for entry in distribution(PKG).entry_points:
         if entry.group == "console_scripts":
             (ours / "lib" / PKG / entry.name).symlink_to(console_script(entry.name))
@@ -136,8 +140,19 @@ class Launch:
         env = {**os.environ, "AMENT_PREFIX_PATH": env_path}
         with log.open("w") as out:
             self.process = subprocess.Popen(
-                [sys.executable, "-c", RUN_LAUNCH, str(REPO / "launch" / file), f"namespace:={namespace}",
-                 *args], stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True)
+                [
+                    sys.executable,
+                    "-c",
+                    RUN_LAUNCH,
+                    str(REPO / "launch" / file),
+                    f"namespace:={namespace}",
+                    *args,
+                ],
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                env=env,
+                start_new_session=True,
+            )
 
     def log(self) -> str:
         return self.log_path.read_text(errors="replace")
@@ -149,8 +164,11 @@ class Launch:
         2 cores the excavator chain's nodes did; the 2 s bound is test_node_shutdown's.)"""
         if self.process.poll() is None:
             os.killpg(self.process.pid, signal.SIGINT)
-        probe.wait_until(lambda: self.process.poll() is not None and not processes_of(self.namespace),
-                         TIMEOUT, f"the end of the launch in {self.namespace}")
+        probe.wait_until(
+            lambda: self.process.poll() is not None and not processes_of(self.namespace),
+            TIMEOUT,
+            f"the end of the launch in {self.namespace}",
+        )
         return self.process.returncode
 
 
@@ -174,15 +192,21 @@ def launched(probe: Probe, tmp_path: Path) -> Iterator[Callable[..., Launch]]:
 
 
 def mk_urdf(machine: str, params: Path) -> str:
-    return subprocess.run([console_script("mk_urdf"), machine, "--params-file", str(params)],
-                          capture_output=True, text=True, check=True, timeout=TIMEOUT).stdout
+    return subprocess.run(
+        [console_script("mk_urdf"), machine, "--params-file", str(params)],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=TIMEOUT,
+    ).stdout
 
 
 def described(probe: Probe, namespace: str) -> list[str]:
     """The robot_description messages of ``namespace`` (filled as they arrive)."""
     got: list[str] = []
-    probe.node.create_subscription(String, f"{namespace}/robot_description", lambda m: got.append(m.data),
-                                   LATCHED)
+    probe.node.create_subscription(
+        String, f"{namespace}/robot_description", lambda m: got.append(m.data), LATCHED
+    )
     return got
 
 
@@ -245,8 +269,9 @@ def excavator_chain_traffic(probe: Probe, namespace: str) -> Callable[[], int]:
 
 def excavator_traffic(probe: Probe, namespace: str) -> Callable[[], int]:
     """Cylinder lengths and swing in, bucket_pose out (the machine's own sensors' role)."""
-    from excavator_kinematics import messages
+    from excavator_kinematics import message_codec
     from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator
+
     cylinders = probe.node.create_publisher(JointState, f"{namespace}/cylinder_lengths", QOS)
     swing = probe.node.create_publisher(JointState, f"{namespace}/joint_states", QOS)
     poses: list[PoseStamped] = []
@@ -255,8 +280,8 @@ def excavator_traffic(probe: Probe, namespace: str) -> Callable[[], int]:
 
     def send() -> int:
         stamp = probe.node.get_clock().now().to_msg()
-        swing.publish(messages.joint_state(stamp, JOINTS[:1], D[:1], [0.0]))
-        cylinders.publish(messages.joint_state(stamp, CYLINDERS, D[1:], [0.0, 0.0, 0.0]))
+        swing.publish(message_codec.joint_state(stamp, JOINTS[:1], D[:1], [0.0]))
+        cylinders.publish(message_codec.joint_state(stamp, CYLINDERS, D[1:], [0.0, 0.0, 0.0]))
         return len(poses)
 
     return send
@@ -292,8 +317,11 @@ def test_a_launch_file_starts_nodes_that_talk_and_gives_the_machines_urdf(
         traffic = joint_traffic(probe, namespace, machine)
     answers = fk_answers(probe, namespace, machine) if file != "excavator_chain.launch.xml" else lambda: 1
     launch = launched(file, namespace, prefixes["stand-in"], "markers:=true")
-    probe.wait_until(lambda: (traffic() > 0 and answers() > 0 and urdf) or launch.process.poll() is not None,
-                     TIMEOUT, f"the nodes of {file}")
+    probe.wait_until(
+        lambda: (traffic() > 0 and answers() > 0 and urdf) or launch.process.poll() is not None,
+        TIMEOUT,
+        f"the nodes of {file}",
+    )
     assert launch.process.poll() is None, launch.log()
     assert urdf == [mk_urdf(machine, config_path(params))]
     assert launch.stop(probe) == 0, launch.log()
@@ -316,8 +344,9 @@ def test_the_urdf_is_that_of_the_machine_given(
     assert launch.stop(probe) == 0, launch.log()
     namespace = "/launch_scara_text"
     urdf = described(probe, namespace)
-    launch = launched("scara.launch.xml", namespace, prefixes["stand-in"],
-                      "robot_description:=<robot name='given'/>")
+    launch = launched(
+        "scara.launch.xml", namespace, prefixes["stand-in"], "robot_description:=<robot name='given'/>"
+    )
     probe.wait_until(lambda: urdf or launch.process.poll() is not None, TIMEOUT, "robot_description")
     assert urdf == ["<robot name='given'/>"], launch.log()
     assert launch.stop(probe) == 0, launch.log()
@@ -337,8 +366,9 @@ def test_without_robot_state_publisher_a_launch_fails_leaving_nothing_or_runs_wi
     assert not processes_of(namespace), launch.log()
 
     traffic = excavator_chain_traffic(probe, "/launch_rsp_off")
-    launch = launched("excavator_chain.launch.xml", "/launch_rsp_off", prefixes["missing"],
-                      "robot_state_publisher:=false")
+    launch = launched(
+        "excavator_chain.launch.xml", "/launch_rsp_off", prefixes["missing"], "robot_state_publisher:=false"
+    )
     probe.wait_until(lambda: traffic() > 0 or launch.process.poll() is not None, TIMEOUT, "the chain")
     assert launch.process.poll() is None, launch.log()
     assert launch.stop(probe) == 0, launch.log()

@@ -1,6 +1,7 @@
 """machine_markers across processes: the MarkerArray it publishes for a known state is the machine's
 scene (Machine.scene) of that state, for the excavator (joint_states + cylinder_lengths) and a
 serial machine (joint_states); a command line without a machine file is refused (isolated domain)."""
+
 from __future__ import annotations
 
 import subprocess
@@ -15,7 +16,7 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from manipulator_kinematics.node_util import console_script
-from manipulator_kinematics.params import config_path
+from manipulator_kinematics.param_files import config_path
 from manipulator_kinematics.registry import machine
 from manipulator_kinematics.scene import solids
 
@@ -117,8 +118,9 @@ def test_absurd_and_non_finite_states_are_not_drawn(probe: Probe) -> None:
     received: list[MarkerArray] = []
     sub = probe.node.create_subscription(MarkerArray, "machine_markers", received.append, qos)
     pub = probe.node.create_publisher(JointState, "joint_states", qos)
-    process = NodeProcess("machine_markers", "--params-file", str(config_path("scara.yaml")),
-                          *RELIABLE_INPUTS)
+    process = NodeProcess(
+        "machine_markers", "--params-file", str(config_path("scara.yaml")), *RELIABLE_INPUTS
+    )
     names = list(model.joint_names)
     try:
         probe.wait_until(lambda: pub.get_subscription_count(), TIMEOUT, "machine_markers")

@@ -37,8 +37,9 @@ def test_the_compiled_rule_is_select(allowed: tuple[bool, ...] | None, seeded: b
     q, status, seed = candidates(500, m, n)
     mask = np.zeros(m, dtype=bool)
     mask[: m if allowed is None else len(allowed)] = True if allowed is None else allowed
-    expected, expected_tie = select(q, np.where(mask, status, IKStatus.UNREACHABLE),
-                                    seed=seed if seeded else None)
+    expected, expected_tie = select(
+        q, np.where(mask, status, IKStatus.UNREACHABLE), seed=seed if seeded else None
+    )
     assert (expected >= 0).any() and (expected < 0).any()
     assert not seeded or expected_tie.any()
     for k in range(500):
@@ -50,8 +51,14 @@ def test_error_codes_are_moveits_where_the_names_are_shared() -> None:
     """moveit_msgs/MoveItErrorCodes (MoveIt 2, Jazzy): the values of the names both define."""
     from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
 
-    moveit = {"SUCCESS": 1, "FAILURE": 99999, "INVALID_GOAL_CONSTRAINTS": -16, "INVALID_ROBOT_STATE": -17,
-              "FRAME_TRANSFORM_FAILURE": -21, "NO_IK_SOLUTION": -31}
+    moveit = {
+        "SUCCESS": 1,
+        "FAILURE": 99999,
+        "INVALID_GOAL_CONSTRAINTS": -16,
+        "INVALID_ROBOT_STATE": -17,
+        "FRAME_TRANSFORM_FAILURE": -21,
+        "NO_IK_SOLUTION": -31,
+    }
     assert {name: getattr(Codes, name) for name in moveit} == moveit
     # Our own codes lie outside the values MoveIt uses (1, 99999, -1 ... -33).
     ours = {name: getattr(Codes, name) for name in ("SINGULAR", "JOINT_LIMITS_VIOLATED", "INVALID_MODE")}
@@ -60,8 +67,13 @@ def test_error_codes_are_moveits_where_the_names_are_shared() -> None:
 
 def _solutions(status: list[int], branches: tuple[str, ...]) -> IKSolutions:
     m = len(status)
-    return IKSolutions(q=np.zeros((m, 2)), status=np.array(status, dtype=np.int8), branches=branches,
-                       selected=np.array(-1), tie=np.array(False))
+    return IKSolutions(
+        q=np.zeros((m, 2)),
+        status=np.array(status, dtype=np.int8),
+        branches=branches,
+        selected=np.array(-1),
+        tie=np.array(False),
+    )
 
 
 def test_failure_is_the_best_status_or_the_asked_branchs() -> None:
@@ -77,19 +89,28 @@ def test_failure_is_the_best_status_or_the_asked_branchs() -> None:
     assert _solutions([IKStatus.SUCCESS] * 3, branches).failure() is N  # nothing failed, nothing selected
 
 
-@pytest.mark.parametrize("name, target, branch, expected", [
-    ("scara", (2.0, 0.0, 0.0), None, IKStatus.JOINT_LIMITS),  # the arm reaches it from x_l = 1.63 m > 0.4 m
-    ("scara", (0.0, 2.0, 0.0), None, IKStatus.UNREACHABLE),  # |y| > l2 + l3: no rail length helps
-    ("tool_changer", (1.5, 0.0, 1.0), None, IKStatus.JOINT_LIMITS),
-    ("tool_changer", (1.5, 0.0, 1.0), "front_up_noflip", IKStatus.UNREACHABLE),  # J3 out of reach there
-    ("tool_changer", (1.5, 0.0, 1.0), "front_up_flip", IKStatus.JOINT_LIMITS),
-    ("tool_changer", (4.0, 0.0, 1.0), None, IKStatus.UNREACHABLE),
-    ("palletizer", (0.0, 0.0, 0.0), None, IKStatus.JOINT_LIMITS),
-    ("palletizer", (100.0, 0.0, 0.0), None, IKStatus.UNREACHABLE),
-    ("pump_boom", (100.0, 0.0, 0.0), None, IKStatus.UNREACHABLE),
-])
-def test_one_failure_rule_on_every_machine(name: str, target: tuple[float, float, float], branch: str | None,
-                                           expected: IKStatus) -> None:
+@pytest.mark.parametrize(
+    "name, target, branch, expected",
+    [
+        (
+            "scara",
+            (2.0, 0.0, 0.0),
+            None,
+            IKStatus.JOINT_LIMITS,
+        ),  # the arm reaches it from x_l = 1.63 m > 0.4 m
+        ("scara", (0.0, 2.0, 0.0), None, IKStatus.UNREACHABLE),  # |y| > l2 + l3: no rail length helps
+        ("tool_changer", (1.5, 0.0, 1.0), None, IKStatus.JOINT_LIMITS),
+        ("tool_changer", (1.5, 0.0, 1.0), "front_up_noflip", IKStatus.UNREACHABLE),  # J3 out of reach there
+        ("tool_changer", (1.5, 0.0, 1.0), "front_up_flip", IKStatus.JOINT_LIMITS),
+        ("tool_changer", (4.0, 0.0, 1.0), None, IKStatus.UNREACHABLE),
+        ("palletizer", (0.0, 0.0, 0.0), None, IKStatus.JOINT_LIMITS),
+        ("palletizer", (100.0, 0.0, 0.0), None, IKStatus.UNREACHABLE),
+        ("pump_boom", (100.0, 0.0, 0.0), None, IKStatus.UNREACHABLE),
+    ],
+)
+def test_one_failure_rule_on_every_machine(
+    name: str, target: tuple[float, float, float], branch: str | None, expected: IKStatus
+) -> None:
     model = machine(name).model()
     result = model.solve_ik(pose_matrix(np.array(target)), use_orientation=False, branch=branch)
     assert not result.ok and result.failure(branch=branch) is expected, result.note()

@@ -3,6 +3,7 @@ failing callback, refuse run-time parameter changes with a reason, and end with 
 and SIGTERM while inputs are still arriving; so does the recorder. Every executable (nodes, mk_*
 tools, batch tools and the demo) ends with exit 0, no traceback and no child left running on a
 signal at any moment of its start-up and shutdown (isolated domain; every wait on a condition)."""
+
 from __future__ import annotations
 
 import ast
@@ -28,10 +29,10 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Int64
 from std_srvs.srv import Trigger
 
-from excavator_kinematics import messages
+from excavator_kinematics import message_codec
 from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
 from manipulator_kinematics.executor import EXECUTORS
-from manipulator_kinematics.params import config_path
+from manipulator_kinematics.param_files import config_path
 from manipulator_kinematics_interfaces.srv import SolveFK
 
 pytestmark = pytest.mark.ros
@@ -81,8 +82,9 @@ sys.exit(run(build, sys.argv))
 
 
 def wait_for_log(probe: Probe, process: subprocess.Popen, log: Path, text: str) -> None:
-    probe.wait_until(lambda: text in log.read_text() or process.poll() is not None, TIMEOUT,
-                     f"log line {text!r}")
+    probe.wait_until(
+        lambda: text in log.read_text() or process.poll() is not None, TIMEOUT, f"log line {text!r}"
+    )
     assert text in log.read_text(), log.read_text()
 
 
@@ -95,7 +97,9 @@ def test_the_entry_point_serves_survives_failing_callbacks_refuses_parameter_cha
     with log.open("w") as out:
         process = subprocess.Popen(
             [sys.executable, "-c", ENTRY_POINT_NODE, "--ros-args", "-r", f"__ns:={namespace}"],
-            stdout=out, stderr=subprocess.STDOUT, env={**os.environ, "MK_EXECUTOR": executor},
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env={**os.environ, "MK_EXECUTOR": executor},
         )
     try:
         node = probe.node
@@ -106,10 +110,14 @@ def test_the_entry_point_serves_survives_failing_callbacks_refuses_parameter_cha
         node.create_subscription(Int64, f"{namespace}/ticks", lambda m: ticks.append(m.data), QOS)
         trigger = node.create_client(Trigger, f"{namespace}/trigger")
         parameters = node.create_client(SetParameters, f"{namespace}/entry_point/set_parameters")
+
         def up() -> bool:
             return process.poll() is not None or (
-                numbers.get_subscription_count() == 1 and node.count_publishers(f"{namespace}/echo") == 1
-                and trigger.service_is_ready() and parameters.service_is_ready())
+                numbers.get_subscription_count() == 1
+                and node.count_publishers(f"{namespace}/echo") == 1
+                and trigger.service_is_ready()
+                and parameters.service_is_ready()
+            )
 
         probe.wait_until(up, TIMEOUT, "the entry point node")
         assert process.poll() is None, log.read_text()
@@ -119,8 +127,13 @@ def test_the_entry_point_serves_survives_failing_callbacks_refuses_parameter_cha
         numbers.publish(Int64(data=-1))
         numbers.publish(Int64(data=7))
         probe.wait_until(lambda: echoed == [7], TIMEOUT, "the echo of 7 after a failed callback")
-        wait_for_log(probe, process, log, f"subscription to {namespace}/numbers failed on "
-                     "std_msgs.msg.Int64(data=-1): RuntimeError: negative number -1 (at ")
+        wait_for_log(
+            probe,
+            process,
+            log,
+            f"subscription to {namespace}/numbers failed on "
+            "std_msgs.msg.Int64(data=-1): RuntimeError: negative number -1 (at ",
+        )
         response = probe.call(trigger, Trigger.Request(), TIMEOUT)
         assert not response.success
         assert response.message.startswith("internal error: RuntimeError: no trigger today (at ")
@@ -135,7 +148,8 @@ def test_the_entry_point_serves_survives_failing_callbacks_refuses_parameter_cha
         true = ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=True)
         assert set_parameter("answer", one) == "Trying to set a read-only parameter: answer."
         assert set_parameter("use_sim_time", true) == (
-            "parameters are read at start-up: restart the node to change use_sim_time")
+            "parameters are read at start-up: restart the node to change use_sim_time"
+        )
 
         process.send_signal(signal.SIGINT)
         assert process.wait(TIMEOUT) == 0, log.read_text()
@@ -170,8 +184,8 @@ def excavator_state(probe: Probe, namespace: str) -> Callable[[], None]:
 
     def send() -> None:
         stamp = probe.node.get_clock().now().to_msg()
-        swing.publish(messages.joint_state(stamp, JOINTS[:1], D[:1], [0.0]))
-        cylinders.publish(messages.joint_state(stamp, CYLINDERS, D[1:], [0.01, -0.01, 0.01]))
+        swing.publish(message_codec.joint_state(stamp, JOINTS[:1], D[:1], [0.0]))
+        cylinders.publish(message_codec.joint_state(stamp, CYLINDERS, D[1:], [0.01, -0.01, 0.01]))
 
     return send
 
@@ -200,7 +214,7 @@ def sim_traffic(probe: Probe, namespace: str) -> tuple[Callable[[], None], Calla
 
     def send() -> None:
         stamp = probe.node.get_clock().now().to_msg()
-        commands.publish(messages.joint_state(stamp, ACTUATORS, velocities=[0.01, 0.01, -0.01, 0.01]))
+        commands.publish(message_codec.joint_state(stamp, ACTUATORS, velocities=[0.01, 0.01, -0.01, 0.01]))
 
     return send, counter(probe, JointState, f"{namespace}/cylinder_lengths")
 
@@ -209,8 +223,11 @@ def scara_forward_traffic(probe: Probe, namespace: str) -> tuple[Callable[[], No
     states = probe.node.create_publisher(JointState, f"{namespace}/joint_states", QOS)
 
     def send() -> None:
-        msg = JointState(name=["rail_joint", "shoulder_joint", "elbow_joint"], position=[0.1, 0.5, 1.0],
-                         velocity=[0.0, 0.1, -0.1])
+        msg = JointState(
+            name=["rail_joint", "shoulder_joint", "elbow_joint"],
+            position=[0.1, 0.5, 1.0],
+            velocity=[0.0, 0.1, -0.1],
+        )
         msg.header.stamp = probe.node.get_clock().now().to_msg()
         states.publish(msg)
 
@@ -239,16 +256,23 @@ def fk_server_traffic(names: list[str], position: list[float]) -> Traffic:
     return traffic
 
 
-EXCAVATOR = ("--params-file", str(config_path("excavator_cet200.yaml")),
-             "--params-file", str(config_path("excavator_nodes.yaml")))
+EXCAVATOR = (
+    "--params-file",
+    str(config_path("excavator_cet200.yaml")),
+    "--params-file",
+    str(config_path("excavator_nodes.yaml")),
+)
 SCARA = ("--params-file", str(config_path("scara.yaml")))
 KINDS = [
     Kind("excavator_forward", EXCAVATOR, forward_traffic),
     Kind("excavator_velocity_ik", EXCAVATOR, velocity_ik_traffic),
     Kind("excavator_sim", EXCAVATOR, sim_traffic),
     Kind("excavator_ik_server", EXCAVATOR, fk_server_traffic(list(ACTUATORS), [0.0, 2.8, 3.3, 2.3])),
-    Kind("scara_ik_server", SCARA,
-         fk_server_traffic(["rail_joint", "shoulder_joint", "elbow_joint"], [0.1, 0.5, 1.0])),
+    Kind(
+        "scara_ik_server",
+        SCARA,
+        fk_server_traffic(["rail_joint", "shoulder_joint", "elbow_joint"], [0.1, 0.5, 1.0]),
+    ),
     Kind("scara_forward", SCARA, scara_forward_traffic),
 ]
 
@@ -262,6 +286,7 @@ def test_a_node_ends_with_exit_0_on_a_signal_while_inputs_arrive(
     send, served = kind.traffic(probe, namespace)
     process = NodeProcess(kind.exe, *kind.args, "-r", f"__ns:={namespace}")
     try:
+
         def serving() -> bool:
             send()
             return served() >= SERVED or not process.alive()
@@ -281,14 +306,15 @@ def test_a_node_ends_with_exit_0_on_a_signal_while_inputs_arrive(
         process.stop()
 
 
-
 def test_record_stops_on_sigint_while_a_publisher_keeps_sending(probe: Probe, tmp_path: Path) -> None:
     """mk_record stores what is queued when it is stopped, but a publisher that keeps sending does not
     keep it alive."""
     topic = "/shutdown_record/numbers"
     publisher = probe.node.create_publisher(Int64, topic, QOS)
-    process = NodeProcess("mk_record", args=("-o", str(tmp_path / "bag"), "--topics", topic,
-                                             "--type", f"{topic}:=std_msgs/msg/Int64"))
+    process = NodeProcess(
+        "mk_record",
+        args=("-o", str(tmp_path / "bag"), "--topics", topic, "--type", f"{topic}:=std_msgs/msg/Int64"),
+    )
     try:
         sent = iter(range(1_000_000))
 
@@ -315,14 +341,36 @@ def test_record_stops_on_sigint_while_a_publisher_keeps_sending(probe: Probe, tm
 BAG = str(sorted((Path(__file__).resolve().parent / "data").glob("*_golden"))[0])
 EXECUTABLES: dict[str, Callable[[Path], tuple[tuple[str, ...], tuple[str, ...]]]] = {
     # name: scratch directory -> (our arguments, ROS arguments)
-    **{exe: (lambda _, ros=ros: ((), ros)) for exe, ros in (
-        ("excavator_forward", EXCAVATOR), ("excavator_velocity_ik", EXCAVATOR), ("excavator_sim", EXCAVATOR),
-        ("excavator_ik_server", EXCAVATOR), ("excavator_imu_state", EXCAVATOR),
-        ("scara_forward", SCARA), ("scara_ik_server", SCARA), ("tool_changer_forward", ()),
-        ("tool_changer_ik_server", ()), ("palletizer_forward", ()), ("palletizer_ik_server", ()),
-        ("pump_boom_forward", ()), ("pump_boom_ik_server", ()), ("machine_markers", SCARA))},
-    "mk_record": lambda work: (("-o", str(work / "bag"), "--topics", "/signalled/numbers",
-                                "--type", "/signalled/numbers:=std_msgs/msg/Int64"), ()),
+    **{
+        exe: (lambda _, ros=ros: ((), ros))
+        for exe, ros in (
+            ("excavator_forward", EXCAVATOR),
+            ("excavator_velocity_ik", EXCAVATOR),
+            ("excavator_sim", EXCAVATOR),
+            ("excavator_ik_server", EXCAVATOR),
+            ("excavator_imu_state", EXCAVATOR),
+            ("scara_forward", SCARA),
+            ("scara_ik_server", SCARA),
+            ("tool_changer_forward", ()),
+            ("tool_changer_ik_server", ()),
+            ("palletizer_forward", ()),
+            ("palletizer_ik_server", ()),
+            ("pump_boom_forward", ()),
+            ("pump_boom_ik_server", ()),
+            ("machine_markers", SCARA),
+        )
+    },
+    "mk_record": lambda work: (
+        (
+            "-o",
+            str(work / "bag"),
+            "--topics",
+            "/signalled/numbers",
+            "--type",
+            "/signalled/numbers:=std_msgs/msg/Int64",
+        ),
+        (),
+    ),
     "mk_replay": lambda _: ((BAG,), ()),
     "mk_replay --loop": lambda _: ((BAG, "--loop"), ()),
     "mk_evaluate": lambda work: ((BAG, "-o", str(work / "report")), ()),
@@ -330,17 +378,27 @@ EXECUTABLES: dict[str, Callable[[Path], tuple[tuple[str, ...], tuple[str, ...]]]
     # The batch tools: plots, tables, the examples and the demo (which starts five processes).
     "excavator_demo": lambda work: (("--output", str(work / "demo")), ()),
     "excavator_slope_example": lambda work: (("--output", str(work / "slope")), ()),
-    "excavator_working_ranges": lambda work: (("--json", str(work / "ranges.json"),
-                                               "--plot", str(work / "ranges.png")), ()),
+    "excavator_working_ranges": lambda work: (
+        ("--json", str(work / "ranges.json"), "--plot", str(work / "ranges.png")),
+        (),
+    ),
     "pump_boom_regions": lambda work: (("--output", str(work / "regions.yaml")), ()),
     "pump_boom_plots": lambda work: ((str(work),), ()),
     "tool_changer_plots": lambda work: ((str(work),), ()),
     "palletizer_plots": lambda work: ((str(work),), ()),
 }
 # Executables that take no ROS arguments (no namespace to give them).
-NO_ROS_ARGS = {"mk_evaluate", "mk_urdf", "excavator_demo", "excavator_slope_example",
-               "excavator_working_ranges", "pump_boom_regions", "pump_boom_plots", "tool_changer_plots",
-               "palletizer_plots"}
+NO_ROS_ARGS = {
+    "mk_evaluate",
+    "mk_urdf",
+    "excavator_demo",
+    "excavator_slope_example",
+    "excavator_working_ranges",
+    "pump_boom_regions",
+    "pump_boom_plots",
+    "tool_changer_plots",
+    "palletizer_plots",
+}
 # Seconds after the process catches SIGTERM (its first import of ours): imports, arguments,
 # rclpy.init, building the node, serving. Each run gets one; a second signal follows the first
 # by SHUTDOWN_DELAY (the shutdown itself). Which signal a delay gets alternates between executables.
@@ -392,8 +450,11 @@ def test_every_executable_ends_with_exit_0_on_a_signal_at_any_moment(
             ros = (*ros, "-r", f"__ns:=/signalled_{i}") if exe not in NO_ROS_ARGS else ros
             process = NodeProcess(exe, *ros, args=args)
             runs.append([process, delay, signum, None])
-        probe.wait_until(lambda: all(catches_sigterm(run[0].process.pid) for run in runs), TIMEOUT,
-                         f"{name} to catch SIGTERM")
+        probe.wait_until(
+            lambda: all(catches_sigterm(run[0].process.pid) for run in runs),
+            TIMEOUT,
+            f"{name} to catch SIGTERM",
+        )
         start = time.monotonic()
         children: set[int] = set()  # every child process seen (the demo's nodes and recorder)
 
@@ -438,10 +499,18 @@ def test_every_node_and_mk_tool_is_named_in_its_package_init_and_importing_leave
     scripts = {e.name for e in entries if e.group == "console_scripts"}
     assert scripts == named
     imported = subprocess.run(
-        [sys.executable, "-c", "import signal, manipulator_kinematics, excavator_kinematics, "
-         "scara_kinematics, pump_boom_kinematics, tool_changer_kinematics, palletizer_kinematics; "
-         "print(signal.getsignal(signal.SIGTERM))"],
-        capture_output=True, text=True, timeout=TIMEOUT, check=True)
+        [
+            sys.executable,
+            "-c",
+            "import signal, manipulator_kinematics, excavator_kinematics, "
+            "scara_kinematics, pump_boom_kinematics, tool_changer_kinematics, palletizer_kinematics; "
+            "print(signal.getsignal(signal.SIGTERM))",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT,
+        check=True,
+    )
     assert imported.stdout.strip() == str(signal.SIG_DFL), imported.stdout
 
 
@@ -455,8 +524,11 @@ def test_a_node_compiling_its_kernel_on_a_cold_cache_stops_within_2_s_of_sigint(
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
     process = NodeProcess(exe, "-r", f"__ns:=/cold_{exe}")
     try:
-        probe.wait_until(lambda: child_pids(process.process.pid) or not process.alive(), TIMEOUT,
-                         f"the kernel compile of {exe}")
+        probe.wait_until(
+            lambda: child_pids(process.process.pid) or not process.alive(),
+            TIMEOUT,
+            f"the kernel compile of {exe}",
+        )
         compiling = child_pids(process.process.pid)
         assert process.alive(), process.log()
         process.process.send_signal(signal.SIGINT)

@@ -9,6 +9,7 @@ names must be one of KNOWN_KEYS, the keys checked by hand against ros/rosdistro 
 pip package mcap; mcap-ros2-support installs it as its dependency), jazzy/distribution.yaml for
 the ROS packages.
 """
+
 from __future__ import annotations
 
 import ast
@@ -32,9 +33,22 @@ ROSDEP = {
     "pyarrow": "python3-pyarrow",
     "dask": "python3-dask",
     "distributed": "python3-distributed",
-    **{ros: ros for ros in ("rclpy", "rcl_interfaces", "ament_index_python", "builtin_interfaces", "std_msgs",
-                            "sensor_msgs", "geometry_msgs", "trajectory_msgs", "visualization_msgs",
-                            "diagnostic_msgs", "manipulator_kinematics_interfaces")},
+    **{
+        ros: ros
+        for ros in (
+            "rclpy",
+            "rcl_interfaces",
+            "ament_index_python",
+            "builtin_interfaces",
+            "std_msgs",
+            "sensor_msgs",
+            "geometry_msgs",
+            "trajectory_msgs",
+            "visualization_msgs",
+            "diagnostic_msgs",
+            "manipulator_kinematics_interfaces",
+        )
+    },
 }
 #: keys needed without an import of ours: (key, why, a text in the source or launch files that needs it)
 INDIRECT = (
@@ -61,8 +75,13 @@ def third_party_imports() -> dict[str, set[str]]:
     found: dict[str, set[str]] = {}
     for path in installed_sources():
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
-                     else [node.module] if isinstance(node, ast.ImportFrom) and node.level == 0 else [])
+            names = (
+                [a.name for a in node.names]
+                if isinstance(node, ast.Import)
+                else [node.module]
+                if isinstance(node, ast.ImportFrom) and node.level == 0
+                else []
+            )
             for name in names:
                 top = name.split(".")[0]
                 if top not in sys.stdlib_module_names and top not in ours:
@@ -81,8 +100,10 @@ def test_every_runtime_import_has_an_exec_depend() -> None:
 
 
 def test_indirect_dependencies_are_still_needed_and_declared() -> None:
-    texts = "\n".join([p.read_text(encoding="utf-8") for p in installed_sources()]
-                      + [p.read_text(encoding="utf-8") for p in (REPO / "launch").glob("*.launch.xml")])
+    texts = "\n".join(
+        [p.read_text(encoding="utf-8") for p in installed_sources()]
+        + [p.read_text(encoding="utf-8") for p in (REPO / "launch").glob("*.launch.xml")]
+    )
     for key, why, needed_by in INDIRECT:
         assert needed_by in texts, f"{key} ({why}): nothing needs it any more"
         assert key in depends("exec_depend"), f"package.xml lacks exec_depend {key} ({why})"

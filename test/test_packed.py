@@ -1,5 +1,6 @@
 """manipulator_kinematics.codec.packed: bytes written in place equal rclpy's own serialization of the same
 message, for every layout our nodes publish (independent reference: rclpy's serializer)."""
+
 from __future__ import annotations
 
 import pytest
@@ -37,15 +38,17 @@ def test_stamped_geometry_bytes_equal_rclpy_serialization(cls: type, count: int)
     # The 2 alignment bytes after frame_id's NUL are not written by rclpy's serializer (they hold
     # whatever its buffer held, which changes with the CPU's code paths): every other byte counts.
     pad = slice(4 + 12 + len("base_link") + 1, 4 + 24)
-    assert raw[pad.stop:] == reference[pad.stop : len(raw)] and raw[: pad.start] == reference[: pad.start]
+    assert raw[pad.stop :] == reference[pad.stop : len(raw)] and raw[: pad.start] == reference[: pad.start]
     assert len(raw) > pad.stop and len(reference) - len(raw) < 8
     assert deserialize_message(raw, cls) == stamped(cls, values)
 
 
 def test_joint_state_with_names_and_an_empty_effort_field() -> None:
     names = ["swing_joint", "boom_joint", "arm_joint", "bucket_joint"]
-    packed = PackedMessage(JointState(name=names, position=[0.0] * 4, velocity=[0.0] * 4),
-                           ("header.stamp", "position", "velocity"))
+    packed = PackedMessage(
+        JointState(name=names, position=[0.0] * 4, velocity=[0.0] * 4),
+        ("header.stamp", "position", "velocity"),
+    )
     raw = packed.pack([3, 4, 0.5, -0.25, 1.5, -2.0, 0.01, 0.02, -0.03, 0.04])
     msg = deserialize_message(raw, JointState)
     assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (3, 4)

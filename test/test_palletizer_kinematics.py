@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from manipulator_kinematics.compiled import enabled
-from manipulator_kinematics.config import ConfigError
 from manipulator_kinematics.model import (
     IKStatus,
     RequestError,
@@ -19,9 +18,10 @@ from manipulator_kinematics.model import (
     quaternion_matrix,
     select,
 )
-from manipulator_kinematics.params import config_path, load_parameters
+from manipulator_kinematics.param_files import config_path, load_parameters
 from manipulator_kinematics.planar import two_link_ik, wrap_angle
 from manipulator_kinematics.registry import machine
+from manipulator_kinematics.schema import ConfigError
 from palletizer_kinematics.kinematics import (
     BRANCHES,
     HOME_DH,

@@ -14,7 +14,7 @@ from ros_harness import IK_FK, RELIABLE_INPUTS, NodeProcess, Probe, start_with_s
 from sensor_msgs.msg import JointState
 
 from manipulator_kinematics.model import matrix_quaternion
-from manipulator_kinematics.params import config_path
+from manipulator_kinematics.param_files import config_path
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
 from manipulator_kinematics_interfaces.srv import SolveFK, SolveIK
 from palletizer_kinematics.kinematics import Palletizer
@@ -34,8 +34,9 @@ def model() -> Palletizer:
 
 @pytest.fixture(scope="module")
 def server(probe: Probe) -> Iterator[tuple[NodeProcess, object, object]]:
-    process, (ik, fk) = start_with_services(probe, "palletizer_ik_server", "--params-file", PARAMS,
-                                            services=IK_FK, timeout=TIMEOUT)
+    process, (ik, fk) = start_with_services(
+        probe, "palletizer_ik_server", "--params-file", PARAMS, services=IK_FK, timeout=TIMEOUT
+    )
     try:
         yield process, ik, fk
     finally:

@@ -197,7 +197,7 @@ def test_palletizer_plots_writes_everything(tmp_path, capsys) -> None:
 
 
 def test_joint_trajectory_message(model: Palletizer) -> None:
-    from palletizer_kinematics.messages import joint_trajectory
+    from palletizer_kinematics.trajectory_message import joint_trajectory
 
     trajectory = door_trajectory(model, step=0.05)
     msg = joint_trajectory(model.joint_names, trajectory.t, trajectory.axis["double"], trajectory.axis_rates)

@@ -1,4 +1,5 @@
 """Planar two-link IK (both branches, reachability reasons), angle wrapping, yaw quaternions."""
+
 from __future__ import annotations
 
 import math

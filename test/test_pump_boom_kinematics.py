@@ -16,7 +16,7 @@ import yaml
 
 from manipulator_kinematics.compiled import enabled as compiled_enabled
 from manipulator_kinematics.model import IKStatus, RequestError, pose_matrix
-from manipulator_kinematics.params import ConfigError, config_path, load_parameters
+from manipulator_kinematics.param_files import ConfigError, config_path, load_parameters
 from manipulator_kinematics.time_scaling import ACCELERATION, TIP_SPEED
 from pump_boom_kinematics import build_regions, kinematics, regions
 from pump_boom_kinematics.kinematics import Failure, PumpBoom, RegionIK, RegionTableError, compiled_kernel
@@ -133,8 +133,15 @@ def test_window_blend_is_the_papers_partition_of_unity_on_equal_squares(boom: Pu
     keys = np.array([(i, j) for i in range(8) for j in range(-3, 5) if rng.random() < 0.7])
     triples = rng.uniform(0.3, 3.0, (len(keys), 3))  # one shape family (unfolded: 0.3 rad > 15 deg)
     assert not regions.family(triples).any()
-    level0 = RegionTable(grid, np.concatenate([keys, np.zeros((len(keys), 1), int)], axis=1), triples,
-                         np.zeros(len(keys)), {}, {}, {})
+    level0 = RegionTable(
+        grid,
+        np.concatenate([keys, np.zeros((len(keys), 1), int)], axis=1),
+        triples,
+        np.zeros(len(keys)),
+        {},
+        {},
+        {},
+    )
     quarters = np.array([(2 * i + a, 2 * j + b, 1) for i, j in keys for a in (0, 1) for b in (0, 1)])
     level1 = RegionTable(grid, quarters, np.repeat(triples, 4, axis=0), np.zeros(len(quarters)), {}, {}, {})
     plane = np.stack([rng.uniform(0.0, 42.0, 50_000), rng.uniform(-16.0, 26.0, 50_000)], axis=-1)
@@ -146,7 +153,8 @@ def test_window_blend_is_the_papers_partition_of_unity_on_equal_squares(boom: Pu
     u = (plane[:, 0] - grid.origin[0]) / grid.size
     v = (plane[:, 1] - grid.origin[1]) / grid.size
     weight = (ramp(u[:, None] - keys[None, :, 0]) - ramp(u[:, None] - keys[None, :, 0] - 1)) * (
-        ramp(v[:, None] - keys[None, :, 1]) - ramp(v[:, None] - keys[None, :, 1] - 1))
+        ramp(v[:, None] - keys[None, :, 1]) - ramp(v[:, None] - keys[None, :, 1] - 1)
+    )
     own = (np.floor(u)[:, None] == keys[None, :, 0]) & (np.floor(v)[:, None] == keys[None, :, 1])
     own = own.any(axis=1)
     with np.errstate(invalid="ignore"):  # points outside every square: no weight
@@ -204,8 +212,9 @@ def test_points_on_edges_and_corners_belong_to_every_square_containing_them(boom
     table = boom.table
     side = boom.grid.side(table.index[:, 2])
     r0, z0 = boom.grid.corner(*table.index.T)
-    fractions = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [0.5, 0.0], [0.5, 1.0], [0.0, 0.5],
-                          [1.0, 0.5]])
+    fractions = np.array(
+        [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0], [0.5, 0.0], [0.5, 1.0], [0.0, 0.5], [1.0, 0.5]]
+    )
     plane = np.stack([r0, z0], axis=-1)[:, None] + side[:, None, None] * fractions[None]
     assert table.contains(plane[..., 0], plane[..., 1]).all()
     points = np.stack([plane[..., 0], np.zeros(plane.shape[:-1]), plane[..., 1]], axis=-1).reshape(-1, 3)
@@ -238,8 +247,14 @@ def test_single_point_path_equals_the_vectorised_ik(boom: PumpBoom, monkeypatch:
     failure and band flag for every point (the kernel's raw joints too where the failure needs them)."""
     rng = np.random.default_rng(17)
     inside = _plane(boom, 0.25)
-    around = inside + np.stack([rng.normal(scale=4.0, size=len(inside)), np.zeros(len(inside)),
-                                rng.normal(scale=4.0, size=len(inside))], axis=-1)
+    around = inside + np.stack(
+        [
+            rng.normal(scale=4.0, size=len(inside)),
+            np.zeros(len(inside)),
+            rng.normal(scale=4.0, size=len(inside)),
+        ],
+        axis=-1,
+    )
     plane = np.concatenate([inside, around])
     heading = rng.uniform(-math.pi, math.pi, len(plane))
     points = np.stack([plane[:, 0] * np.cos(heading), plane[:, 0] * np.sin(heading), plane[:, 2]], axis=-1)
@@ -257,8 +272,13 @@ def test_single_point_path_equals_the_vectorised_ik(boom: PumpBoom, monkeypatch:
         if solution is not None:
             q[k] = solution
     np.testing.assert_array_equal(failure, expected.failure)
-    assert set(failure.tolist()) >= {Failure.NONE, Failure.NOT_FINITE, Failure.BEYOND_REACH,
-                                     Failure.BEHIND_ROOT, Failure.NOT_IN_TABLE}
+    assert set(failure.tolist()) >= {
+        Failure.NONE,
+        Failure.NOT_FINITE,
+        Failure.BEYOND_REACH,
+        Failure.BEHIND_ROOT,
+        Failure.NOT_IN_TABLE,
+    }
     assert expected.blended.sum() > 5000  # the bands are well sampled
     np.testing.assert_allclose(q, expected.q, atol=1e-12)  # NaN where both fail
     unseeded, _ = boom.region_ik_point(-20.0, 5.0, 17.5)
@@ -277,20 +297,31 @@ def test_single_point_path_equals_the_vectorised_ik(boom: PumpBoom, monkeypatch:
     _kernel_equals_numpy(kernel, boom, points, slew, expected)
     # A table of jittered triples fails in the steps the shipped table never fails in.
     table = boom.table
-    jittered = RegionTable(grid=table.grid, index=table.index,
-                           triples=table.triples + rng.normal(scale=0.2, size=table.triples.shape),
-                           margin=table.margin, built_for=table.built_for, search=table.search,
-                           coverage=table.coverage)
+    jittered = RegionTable(
+        grid=table.grid,
+        index=table.index,
+        triples=table.triples + rng.normal(scale=0.2, size=table.triples.shape),
+        margin=table.margin,
+        built_for=table.built_for,
+        search=table.search,
+        coverage=table.coverage,
+    )
     other = PumpBoom(boom.root, boom.lengths, boom.limits, boom.grid, table=jittered)
-    inside_points = points[:len(inside)]
-    failures = _kernel_equals_numpy(kernel, other, inside_points, slew[:len(inside)],
-                                    other.region_ik(inside_points, seed=seed[:len(inside)]))
+    inside_points = points[: len(inside)]
+    failures = _kernel_equals_numpy(
+        kernel,
+        other,
+        inside_points,
+        slew[: len(inside)],
+        other.region_ik(inside_points, seed=seed[: len(inside)]),
+    )
     for code in (Failure.NONE, Failure.TWO_LINK, Failure.JOINT_LIMITS, Failure.ENVELOPE):
         assert np.sum(failures == code) > 100, (code, np.bincount(failures))
 
 
-def _kernel_equals_numpy(kernel: ModuleType, boom: PumpBoom, points: np.ndarray, slew: np.ndarray,
-                         expected: RegionIK) -> np.ndarray:
+def _kernel_equals_numpy(
+    kernel: ModuleType, boom: PumpBoom, points: np.ndarray, slew: np.ndarray, expected: RegionIK
+) -> np.ndarray:
     """The kernel against region_ik (seeded): the same failures and band flags, joints to 1e-12
     where solved and, before the failure mask, where the steps that fill every joint ran."""
     raw, blended = np.full((len(points), 6), np.nan), np.zeros(len(points), dtype=bool)
@@ -489,11 +520,15 @@ def test_pour_end_outside_is_replaced_by_farthest_reachable_point(boom: PumpBoom
     [
         ({"step": 1e-10}, r"step 1e-10 m is outside \[0.001, 10\] m"),
         ({"step": math.nan}, "step nan m is outside"),
-        ({"step": 0.002, "waypoints": [[20.0, 5.0, 17.5], [70.0, 5.0, 17.5]]},
-         rf"would have 2.5e\+04 points at step 0.002 m; at most {MAX_POINTS}"),
+        (
+            {"step": 0.002, "waypoints": [[20.0, 5.0, 17.5], [70.0, 5.0, 17.5]]},
+            rf"would have 2.5e\+04 points at step 0.002 m; at most {MAX_POINTS}",
+        ),
         ({"waypoints": [[20.0, 5.0, 17.5], [1e300, 5.0, 17.5]]}, f"at most {MAX_POINTS}"),
-        ({"waypoints": [[20.0, 5.0, 17.5], [1.7e308, 5.0, 17.5], [-1.7e308, 5.0, 17.5]]},
-         f"at most {MAX_POINTS}"),
+        (
+            {"waypoints": [[20.0, 5.0, 17.5], [1.7e308, 5.0, 17.5], [-1.7e308, 5.0, 17.5]]},
+            f"at most {MAX_POINTS}",
+        ),
         ({"waypoints": [[20.0, 5.0, 17.5]] * (MAX_WAYPOINTS + 1)}, f"1 <= K <= {MAX_WAYPOINTS}"),
         ({"waypoints": [[20.0, 5.0, math.inf]]}, "finite"),
         ({"tip_speed": 1e-300}, "tip_speed 1e-300 m/s is outside"),
@@ -504,8 +539,10 @@ def test_pour_end_outside_is_replaced_by_farthest_reachable_point(boom: PumpBoom
         ({"tip_speed": -0.2}, "tip_speed -0.2 m/s is outside"),
         ({"acceleration": 0.0}, r"acceleration 0 m/s\^2 is outside"),
         ({"acceleration": math.inf}, r"acceleration inf m/s\^2 is outside"),
-        ({"tip_speed": 0.001, "waypoints": [[20.0, 5.0, 17.5], [24.0, 5.0, 17.5]] * 20},
-         rf"at least 1.56e\+05 s at 0.001 m/s; at most {MAX_DURATION:g} s"),
+        (
+            {"tip_speed": 0.001, "waypoints": [[20.0, 5.0, 17.5], [24.0, 5.0, 17.5]] * 20},
+            rf"at least 1.56e\+05 s at 0.001 m/s; at most {MAX_DURATION:g} s",
+        ),
     ],
 )
 def test_a_plan_out_of_bounds_is_refused_before_any_work(boom: PumpBoom, change: dict, match: str) -> None:
@@ -543,8 +580,8 @@ def test_lookup_arrays_are_the_squares_drawn_one_by_one(boom: PumpBoom) -> None:
         corner = np.array(boom.grid.corner(i, j, level), dtype=float)
         a, b = np.rint((corner - boom.grid.origin) / cell - lower).astype(int)
         n = round(float(boom.grid.side(level)) / cell)
-        assert (drawn[a:a + n, b:b + n] == -1).all()
-        drawn[a:a + n, b:b + n] = k
+        assert (drawn[a : a + n, b : b + n] == -1).all()
+        drawn[a : a + n, b : b + n] = k
     np.testing.assert_array_equal(owner, drawn)
     assert (owner >= 0).sum() * cell**2 == pytest.approx(table.covered_area, rel=1e-12)
     fresh = RegionTable(table.grid, table.index, table.triples, table.margin, {}, {}, {})
@@ -664,7 +701,7 @@ def _squares_block(document: str) -> str:
 def _shipped_squares() -> tuple[str, np.ndarray]:
     """The shipped table file's text before its squares, and its squares (a copy)."""
     text = Path(config_path("pump_boom_regions.yaml")).read_text(encoding="utf-8")
-    return text[:text.index("      squares: |")], regions._squares(_squares_block(text), "squares").copy()
+    return text[: text.index("      squares: |")], regions._squares(_squares_block(text), "squares").copy()
 
 
 def _table_file(tmp_path: Path, head: str, stream: bytes) -> Path:
@@ -685,8 +722,9 @@ def _table_file(tmp_path: Path, head: str, stream: bytes) -> Path:
         (None, None, r"squares: expected base64 of the zlib-deflated squares of 37 bytes"),
     ],
 )
-def test_a_bad_square_of_the_table_file_is_refused_with_its_key(tmp_path, field: str | None, value: object,
-                                                                match: str) -> None:
+def test_a_bad_square_of_the_table_file_is_refused_with_its_key(
+    tmp_path, field: str | None, value: object, match: str
+) -> None:
     head, squares = _shipped_squares()
     if field is None:
         data = squares.tobytes()[:-1]  # a byte short
@@ -722,10 +760,14 @@ def _far_column(squares: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize(
     ("change", "match"),
     [
-        (lambda squares: squares[[0, 0, *range(2, len(squares))]],  # square 1 twice
-         r"square \(0, -85, 4\) overlaps square \(0, -85, 4\)"),
-        (lambda squares: np.concatenate([squares, squares[-1:]]),  # the last one twice
-         r"square \(264, 19, 5\) overlaps square \(264, 19, 5\)"),
+        (
+            lambda squares: squares[[0, 0, *range(2, len(squares))]],  # square 1 twice
+            r"square \(0, -85, 4\) overlaps square \(0, -85, 4\)",
+        ),
+        (
+            lambda squares: np.concatenate([squares, squares[-1:]]),  # the last one twice
+            r"square \(264, 19, 5\) overlaps square \(264, 19, 5\)",
+        ),
         (_far_column, r"the squares span \d+ x \d+ cells of 0.15625 m, more than 16777216"),
     ],
     ids=["first twice", "last twice", "a square 15 km away"],
@@ -780,8 +822,9 @@ def test_a_changed_geometry_runs_fk_but_no_region_ik_until_its_table_is_built(
     # FK and the Jacobian need no table: section 1 is 0.1 m longer, so every joint from P_1 on moves
     # by 0.1 m along section 1.
     phi1 = random_q[:, 1]
-    shift = 0.1 * np.stack([np.cos(phi1) * np.cos(random_q[:, 0]), np.cos(phi1) * np.sin(random_q[:, 0]),
-                            np.sin(phi1)], axis=-1)
+    shift = 0.1 * np.stack(
+        [np.cos(phi1) * np.cos(random_q[:, 0]), np.cos(phi1) * np.sin(random_q[:, 0]), np.sin(phi1)], axis=-1
+    )
     np.testing.assert_allclose(changed.tip(random_q) - boom.tip(random_q), shift, atol=1e-12)
     np.testing.assert_allclose(changed.jacob0(random_q)[:, :3], changed.tip_jacobian(random_q), atol=1e-11)
     # Region IK, solve_ik and pours refuse with the reason and the fix.
@@ -816,7 +859,8 @@ def test_section_2_folds_back_only_where_no_other_shape_reaches(boom: PumpBoom) 
         cos5 = np.clip((d * d - l4 * l4 - l5 * l5) / (2.0 * l4 * l5), -1.0, 1.0)
         bend = elbow * np.arccos(cos5)
         phi4 = np.arctan2(10.0 - shoulder[:, 1], 2.5 - shoulder[:, 0]) - np.arctan2(
-            l5 * np.sin(bend), l4 + l5 * np.cos(bend))
+            l5 * np.sin(bend), l4 + l5 * np.cos(bend)
+        )
         q[:, 4] = np.mod(phi4 - phi3 + np.pi, 2.0 * np.pi)
         q[:, 5] = bend + np.pi
         tip_error = np.abs(boom.plane_points(q)[:, 5] - [2.5, 10.0]).max(axis=-1)
@@ -835,8 +879,10 @@ def test_builder_is_deterministic_and_its_table_serves_a_changed_machine(tmp_pat
     # The check lattice 0.25 m apart (the shipped table's 0.1 m): each final check runs on a sixth
     # of the points, and the build (its gaps filled and checked again) takes 12 s instead of 90 s;
     # the test's 0.5 m points lie on that lattice (to 1 um), so the check vouches for every one.
-    tables = [build_regions.build_table(boom, step_deg=15.0, levels=1, coverage=area, check_spacing=0.25)
-              for _ in range(2)]
+    tables = [
+        build_regions.build_table(boom, step_deg=15.0, levels=1, coverage=area, check_spacing=0.25)
+        for _ in range(2)
+    ]
     for k, table in enumerate(tables):
         table.dump(tmp_path / f"t{k}.yaml")
     assert (tmp_path / "t0.yaml").read_bytes() == (tmp_path / "t1.yaml").read_bytes()

@@ -19,7 +19,7 @@ from ros_harness import IK_FK, RELIABLE_INPUTS, NodeProcess, Probe, start_with_s
 from sensor_msgs.msg import JointState
 
 from manipulator_kinematics.model import matrix_quaternion
-from manipulator_kinematics.params import config_path
+from manipulator_kinematics.param_files import config_path
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
 from manipulator_kinematics_interfaces.srv import PlanPath, SolveFK, SolveIK
 from pump_boom_kinematics.kinematics import PumpBoom
@@ -27,8 +27,14 @@ from pump_boom_kinematics.pour import MAX_POINTS, MAX_WAYPOINTS, TYPICAL_POURS, 
 
 pytestmark = pytest.mark.ros
 
-NAMES = ["slew_joint", "section_1_joint", "section_2_joint", "section_3_joint", "section_4_joint",
-         "section_5_joint"]
+NAMES = [
+    "slew_joint",
+    "section_1_joint",
+    "section_2_joint",
+    "section_3_joint",
+    "section_4_joint",
+    "section_5_joint",
+]
 PARAMS = str(config_path("pump_boom.yaml"))
 TIMEOUT = 20.0
 CHANGED_LENGTHS = [9.7, 8.4, 8.2, 8.6, 6.7]  # section 1 0.1 m longer than the table was built for
@@ -42,9 +48,16 @@ def boom() -> PumpBoom:
 def start_server(
     probe: Probe, *ros_args: str, namespace: str = ""
 ) -> tuple[NodeProcess, object, object, object]:
-    process, clients = start_with_services(probe, "pump_boom_ik_server", "--params-file", PARAMS, *ros_args,
-                                           services=(*IK_FK, (PlanPath, "plan_path")), timeout=TIMEOUT,
-                                           namespace=namespace)
+    process, clients = start_with_services(
+        probe,
+        "pump_boom_ik_server",
+        "--params-file",
+        PARAMS,
+        *ros_args,
+        services=(*IK_FK, (PlanPath, "plan_path")),
+        timeout=TIMEOUT,
+        namespace=namespace,
+    )
     return process, *clients
 
 
@@ -62,8 +75,9 @@ def call(probe: Probe, client, request):
     return probe.call(client, request, TIMEOUT)
 
 
-def ik_request(point, use_orientation: bool = False, seed=None, mode: str = "", branch: str = "",
-               frame: str = "") -> SolveIK.Request:
+def ik_request(
+    point, use_orientation: bool = False, seed=None, mode: str = "", branch: str = "", frame: str = ""
+) -> SolveIK.Request:
     request = SolveIK.Request(mode=mode, branch=branch, use_orientation=use_orientation)
     request.target.header.frame_id = frame
     p = request.target.pose.position
@@ -74,8 +88,9 @@ def ik_request(point, use_orientation: bool = False, seed=None, mode: str = "", 
 
 
 def fk_request(q, qd=None, stamp: Time | None = None) -> SolveFK.Request:
-    state = JointState(name=NAMES, position=[float(v) for v in q],
-                       velocity=[] if qd is None else [float(v) for v in qd])
+    state = JointState(
+        name=NAMES, position=[float(v) for v in q], velocity=[] if qd is None else [float(v) for v in qd]
+    )
     if stamp is not None:
         state.header.stamp = stamp
     return SolveFK.Request(joint_state=state)
@@ -101,8 +116,9 @@ def assert_trajectory_is_the_plan(trajectory, plan) -> None:
     t = np.array([seconds(point.time_from_start) for point in trajectory.points])
     np.testing.assert_allclose(t, plan.t, atol=1e-9)
     for field, expected in (("positions", plan.q), ("velocities", plan.qd), ("accelerations", plan.qdd)):
-        np.testing.assert_allclose(np.array([getattr(p, field) for p in trajectory.points]), expected,
-                                   atol=1e-12, err_msg=field)
+        np.testing.assert_allclose(
+            np.array([getattr(p, field) for p in trajectory.points]), expected, atol=1e-12, err_msg=field
+        )
     np.testing.assert_array_equal(trajectory.points[0].velocities, 0.0)
     np.testing.assert_array_equal(trajectory.points[-1].velocities, 0.0)
 
@@ -151,19 +167,28 @@ def test_behind_the_slew_axis_the_seed_picks_the_slew_turn(probe: Probe, server,
 
 
 BAD_IK = {
-    "outside the table": (ik_request([40.7, 0.0, 12.0]), Codes.NO_IK_SOLUTION,
-                          "outside the region table: no square covers it (its 5 m square (8, 2)"),
+    "outside the table": (
+        ik_request([40.7, 0.0, 12.0]),
+        Codes.NO_IK_SOLUTION,
+        "outside the region table: no square covers it (its 5 m square (8, 2)",
+    ),
     "beyond the reach": (ik_request([60.0, 0.0, 3.6]), Codes.NO_IK_SOLUTION, "beyond the boom's reach"),
     "on the slew axis": (ik_request([0.0, 0.0, 10.0]), Codes.NO_IK_SOLUTION, "behind the boom root pin"),
     "behind the root pin": (ik_request([-0.1, 0.05, 10.0]), Codes.NO_IK_SOLUTION, "behind the boom root pin"),
-    "orientation": (ik_request([20.0, 5.0, 17.5], use_orientation=True), Codes.INVALID_GOAL_CONSTRAINTS,
-                    "position only"),
+    "orientation": (
+        ik_request([20.0, 5.0, 17.5], use_orientation=True),
+        Codes.INVALID_GOAL_CONSTRAINTS,
+        "position only",
+    ),
     "nan": (ik_request([math.nan, 0.0, 17.5]), Codes.INVALID_GOAL_CONSTRAINTS, "not finite"),
     "mode": (ik_request([20.0, 5.0, 17.5], mode="phi"), Codes.INVALID_MODE, "unknown IK mode 'phi'"),
     "branch": (ik_request([20.0, 5.0, 17.5], branch="elbow_a"), Codes.INVALID_MODE, "unknown branch"),
     "frame": (ik_request([20.0, 5.0, 17.5], frame="map"), Codes.FRAME_TRANSFORM_FAILURE, "'map'"),
-    "seed nan": (ik_request([20.0, 5.0, 17.5], seed=[0.0, math.nan, 2.0, 2.0, 2.0, 2.0]),
-                 Codes.INVALID_ROBOT_STATE, "non-finite"),
+    "seed nan": (
+        ik_request([20.0, 5.0, 17.5], seed=[0.0, math.nan, 2.0, 2.0, 2.0, 2.0]),
+        Codes.INVALID_ROBOT_STATE,
+        "non-finite",
+    ),
 }
 
 
@@ -178,10 +203,16 @@ def test_bad_ik_and_fk_requests_fail_with_a_code_and_a_reason(probe: Probe, serv
     straight = [0.0, math.pi / 2, math.pi, math.pi, math.pi, math.pi]
     fk_cases = {
         "nan": (fk_request([0.0, math.nan, 3.0, 3.0, 3.0, 3.0]), Codes.INVALID_ROBOT_STATE, "non-finite"),
-        "limits": (fk_request([0.0, 2.0, 3.0, 3.0, 3.0, 3.0]), Codes.JOINT_LIMITS_VIOLATED,
-                   "section_1_joint"),
-        "missing": (SolveFK.Request(joint_state=JointState(name=NAMES[:5], position=straight[:5])),
-                    Codes.INVALID_ROBOT_STATE, "['section_5_joint'] missing"),
+        "limits": (
+            fk_request([0.0, 2.0, 3.0, 3.0, 3.0, 3.0]),
+            Codes.JOINT_LIMITS_VIOLATED,
+            "section_1_joint",
+        ),
+        "missing": (
+            SolveFK.Request(joint_state=JointState(name=NAMES[:5], position=straight[:5])),
+            Codes.INVALID_ROBOT_STATE,
+            "['section_5_joint'] missing",
+        ),
     }
     for name, (request, code, text) in fk_cases.items():
         response = call(probe, fk, request)
@@ -206,8 +237,11 @@ def test_plan_path_of_the_papers_typical_pours(probe: Probe, server, boom: PumpB
         plan = pour_line(boom, start, end, step or None, speed or None)
         trajectory = response.trajectory
         assert list(trajectory.joint_names) == NAMES and trajectory.header.frame_id == "base_link"
-        assert len(trajectory.points) == len(plan.q) == math.ceil(
-            np.linalg.norm(np.subtract(end, start)) / (step or 0.1) - 1e-9) + 1
+        assert (
+            len(trajectory.points)
+            == len(plan.q)
+            == math.ceil(np.linalg.norm(np.subtract(end, start)) / (step or 0.1) - 1e-9) + 1
+        )
         q = np.array([point.positions for point in trajectory.points])
         np.testing.assert_allclose(q, plan.q, atol=1e-12)
         np.testing.assert_allclose(boom.tip(q), plan.points, atol=1e-9)
@@ -248,29 +282,47 @@ def test_plan_path_truncated_and_refused(probe: Probe, server, boom: PumpBoom) -
     line = [start, end]
     cases = {
         "no waypoint": (plan_request([]), invalid, "waypoints: need 1 to 1000, got 0"),
-        "too many waypoints": (plan_request([start] * (MAX_WAYPOINTS + 1)), invalid,
-                               f"need 1 to {MAX_WAYPOINTS}, got {MAX_WAYPOINTS + 1}"),
+        "too many waypoints": (
+            plan_request([start] * (MAX_WAYPOINTS + 1)),
+            invalid,
+            f"need 1 to {MAX_WAYPOINTS}, got {MAX_WAYPOINTS + 1}",
+        ),
         "nan": (plan_request([start, [math.nan, 0.0, 1.0]]), invalid, "finite"),
-        "huge waypoint": (plan_request([start, [1e300, 0.0, 17.5]]), invalid,
-                          "waypoint 1 [1e+300, 0.0, 17.5] is beyond 1000 x the machine's reach"),
-        "too many points": (plan_request([start, [20.0, 20.0, 17.5]], step=0.001), invalid,
-                            f"would have 2e+04 points at step 0.001 m; at most {MAX_POINTS}"),
-        "too long": (plan_request([start, [20.0, 20.0, 17.5]] * 3, tip_speed=0.001), invalid,
-                     "would take at least 1e+05 s at 0.001 m/s; at most 86400 s"),
+        "huge waypoint": (
+            plan_request([start, [1e300, 0.0, 17.5]]),
+            invalid,
+            "waypoint 1 [1e+300, 0.0, 17.5] is beyond 1000 x the machine's reach",
+        ),
+        "too many points": (
+            plan_request([start, [20.0, 20.0, 17.5]], step=0.001),
+            invalid,
+            f"would have 2e+04 points at step 0.001 m; at most {MAX_POINTS}",
+        ),
+        "too long": (
+            plan_request([start, [20.0, 20.0, 17.5]] * 3, tip_speed=0.001),
+            invalid,
+            "would take at least 1e+05 s at 0.001 m/s; at most 86400 s",
+        ),
         "step negative": (plan_request(line, step=-0.1), invalid, "step -0.1 m is outside [0.001, 10] m"),
         "step tiny": (plan_request(line, step=1e-10), invalid, "step 1e-10 m is outside"),
         "step nan": (plan_request(line, step=math.nan), invalid, "step nan m is outside"),
         "speed inf": (plan_request(line, tip_speed=math.inf), invalid, "tip_speed inf m/s is outside"),
         "speed tiny": (plan_request(line, tip_speed=1e-300), invalid, "tip_speed 1e-300 m/s is outside"),
-        "speed denormal": (plan_request(line, tip_speed=5e-324), invalid,
-                           "tip_speed 4.94066e-324 m/s is outside"),
+        "speed denormal": (
+            plan_request(line, tip_speed=5e-324),
+            invalid,
+            "tip_speed 4.94066e-324 m/s is outside",
+        ),
         "speed huge": (plan_request(line, tip_speed=1e300), invalid, "tip_speed 1e+300 m/s is outside"),
         "speed nan": (plan_request(line, tip_speed=math.nan), invalid, "tip_speed nan m/s is outside"),
         "speed negative": (plan_request(line, tip_speed=-0.2), invalid, "tip_speed -0.2 m/s is outside"),
         "mode": (plan_request(line, mode="phi"), Codes.INVALID_MODE, "unknown mode 'phi'"),
         "seed": (plan_request(line, seed=[0.0, 1.0]), Codes.INVALID_ROBOT_STATE, "seed:"),
-        "seed huge": (plan_request(line, seed=[1e300, 1.0, 2.0, 2.0, 2.0, 2.0]), Codes.INVALID_ROBOT_STATE,
-                      "seed: slew_joint = 1e+300 is beyond 1000 x its range"),
+        "seed huge": (
+            plan_request(line, seed=[1e300, 1.0, 2.0, 2.0, 2.0, 2.0]),
+            Codes.INVALID_ROBOT_STATE,
+            "seed: slew_joint = 1e+300 is beyond 1000 x its range",
+        ),
     }
     for name, (request, code, text) in cases.items():
         response = call(probe, plan_client, request)
@@ -304,14 +356,17 @@ def test_solve_ik_is_answered_while_a_long_plan_runs(probe: Probe, server, boom:
     gaps = np.diff([sent, *answered, finished])
     assert took > 0.3 and len(answered) >= 3, (took, len(answered))
     assert gaps.max() < 0.5 * took, (took, gaps.max(), len(answered))
-    print(f"plan of {len(plan.trajectory.points)} points answered after {took:.2f} s; "
-          f"{len(answered)} solve_ik answered meanwhile, longest gap {gaps.max():.3f} s")
+    print(
+        f"plan of {len(plan.trajectory.points)} points answered after {took:.2f} s; "
+        f"{len(answered)} solve_ik answered meanwhile, longest gap {gaps.max():.3f} s"
+    )
 
 
 def test_a_server_on_a_changed_geometry_solves_fk_and_refuses_region_ik(probe: Probe, boom: PumpBoom) -> None:
     lengths = "[" + ", ".join(map(str, CHANGED_LENGTHS)) + "]"
     process, ik, fk, plan_client = start_server(
-        probe, "-p", f"pump_boom.lengths:={lengths}", "-r", "__ns:=/changed", namespace="/changed")
+        probe, "-p", f"pump_boom.lengths:={lengths}", "-r", "__ns:=/changed", namespace="/changed"
+    )
     try:
         q = [0.4, 1.0, 2.5, 2.8, 3.3, 2.6]
         response = call(probe, fk, fk_request(q))
@@ -321,8 +376,10 @@ def test_a_server_on_a_changed_geometry_solves_fk_and_refuses_region_ik(probe: P
         c1, s1 = math.cos(q[1]), math.sin(q[1])
         shift = 0.1 * np.array([c1 * math.cos(q[0]), c1 * math.sin(q[0]), s1])
         np.testing.assert_allclose([p.x, p.y, p.z], boom.tip(q) + shift, atol=1e-9)
-        for client, request in ((ik, ik_request([20.0, 5.0, 17.5])),
-                                (plan_client, plan_request([[20.0, 0.0, 17.5], [25.0, 0.0, 17.5]]))):
+        for client, request in (
+            (ik, ik_request([20.0, 5.0, 17.5])),
+            (plan_client, plan_request([[20.0, 0.0, 17.5], [25.0, 0.0, 17.5]])),
+        ):
             answer = call(probe, client, request)
             assert not answer.success and answer.error_code.val == Codes.FAILURE, answer.message
             assert "built_for.lengths" in answer.message, answer.message
@@ -341,10 +398,16 @@ def test_forward_node_publishes_the_tip_pose_and_twist(probe: Probe, boom: PumpB
     pose_sub = node.create_subscription(PoseStamped, "pump_boom_test/tool_pose", poses.append, 10)
     twist_sub = node.create_subscription(TwistStamped, "pump_boom_test/tool_twist", twists.append, 10)
     process = NodeProcess(
-        "pump_boom_forward", "--params-file", PARAMS, *RELIABLE_INPUTS,
-        "-p", "pump_boom_forward:topics.joint_states:=pump_boom_test/joint_states",
-        "-p", "pump_boom_forward:topics.tool_pose:=pump_boom_test/tool_pose",
-        "-p", "pump_boom_forward:topics.tool_twist:=pump_boom_test/tool_twist",
+        "pump_boom_forward",
+        "--params-file",
+        PARAMS,
+        *RELIABLE_INPUTS,
+        "-p",
+        "pump_boom_forward:topics.joint_states:=pump_boom_test/joint_states",
+        "-p",
+        "pump_boom_forward:topics.tool_pose:=pump_boom_test/tool_pose",
+        "-p",
+        "pump_boom_forward:topics.tool_twist:=pump_boom_test/tool_twist",
     )
     # Joint states along the slanted pour, with the plan's joint rates.
     plan = pour_line(boom, *TYPICAL_POURS["slanted_line"][1:])
@@ -353,9 +416,17 @@ def test_forward_node_publishes_the_tip_pose_and_twist(probe: Probe, boom: PumpB
     rates = plan.qd[index]
     try:
         probe.wait_until(
-            lambda: (publisher.get_subscription_count() > 0 and pose_sub.get_publisher_count() > 0
-                     and twist_sub.get_publisher_count() > 0) or not process.alive(),
-            TIMEOUT, "forward node discovery")
+            lambda: (
+                (
+                    publisher.get_subscription_count() > 0
+                    and pose_sub.get_publisher_count() > 0
+                    and twist_sub.get_publisher_count() > 0
+                )
+                or not process.alive()
+            ),
+            TIMEOUT,
+            "forward node discovery",
+        )
         assert process.alive(), process.log()
         bad = JointState(name=NAMES, position=[0.0, math.nan, 3.0, 3.0, 3.0, 3.0])
         for i, (q, qd) in enumerate(zip(states, rates, strict=True)):
@@ -364,8 +435,9 @@ def test_forward_node_publishes_the_tip_pose_and_twist(probe: Probe, boom: PumpB
             message = JointState(name=NAMES, position=q.tolist(), velocity=qd.tolist())
             message.header.stamp = Time(sec=300 + i, nanosec=250)
             publisher.publish(message)
-            probe.wait_until(lambda n=i + 1: len(poses) >= n and len(twists) >= n, TIMEOUT,
-                             f"pose and twist {i}")
+            probe.wait_until(
+                lambda n=i + 1: len(poses) >= n and len(twists) >= n, TIMEOUT, f"pose and twist {i}"
+            )
     finally:
         log = process.stop()
     assert "dropped joint_states" in log and "Traceback" not in log, log

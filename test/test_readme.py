@@ -2,6 +2,7 @@
 block marked ``<!-- runnable -->`` is run, Python blocks
 in-process and shell blocks with the venv's executables; blocks marked ``<!-- runnable: nodes -->``
 start their nodes together, which must come up, log a start-up line and exit 0 on SIGINT."""
+
 from __future__ import annotations
 
 import contextlib
@@ -25,8 +26,11 @@ STARTUP_TIMEOUT = 30.0
 
 
 def blocks(kind: str | None, lang: str) -> list[str]:
-    found = [(m["kind"], m["lang"], m["code"])
-             for page in PAGES for m in BLOCK.finditer(page.read_text(encoding="utf-8"))]
+    found = [
+        (m["kind"], m["lang"], m["code"])
+        for page in PAGES
+        for m in BLOCK.finditer(page.read_text(encoding="utf-8"))
+    ]
     return [code for k, language, code in found if k == kind and language == lang]
 
 
@@ -47,8 +51,9 @@ def test_shell_block_runs(code: str) -> None:
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}"}
     out = REPO / "out" / "readme_eval"
     try:
-        result = subprocess.run(["bash", "-e", "-c", code], cwd=REPO, env=env, capture_output=True,
-                                text=True, timeout=300)
+        result = subprocess.run(
+            ["bash", "-e", "-c", code], cwd=REPO, env=env, capture_output=True, text=True, timeout=300
+        )
         assert result.returncode == 0, result.stdout + result.stderr
         assert "Traceback" not in result.stderr
     finally:

@@ -2,6 +2,7 @@
 every node kind, parameter descriptions and ranges, input QoS with both kinds of publisher across
 processes, frame prefixes (nodes, URDF, two machines in one bag's TF tree), an empty target
 frame_id, the documented frames, and the demo's network isolation."""
+
 from __future__ import annotations
 
 import os
@@ -27,7 +28,7 @@ from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.bag.visual import add_visuals
 from manipulator_kinematics.bag.writer import BagWriter
 from manipulator_kinematics.nodes.base import command_line_values
-from manipulator_kinematics.params import config_path, load_parameters
+from manipulator_kinematics.param_files import config_path, load_parameters
 from manipulator_kinematics.registry import machine
 from manipulator_kinematics.urdf import machine_urdf, prefixed_urdf
 from manipulator_kinematics_interfaces.srv import SolveIK
@@ -48,12 +49,30 @@ def write(path: Path, document: dict) -> str:
 
 # ---- precedence --------------------------------------------------------------------------------
 def test_the_precedence_rule_without_ros(tmp_path: Path) -> None:
-    first = write(tmp_path / "a.yaml", {"/**": {"ros__parameters": {"x": 1, "scara": {"l2": 0.3}}},
-                                        "/**/node": {"ros__parameters": {"y": 1, "z": 1}}})
-    second = write(tmp_path / "b.yaml", {"/**": {"ros__parameters": {"y": 2}},
-                                         "/ns/node": {"ros__parameters": {"w": 2}}})
-    argv = ["exe", "--ros-args", "-p", "z:=3", "--params-file", first, "--params-file", second,
-            "-p", "other:x:=9", "-p", "node:scara.l2:=0.35"]
+    first = write(
+        tmp_path / "a.yaml",
+        {
+            "/**": {"ros__parameters": {"x": 1, "scara": {"l2": 0.3}}},
+            "/**/node": {"ros__parameters": {"y": 1, "z": 1}},
+        },
+    )
+    second = write(
+        tmp_path / "b.yaml", {"/**": {"ros__parameters": {"y": 2}}, "/ns/node": {"ros__parameters": {"w": 2}}}
+    )
+    argv = [
+        "exe",
+        "--ros-args",
+        "-p",
+        "z:=3",
+        "--params-file",
+        first,
+        "--params-file",
+        second,
+        "-p",
+        "other:x:=9",
+        "-p",
+        "node:scara.l2:=0.35",
+    ]
     values = command_line_values("/ns/node", argv)
     # a later file's /** beats an earlier file's node section; -p beats every file, wherever it is
     assert values == {"x": 1, "scara.l2": 0.35, "y": 2, "z": 3, "w": 2}
@@ -70,13 +89,37 @@ def test_the_precedence_rule_without_ros(tmp_path: Path) -> None:
 #: on the command line, another setting with its value in that node section and in a later file's /**
 KINDS = {
     "serial forward": ("scara_forward", "config/scara.yaml", "warning_period", 3.0, 4.0, "qos_depth", 7, 9),
-    "ik server": ("scara_ik_server", "config/scara.yaml", "base_frame", "file", "odom",
-                  "frame_prefix", "a/", "b/"),
+    "ik server": (
+        "scara_ik_server",
+        "config/scara.yaml",
+        "base_frame",
+        "file",
+        "odom",
+        "frame_prefix",
+        "a/",
+        "b/",
+    ),
     "markers": ("machine_markers", "config/scara.yaml", "warning_period", 3.0, 4.0, "qos_depth", 7, 9),
-    "excavator forward": ("excavator_forward", "config/excavator_cet200.yaml", "base_frame", "file", "odom",
-                          "qos_depth", 7, 9),
-    "velocity ik": ("excavator_velocity_ik", "config/excavator_cet200.yaml", "warning_period", 3.0, 4.0,
-                    "qos_depth", 7, 9),
+    "excavator forward": (
+        "excavator_forward",
+        "config/excavator_cet200.yaml",
+        "base_frame",
+        "file",
+        "odom",
+        "qos_depth",
+        7,
+        9,
+    ),
+    "velocity ik": (
+        "excavator_velocity_ik",
+        "config/excavator_cet200.yaml",
+        "warning_period",
+        3.0,
+        4.0,
+        "qos_depth",
+        7,
+        9,
+    ),
     "simulator": ("excavator_sim", "config/excavator_cet200.yaml", "rate", 50.0, 60.0, "qos_depth", 7, 9),
 }
 
@@ -84,8 +127,10 @@ KINDS = {
 def get(probe: Probe, node: str, names: list[str]) -> list:
     client = probe.node.create_client(GetParameters, f"/{node}/get_parameters")
     probe.wait_until(client.service_is_ready, TIMEOUT, f"{node}/get_parameters")
-    return [parameter_value_to_python(v) for v in probe.call(client, GetParameters.Request(names=names),
-                                                               TIMEOUT).values]
+    return [
+        parameter_value_to_python(v)
+        for v in probe.call(client, GetParameters.Request(names=names), TIMEOUT).values
+    ]
 
 
 def test_p_wins_over_every_params_file_for_every_node_kind(probe: Probe, tmp_path: Path) -> None:
@@ -94,12 +139,21 @@ def test_p_wins_over_every_params_file_for_every_node_kind(probe: Probe, tmp_pat
     processes = {}
     try:
         for kind, (exe, machine_file, key, in_file, given, other, early, late) in KINDS.items():
-            section = write(tmp_path / f"{exe}.yaml",
-                            {f"/**/{exe}": {"ros__parameters": {key: in_file, other: early}}})
+            section = write(
+                tmp_path / f"{exe}.yaml", {f"/**/{exe}": {"ros__parameters": {key: in_file, other: early}}}
+            )
             later = write(tmp_path / f"{exe}_later.yaml", {"/**": {"ros__parameters": {other: late}}})
-            processes[kind] = NodeProcess(exe, "-p", f"{key}:={given}", "--params-file",
-                                          str(REPO / machine_file), "--params-file", section,
-                                          "--params-file", later)
+            processes[kind] = NodeProcess(
+                exe,
+                "-p",
+                f"{key}:={given}",
+                "--params-file",
+                str(REPO / machine_file),
+                "--params-file",
+                section,
+                "--params-file",
+                later,
+            )
         for kind, (exe, _, key, _, given, other, _, late) in KINDS.items():
             values = get(probe, exe, [key, other])
             assert values == [given, late], (kind, values, processes[kind].log())
@@ -114,20 +168,23 @@ def test_machine_parameters_are_described_with_their_range(probe: Probe) -> None
         probe.wait_until(client.service_is_ready, TIMEOUT, "describe_parameters")
         names = ["excavator.arm.length", "excavator.boom.foot_pin", "input_reliability", "frame_prefix"]
         length, pin, reliability, prefix = probe.call(
-            client, DescribeParameters.Request(names=names), TIMEOUT).descriptors
+            client, DescribeParameters.Request(names=names), TIMEOUT
+        ).descriptors
         assert length.description == "number in (0, 30] m", process.log()
         (bounds,) = length.floating_point_range
         assert (bounds.from_value, bounds.to_value) == (0.0, 30.0)
         assert pin.description.startswith("list of 2 numbers, each a number in [-30, 30] m")
         assert "one of reliable, best_effort" in reliability.additional_constraints
         assert "robot_state_publisher" in prefix.description and all(
-            d.read_only for d in (length, pin, reliability, prefix))
+            d.read_only for d in (length, pin, reliability, prefix)
+        )
 
 
 # ---- input QoS -------------------------------------------------------------------------------
 def joint_state(names, positions, velocities=(), sec: int = 1) -> JointState:
-    msg = JointState(name=list(names), position=[float(v) for v in positions],
-                     velocity=[float(v) for v in velocities])
+    msg = JointState(
+        name=list(names), position=[float(v) for v in positions], velocity=[float(v) for v in velocities]
+    )
     msg.header.stamp.sec = sec
     return msg
 
@@ -141,8 +198,9 @@ class Outputs:
 def test_both_kinds_of_publisher_are_heard_where_the_default_is_best_effort(probe: Probe) -> None:
     node = probe.node
     scara = NodeProcess("scara_forward", "-r", "__ns:=/qos", "-p", "frame_prefix:=m1/")
-    markers = NodeProcess("machine_markers", "-r", "__ns:=/qos", "--params-file",
-                          str(REPO / "config/scara.yaml"))
+    markers = NodeProcess(
+        "machine_markers", "-r", "__ns:=/qos", "--params-file", str(REPO / "config/scara.yaml")
+    )
     excavator = NodeProcess("excavator_forward", "-r", "__ns:=/qos")
     velocity_ik = NodeProcess("excavator_velocity_ik", "-r", "__ns:=/qos")
     try:
@@ -154,25 +212,39 @@ def test_both_kinds_of_publisher_are_heard_where_the_default_is_best_effort(prob
             joints = node.create_publisher(JointState, "/qos/joint_states", qos)
             cylinders = node.create_publisher(JointState, "/qos/cylinder_lengths", qos)
             target = node.create_publisher(TwistStamped, "/qos/target_bucket_twist", qos)
-            probe.wait_until(lambda j=joints, c=cylinders, t=target: j.get_subscription_count() >= 4
-                             and c.get_subscription_count() >= 3 and t.get_subscription_count() >= 1,
-                             TIMEOUT, f"every node subscribed ({qos.reliability.name})")
+            probe.wait_until(
+                lambda j=joints, c=cylinders, t=target: (
+                    j.get_subscription_count() >= 4
+                    and c.get_subscription_count() >= 3
+                    and t.get_subscription_count() >= 1
+                ),
+                TIMEOUT,
+                f"every node subscribed ({qos.reliability.name})",
+            )
             D = Excavator.default().limits.reference
             twist = TwistStamped()  # frame_id empty: the base frame
             twist.header.stamp.sec = sec
             twist.twist.linear.x = -0.05
 
             def send(sec=sec, joints=joints, cylinders=cylinders, target=target, twist=twist, D=D) -> None:
-                joints.publish(joint_state(["rail_joint", "shoulder_joint", "elbow_joint", "swing_joint"],
-                                           [*SCARA_Q, D[0]], [0.0, 0.0, 0.0, 0.0], sec))
+                joints.publish(
+                    joint_state(
+                        ["rail_joint", "shoulder_joint", "elbow_joint", "swing_joint"],
+                        [*SCARA_Q, D[0]],
+                        [0.0, 0.0, 0.0, 0.0],
+                        sec,
+                    )
+                )
                 cylinders.publish(joint_state(CYLINDERS, D[1:], [0.0] * 3, sec))
                 target.publish(twist)
 
             def heard(sec=sec) -> bool:
-                return (any(m.header.stamp.sec == sec for m in poses.messages)
-                        and any(m.header.stamp.sec == sec for m in buckets.messages)
-                        and any(m.markers[0].header.stamp.sec == sec for m in drawn.messages)
-                        and any(m.header.stamp.sec == sec for m in commands.messages))
+                return (
+                    any(m.header.stamp.sec == sec for m in poses.messages)
+                    and any(m.header.stamp.sec == sec for m in buckets.messages)
+                    and any(m.markers[0].header.stamp.sec == sec for m in drawn.messages)
+                    and any(m.header.stamp.sec == sec for m in commands.messages)
+                )
 
             while not heard():  # best effort may drop one; every round is a complete state
                 send()
@@ -195,14 +267,18 @@ def test_both_kinds_of_publisher_are_heard_where_the_default_is_best_effort(prob
 def test_the_simulator_hears_reliable_commands_only_unless_told(probe: Probe) -> None:
     """Its default is reliable (the velocity IK's single stop must arrive); best_effort is a
     setting away."""
-    with NodeProcess("excavator_sim", "-r", "__ns:=/sim_a"), \
-            NodeProcess("excavator_sim", "-r", "__ns:=/sim_b", "-p", "input_reliability:=best_effort"):
+    with (
+        NodeProcess("excavator_sim", "-r", "__ns:=/sim_a"),
+        NodeProcess("excavator_sim", "-r", "__ns:=/sim_b", "-p", "input_reliability:=best_effort"),
+    ):
         incompatible = []
         events = PublisherEventCallbacks(
-            incompatible_qos=lambda event: incompatible.append(event.last_policy_kind))
+            incompatible_qos=lambda event: incompatible.append(event.last_policy_kind)
+        )
         reliable_a = probe.node.create_publisher(JointState, "/sim_a/cylinder_rate_commands", RELIABLE)
-        sensor_a = probe.node.create_publisher(JointState, "/sim_a/cylinder_rate_commands", BEST_EFFORT,
-                                               event_callbacks=events)
+        sensor_a = probe.node.create_publisher(
+            JointState, "/sim_a/cylinder_rate_commands", BEST_EFFORT, event_callbacks=events
+        )
         sensor_b = probe.node.create_publisher(JointState, "/sim_b/cylinder_rate_commands", BEST_EFFORT)
         probe.wait_until(lambda: reliable_a.get_subscription_count() > 0, TIMEOUT, "sim_a subscribed")
         probe.wait_until(lambda: sensor_b.get_subscription_count() > 0, TIMEOUT, "sim_b, best effort")
@@ -270,8 +346,9 @@ def test_two_machines_share_one_tf_tree_in_one_bag(tmp_path: Path) -> None:
             frame = parents[frame]
     descriptions = [m.data for ns in ("/m1", "/m2") for m in messages[f"{ns}/robot_description"]]
     assert 'name="m1/base_link"' in descriptions[0] and 'name="m2/base_link"' in descriptions[1]
-    markers = {m.markers[0].header.frame_id
-               for ns in ("/m1", "/m2") for m in messages[f"{ns}/machine_markers"]}
+    markers = {
+        m.markers[0].header.frame_id for ns in ("/m1", "/m2") for m in messages[f"{ns}/machine_markers"]
+    }
     assert markers == {"m1/base_link", "m2/base_link"}
 
 

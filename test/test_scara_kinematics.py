@@ -1,5 +1,6 @@
 """SCARA core: the reference check values, FK vs the D-H chain, IK round trips in every mode,
 branches, the position-mode rule against brute force, Jacobian and singularity, limits, config."""
+
 from __future__ import annotations
 
 import math
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from manipulator_kinematics.params import ConfigError, config_path, load_parameters
+from manipulator_kinematics.param_files import ConfigError, config_path, load_parameters
 from manipulator_kinematics.planar import wrap_angle
 from scara_kinematics.kinematics import BRANCHES, MODES, PAPER_PHI, IKStatus, Scara, compiled_kernel
 
@@ -170,8 +171,13 @@ def test_the_compiled_kernel_is_the_numpy_path_for_one_target(scara: Scara) -> N
     rng = np.random.default_rng(22)
     n = N
     x = scara.fk(random_states(scara, rng, n // 2))
-    wide = np.column_stack([rng.uniform(-0.6, 1.4, n - n // 2), rng.uniform(-0.9, 0.9, n - n // 2),
-                            rng.uniform(-math.pi, math.pi, n - n // 2)])
+    wide = np.column_stack(
+        [
+            rng.uniform(-0.6, 1.4, n - n // 2),
+            rng.uniform(-0.9, 0.9, n - n // 2),
+            rng.uniform(-math.pi, math.pi, n - n // 2),
+        ]
+    )
     x = np.concatenate([x, wide])
     near_vertical = scara.l2 * rng.uniform(0.99995, 1.0, len(x[3::50]))  # sin theta1 ~ 1: singular
     x[3::50, 1] = scara.l3 * np.sin(x[3::50, 2]) + near_vertical
@@ -179,8 +185,9 @@ def test_the_compiled_kernel_is_the_numpy_path_for_one_target(scara: Scara) -> N
     x[5::50, 1] = -scara.l3 - scara.l2 * rng.uniform(0.9999, 1.00001, len(x[5::50]))  # band edges, position
     at_limit = random_states(scara, rng, len(x[6::50]))
     joint = rng.integers(0, 3, len(at_limit))
-    at_limit[np.arange(len(at_limit)), joint] = np.where(rng.random(len(at_limit)) < 0.5,
-                                                         scara.limits.lower[joint], scara.limits.upper[joint])
+    at_limit[np.arange(len(at_limit)), joint] = np.where(
+        rng.random(len(at_limit)) < 0.5, scara.limits.lower[joint], scara.limits.upper[joint]
+    )
     x[6::50] = scara.fk(at_limit)
     x[::997, 0] = np.nan
     x[500::997, 1] = np.inf
@@ -189,20 +196,32 @@ def test_the_compiled_kernel_is_the_numpy_path_for_one_target(scara: Scara) -> N
     ties = np.flatnonzero(both.valid.all(axis=1))[::10]  # seeded halfway between two solutions
     seeds[ties] = both.candidates[ties].mean(axis=1)
     seeds[4::100, 2] = PAPER_PHI - seeds[4::100, 1]  # mode position in the singular band: stays singular
-    for mode, seed, branch in (("phi", None, None), ("phi", seeds, None), ("phi", seeds, "elbow_b"),
-                               ("fixed_phi", seeds, None), ("position", None, None),
-                               ("position", None, "elbow_b"), ("position", seeds, None),
-                               ("position", seeds, "elbow_a")):
+    for mode, seed, branch in (
+        ("phi", None, None),
+        ("phi", seeds, None),
+        ("phi", seeds, "elbow_b"),
+        ("fixed_phi", seeds, None),
+        ("position", None, None),
+        ("position", None, "elbow_b"),
+        ("position", seeds, None),
+        ("position", seeds, "elbow_a"),
+    ):
         phi = x[:, 2] if mode == "phi" else None
         batch = scara.ik(x[:, :2], mode=mode, phi=phi, seed=seed, branch=branch)
         seen = set(np.unique(batch.branch_status).tolist()) | set(np.unique(batch.status).tolist())
         assert seen == set(range(5)), seen
         for i in range(n):
-            one = scara.ik(x[i, :2], mode=mode, phi=None if phi is None else phi[i],
-                           seed=None if seed is None else seed[i], branch=branch)
+            one = scara.ik(
+                x[i, :2],
+                mode=mode,
+                phi=None if phi is None else phi[i],
+                seed=None if seed is None else seed[i],
+                branch=branch,
+            )
             np.testing.assert_allclose(one.candidates, batch.candidates[i], rtol=0.0, atol=1e-12)
-            np.testing.assert_allclose([one.phi, one.preferred_phi], [batch.phi[i], batch.preferred_phi[i]],
-                                       rtol=0.0, atol=1e-12)
+            np.testing.assert_allclose(
+                [one.phi, one.preferred_phi], [batch.phi[i], batch.preferred_phi[i]], rtol=0.0, atol=1e-12
+            )
             assert np.array_equal(one.branch_status, batch.branch_status[i]), i
             assert one.status == batch.status[i] and one.solutions.tie == batch.solutions.tie[i], i
             # A tie is decided by the last bits of two equal distances: either tied branch is right.
@@ -270,8 +289,9 @@ def test_position_mode_moves_the_heading_as_little_as_possible(scara: Scara) -> 
     # A moved heading sits on a constraint: a joint at a limit or |cos theta1| at the threshold.
     on_edge = moved > 1e-6
     q_moved = result.q[on_edge]
-    at_limit = (np.isclose(q_moved, scara.limits.lower, atol=1e-9)
-                | np.isclose(q_moved, scara.limits.upper, atol=1e-9))
+    at_limit = np.isclose(q_moved, scara.limits.lower, atol=1e-9) | np.isclose(
+        q_moved, scara.limits.upper, atol=1e-9
+    )
     at_singular = np.isclose(np.abs(np.cos(q_moved[:, 1])), scara.singularity_threshold, atol=1e-9)
     assert np.all(at_limit.any(axis=1) | at_singular)
 
@@ -295,8 +315,12 @@ def test_position_mode_takes_the_first_of_two_equally_near_headings(scara: Scara
 def test_failures_say_why(scara: Scara) -> None:
     cases = {
         "unreachable": ([0.3, 0.9], "fixed_phi", IKStatus.UNREACHABLE, "out of the upper arm's reach"),
-        "limits": ([1.3, 0.4], "fixed_phi", IKStatus.JOINT_LIMITS,
-                   "rail_joint = 0.840192 m above its limit 0.4 m"),
+        "limits": (
+            [1.3, 0.4],
+            "fixed_phi",
+            IKStatus.JOINT_LIMITS,
+            "rail_joint = 0.840192 m above its limit 0.4 m",
+        ),
         "singular": ([0.5, 0.55], "fixed_phi", IKStatus.SINGULAR, "|cos theta1|"),
         "nan": ([np.nan, 0.2], "fixed_phi", IKStatus.INVALID, "not finite"),
         "position far": ([0.3, 0.6], "position", IKStatus.UNREACHABLE, "farther than l2 + l3 = 0.55 m"),
@@ -335,10 +359,12 @@ def test_invalid_arguments(scara: Scara) -> None:
 
 
 def test_limit_checks(scara: Scara) -> None:
-    q = np.array([[0.41, 0.0, 0.0], [-0.01, 0.0, 0.0], [0.2, -151 * DEG, 0.0], [0.2, 0.0, 150 * DEG],
-                  [0.4, 0.0, 0.0]])
-    np.testing.assert_array_equal(scara.limit_violation(q),
-                                  [[1, 0, 0], [-1, 0, 0], [0, -1, 0], [0, 0, 0], [0, 0, 0]])
+    q = np.array(
+        [[0.41, 0.0, 0.0], [-0.01, 0.0, 0.0], [0.2, -151 * DEG, 0.0], [0.2, 0.0, 150 * DEG], [0.4, 0.0, 0.0]]
+    )
+    np.testing.assert_array_equal(
+        scara.limit_violation(q), [[1, 0, 0], [-1, 0, 0], [0, -1, 0], [0, 0, 0], [0, 0, 0]]
+    )
     np.testing.assert_array_equal(scara.within_limits(q), [False, False, False, True, True])
 
 
@@ -347,24 +373,35 @@ def reference_parameters() -> dict:
     return load_parameters(config_path("scara.yaml"))["scara"]
 
 
-@pytest.mark.parametrize(("change", "key"), [
-    (lambda p: p.pop("l2"), "scara.l2: missing"),
-    (lambda p: p.update(l3=-0.25), "scara.l3 = -0.25 is outside (0, 100] (m)"),
-    (lambda p: p.update(l1=-0.1), "scara.l1 = -0.1 is outside [0, 100] (m)"),
-    (lambda p: p.update(l2="0.3"), "scara.l2: expected a number (m), got '0.3'"),
-    (lambda p: p.update(l2=True), "scara.l2: expected a number (m), got True"),
-    (lambda p: p.update(l2=1e300), "scara.l2 = 1e+300 is outside (0, 100] (m)"),
-    (lambda p: p.update(l22=0.3), "scara.l22: unknown key (did you mean 'l2'?)"),
-    (lambda p: p.update(joint_min=[0.5, -2.0, -2.0]),
-     "scara.joint_min[0]: 0.5 must be below scara.joint_max[0] = 0.4"),
-    (lambda p: p.update(joint_max=[0.4, 200.0, 2.0]), "scara.joint_max[1]: 200.0 rad"),
-    (lambda p: p.update(joint_max=[0.4, 2.0]), "scara.joint_max: expected 3 numbers"),
-    (lambda p: p.update(joint_min=[0.0, float("nan"), -2.0]), "scara.joint_min[1]: expected a finite number"),
-    (lambda p: p.update(joint_names=["a", "a", "b"]), "scara.joint_names"),
-    (lambda p: p.pop("singularity_threshold"), "scara.singularity_threshold: missing"),
-    (lambda p: p.update(singularity_threshold=1.5), "scara.singularity_threshold = 1.5 is outside [0, 1]"),
-    (lambda p: p.update(singularity_threshold=1.0), "scara.singularity_threshold: 1.0 must be below 1"),
-])
+@pytest.mark.parametrize(
+    ("change", "key"),
+    [
+        (lambda p: p.pop("l2"), "scara.l2: missing"),
+        (lambda p: p.update(l3=-0.25), "scara.l3 = -0.25 is outside (0, 100] (m)"),
+        (lambda p: p.update(l1=-0.1), "scara.l1 = -0.1 is outside [0, 100] (m)"),
+        (lambda p: p.update(l2="0.3"), "scara.l2: expected a number (m), got '0.3'"),
+        (lambda p: p.update(l2=True), "scara.l2: expected a number (m), got True"),
+        (lambda p: p.update(l2=1e300), "scara.l2 = 1e+300 is outside (0, 100] (m)"),
+        (lambda p: p.update(l22=0.3), "scara.l22: unknown key (did you mean 'l2'?)"),
+        (
+            lambda p: p.update(joint_min=[0.5, -2.0, -2.0]),
+            "scara.joint_min[0]: 0.5 must be below scara.joint_max[0] = 0.4",
+        ),
+        (lambda p: p.update(joint_max=[0.4, 200.0, 2.0]), "scara.joint_max[1]: 200.0 rad"),
+        (lambda p: p.update(joint_max=[0.4, 2.0]), "scara.joint_max: expected 3 numbers"),
+        (
+            lambda p: p.update(joint_min=[0.0, float("nan"), -2.0]),
+            "scara.joint_min[1]: expected a finite number",
+        ),
+        (lambda p: p.update(joint_names=["a", "a", "b"]), "scara.joint_names"),
+        (lambda p: p.pop("singularity_threshold"), "scara.singularity_threshold: missing"),
+        (
+            lambda p: p.update(singularity_threshold=1.5),
+            "scara.singularity_threshold = 1.5 is outside [0, 1]",
+        ),
+        (lambda p: p.update(singularity_threshold=1.0), "scara.singularity_threshold: 1.0 must be below 1"),
+    ],
+)
 def test_config_errors_name_the_key(change, key: str) -> None:
     params = reference_parameters()
     change(params)
@@ -374,8 +411,10 @@ def test_config_errors_name_the_key(change, key: str) -> None:
 
 
 def test_a_users_params_file_is_loaded(tmp_path: Path) -> None:
-    document = {"/**": {"ros__parameters": {"scara": {**reference_parameters(), "l2": 0.35}}},
-                "scara_ik_server": {"ros__parameters": {"scara": {"l3": 0.2}}}}
+    document = {
+        "/**": {"ros__parameters": {"scara": {**reference_parameters(), "l2": 0.35}}},
+        "scara_ik_server": {"ros__parameters": {"scara": {"l3": 0.2}}},
+    }
     path = tmp_path / "my_scara.yaml"
     path.write_text(yaml.safe_dump(document))
     machine = Scara.from_parameters(load_parameters(path, "scara_ik_server")["scara"])
@@ -392,9 +431,14 @@ def test_solve_ik_of_one_target_is_the_batch_path(scara: Scara) -> None:
     rng = np.random.default_rng(32)
     n = 2000
     m = n - n // 2
-    x = np.concatenate([scara.fk(random_states(scara, rng, n // 2)),
-                        np.column_stack([rng.uniform(-0.6, 1.4, m), rng.uniform(-0.9, 0.9, m),
-                                         rng.uniform(-math.pi, math.pi, m)])])
+    x = np.concatenate(
+        [
+            scara.fk(random_states(scara, rng, n // 2)),
+            np.column_stack(
+                [rng.uniform(-0.6, 1.4, m), rng.uniform(-0.9, 0.9, m), rng.uniform(-math.pi, math.pi, m)]
+            ),
+        ]
+    )
     poses = scara.fkine(np.zeros((n, 3)))
     c, s = np.cos(x[:, 2]), np.sin(x[:, 2])
     poses[:, 0, 0], poses[:, 0, 1], poses[:, 1, 0], poses[:, 1, 1] = c, -s, s, c
@@ -408,17 +452,24 @@ def test_solve_ik_of_one_target_is_the_batch_path(scara: Scara) -> None:
     fixed = poses.copy()  # heading 90 deg: what mode fixed_phi with an orientation accepts
     fixed[:, :2, :2] = [[0.0, -1.0], [1.0, 0.0]]
     seeds = rng.uniform(scara.limits.lower, scara.limits.upper, (n, 3))
-    for targets, orientation, mode, seed, branch in ((poses, True, None, None, None),
-                                                     (poses, True, "phi", seeds, "elbow_b"),
-                                                     (poses, False, None, seeds, None),
-                                                     (poses, False, "position", None, "elbow_a"),
-                                                     (fixed, True, "fixed_phi", seeds, None),
-                                                     (poses, False, "fixed_phi", None, None)):
+    for targets, orientation, mode, seed, branch in (
+        (poses, True, None, None, None),
+        (poses, True, "phi", seeds, "elbow_b"),
+        (poses, False, None, seeds, None),
+        (poses, False, "position", None, "elbow_a"),
+        (fixed, True, "fixed_phi", seeds, None),
+        (poses, False, "fixed_phi", None, None),
+    ):
         batch = scara.solve_ik(targets, use_orientation=orientation, mode=mode, seed=seed, branch=branch)
         assert len(set(batch.status.ravel().tolist())) >= 3
         for i in range(n):
-            one = scara.solve_ik(targets[i], use_orientation=orientation, mode=mode,
-                                 seed=None if seed is None else seed[i], branch=branch)
+            one = scara.solve_ik(
+                targets[i],
+                use_orientation=orientation,
+                mode=mode,
+                seed=None if seed is None else seed[i],
+                branch=branch,
+            )
             np.testing.assert_allclose(one.q, batch.q[i], rtol=0.0, atol=1e-12)
             assert np.array_equal(one.status, batch.status[i]), i
             assert one.selected.shape == () and one.tie.shape == ()

@@ -1,5 +1,6 @@
 """SCARA nodes across processes: SolveIK / SolveFK round trips and bad requests against a real
 ``scara_ik_server`` process, and the ``scara_forward`` node's pose and twist (isolated domain)."""
+
 from __future__ import annotations
 
 import math
@@ -12,7 +13,7 @@ from geometry_msgs.msg import PoseStamped, TwistStamped
 from ros_harness import IK_FK, RELIABLE_INPUTS, NodeProcess, Probe, start_with_services
 from sensor_msgs.msg import JointState
 
-from manipulator_kinematics.params import config_path
+from manipulator_kinematics.param_files import config_path
 from manipulator_kinematics.planar import yaw_quaternion
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
 from manipulator_kinematics_interfaces.srv import SolveFK, SolveIK
@@ -33,8 +34,9 @@ def scara() -> Scara:
 
 @pytest.fixture(scope="module")
 def server(probe: Probe) -> Iterator[tuple[NodeProcess, object, object]]:
-    process, (ik, fk) = start_with_services(probe, "scara_ik_server", "--params-file", PARAMS, services=IK_FK,
-                                            timeout=TIMEOUT)
+    process, (ik, fk) = start_with_services(
+        probe, "scara_ik_server", "--params-file", PARAMS, services=IK_FK, timeout=TIMEOUT
+    )
     try:
         yield process, ik, fk
     finally:
@@ -46,8 +48,16 @@ def call(probe: Probe, client, request):
     return probe.call(client, request, TIMEOUT)
 
 
-def ik_request(x: float, y: float, mode: str = "", phi: float | None = None, seed: list[float] | None = None,
-               branch: str = "", frame: str = "", z: float = 0.0) -> SolveIK.Request:
+def ik_request(
+    x: float,
+    y: float,
+    mode: str = "",
+    phi: float | None = None,
+    seed: list[float] | None = None,
+    branch: str = "",
+    frame: str = "",
+    z: float = 0.0,
+) -> SolveIK.Request:
     request = SolveIK.Request(mode=mode, branch=branch, use_orientation=phi is not None)
     request.target.header.frame_id = frame
     request.target.pose.position.x, request.target.pose.position.y, request.target.pose.position.z = x, y, z
@@ -71,8 +81,12 @@ def test_ik_round_trip_with_the_reference_values(probe: Probe, server, scara: Sc
     q_ref = [0.1, 30 * DEG, 60 * DEG]
     px, py, _ = scara.fk(q_ref)
     assert (px, py) == pytest.approx((0.559808, 0.40), abs=5e-7)
-    for request in (ik_request(px, py, mode="fixed_phi"), ik_request(px, py, phi=90 * DEG),
-                    ik_request(px, py, frame="base_link"), ik_request(px, py, mode="position", seed=q_ref)):
+    for request in (
+        ik_request(px, py, mode="fixed_phi"),
+        ik_request(px, py, phi=90 * DEG),
+        ik_request(px, py, frame="base_link"),
+        ik_request(px, py, mode="position", seed=q_ref),
+    ):
         response = call(probe, ik, request)
         assert response.success and response.error_code.val == Codes.SUCCESS, response.message
         assert list(response.solution.name) == NAMES
@@ -86,13 +100,15 @@ def test_ik_round_trip_with_the_reference_values(probe: Probe, server, scara: Sc
     assert response.pose.header.frame_id == "base_link" and response.pose.header.stamp == stamp
     position, orientation = response.pose.pose.position, response.pose.pose.orientation
     np.testing.assert_allclose([position.x, position.y, position.z], [px, py, 0.0], atol=1e-12)
-    np.testing.assert_allclose([orientation.x, orientation.y, orientation.z, orientation.w],
-                               yaw_quaternion(90 * DEG), atol=1e-12)
+    np.testing.assert_allclose(
+        [orientation.x, orientation.y, orientation.z, orientation.w], yaw_quaternion(90 * DEG), atol=1e-12
+    )
     twist = response.twist.twist
     expected = scara.velocity_fk(q_ref, qd)
     v, w = twist.linear, twist.angular
-    np.testing.assert_allclose([v.x, v.y, v.z, w.x, w.y, w.z],
-                               [expected[0], expected[1], 0, 0, 0, expected[2]], atol=1e-12)
+    np.testing.assert_allclose(
+        [v.x, v.y, v.z, w.x, w.y, w.z], [expected[0], expected[1], 0, 0, 0, expected[2]], atol=1e-12
+    )
     assert response.twist.header.stamp == stamp
 
 
@@ -118,11 +134,17 @@ def test_ik_returns_both_branches_and_honours_seed_and_branch(probe: Probe, serv
 
 BAD_IK = {
     "nan": (ik_request(math.nan, 0.3, mode="fixed_phi"), Codes.INVALID_GOAL_CONSTRAINTS, "not finite"),
-    "unreachable": (ik_request(0.3, 0.9, mode="fixed_phi"), Codes.NO_IK_SOLUTION,
-                    "out of the upper arm's reach"),
+    "unreachable": (
+        ik_request(0.3, 0.9, mode="fixed_phi"),
+        Codes.NO_IK_SOLUTION,
+        "out of the upper arm's reach",
+    ),
     "far": (ik_request(0.3, 0.7, mode="position"), Codes.NO_IK_SOLUTION, "farther than l2 + l3"),
-    "limits": (ik_request(1.3, 0.4, mode="fixed_phi"), Codes.JOINT_LIMITS_VIOLATED,
-               "rail_joint = 0.840192 m above its limit 0.4 m"),
+    "limits": (
+        ik_request(1.3, 0.4, mode="fixed_phi"),
+        Codes.JOINT_LIMITS_VIOLATED,
+        "rail_joint = 0.840192 m above its limit 0.4 m",
+    ),
     "singular": (ik_request(0.5, 0.55, mode="fixed_phi"), Codes.SINGULAR, "|cos theta1|"),
     "mode": (ik_request(0.5, 0.3, mode="sideways"), Codes.INVALID_MODE, "unknown mode 'sideways'"),
     "branch": (ik_request(0.5, 0.3, branch="elbow_up"), Codes.INVALID_MODE, "unknown branch 'elbow_up'"),
@@ -130,10 +152,15 @@ BAD_IK = {
     "off plane": (ik_request(0.5, 0.3, z=0.1), Codes.NO_IK_SOLUTION, "z = 0.1 m"),
     "seed nan": (ik_request(0.5, 0.3, seed=[0.1, math.nan, 0.0]), Codes.INVALID_ROBOT_STATE, "non-finite"),
     "seed short": (
-        ik_request(0.5, 0.3, seed=[0.1, 0.2]), Codes.INVALID_ROBOT_STATE, "3 names but 2 position values"
+        ik_request(0.5, 0.3, seed=[0.1, 0.2]),
+        Codes.INVALID_ROBOT_STATE,
+        "3 names but 2 position values",
     ),
-    "fixed vs heading": (ik_request(0.5, 0.3, mode="fixed_phi", phi=0.5), Codes.INVALID_GOAL_CONSTRAINTS,
-                         "fixed_phi"),
+    "fixed vs heading": (
+        ik_request(0.5, 0.3, mode="fixed_phi", phi=0.5),
+        Codes.INVALID_GOAL_CONSTRAINTS,
+        "fixed_phi",
+    ),
 }
 
 
@@ -160,14 +187,26 @@ def test_bad_fk_requests_fail_with_a_code_and_a_reason(probe: Probe, server) -> 
     process, _, fk = server
     cases = {
         "nan": (fk_request([0.1, math.nan, 0.0]), Codes.INVALID_ROBOT_STATE, "non-finite position"),
-        "nan velocity": (fk_request([0.1, 0.2, 0.0], [0.0, math.inf, 0.0]), Codes.INVALID_ROBOT_STATE,
-                         "non-finite velocity"),
-        "limits": (fk_request([0.5, 0.2, 0.0]), Codes.JOINT_LIMITS_VIOLATED,
-                   "rail_joint = 0.5 m above its limit"),
-        "missing": (SolveFK.Request(joint_state=JointState(name=NAMES[:2], position=[0.1, 0.2])),
-                    Codes.INVALID_ROBOT_STATE, "['elbow_joint'] missing"),
-        "frame": (SolveFK.Request(joint_state=JointState(name=NAMES, position=[0.1, 0.2, 0.0]),
-                                  frame_id="odom"), Codes.FRAME_TRANSFORM_FAILURE, "'odom'"),
+        "nan velocity": (
+            fk_request([0.1, 0.2, 0.0], [0.0, math.inf, 0.0]),
+            Codes.INVALID_ROBOT_STATE,
+            "non-finite velocity",
+        ),
+        "limits": (
+            fk_request([0.5, 0.2, 0.0]),
+            Codes.JOINT_LIMITS_VIOLATED,
+            "rail_joint = 0.5 m above its limit",
+        ),
+        "missing": (
+            SolveFK.Request(joint_state=JointState(name=NAMES[:2], position=[0.1, 0.2])),
+            Codes.INVALID_ROBOT_STATE,
+            "['elbow_joint'] missing",
+        ),
+        "frame": (
+            SolveFK.Request(joint_state=JointState(name=NAMES, position=[0.1, 0.2, 0.0]), frame_id="odom"),
+            Codes.FRAME_TRANSFORM_FAILURE,
+            "'odom'",
+        ),
     }
     for name, (request, code, text) in cases.items():
         response = call(probe, fk, request)
@@ -188,15 +227,29 @@ def test_forward_node_publishes_pose_and_twist(probe: Probe, scara: Scara) -> No
     twist_sub = node.create_subscription(TwistStamped, "twist_remapped", twists.append, 10)
     # Topic names by parameter (node-scoped, so they win over the params file's section) and by remapping.
     process = NodeProcess(
-        "scara_forward", "--params-file", PARAMS, *RELIABLE_INPUTS,
-        "-p", "scara_forward:topics.joint_states:=scara_test/joint_states",
-        "-p", "scara_forward:topics.tool_pose:=scara_test/pose",
-        "-p", "scara_forward:base_frame:=arm_base",
-        "-r", "tool_twist:=twist_remapped",
+        "scara_forward",
+        "--params-file",
+        PARAMS,
+        *RELIABLE_INPUTS,
+        "-p",
+        "scara_forward:topics.joint_states:=scara_test/joint_states",
+        "-p",
+        "scara_forward:topics.tool_pose:=scara_test/pose",
+        "-p",
+        "scara_forward:base_frame:=arm_base",
+        "-r",
+        "tool_twist:=twist_remapped",
     )
     try:
-        probe.wait_until(lambda: publisher.get_subscription_count() > 0 and pose_sub.get_publisher_count() > 0
-                         and twist_sub.get_publisher_count() > 0, TIMEOUT, "forward node discovery")
+        probe.wait_until(
+            lambda: (
+                publisher.get_subscription_count() > 0
+                and pose_sub.get_publisher_count() > 0
+                and twist_sub.get_publisher_count() > 0
+            ),
+            TIMEOUT,
+            "forward node discovery",
+        )
         rng = np.random.default_rng(7)
         states = rng.uniform(scara.limits.lower, scara.limits.upper, (5, 3))
         rates = rng.normal(size=(5, 3))
@@ -215,8 +268,9 @@ def test_forward_node_publishes_pose_and_twist(probe: Probe, scara: Scara) -> No
             good = JointState(name=["gripper_joint", *NAMES], position=[9.0, *q], velocity=[1.0, *qd])
             good.header.stamp = stamp
             publisher.publish(good)
-            probe.wait_until(lambda n=i + 1: len(poses) >= n and len(twists) >= n, TIMEOUT,
-                             f"pose and twist {i}")
+            probe.wait_until(
+                lambda n=i + 1: len(poses) >= n and len(twists) >= n, TIMEOUT, f"pose and twist {i}"
+            )
         no_rates = JointState(name=NAMES, position=[0.2, 0.1, 0.3])
         no_rates.header.stamp = Time(sec=200)
         publisher.publish(no_rates)

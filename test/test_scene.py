@@ -1,6 +1,7 @@
 """The drawing description (manipulator_kinematics.scene, excavator_kinematics.scene) against the
 kinematics it draws: link ends on the FK frames, cylinder ends on the pins at the commanded
 lengths, link lengths from the machine file, marker poses that turn z onto each segment."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -90,8 +91,11 @@ def test_excavator_linkage_and_frames_match_the_machine_file_and_pose() -> None:
     np.testing.assert_allclose(scene.frames["bucket_tip"][:, :3, :3], expected, atol=1e-12)
     np.testing.assert_allclose(scene.frames["bucket"][:, :3, 3], model.pins(D)["bucket_pin"], atol=1e-12)
     boom = scene.frames["boom"]
-    np.testing.assert_allclose(np.linalg.norm(model.pins(D)["arm_pin"] - boom[:, :3, 3], axis=-1),
-                               params["boom"]["length"], atol=1e-9)
+    np.testing.assert_allclose(
+        np.linalg.norm(model.pins(D)["arm_pin"] - boom[:, :3, 3], axis=-1),
+        params["boom"]["length"],
+        atol=1e-9,
+    )
     for pose4 in scene.frames.values():  # proper rotations
         np.testing.assert_allclose(np.linalg.det(pose4[:, :3, :3]), 1.0, atol=1e-12)
 
@@ -119,4 +123,6 @@ def test_solids_list_every_segment_and_sphere_once() -> None:
     assert parts.cylinder.sum() == len(scene.segments)
     lengths = np.stack([s.length for s in scene.segments], -1)
     np.testing.assert_allclose(parts.scale[:, : len(scene.segments), 2], lengths)
-    np.testing.assert_allclose(parts.scale[0, len(scene.segments):, 0], [2 * s.radius for s in scene.spheres])
+    np.testing.assert_allclose(
+        parts.scale[0, len(scene.segments) :, 0], [2 * s.radius for s in scene.spheres]
+    )

@@ -1,4 +1,5 @@
 """Serial D-H chain: stated poses, hand cases, standard vs modified D-H, Jacobian vs finite differences."""
+
 from __future__ import annotations
 
 import math
@@ -196,8 +197,13 @@ def test_fkine_jacob0_equals_link_products_and_central_differences(modified: boo
 def test_fkine_jacob0_of_a_coupled_chain_differentiates_the_independent_joints() -> None:
     # The palletizer's pattern: a passive row v4 = -(q2 + q3) keeps the flange level.
     coupling = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, -1, -1, 0], [0, 0, 0, 1]]
-    rows = [revolute(d=0.4, alpha=PI / 2), revolute(a=0.7), revolute(a=0.6), revolute(a=0.1, alpha=-PI / 2),
-            revolute(d=0.2)]
+    rows = [
+        revolute(d=0.4, alpha=PI / 2),
+        revolute(a=0.7),
+        revolute(a=0.6),
+        revolute(a=0.1, alpha=-PI / 2),
+        revolute(d=0.2),
+    ]
     chain = SerialChain(rows, tool=transl(0.0, 0.0, 0.15), coupling=coupling)
     q = np.array([0.3, 0.9, -0.4, 1.1])
     pose, jacobian = chain.fkine_jacob0(q)

@@ -1,5 +1,6 @@
 """The compiled serial chain (manipulator_kinematics.chain_kernel) against the numpy path, the
 reference: every machine's chain and random chains, 10^4 random configurations each."""
+
 from __future__ import annotations
 
 import math

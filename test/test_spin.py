@@ -2,6 +2,7 @@
 rclpy entities over real DDS (isolated domain), under both executors: every entity kind our nodes
 have is served, a failing callback is logged and the node keeps serving, shutdown or ``until``
 ends the spin, and what EventsExecutor cannot serve is refused up front."""
+
 from __future__ import annotations
 
 import gc
@@ -25,7 +26,7 @@ from std_srvs.srv import Trigger
 
 from manipulator_kinematics.executor import EXECUTORS, executor_name, new_executor, spin
 from manipulator_kinematics.node_util import param, refuse_runtime_changes
-from manipulator_kinematics.params import ConfigError
+from manipulator_kinematics.param_files import ConfigError
 from manipulator_kinematics.throttle import ThrottledLog
 
 pytestmark = pytest.mark.ros
@@ -48,8 +49,9 @@ class Spun:
         self.ticks = 0
         self.echo = self.node.create_publisher(Int64, "echo", QOS)
         self.node.create_subscription(Int64, "numbers", self.on_number, QOS)
-        self.node.create_subscription(Int64, "raw_numbers", lambda raw: self.raw_sizes.append(len(raw)), QOS,
-                                      raw=True)
+        self.node.create_subscription(
+            Int64, "raw_numbers", lambda raw: self.raw_sizes.append(len(raw)), QOS, raw=True
+        )
         self.node.create_timer(0.01, self.on_timer)
         self.node.create_service(Trigger, "trigger", self.on_trigger)
         self.node.create_service(Trigger, "explode", self.on_explode)
@@ -154,8 +156,10 @@ def test_a_failing_callback_is_logged_and_the_node_keeps_serving(
     probe.wait_until(lambda: spun.ticks >= 6, TIMEOUT, "timer ticks after the failed third")
     assert spun.thread.is_alive() and spun.outcome is None
     log = capfd.readouterr().err
-    assert ("subscription to /numbers failed on std_msgs.msg.Int64(data=-1): RuntimeError: a negative number"
-            in log)
+    assert (
+        "subscription to /numbers failed on std_msgs.msg.Int64(data=-1): RuntimeError: a negative number"
+        in log
+    )
     assert "timer of 0.01 s failed on its tick: ValueError: the third tick (at " in log
     assert "service /explode failed on std_srvs.srv.Trigger_Request" in log
 
@@ -189,8 +193,9 @@ def test_events_hands_a_backlog_on_two_topics_over_in_the_order_it_was_sent(prob
         for topic, n in sent[1:]:
             publishers[topic].publish(Int64(data=n))
         for publisher in publishers.values():
-            probe.wait_until(lambda p=publisher: p.wait_for_all_acked(Duration(seconds=0.01)), TIMEOUT,
-                             "acknowledgements")
+            probe.wait_until(
+                lambda p=publisher: p.wait_for_all_acked(Duration(seconds=0.01)), TIMEOUT, "acknowledgements"
+            )
         release.set()
         probe.wait_until(lambda: len(sequence) == len(sent), TIMEOUT, f"{len(sent)} messages")
         assert sequence == sent
@@ -221,7 +226,8 @@ def test_a_shutdown_before_the_executor_is_built_ends_the_spin_quietly(
     rclpy.init(context=context)
     node = Node("built_late", context=context)
     built = {"multi": MultiThreadedExecutor, "signal guard": SignalHandlerGuardCondition}.get(
-        executor, EXECUTORS.get(executor))
+        executor, EXECUTORS.get(executor)
+    )
 
     def shut_down_then_build(**options: object) -> object:
         context.shutdown()
@@ -318,10 +324,12 @@ class FakeNode:
     def __init__(self) -> None:
         self.now_ns = 0
         self.lines: list[tuple[str, str]] = []
-        logger = SimpleNamespace(**{
-            severity: (lambda text, s=severity: self.lines.append((s, text)))
-            for severity in ("error", "warning", "info")
-        })
+        logger = SimpleNamespace(
+            **{
+                severity: (lambda text, s=severity: self.lines.append((s, text)))
+                for severity in ("error", "warning", "info")
+            }
+        )
         self.get_logger = lambda: logger
         self.get_clock = lambda: SimpleNamespace(now=lambda: SimpleNamespace(nanoseconds=self.now_ns))
 
@@ -362,5 +370,6 @@ def test_throttled_log_is_bounded_in_lines_and_memory_whatever_the_inputs_say() 
     node.now_ns += 10_000_000_000
     log("error", "frame 'a' is not base_link", kind="frame")
     log("error", "frame 'b' is not base_link", kind="frame")
-    assert [text for _, text in node.lines] == ["frame 'a' is not base_link (997 more held back since the "
-                                                "previous line)"]
+    assert [text for _, text in node.lines] == [
+        "frame 'a' is not base_link (997 more held back since the previous line)"
+    ]

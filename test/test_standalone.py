@@ -2,6 +2,7 @@
 points at the team's notes and papers beside the checkout (``../shared``, ``shared/reference``,
 ``shared/seeds``, ``/work/shared``), which users of the repository do not have. What users need
 from them is in docs/ (issue 9, item 8)."""
+
 from __future__ import annotations
 
 import shutil
@@ -19,10 +20,17 @@ def repository_files() -> list[Path]:
     the patterns, as this one does)."""
     if shutil.which("git") is None or not (REPO / ".git").exists():
         pytest.skip("not a git checkout")
-    listed = subprocess.run(
-        ["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
-        cwd=REPO, capture_output=True, check=True, timeout=60,
-    ).stdout.decode().split("\0")
+    listed = (
+        subprocess.run(
+            ["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+            cwd=REPO,
+            capture_output=True,
+            check=True,
+            timeout=60,
+        )
+        .stdout.decode()
+        .split("\0")
+    )
     paths = [REPO / name for name in listed if name and not name.startswith("test/")]
     return [path for path in paths if path.is_file()]
 
@@ -46,7 +54,12 @@ def test_nothing_points_outside_the_repository() -> None:
 
 
 def test_the_check_finds_each_form_of_pointer(tmp_path: Path) -> None:
-    lines = ["see ../shared/reference/platform.md", "(/work/shared/seeds/000.pdf)", "shared/reference/x.md",
-             "the shared package, manipulator_kinematics/", "shared/ alone"]
+    lines = [
+        "see ../shared/reference/platform.md",
+        "(/work/shared/seeds/000.pdf)",
+        "shared/reference/x.md",
+        "the shared package, manipulator_kinematics/",
+        "shared/ alone",
+    ]
     (tmp_path / "note.md").write_text("\n".join(lines))
     assert [hit.split(":")[1] for hit in pointers(tmp_path / "note.md")] == ["1", "2", "3"]

@@ -4,6 +4,7 @@ brute-force lower envelope, the FK of a planar 2R arm and finite differences of 
 Tolerances: joint speeds <= limit x (1 + 1e-12) and tip speed <= the asked one exactly (speeds are
 clipped to the caps); |sdd| <= a x (1 + 1e-9) (the rounding of the accumulated sums, ~N eps).
 """
+
 from __future__ import annotations
 
 import math
@@ -33,8 +34,13 @@ def line_2r(count: int, start=(1.6, -0.6), end=(0.3, 1.1)) -> tuple[np.ndarray, 
 
 def jacobian_2r(q: np.ndarray) -> np.ndarray:
     t1, t12 = q[:, 0], q[:, 0] + q[:, 1]
-    return np.stack([np.stack([-L1 * np.sin(t1) - L2 * np.sin(t12), -L2 * np.sin(t12)], -1),
-                     np.stack([L1 * np.cos(t1) + L2 * np.cos(t12), L2 * np.cos(t12)], -1)], -2)
+    return np.stack(
+        [
+            np.stack([-L1 * np.sin(t1) - L2 * np.sin(t12), -L2 * np.sin(t12)], -1),
+            np.stack([L1 * np.cos(t1) + L2 * np.cos(t12), L2 * np.cos(t12)], -1),
+        ],
+        -2,
+    )
 
 
 def joint_rate(q: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -110,8 +116,9 @@ def test_slows_only_where_a_constraint_is_active() -> None:
     for joint in (0, 1):
         at_limit = timed.active == joint
         assert np.any(at_limit)
-        np.testing.assert_allclose(timed.speed[at_limit] * joint_rate(q, s)[at_limit, joint], vmax[joint],
-                                   rtol=SPEED_RTOL)
+        np.testing.assert_allclose(
+            timed.speed[at_limit] * joint_rate(q, s)[at_limit, joint], vmax[joint], rtol=SPEED_RTOL
+        )
     # On acceleration curves the tip is slower than every cap and accelerates or brakes at a
     # on a segment next to it.
     on_curve = np.flatnonzero(timed.active[1:-1] == ACCELERATION) + 1
@@ -131,8 +138,12 @@ def test_a_corner_keeps_the_chords_within_the_limits() -> None:
     first, _, _ = line_2r(201, (1.6, -0.6), (1.0, 0.4))
     second, _, _ = line_2r(201, (1.0, 0.4), (0.2, 0.2))
     q = np.vstack([first, second[1:]])
-    s = np.concatenate([np.linspace(0.0, math.hypot(0.6, 1.0), 201),
-                        math.hypot(0.6, 1.0) + np.linspace(0.0, math.hypot(0.8, 0.2), 201)[1:]])
+    s = np.concatenate(
+        [
+            np.linspace(0.0, math.hypot(0.6, 1.0), 201),
+            math.hypot(0.6, 1.0) + np.linspace(0.0, math.hypot(0.8, 0.2), 201)[1:],
+        ]
+    )
     vmax = np.array([0.45, 0.55])
     timed = time_scale(q, s, vmax, TIP, ACC)
     assert_within_limits(timed, vmax, TIP, ACC)
@@ -147,8 +158,9 @@ def test_limits_hold_on_a_long_path() -> None:
     assert_within_limits(timed, vmax, TIP, ACC)
     # Each segment is at constant sdd: its length is the mean speed times its time (to the
     # rounding of differences of s ~ 2 m at 2e-5 m apart).
-    np.testing.assert_allclose(np.diff(s), 0.5 * (timed.speed[1:] + timed.speed[:-1]) * np.diff(timed.t),
-                               rtol=1e-9)
+    np.testing.assert_allclose(
+        np.diff(s), 0.5 * (timed.speed[1:] + timed.speed[:-1]) * np.diff(timed.t), rtol=1e-9
+    )
 
 
 def test_fk_and_finite_differences_agree_with_qd_and_qdd() -> None:

@@ -1,5 +1,6 @@
 """Tool changer: the paper's quintic observations (Figs. 7-9), Monte-Carlo workspace extents
 (Figs. 5-6) against the reference values, the JointTrajectory message and the plot script."""
+
 from __future__ import annotations
 
 import math
@@ -68,7 +69,11 @@ def test_workspace_extents_approach_the_reference_values(arm: ToolChanger) -> No
 def test_plot_script_writes_the_pngs(tmp_path, capsys) -> None:
     plots_main([str(tmp_path), "--samples", "20000", "--section-samples", "5000"])
     names = sorted(p.name for p in tmp_path.glob("*.png"))
-    assert names == ["tool_changer_section.png", "tool_changer_solutions.png", "tool_changer_trajectory.png",
-                     "tool_changer_workspace.png"]
+    assert names == [
+        "tool_changer_section.png",
+        "tool_changer_solutions.png",
+        "tool_changer_trajectory.png",
+        "tool_changer_workspace.png",
+    ]
     assert all((tmp_path / n).stat().st_size > 10_000 for n in names)
     assert "20000 samples: max radius" in capsys.readouterr().out

@@ -1,5 +1,6 @@
 """Tool changer (paper 003): FK against the note's pose, FK(IK) round trips, a numerical solver's
 solution set, Jacobian vs central differences, selection rule, singular and failing targets."""
+
 from __future__ import annotations
 
 import math
@@ -7,17 +8,18 @@ import math
 import numpy as np
 import pytest
 
-from manipulator_kinematics.config import ConfigError
 from manipulator_kinematics.model import IKStatus, RequestError, SerialModel, quaternion_matrix
-from manipulator_kinematics.params import config_path, load_parameters
+from manipulator_kinematics.param_files import config_path, load_parameters
 from manipulator_kinematics.planar import wrap_angle
+from manipulator_kinematics.schema import ConfigError
 from tool_changer_kinematics.kinematics import BRANCHES, SECTION, ToolChanger
 
 PI = math.pi
 PAPER_Q = np.array([PI / 2, PI / 6, -PI / 3, PI / 3, PI / 2, 0.0])
 # The note's pair of in-limit joint vectors that reach one pose (deg).
-PAIR = np.radians([[-11.06, 128.98, -82.79, 32.96, 82.48, -152.27],
-                   [168.94, 143.64, -80.26, 37.46, 97.52, 27.73]])
+PAIR = np.radians(
+    [[-11.06, 128.98, -82.79, 32.96, 82.48, -152.27], [168.94, 143.64, -80.26, 37.46, 97.52, 27.73]]
+)
 
 
 @pytest.fixture(scope="module")
@@ -304,9 +306,11 @@ def test_position_only_keeps_the_seed_orientation(arm: ToolChanger) -> None:
 def test_config_is_validated_and_the_model_meets_the_protocol(arm: ToolChanger) -> None:
     assert isinstance(arm, SerialModel)
     assert arm.joint_names[0] == "slew_joint" and arm.limits.lower[3] == pytest.approx(math.radians(20))
-    for key, value, match in (("alpha", 0.5, r"tool_changer\.dh\.alpha\[1\]"),
-                              ("d", 0.1, r"tool_changer\.dh\.d\[2\]"),
-                              ("a", 0.1, r"tool_changer\.dh\.a\[4\]")):
+    for key, value, match in (
+        ("alpha", 0.5, r"tool_changer\.dh\.alpha\[1\]"),
+        ("d", 0.1, r"tool_changer\.dh\.d\[2\]"),
+        ("a", 0.1, r"tool_changer\.dh\.a\[4\]"),
+    ):
         params = section()
         index = int(match[-3])
         params["dh"][key][index] = value

@@ -1,5 +1,6 @@
 """Tool changer nodes across processes: SolveIK / SolveFK round trips against a real
 ``tool_changer_ik_server`` and the ``tool_changer_forward`` node's pose and twist (isolated domain)."""
+
 from __future__ import annotations
 
 import math
@@ -12,7 +13,7 @@ from ros_harness import IK_FK, RELIABLE_INPUTS, NodeProcess, Probe, start_with_s
 from sensor_msgs.msg import JointState
 
 from manipulator_kinematics.model import matrix_quaternion, pose_matrix
-from manipulator_kinematics.params import config_path
+from manipulator_kinematics.param_files import config_path
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
 from manipulator_kinematics_interfaces.srv import SolveFK, SolveIK
 from tool_changer_kinematics.kinematics import ToolChanger
@@ -41,8 +42,9 @@ def ik_request(T: np.ndarray, names: tuple[str, ...], seed=None, branch: str = "
 
 
 def test_ik_and_fk_services_round_trip(probe: Probe, arm: ToolChanger) -> None:
-    process, (ik, fk) = start_with_services(probe, "tool_changer_ik_server", "--params-file", PARAMS,
-                                            services=IK_FK, timeout=TIMEOUT)
+    process, (ik, fk) = start_with_services(
+        probe, "tool_changer_ik_server", "--params-file", PARAMS, services=IK_FK, timeout=TIMEOUT
+    )
     names = arm.joint_names
     try:
         # The note's verification pose: one valid solution, the generating vector.
@@ -80,8 +82,11 @@ def test_ik_and_fk_services_round_trip(probe: Probe, arm: ToolChanger) -> None:
         branch_far[:3, 3] = (1.5, 0.0, 1.0)
         for request, code, text in (
             (ik_request(far, names), Codes.NO_IK_SOLUTION, "cannot reach"),
-            (ik_request(arm.fkine([0.3, 1.0, -1.2, 1.5, 1.0, 0.2]), names), Codes.JOINT_LIMITS_VIOLATED,
-             "wrist_pitch_joint"),
+            (
+                ik_request(arm.fkine([0.3, 1.0, -1.2, 1.5, 1.0, 0.2]), names),
+                Codes.JOINT_LIMITS_VIOLATED,
+                "wrist_pitch_joint",
+            ),
             (ik_request(T, names, branch="elbow_up"), Codes.INVALID_MODE, "unknown branch"),
             # Out of this branch's reach, only other branches have (limit-breaking) solutions.
             (ik_request(branch_far, names, branch="front_up_noflip"), Codes.NO_IK_SOLUTION, "cannot reach"),
@@ -102,14 +107,27 @@ def test_forward_node_publishes_pose_and_twist(probe: Probe, arm: ToolChanger) -
     publisher = node.create_publisher(JointState, "tc_test/joint_states", 10)
     pose_sub = node.create_subscription(PoseStamped, "tool_pose", poses.append, 10)
     twist_sub = node.create_subscription(TwistStamped, "tool_twist", twists.append, 10)
-    process = NodeProcess("tool_changer_forward", "--params-file", PARAMS, *RELIABLE_INPUTS,
-                          "-p", "tool_changer_forward:topics.joint_states:=tc_test/joint_states")
+    process = NodeProcess(
+        "tool_changer_forward",
+        "--params-file",
+        PARAMS,
+        *RELIABLE_INPUTS,
+        "-p",
+        "tool_changer_forward:topics.joint_states:=tc_test/joint_states",
+    )
     rng = np.random.default_rng(11)
     states = rng.uniform(arm.limits.lower, arm.limits.upper, (4, 6))
     rates = rng.normal(size=(4, 6))
     try:
-        probe.wait_until(lambda: publisher.get_subscription_count() > 0 and pose_sub.get_publisher_count() > 0
-                         and twist_sub.get_publisher_count() > 0, TIMEOUT, "forward node discovery")
+        probe.wait_until(
+            lambda: (
+                publisher.get_subscription_count() > 0
+                and pose_sub.get_publisher_count() > 0
+                and twist_sub.get_publisher_count() > 0
+            ),
+            TIMEOUT,
+            "forward node discovery",
+        )
         for i, (q, qd) in enumerate(zip(states, rates, strict=True)):
             message = JointState(name=list(arm.joint_names), position=q.tolist(), velocity=qd.tolist())
             message.header.stamp = Time(sec=100 + i)

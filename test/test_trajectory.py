@@ -1,4 +1,5 @@
 """Quintic joint trajectory (jtraj's polynomial) and straight-line Cartesian interpolation."""
+
 from __future__ import annotations
 
 import math

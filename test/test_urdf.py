@@ -108,8 +108,9 @@ def test_serial_urdf_fk_equals_the_package(name: str, model) -> None:
     # Only the machine's joints are free: passive and coupled joints are mimic joints.
     assert pm.nq == len(names)
     assert sorted(n for n in list(pm.names)[1:] if "mimic" not in n) == sorted(names)
-    np.testing.assert_allclose(pm.lowerPositionLimit[[pm.joints[pm.getJointId(n)].idx_q for n in names]],
-                               model.limits.lower)
+    np.testing.assert_allclose(
+        pm.lowerPositionLimit[[pm.joints[pm.getJointId(n)].idx_q for n in names]], model.limits.lower
+    )
     q = _random_states(model.limits, np.random.default_rng(7))
     expected = model.frames(q)
     frame_names = [f"frame_{i}" for i in range(model.chain.n_rows + 1)] + ["tool"]
@@ -133,8 +134,12 @@ def test_excavator_urdf_fk_equals_the_package() -> None:
     pins = exc.pins(D)
     pose = exc.pose(D)
     # The cut loops: the rod bodies end on the rod pins, the H-link on the bucket's pin.
-    closures = {"boom_cylinder_rod_body": "boom_cylinder_rod", "arm_cylinder_rod_body": "arm_cylinder_rod",
-                "bucket_cylinder_rod_body": "bucket_cylinder_rod", "h_link_pin": "h_link_pin_on_bucket"}
+    closures = {
+        "boom_cylinder_rod_body": "boom_cylinder_rod",
+        "arm_cylinder_rod_body": "arm_cylinder_rod",
+        "bucket_cylinder_rod_body": "bucket_cylinder_rod",
+        "h_link_pin": "h_link_pin_on_bucket",
+    }
     names = list(pins) + list(closures)
     worst_position = worst_rotation = 0.0
     for k in range(STATES):
@@ -164,8 +169,10 @@ def test_excavator_joint_positions() -> None:
     assert values[0, 4] == pytest.approx(math.atan2(d[2], math.hypot(d[0], d[1])), abs=1e-12)
 
 
-@pytest.mark.parametrize("angles", [(0.1, 0.2, 0.3), (0.4, math.pi / 2, -1.0), (-0.3, -math.pi / 2, 2.0),
-                                    (math.pi, 0.0, -math.pi / 2)])
+@pytest.mark.parametrize(
+    "angles",
+    [(0.1, 0.2, 0.3), (0.4, math.pi / 2, -1.0), (-0.3, -math.pi / 2, 2.0), (math.pi, 0.0, -math.pi / 2)],
+)
 def test_rpy_round_trip(angles: tuple[float, float, float]) -> None:
     rotation = rotation_rpy(angles)
     np.testing.assert_allclose(rotation_rpy(rpy(rotation)), rotation, atol=1e-15)

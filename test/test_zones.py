@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from manipulator_kinematics.params import ConfigError
+from manipulator_kinematics.param_files import ConfigError
 from manipulator_kinematics.zones import Monitor, Zone, load_zones, scale_for, stop_time
 
 RNG = np.random.default_rng(34)
@@ -52,8 +52,9 @@ def test_sector_clearance_is_the_arc_to_the_nearest_edge(start: float, end: floa
     fine = np.linspace(0, np.mod(end - start, 2 * np.pi), 20001) + start  # the sector's bearings
     gap = np.abs(np.angle(np.exp(1j * (bearing[:, None] - fine[None, :]))))
     inside = gap.min(axis=1) < 1e-3
-    to_edge = np.minimum(np.abs(np.angle(np.exp(1j * (bearing - start)))),
-                         np.abs(np.angle(np.exp(1j * (bearing - end)))))
+    to_edge = np.minimum(
+        np.abs(np.angle(np.exp(1j * (bearing - start)))), np.abs(np.angle(np.exp(1j * (bearing - end))))
+    )
     expected = np.where(inside, -to_edge, gap.min(axis=1)) * r - 0.1
     np.testing.assert_allclose(c, expected, atol=2e-3 * r.max())
     step = sector.clearance(points + 1e-5 * g)[0] - c
@@ -76,8 +77,9 @@ def test_scale_moving_away_or_along_is_never_limited() -> None:
 
 
 @pytest.mark.parametrize("speed, decel, period", [(0.4, 0.5, 0.01), (1.2, 0.3, 0.02), (0.1, 2.0, 0.01)])
-def test_a_point_driven_at_a_ceiling_stops_before_it_and_close_to_it(speed: float, decel: float,
-                                                                    period: float) -> None:
+def test_a_point_driven_at_a_ceiling_stops_before_it_and_close_to_it(
+    speed: float, decel: float, period: float
+) -> None:
     """Closed loop, as the velocity IK runs it: each period the full command (speed up, one
     actuator at its rate) is scaled; the actuator follows within its deceleration limit."""
     ceiling = Monitor([zone("ceiling", 0.3, height=5.0)], ["tip"])
@@ -113,41 +115,53 @@ def write(tmp_path: Path, text: str) -> Path:
 
 
 def test_a_zone_file_loads(tmp_path: Path) -> None:
-    zones = load_zones(write(tmp_path, """
+    zones = load_zones(
+        write(
+            tmp_path,
+            """
 zones:
   power_line: {kind: ceiling, height: 7.5, margin: 1.0}
   trench: {kind: wall, point: [4.0, 0.0], normal: [1.0, 0.0], margin: 0.3}
   truck: {kind: box, frame: site, min: [10.0, 2.0, 0.0], max: [18.0, 5.0, 4.0]}
   tail_side: {kind: sector, from: 2.5, to: -2.5}
-"""))
+""",
+        )
+    )
     assert [(z.name, z.kind, z.frame) for z in zones] == [
-        ("power_line", "ceiling", "base"), ("trench", "wall", "base"), ("truck", "box", "site"),
-        ("tail_side", "sector", "base")]
+        ("power_line", "ceiling", "base"),
+        ("trench", "wall", "base"),
+        ("truck", "box", "site"),
+        ("tail_side", "sector", "base"),
+    ]
 
 
-@pytest.mark.parametrize("text, key", [
-    ("zones:\n  a: {kind: roof, height: 3}\n", "zones.a.kind"),
-    ("zones:\n  a: {kind: ceiling, hieght: 3}\n", "zones.a.hieght"),
-    ("zones:\n  a: {kind: ceiling}\n", "zones.a.height"),
-    ("zones:\n  a: {kind: ceiling, height: .nan}\n", "zones.a.height"),
-    ("zones:\n  a: {kind: box, min: [0, 0, 0], max: [1, -1, 1]}\n", "zones.a.max"),
-    ("zones:\n  a: {kind: wall, point: [0, 0], normal: [0, 0]}\n", "zones.a.normal"),
-    ("zones:\n  a: {kind: sector, frame: site, from: 0, to: 1}\n", "zones.a.frame"),
-    ("zones:\n  a: {kind: surface, file: x.xml, side: below}\n", "zones.a"),
-    ("zones: []\n", "zones"),
-    ("zone:\n  a: {kind: ceiling, height: 3}\n", "zones"),
-])
+@pytest.mark.parametrize(
+    "text, key",
+    [
+        ("zones:\n  a: {kind: roof, height: 3}\n", "zones.a.kind"),
+        ("zones:\n  a: {kind: ceiling, hieght: 3}\n", "zones.a.hieght"),
+        ("zones:\n  a: {kind: ceiling}\n", "zones.a.height"),
+        ("zones:\n  a: {kind: ceiling, height: .nan}\n", "zones.a.height"),
+        ("zones:\n  a: {kind: box, min: [0, 0, 0], max: [1, -1, 1]}\n", "zones.a.max"),
+        ("zones:\n  a: {kind: wall, point: [0, 0], normal: [0, 0]}\n", "zones.a.normal"),
+        ("zones:\n  a: {kind: sector, frame: site, from: 0, to: 1}\n", "zones.a.frame"),
+        ("zones:\n  a: {kind: surface, file: x.xml, side: below}\n", "zones.a"),
+        ("zones: []\n", "zones"),
+        ("zone:\n  a: {kind: ceiling, height: 3}\n", "zones"),
+    ],
+)
 def test_a_malformed_zone_file_is_refused_naming_the_key(tmp_path: Path, text: str, key: str) -> None:
     with pytest.raises(ConfigError) as error:
         load_zones(write(tmp_path, text))
     assert str(error.value).split(":")[0] == key
 
 
-@pytest.mark.parametrize("name", ["excavator_cet200_family.yaml", "wheel_loader_wl20.yaml",
-                                  "knuckle_crane_kc100.yaml"])
+@pytest.mark.parametrize(
+    "name", ["excavator_cet200_family.yaml", "wheel_loader_wl20.yaml", "knuckle_crane_kc100.yaml"]
+)
 def test_monitored_points_move_as_their_positions_differentiate(name: str) -> None:
     from manipulator_kinematics.hydraulic import HydraulicModel
-    from manipulator_kinematics.params import config_path
+    from manipulator_kinematics.param_files import config_path
 
     model = HydraulicModel.from_file(config_path(name))
     D = model.lower + RNG.uniform(0.2, 0.8, (5, model.m)) * (model.upper - model.lower)
@@ -164,8 +178,15 @@ def test_monitored_points_move_as_their_positions_differentiate(name: str) -> No
     np.testing.assert_allclose(v, (ahead - behind) / (2 * h), atol=1e-6)
 
 
-def drive(model, monitor: Monitor, D: np.ndarray, twist, seconds: float, period: float = 0.05,
-          decel_time: float = 0.3):
+def drive(
+    model,
+    monitor: Monitor,
+    D: np.ndarray,
+    twist,
+    seconds: float,
+    period: float = 0.05,
+    decel_time: float = 0.3,
+):
     """Closed loop as the velocity IK runs it: the target twist's rates (eq. 9) capped at the
     actuators' speeds in their own direction, scaled by the zones; the actuators slow at most at
     max_speed / decel_time. Returns the smallest clearance per step and the states."""
@@ -191,11 +212,12 @@ def drive(model, monitor: Monitor, D: np.ndarray, twist, seconds: float, period:
     return np.array(clearances), np.array(states), final
 
 
-@pytest.mark.parametrize("name", ["excavator_cet200_family.yaml", "wheel_loader_wl20.yaml",
-                                  "knuckle_crane_kc100.yaml"])
+@pytest.mark.parametrize(
+    "name", ["excavator_cet200_family.yaml", "wheel_loader_wl20.yaml", "knuckle_crane_kc100.yaml"]
+)
 def test_random_commands_never_cross_a_ceiling_and_still_reach_it(name: str) -> None:
     from manipulator_kinematics.hydraulic import HydraulicModel
-    from manipulator_kinematics.params import config_path
+    from manipulator_kinematics.param_files import config_path
 
     model = HydraulicModel.from_file(config_path(name))
     D0 = np.asarray(model.reference, float)

@@ -48,16 +48,27 @@ def _rigid(T: np.ndarray, rotation_tol: float, bottom_tol: float) -> bool:
             dot = T[0, i] * T[0, j] + T[1, i] * T[1, j] + T[2, i] * T[2, j]
             if not abs(dot - (1.0 if i == j else 0.0)) < rotation_tol:
                 return False
-    det = (T[0, 0] * (T[1, 1] * T[2, 2] - T[2, 1] * T[1, 2])
-           + T[1, 0] * (T[2, 1] * T[0, 2] - T[0, 1] * T[2, 2])
-           + T[2, 0] * (T[0, 1] * T[1, 2] - T[1, 1] * T[0, 2]))
+    det = (
+        T[0, 0] * (T[1, 1] * T[2, 2] - T[2, 1] * T[1, 2])
+        + T[1, 0] * (T[2, 1] * T[0, 2] - T[0, 1] * T[2, 2])
+        + T[2, 0] * (T[0, 1] * T[1, 2] - T[1, 1] * T[0, 2])
+    )
     bottom = abs(T[3, 0]) + abs(T[3, 1]) + abs(T[3, 2]) + abs(T[3, 3] - 1.0)
     return det > 0.0 and bottom < bottom_tol
 
 
 @njit(cache=True, error_model="numpy")
-def solve(k: np.ndarray, T: np.ndarray, seed: np.ndarray, seeded: bool, branch: int, q: np.ndarray,
-          status: np.ndarray, s5_out: np.ndarray, reach: np.ndarray) -> tuple[int, bool, bool, float]:
+def solve(
+    k: np.ndarray,
+    T: np.ndarray,
+    seed: np.ndarray,
+    seeded: bool,
+    branch: int,
+    q: np.ndarray,
+    status: np.ndarray,
+    s5_out: np.ndarray,
+    reach: np.ndarray,
+) -> tuple[int, bool, bool, float]:
     """Candidates q (8, 6), statuses (8,), |sin theta5| (8,), NaN where no solution, and the J3
     origin's distance from J2 (8,) of one flange pose ``T`` (4, 4), filled in place; returns
     (selected, tie, not a pose, rho). ``seed`` (6,) is used only if ``seeded``; ``branch`` -1 = any."""
@@ -154,11 +165,24 @@ def solve(k: np.ndarray, T: np.ndarray, seed: np.ndarray, seeded: bool, branch: 
 
 
 @njit(cache=True, error_model="numpy")
-def solve_batch(k: np.ndarray, T: np.ndarray, seeds: np.ndarray, seeded: bool, branch: int, q: np.ndarray,
-                status: np.ndarray, s5_out: np.ndarray, reach: np.ndarray, selected: np.ndarray,
-                tie: np.ndarray, invalid: np.ndarray, rho: np.ndarray) -> None:
+def solve_batch(
+    k: np.ndarray,
+    T: np.ndarray,
+    seeds: np.ndarray,
+    seeded: bool,
+    branch: int,
+    q: np.ndarray,
+    status: np.ndarray,
+    s5_out: np.ndarray,
+    reach: np.ndarray,
+    selected: np.ndarray,
+    tie: np.ndarray,
+    invalid: np.ndarray,
+    rho: np.ndarray,
+) -> None:
     """:func:`solve` for every flange pose T (N, 4, 4) with seeds (N, 6) (read if ``seeded``): q
     (N, 8, 6), status, s5_out and reach (N, 8), selected, tie, invalid and rho (N,)."""
     for i in range(T.shape[0]):
-        selected[i], tie[i], invalid[i], rho[i] = solve(k, T[i], seeds[i], seeded, branch, q[i], status[i],
-                                                        s5_out[i], reach[i])
+        selected[i], tie[i], invalid[i], rho[i] = solve(
+            k, T[i], seeds[i], seeded, branch, q[i], status[i], s5_out[i], reach[i]
+        )

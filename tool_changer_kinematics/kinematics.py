@@ -32,7 +32,7 @@ limits when there is one (J5's limits [0, 270] deg span more than a half turn).
 The steps are plain numpy on candidate arrays (``ToolChanger._closed_form``: the 8 candidates
 side by side, each angle as a (sine, cosine) pair until one arctan2 per joint into the (N, 8, 6)
 result; ``_solve``: the joint values, statuses and selection), one target being a batch of one; a
-batch runs in blocks of rows (the shared :func:`manipulator_kinematics.blocks.in_blocks`).
+batch runs in blocks of rows (the shared :func:`manipulator_kinematics.row_blocks.in_blocks`).
 One target (4, 4) runs the same steps as scalar loops compiled by numba
 (:mod:`tool_changer_kinematics.ik_kernel`, loaded by the shared
 :class:`manipulator_kinematics.compiled.Kernel`; the numpy path answers until it is ready and
@@ -70,9 +70,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from manipulator_kinematics.blocks import in_blocks
 from manipulator_kinematics.compiled import Kernel
-from manipulator_kinematics.config import Names, Number, Numbers, Schema, Text, require, validate
 from manipulator_kinematics.model import (
     TIE_TOLERANCE,
     IKSolutions,
@@ -83,7 +81,9 @@ from manipulator_kinematics.model import (
     matrix_quaternion,
     select,
 )
-from manipulator_kinematics.params import config_path, load_parameters
+from manipulator_kinematics.param_files import config_path, load_parameters
+from manipulator_kinematics.row_blocks import in_blocks
+from manipulator_kinematics.schema import Names, Number, Numbers, Schema, Text, require, validate
 from manipulator_kinematics.serial_chain import (
     JointLimits,
     SerialChain,
@@ -96,8 +96,12 @@ from manipulator_kinematics.serial_chain import (
 
 CONFIG_FILE = "tool_changer.yaml"
 SECTION = "tool_changer"
-BRANCHES = tuple(f"{shoulder}_{elbow}_{wrist}" for shoulder in ("front", "back") for elbow in ("up", "down")
-                 for wrist in ("noflip", "flip"))
+BRANCHES = tuple(
+    f"{shoulder}_{elbow}_{wrist}"
+    for shoulder in ("front", "back")
+    for elbow in ("up", "down")
+    for wrist in ("noflip", "flip")
+)
 MODES = ("closed_form",)
 #: The D-H twists the closed form needs (rad).
 ALPHA = (math.pi / 2, 0.0, 0.0, math.pi / 2, -math.pi / 2, 0.0)
@@ -126,7 +130,7 @@ ELBOW_UP_ROW = np.array([0, 1, 0, 1, 2, 3, 2, 3])
 _SUCCESS, _SINGULAR, _JOINT_LIMITS, _UNREACHABLE, _INVALID = (int(s) for s in IKStatus)
 _SIX = Numbers(6)
 
-#: The ``tool_changer:`` section of a parameters file (manipulator_kinematics.config).
+#: The ``tool_changer:`` section of a parameters file (manipulator_kinematics.schema).
 SCHEMA: Schema = {
     "name": Text(empty=False, default="tool_changer", doc="the machine's name: the robot name of its URDF"),
     "joint_names": Names(6),
@@ -153,8 +157,12 @@ def rigid_transform(T: np.ndarray) -> np.ndarray:
     gram = np.einsum("...ki,...kj->...ij", R, R)
     det = np.einsum("...i,...i->...", R[..., 0], np.cross(R[..., 1], R[..., 2]))
     bottom = np.abs(T[..., 3, :] - (0.0, 0.0, 0.0, 1.0)).sum(axis=-1)
-    return (np.isfinite(T).all(axis=(-2, -1)) & (np.abs(gram - np.eye(3)) < ROTATION_TOL).all(axis=(-2, -1))
-            & (det > 0.0) & (bottom < BOTTOM_TOL))
+    return (
+        np.isfinite(T).all(axis=(-2, -1))
+        & (np.abs(gram - np.eye(3)) < ROTATION_TOL).all(axis=(-2, -1))
+        & (det > 0.0)
+        & (bottom < BOTTOM_TOL)
+    )
 
 
 def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
@@ -162,8 +170,21 @@ def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
     q, status, s5, reach = np.empty((8, 6)), np.empty(8, dtype=np.int8), np.empty(8), np.empty(8)
     ik_kernel.solve(packed, np.eye(4), packed[:6], False, -1, q, status, s5, reach)
     flags = np.empty(1, dtype=bool)
-    ik_kernel.solve_batch(packed, np.eye(4)[None], packed[None, :6].copy(), False, -1, q[None], status[None],
-                          s5[None], reach[None], np.empty(1, dtype=np.intp), flags, flags.copy(), np.empty(1))
+    ik_kernel.solve_batch(
+        packed,
+        np.eye(4)[None],
+        packed[None, :6].copy(),
+        False,
+        -1,
+        q[None],
+        status[None],
+        s5[None],
+        reach[None],
+        np.empty(1, dtype=np.intp),
+        flags,
+        flags.copy(),
+        np.empty(1),
+    )
 
 
 #: The single-target kernel (:mod:`tool_changer_kinematics.ik_kernel`), see manipulator_kinematics.compiled.
@@ -176,9 +197,18 @@ class ToolChanger:
     ik_branches = BRANCHES
     ik_modes = MODES
 
-    def __init__(self, a: ArrayLike, d: ArrayLike, limits: JointLimits, *, offset: ArrayLike | None = None,
-                 tool: ArrayLike | None = None, wrist_singularity: float = 0.01,
-                 axis_singularity: float = 0.005, name: str = "tool_changer") -> None:
+    def __init__(
+        self,
+        a: ArrayLike,
+        d: ArrayLike,
+        limits: JointLimits,
+        *,
+        offset: ArrayLike | None = None,
+        tool: ArrayLike | None = None,
+        wrist_singularity: float = 0.01,
+        axis_singularity: float = 0.005,
+        name: str = "tool_changer",
+    ) -> None:
         self.name = name
         a = np.asarray(a, dtype=float)
         d = np.asarray(d, dtype=float)
@@ -186,8 +216,9 @@ class ToolChanger:
         if a.shape != (6,) or d.shape != (6,) or offset.shape != (6,) or len(limits.names) != 6:
             raise ValueError("the tool changer has six joints: a, d, offset and limits need six entries")
         if not (a[1] > 0.0 and a[2] > 0.0) or np.any(a[4:] != 0.0) or np.any(d[1:4] != 0.0):
-            raise ValueError("closed-form IK needs a2, a3 > 0, a5 = a6 = 0, d2 = d3 = d4 = 0; "
-                             f"got a = {a}, d = {d}")
+            raise ValueError(
+                f"closed-form IK needs a2, a3 > 0, a5 = a6 = 0, d2 = d3 = d4 = 0; got a = {a}, d = {d}"
+            )
         self.a, self.d, self.offset = a, d, offset
         self._limits = limits
         self.wrist_singularity = float(wrist_singularity)
@@ -209,10 +240,25 @@ class ToolChanger:
         self._wrap_offset = offset - 2 * math.pi * turns
         self._wrap_bottom = top - 2 * math.pi
         # The constants of the compiled kernel (ik_kernel's order).
-        self._packed = np.array([*self._lengths, *self._reach, self.wrist_singularity, self.axis_singularity,
-                                 *self._wrap_offset, *self._wrap_bottom, *(limits.lower - LIMIT_TOL),
-                                 *(limits.upper + LIMIT_TOL), offset[0], offset[5], AXIS_RULE, WRIST_RULE,
-                                 ROTATION_TOL, BOTTOM_TOL, TIE_TOLERANCE])
+        self._packed = np.array(
+            [
+                *self._lengths,
+                *self._reach,
+                self.wrist_singularity,
+                self.axis_singularity,
+                *self._wrap_offset,
+                *self._wrap_bottom,
+                *(limits.lower - LIMIT_TOL),
+                *(limits.upper + LIMIT_TOL),
+                offset[0],
+                offset[5],
+                AXIS_RULE,
+                WRIST_RULE,
+                ROTATION_TOL,
+                BOTTOM_TOL,
+                TIE_TOLERANCE,
+            ]
+        )
 
     # ---- construction -------------------------------------------------------------------------
     @classmethod
@@ -221,25 +267,42 @@ class ToolChanger:
         p = validate(params, SCHEMA, prefix)
         dh = p["dh"]
         for i, (given, needed) in enumerate(zip(dh["alpha"], ALPHA, strict=True)):
-            require(abs(given - needed) < 1e-9, f"{prefix}.dh.alpha[{i}]",
-                    f"{given} rad: the closed-form IK needs alpha = (+90, 0, 0, +90, -90, 0) deg")
+            require(
+                abs(given - needed) < 1e-9,
+                f"{prefix}.dh.alpha[{i}]",
+                f"{given} rad: the closed-form IK needs alpha = (+90, 0, 0, +90, -90, 0) deg",
+            )
         for key, indices in (("a", (4, 5)), ("d", (1, 2, 3))):
             for i in indices:
-                require(dh[key][i] == 0.0, f"{prefix}.dh.{key}[{i}]",
-                        f"{dh[key][i]} m: the closed-form IK needs a5 = a6 = 0 and d2 = d3 = d4 = 0")
+                require(
+                    dh[key][i] == 0.0,
+                    f"{prefix}.dh.{key}[{i}]",
+                    f"{dh[key][i]} m: the closed-form IK needs a5 = a6 = 0 and d2 = d3 = d4 = 0",
+                )
         for i in (1, 2):
-            require(dh["a"][i] > 0.0, f"{prefix}.dh.a[{i}]",
-                    f"{dh['a'][i]} m: boom and arm lengths must be > 0")
+            require(
+                dh["a"][i] > 0.0, f"{prefix}.dh.a[{i}]", f"{dh['a'][i]} m: boom and arm lengths must be > 0"
+            )
         names, lower, upper = p["joint_names"], p["joint_min"], p["joint_max"]
         for i in range(6):
-            require(lower[i] < upper[i], f"{prefix}.joint_min[{i}]",
-                    f"{lower[i]} must be below {prefix}.joint_max[{i}] = {upper[i]} ({names[i]})")
+            require(
+                lower[i] < upper[i],
+                f"{prefix}.joint_min[{i}]",
+                f"{lower[i]} must be below {prefix}.joint_max[{i}] = {upper[i]} ({names[i]})",
+            )
         roll, pitch, yaw = p["tool_rpy"]
         tool = transl(*p["tool_xyz"]) @ trotz(yaw) @ troty(pitch) @ trotx(roll)
         limits = JointLimits(tuple(names), np.array(lower), np.array(upper))
-        return cls(dh["a"], dh["d"], limits, offset=dh["offset"], tool=tool,
-                   wrist_singularity=p["wrist_singularity"], axis_singularity=p["axis_singularity"],
-                   name=p["name"])
+        return cls(
+            dh["a"],
+            dh["d"],
+            limits,
+            offset=dh["offset"],
+            tool=tool,
+            wrist_singularity=p["wrist_singularity"],
+            axis_singularity=p["axis_singularity"],
+            name=p["name"],
+        )
 
     @classmethod
     def default(cls) -> ToolChanger:
@@ -294,9 +357,16 @@ class ToolChanger:
         return "; ".join(notes)
 
     # ---- protocol: inverse kinematics ------------------------------------------------------------
-    def solve_ik(self, target: ArrayLike, *, use_orientation: bool = True, mode: str | None = None,
-                 seed: ArrayLike | None = None, branch: str | None = None,
-                 compiled: bool = True) -> IKSolutions:
+    def solve_ik(
+        self,
+        target: ArrayLike,
+        *,
+        use_orientation: bool = True,
+        mode: str | None = None,
+        seed: ArrayLike | None = None,
+        branch: str | None = None,
+        compiled: bool = True,
+    ) -> IKSolutions:
         """Every closed-form solution of target poses (..., 4, 4), each with a status (module docstring).
 
         ``use_orientation=False``: the arm has six joints for three position constraints, so the
@@ -309,8 +379,9 @@ class ToolChanger:
         if mode is not None and mode not in MODES:
             raise RequestError(f"unknown mode {mode!r}; known: {', '.join(MODES)}")
         if branch is not None and branch not in BRANCHES:
-            raise RequestError(f"unknown branch {branch!r}; known: {', '.join(BRANCHES)} "
-                               "(empty = closest to the seed)")
+            raise RequestError(
+                f"unknown branch {branch!r}; known: {', '.join(BRANCHES)} (empty = closest to the seed)"
+            )
         target = np.array(target, dtype=float)
         if target.shape[-2:] != (4, 4):
             raise ValueError(f"targets must have shape (..., 4, 4), got {target.shape}")
@@ -328,16 +399,19 @@ class ToolChanger:
             flat_seed = None if seed_q is None else seed_q.reshape(-1, 6)
             flange = self._flange(target).reshape(-1, 4, 4)
             q, status, selected, tie, diag = self._solve_many(kernel, flange, flat_seed, index)
-            q, status, selected, tie = (value.reshape(shape + value.shape[1:])
-                                        for value in (q, status, selected, tie))
+            q, status, selected, tie = (
+                value.reshape(shape + value.shape[1:]) for value in (q, status, selected, tie)
+            )
             diag = {key: value.reshape(shape + value.shape[1:]) for key, value in diag.items()}
         else:
             flange = self._flange(target)
             flat_seed = None if seed_q is None else seed_q.reshape(-1, 6)
-            judged = in_blocks(functools.partial(self._solve, branch=index), flange.reshape(-1, 4, 4),
-                               flat_seed)
+            judged = in_blocks(
+                functools.partial(self._solve, branch=index), flange.reshape(-1, 4, 4), flat_seed
+            )
             q, status, selected, tie, invalid, rho, s5, reach = (
-                value.reshape(shape + value.shape[1:]) for value in judged)
+                value.reshape(shape + value.shape[1:]) for value in judged
+            )
             diag = {"invalid": invalid, "rho": rho, "s5": s5, "reach": reach}
 
         def explain(solutions: IKSolutions, at: tuple[int, ...]) -> str:
@@ -353,8 +427,9 @@ class ToolChanger:
         with np.errstate(invalid="ignore", over="ignore"):  # a target that is not a pose: INVALID
             return target @ self._tool_inv
 
-    def _solve(self, flange: np.ndarray, seed: np.ndarray | None,
-               branch: int | None) -> tuple[np.ndarray, ...]:
+    def _solve(
+        self, flange: np.ndarray, seed: np.ndarray | None, branch: int | None
+    ) -> tuple[np.ndarray, ...]:
         """Flange poses (N, 4, 4) -> candidates q (N, 8, 6), statuses (N, 8), selected and tie (N,),
         and the diagnostics of the texts: not a pose (N,), rho (N,), |sin theta5| and the J3 origin's
         distance from J2 (N, 8) (:meth:`_closed_form`)."""
@@ -437,8 +512,7 @@ class ToolChanger:
         for j, (y, x) in ((0, (shoulder * s1, shoulder * c1)), (4, (sin5, az1_k)), (5, (y6, x6))):
             theta[..., j] = np.arctan2(y, x)[ELBOW_UP_ROW].T  # theta1, theta5, theta6: as the elbow-up twin's
         # The elbow: all 8 candidates, each from its elbow-up twin.
-        cphi, sphi, o3x, o3y, c3, exists, r = (
-            v[ELBOW_UP_ROW] for v in (cphi, sphi, o3x, o3y, c3, exists, r))
+        cphi, sphi, o3x, o3y, c3, exists, r = (v[ELBOW_UP_ROW] for v in (cphi, sphi, o3x, o3y, c3, exists, r))
         s3 = ELBOW[:, None] * np.sqrt(1.0 - c3 * c3)
         k1, k2 = a2 + a3 * c3, a3 * s3
         y2, x2 = o3y * k1 - o3x * k2, o3x * k1 + o3y * k2
@@ -456,34 +530,62 @@ class ToolChanger:
         ``wait``: load it now (tests, benchmarks)."""
         return KERNEL.get(self._packed, wait=wait)
 
-    def _solve_one(self, kernel: ModuleType, target: np.ndarray, seed: np.ndarray | None,
-                   branch: int | None) -> tuple:
+    def _solve_one(
+        self, kernel: ModuleType, target: np.ndarray, seed: np.ndarray | None, branch: int | None
+    ) -> tuple:
         """One target (4, 4) through :func:`tool_changer_kinematics.ik_kernel.solve`."""
         q, status = np.empty((8, 6)), np.empty(8, dtype=np.int8)
         s5, reach = np.empty(8), np.empty(8)
         seeded = seed is not None
         selected, tie, invalid, rho = kernel.solve(
-            self._packed, self._flange(target), np.ascontiguousarray(seed) if seeded else self._packed[:6],
-            seeded, -1 if branch is None else branch, q, status, s5, reach)
+            self._packed,
+            self._flange(target),
+            np.ascontiguousarray(seed) if seeded else self._packed[:6],
+            seeded,
+            -1 if branch is None else branch,
+            q,
+            status,
+            s5,
+            reach,
+        )
         diag = {"invalid": np.array(invalid), "rho": np.array(rho), "s5": s5, "reach": reach}
         return q, status, np.array(selected, dtype=np.intp), np.array(tie), diag
 
-    def _solve_many(self, kernel: ModuleType, flange: np.ndarray, seeds: np.ndarray | None,
-                    branch: int | None) -> tuple:
+    def _solve_many(
+        self, kernel: ModuleType, flange: np.ndarray, seeds: np.ndarray | None, branch: int | None
+    ) -> tuple:
         """Flange poses (N, 4, 4) through the kernel's loop (ik_kernel.solve_batch)."""
         n = len(flange)
         q, status = np.empty((n, 8, 6)), np.empty((n, 8), dtype=np.int8)
         s5, reach, rho = np.empty((n, 8)), np.empty((n, 8)), np.empty(n)
         selected, tie, invalid = np.empty(n, dtype=np.intp), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
         seeded = seeds is not None
-        kernel.solve_batch(self._packed, np.ascontiguousarray(flange),
-                           np.ascontiguousarray(seeds) if seeded else np.zeros((n, 6)), seeded,
-                           -1 if branch is None else branch, q, status, s5, reach, selected, tie, invalid,
-                           rho)
+        kernel.solve_batch(
+            self._packed,
+            np.ascontiguousarray(flange),
+            np.ascontiguousarray(seeds) if seeded else np.zeros((n, 6)),
+            seeded,
+            -1 if branch is None else branch,
+            q,
+            status,
+            s5,
+            reach,
+            selected,
+            tie,
+            invalid,
+            rho,
+        )
         return q, status, selected, tie, {"invalid": invalid, "rho": rho, "s5": s5, "reach": reach}
 
-    def _explain(self, solutions: IKSolutions, at: tuple[int, ...], diag: dict[str, np.ndarray], *,
-                 seeded: bool, requested: str | None) -> str:
+    def _explain(
+        self,
+        solutions: IKSolutions,
+        at: tuple[int, ...],
+        diag: dict[str, np.ndarray],
+        *,
+        seeded: bool,
+        requested: str | None,
+    ) -> str:
         if diag["invalid"][at]:
             return "target is not a finite rigid transform (4x4 with a rotation part)"
         rho = float(diag["rho"][at])
@@ -491,8 +593,13 @@ class ToolChanger:
         valid = [BRANCHES[i] for i in solutions.ordered(at)]
         chosen = int(solutions.selected[at])
         if chosen >= 0:
-            how = ("the requested branch" if requested else
-                   "closest to the seed" if seeded else "first in branch order (no seed)")
+            how = (
+                "the requested branch"
+                if requested
+                else "closest to the seed"
+                if seeded
+                else "first in branch order (no seed)"
+            )
             text = f"branch {BRANCHES[chosen]} ({how}); valid: {', '.join(valid)}"
             if solutions.tie[at]:
                 text += "; tie: another valid solution is as close to the seed"
@@ -503,16 +610,21 @@ class ToolChanger:
             reach = float(diag["reach"][at + (i,)])
             shortest, longest = abs(self.a[1] - self.a[2]), self.a[1] + self.a[2]
             if kind == _UNREACHABLE and not shortest <= reach <= longest:
-                reason = (f"J2-J3 cannot reach the J3 origin ({reach:.4g} m from J2, "
-                          f"needs [{shortest:.4g}, {longest:.4g}])")
+                reason = (
+                    f"J2-J3 cannot reach the J3 origin ({reach:.4g} m from J2, "
+                    f"needs [{shortest:.4g}, {longest:.4g}])"
+                )
             elif kind == _UNREACHABLE:
                 reason = "same configuration as the noflip branch (wrist singularity)"
             elif kind == _JOINT_LIMITS:
                 reason = describe_limits(q[i], self._limits)
             elif kind == _SINGULAR:
                 s5 = float(diag["s5"][at + (i,)])
-                reason = (f"wrist singularity, |sin q5| = {s5:.3g}" if s5 < self.wrist_singularity
-                          else f"wrist centre {rho:.3g} m from the J1 axis")
+                reason = (
+                    f"wrist singularity, |sin q5| = {s5:.3g}"
+                    if s5 < self.wrist_singularity
+                    else f"wrist centre {rho:.3g} m from the J1 axis"
+                )
             else:
                 reason = "not the requested branch"
             parts.append(f"{BRANCHES[i]}: {reason}")

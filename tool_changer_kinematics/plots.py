@@ -18,7 +18,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from manipulator_kinematics.plain import plain
+from manipulator_kinematics.help_text import plain
 from tool_changer_kinematics.kinematics import BRANCHES, ToolChanger
 from tool_changer_kinematics.trajectory import paper_trajectory
 from tool_changer_kinematics.workspace import Workspace, sample, section
@@ -47,8 +47,12 @@ def plot_section(workspace: Workspace, path: Path) -> None:
     fig, ax = plt.subplots(figsize=(6.5, 5.5))
     ax.scatter(points[:, 1], points[:, 2], s=0.5, alpha=0.3)
     ax.plot(0.0, 0.0, "k+", ms=12)
-    ax.set(xlabel="y0 (m)", ylabel="z0 (m)", aspect="equal",
-           title=f"J1 = 90 deg: section in the y0-z0 plane (cf. paper Fig. 6), {workspace.samples} samples")
+    ax.set(
+        xlabel="y0 (m)",
+        ylabel="z0 (m)",
+        aspect="equal",
+        title=f"J1 = 90 deg: section in the y0-z0 plane (cf. paper Fig. 6), {workspace.samples} samples",
+    )
     ax.title.set_fontsize(9)
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
@@ -84,9 +88,15 @@ def plot_solutions(arm: ToolChanger, path: Path) -> None:
             continue
         joints = arm.frames(candidate)[:, :3, 3]
         valid = bool(solutions.valid[i])
-        ax.plot(*joints.T, "-o", ms=3, lw=2.5 if valid else 1.0, alpha=1.0 if valid else 0.35,
-                color=None if valid else "grey",
-                label=f"{BRANCHES[i]}{' (selected)' if i == solutions.selected else ''}" if valid else None)
+        ax.plot(
+            *joints.T,
+            "-o",
+            ms=3,
+            lw=2.5 if valid else 1.0,
+            alpha=1.0 if valid else 0.35,
+            color=None if valid else "grey",
+            label=f"{BRANCHES[i]}{' (selected)' if i == solutions.selected else ''}" if valid else None,
+        )
     ax.plot([], [], color="grey", alpha=0.35, label="outside the joint limits")
     ax.set(xlabel="x0 (m)", ylabel="y0 (m)", zlabel="z0 (m)")
     ax.set_title("All closed-form solutions of one pose: two inside every limit", fontsize=9)
@@ -102,18 +112,24 @@ def animate_trajectory(arm: ToolChanger, path: Path) -> Path:
     from tool_changer_kinematics.machine import MACHINE
 
     trajectory = paper_trajectory()
-    return animate(MACHINE.scene(arm, trajectory.q), path,
-                   [View(view_xz, "x (m)", "z (m)", "side"), View(view_xy, "x (m)", "y (m)", "top")],
-                   times=trajectory.t, speed=3.0, size=(7.0, 3.6),
-                   title="Tool changer: quintic joint trajectory (Figs. 7-9), 3x speed")
+    return animate(
+        MACHINE.scene(arm, trajectory.q),
+        path,
+        [View(view_xz, "x (m)", "z (m)", "side"), View(view_xy, "x (m)", "y (m)", "top")],
+        times=trajectory.t,
+        speed=3.0,
+        size=(7.0, 3.6),
+        title="Tool changer: quintic joint trajectory (Figs. 7-9), 3x speed",
+    )
 
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=plain(__doc__.splitlines()[0]))
     parser.add_argument("outdir", type=Path, help="directory for the PNG files (created)")
     parser.add_argument("--samples", type=int, default=1_000_000, help="Monte-Carlo samples (Fig. 5)")
-    parser.add_argument("--section-samples", type=int, default=200_000,
-                        help="samples with J1 = 90 deg (Fig. 6)")
+    parser.add_argument(
+        "--section-samples", type=int, default=200_000, help="samples with J1 = 90 deg (Fig. 6)"
+    )
     parser.add_argument("--seed", type=int, default=0, help="random seed")
     parser.add_argument("--config", type=Path, help="machine file (default: the shipped tool_changer.yaml)")
     args = parser.parse_args(argv)

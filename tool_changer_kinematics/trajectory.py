@@ -40,6 +40,12 @@ def joint_trajectory_message(trajectory: JointTrajectory, joint_names: Sequence[
     for t, q, qd, qdd in zip(trajectory.t, trajectory.q, trajectory.qd, trajectory.qdd, strict=True):
         seconds, nanoseconds = divmod(round(float(t) * 1e9), 1_000_000_000)
         stamp = Duration(sec=int(seconds), nanosec=int(nanoseconds))
-        message.points.append(JointTrajectoryPoint(positions=q.tolist(), velocities=qd.tolist(),
-                                                   accelerations=qdd.tolist(), time_from_start=stamp))
+        message.points.append(
+            JointTrajectoryPoint(
+                positions=q.tolist(),
+                velocities=qd.tolist(),
+                accelerations=qdd.tolist(),
+                time_from_start=stamp,
+            )
+        )
     return message

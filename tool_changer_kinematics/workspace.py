@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from manipulator_kinematics.blocks import in_blocks
+from manipulator_kinematics.row_blocks import in_blocks
 from tool_changer_kinematics.kinematics import ToolChanger
 
 
@@ -42,8 +42,10 @@ class Workspace:
         return float(-self.points[:, 2].min())
 
     def summary(self) -> str:
-        return (f"{self.samples} samples: max radius {self.max_radius * 1e3:.0f} mm, max height "
-                f"{self.max_height * 1e3:.0f} mm, max depth {self.max_depth * 1e3:.0f} mm")
+        return (
+            f"{self.samples} samples: max radius {self.max_radius * 1e3:.0f} mm, max height "
+            f"{self.max_height * 1e3:.0f} mm, max depth {self.max_depth * 1e3:.0f} mm"
+        )
 
 
 def sample(arm: ToolChanger, n: int = 1_000_000, seed: int = 0, theta1: float | None = None) -> Workspace:

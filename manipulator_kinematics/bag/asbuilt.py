@@ -55,16 +55,29 @@ GRADE = ("grade_left", "grade_right")
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog=NAME, description=__doc__.split("\n\n")[0])
     parser.add_argument("bags", nargs="*", type=Path, help="bag folders (rosbag2: metadata.yaml + files)")
-    parser.add_argument("--fleet", metavar="DIR_OR_GLOB",
-                        help="every bag under this folder, or matching this glob, in parallel")
+    parser.add_argument(
+        "--fleet",
+        metavar="DIR_OR_GLOB",
+        help="every bag under this folder, or matching this glob, in parallel",
+    )
     parser.add_argument("-o", "--output", type=Path, required=True, help="output folder")
     parser.add_argument("--cell", type=float, default=0.25, help="as-built cell size, m (default 0.25)")
-    parser.add_argument("--params", nargs="+", type=Path, default=[], metavar="FILE",
-                        help="ROS parameter files with machines and node settings (as mk_evaluate)")
-    parser.add_argument("--workers", type=int, default=None,
-                        help="--fleet: local worker processes (default: one per core)")
-    parser.add_argument("--scheduler", metavar="ADDRESS",
-                        help="--fleet: a running Dask scheduler (tcp://host:8786) instead of local processes")
+    parser.add_argument(
+        "--params",
+        nargs="+",
+        type=Path,
+        default=[],
+        metavar="FILE",
+        help="ROS parameter files with machines and node settings (as mk_evaluate)",
+    )
+    parser.add_argument(
+        "--workers", type=int, default=None, help="--fleet: local worker processes (default: one per core)"
+    )
+    parser.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="--fleet: a running Dask scheduler (tcp://host:8786) instead of local processes",
+    )
     parser.add_argument("--recover", action="store_true", help="read mcap bags whose recorder was killed")
     args = parser.parse_args(argv)
     if bool(args.bags) == bool(args.fleet):
@@ -95,8 +108,9 @@ def _setup(params: tuple[Path, ...]) -> Setup:
     return load_setup(params)
 
 
-def process_bag(path: Path, output: Path, params: Sequence[Path], cell: float,
-                recover: bool = False) -> BagResult:
+def process_bag(
+    path: Path, output: Path, params: Sequence[Path], cell: float, recover: bool = False
+) -> BagResult:
     """One bag's tables and as-built surfaces into ``output/<bag name>``, with the machines and
     node settings of ``params`` (as mk_evaluate --params); a bag that cannot be read gives a
     result with ``error`` set and writes nothing."""
@@ -130,15 +144,26 @@ def process_bag(path: Path, output: Path, params: Sequence[Path], cell: float,
                 columns, units = machine.samples(own, setup.model(machine), context)
             key = f"{prefix}{machine.name}"
             table = pa.table(columns)
-            metadata = {"units": json.dumps(_units(list(columns), units)), "machine": machine.name,
-                        "namespace": namespace, "bag": str(path)}
+            metadata = {
+                "units": json.dumps(_units(list(columns), units)),
+                "machine": machine.name,
+                "namespace": namespace,
+                "bag": str(path),
+            }
             table = table.replace_schema_metadata(metadata)
             folder.mkdir(parents=True, exist_ok=True)
             file = folder / f"{key}.parquet"
             pq.write_table(table, file)
             stamps = np.asarray(columns["stamp_ns"])
-            result.tables.append({"file": str(file), "machine": machine.name, "namespace": namespace,
-                                  "rows": len(stamps), "days": _days(stamps)})
+            result.tables.append(
+                {
+                    "file": str(file),
+                    "machine": machine.name,
+                    "namespace": namespace,
+                    "rows": len(stamps),
+                    "days": _days(stamps),
+                }
+            )
             if all(c in columns for c in EDGE) and len(stamps):
                 left = np.column_stack([columns[c] for c in EDGE[:3]])
                 right = np.column_stack([columns[c] for c in EDGE[3:]])
@@ -146,11 +171,18 @@ def process_bag(path: Path, output: Path, params: Sequence[Path], cell: float,
                 result.grids[key] = grid
                 _write_surface(grid, folder / f"{key}_asbuilt", f"{path.name} {key}")
                 if all(c in columns for c in GRADE):
-                    grade = lowest_elevation(np.column_stack([left[:, :2], columns[GRADE[0]]]),
-                                             np.column_stack([right[:, :2], columns[GRADE[1]]]), cell)
+                    grade = lowest_elevation(
+                        np.column_stack([left[:, :2], columns[GRADE[0]]]),
+                        np.column_stack([right[:, :2], columns[GRADE[1]]]),
+                        cell,
+                    )
                     result.grade_grids[key] = grade
-                _write_map(grid, result.grade_grids.get(key), folder / f"{key}_asbuilt.png",
-                           f"as-built: {path.name} {key}")
+                _write_map(
+                    grid,
+                    result.grade_grids.get(key),
+                    folder / f"{key}_asbuilt.png",
+                    f"as-built: {path.name} {key}",
+                )
     return result
 
 
@@ -168,8 +200,10 @@ def _days(stamps: np.ndarray) -> dict[str, int]:
     if not len(stamps):
         return {}
     days, counts = np.unique(stamps // 86_400_000_000_000, return_counts=True)
-    return {str(datetime.date(1970, 1, 1) + datetime.timedelta(days=int(d))): int(c)
-            for d, c in zip(days, counts, strict=True)}
+    return {
+        str(datetime.date(1970, 1, 1) + datetime.timedelta(days=int(d))): int(c)
+        for d, c in zip(days, counts, strict=True)
+    }
 
 
 def _write_surface(grid: AsBuilt, stem: Path, name: str) -> None:
@@ -193,8 +227,9 @@ def _write_map(grid: AsBuilt, grade: AsBuilt | None, path: Path, title: str) -> 
     if grade is not None:
         placed = grade.on(grid.x0, grid.y0, grid.z.shape)
         limit = max(float(np.nanmax(np.abs(placed.z))) if np.isfinite(placed.z).any() else 0.0, 0.01)
-        image = axes[0, 1].imshow(placed.z, origin="lower", extent=extent, cmap="RdBu_r",
-                                  vmin=-limit, vmax=limit)
+        image = axes[0, 1].imshow(
+            placed.z, origin="lower", extent=extent, cmap="RdBu_r", vmin=-limit, vmax=limit
+        )
         figure.colorbar(image, ax=axes[0, 1], label="lowest height above design (m): + to cut, - over-dug")
         axes[0, 1].set_title("cut / fill against the design")
     for ax in axes[0]:
@@ -219,9 +254,15 @@ def fleet_bags(pattern: str) -> list[Path]:
     return sorted(found)
 
 
-def run_fleet(paths: Sequence[Path], output: Path, params: Sequence[Path], cell: float,
-              workers: int | None = None, scheduler: str | None = None,
-              recover: bool = False) -> list[BagResult]:
+def run_fleet(
+    paths: Sequence[Path],
+    output: Path,
+    params: Sequence[Path],
+    cell: float,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    recover: bool = False,
+) -> list[BagResult]:
     """Every bag processed by Dask (local processes, or the cluster at ``scheduler``), with a
     progress bar on stderr; the results in the order of ``paths``."""
     import dask
@@ -258,12 +299,15 @@ def merge_tables(results: Sequence[BagResult], path: Path) -> int:
         for bag, entry in entries:
             table = pq.read_table(entry["file"])
             n = table.num_rows
-            columns = {"bag": pa.array([bag] * n, pa.string()),
-                       "namespace": pa.array([entry["namespace"]] * n, pa.string()),
-                       "machine": pa.array([entry["machine"]] * n, pa.string())}
+            columns = {
+                "bag": pa.array([bag] * n, pa.string()),
+                "namespace": pa.array([entry["namespace"]] * n, pa.string()),
+                "machine": pa.array([entry["machine"]] * n, pa.string()),
+            }
             for name in schema.names[3:]:
-                columns[name] = (table[name] if name in table.column_names
-                                 else pa.nulls(n, schema.field(name).type))
+                columns[name] = (
+                    table[name] if name in table.column_names else pa.nulls(n, schema.field(name).type)
+                )
             writer.write_table(pa.table(columns, schema=schema))
             rows += n
     return rows
@@ -278,8 +322,13 @@ def fleet_report(results: Sequence[BagResult]) -> dict[str, Any]:
         if r.error:
             bags.append({"bag": r.bag, "error": r.error})
             continue
-        bags.append({"bag": r.bag, "rows": sum(t["rows"] for t in r.tables),
-                     "machines": [f"{t['namespace']} {t['machine']}" for t in r.tables]})
+        bags.append(
+            {
+                "bag": r.bag,
+                "rows": sum(t["rows"] for t in r.tables),
+                "machines": [f"{t['namespace']} {t['machine']}" for t in r.tables],
+            }
+        )
         for t in r.tables:
             m = per_machine.setdefault(t["machine"], {"rows": 0, "bags": 0})
             m["rows"] += t["rows"]
@@ -288,9 +337,12 @@ def fleet_report(results: Sequence[BagResult]) -> dict[str, Any]:
                 d = per_day.setdefault(day, {"rows": 0, "bags": set()})
                 d["rows"] += count
                 d["bags"].add(r.bag)
-    return {"bags": bags, "skipped": sum(1 for r in results if r.error),
-            "machines": per_machine,
-            "days": {day: {"rows": d["rows"], "bags": len(d["bags"])} for day, d in sorted(per_day.items())}}
+    return {
+        "bags": bags,
+        "skipped": sum(1 for r in results if r.error),
+        "machines": per_machine,
+        "days": {day: {"rows": d["rows"], "bags": len(d["bags"])} for day, d in sorted(per_day.items())},
+    }
 
 
 def run_asbuilt(argv: Sequence[str]) -> int:
@@ -303,8 +355,9 @@ def run_asbuilt(argv: Sequence[str]) -> int:
     if args.fleet:
         paths = fleet_bags(args.fleet)
         print(f"{NAME}: {len(paths)} bags", file=sys.stderr)
-        results = run_fleet(paths, args.output, args.params, args.cell, args.workers, args.scheduler,
-                            args.recover)
+        results = run_fleet(
+            paths, args.output, args.params, args.cell, args.workers, args.scheduler, args.recover
+        )
     else:
         results = [process_bag(p, args.output, args.params, args.cell, args.recover) for p in args.bags]
     for r in results:
@@ -322,8 +375,12 @@ def run_asbuilt(argv: Sequence[str]) -> int:
             merged = AsBuilt.merge(grids)
             grades = [g for r in results for g in r.grade_grids.values()]
             _write_surface(merged, args.output / "fleet_asbuilt", "fleet as-built")
-            _write_map(merged, AsBuilt.merge(grades) if grades else None,
-                       args.output / "fleet_asbuilt.png", "fleet as-built")
+            _write_map(
+                merged,
+                AsBuilt.merge(grades) if grades else None,
+                args.output / "fleet_asbuilt.png",
+                "fleet as-built",
+            )
         (args.output / "fleet.json").write_text(json.dumps(report, indent=2), encoding="utf-8")
     if all(r.error for r in results):
         raise BagError("no bag could be read")

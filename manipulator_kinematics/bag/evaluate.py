@@ -42,7 +42,7 @@ from manipulator_kinematics.bag.topics import (
     package_topics,
 )
 from manipulator_kinematics.bag.types import BagError
-from manipulator_kinematics.params import flatten, load_parameters, merge, unflatten
+from manipulator_kinematics.param_files import flatten, load_parameters, merge, unflatten
 from manipulator_kinematics.registry import Machine, by_section, machines
 
 NAME = "mk_evaluate"
@@ -105,8 +105,11 @@ class Setup:
         """Node name -> settings for the nodes of ``namespace`` (the package's, then what the bag
         recorded for ``<namespace>/<node>``, then ``--params``), and node name -> where they came from."""
         prefix = namespace.rstrip("/") + "/"
-        here = {node[len(prefix):]: values for node, values in recorded.items()
-                if node.startswith(prefix) and "/" not in node[len(prefix):]}
+        here = {
+            node[len(prefix) :]: values
+            for node, values in recorded.items()
+            if node.startswith(prefix) and "/" not in node[len(prefix) :]
+        }
         settings, sources = {}, {}
         for name in dict.fromkeys([*self.node_settings, *here]):
             layers = (self.node_settings.get(name, {}), here.get(name, {}), self.given.get(name, {}))
@@ -156,8 +159,10 @@ def load_setup(files: Sequence[Path]) -> Setup:
                 known = [m.section for m in machines().values()]
                 close = difflib.get_close_matches(key, known, n=1)
                 hint = f" (did you mean {close[0]!r}?)" if close else ""
-                raise BagError(f"--params: {key!r} is not the section of a registered machine{hint}; "
-                               f"known: {', '.join(known)}")
+                raise BagError(
+                    f"--params: {key!r} is not the section of a registered machine{hint}; "
+                    f"known: {', '.join(known)}"
+                )
         defaults = node_settings()
         settings = {name: merge(defaults.get(name, {}), nodes.get(name, {})) for name in defaults | nodes}
         return Setup(models, settings, nodes)
@@ -367,16 +372,33 @@ def render(report: dict[str, Any]) -> str:
                 if "not_compared" in entry
             ]
         pairs = [
-            [f"cylinder_lengths -> {topic}", c["recorded"], c["accepted"], c["due"], c["answered"],
-             c["missing"], c["outside_recording"]]
+            [
+                f"cylinder_lengths -> {topic}",
+                c["recorded"],
+                c["accepted"],
+                c["due"],
+                c["answered"],
+                c["missing"],
+                c["outside_recording"],
+            ]
             for topic, c in machine.get("inputs_to_outputs", {}).items()
         ]
         if pairs:
             out += [
                 "inputs and outputs (due: accepted and not skipped by a rate limit; missing: due, "
                 "no output, within the recording of the output)",
-                _table(["input -> output", "recorded", "accepted", "due", "answered", "missing",
-                        "outside recording"], pairs),
+                _table(
+                    [
+                        "input -> output",
+                        "recorded",
+                        "accepted",
+                        "due",
+                        "answered",
+                        "missing",
+                        "outside recording",
+                    ],
+                    pairs,
+                ),
             ]
             out += [
                 f"  SHORTFALL: {row[5]} of {row[3]} due inputs have no {row[0].split(' -> ')[1]}, more "
@@ -497,7 +519,7 @@ def _decade_ticks(ax: Any) -> None:
     top = math.ceil(math.log10(max(high, 1e-12)))
     bottom = max(-12, math.floor(math.log10(max(low, 1e-12))))
     step = max(1, math.ceil((top - bottom) / 6))
-    ax.set_yticks([0.0, *(10.0 ** k for k in range(top, bottom - 1, -step))])
+    ax.set_yticks([0.0, *(10.0**k for k in range(top, bottom - 1, -step))])
 
 
 def write_plots(plots: Sequence[Plot], directory: Path) -> list[Path]:
@@ -514,8 +536,9 @@ def write_plots(plots: Sequence[Plot], directory: Path) -> list[Path]:
         height = 1.2 + 2.2 * len(panels)
         figure, axes = plt.subplots(len(panels), 1, sharex=True, squeeze=False, figsize=(10, height))
         # Fixed margins: tight_layout measures every tick label and costs seconds per figure.
-        figure.subplots_adjust(left=0.11, right=0.98, top=1 - 0.45 / height, bottom=0.55 / height,
-                               hspace=0.15)
+        figure.subplots_adjust(
+            left=0.11, right=0.98, top=1 - 0.45 / height, bottom=0.55 / height, hspace=0.15
+        )
         for ax, panel in zip(axes[:, 0], panels):
             for label, (t, y) in panel.curves.items():
                 y = np.abs(y) if panel.log else y

@@ -26,7 +26,7 @@ from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 from manipulator_kinematics.bag.types import BagError, MessageTypes, TopicQos
 from manipulator_kinematics.bag.writer import STORAGES
 from manipulator_kinematics.codec import cdr
-from manipulator_kinematics.params import ConfigError, read_document
+from manipulator_kinematics.param_files import ConfigError, read_document
 
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
 # ROS 2 times are int64 nanoseconds; MCAP stores uint64, so anything above is a damaged record.
@@ -257,8 +257,10 @@ class BagReader:
             files, self.storage = self._files()
             total = sum(file.stat().st_size for file in files)
             if total > MAX_BAG_BYTES:
-                raise BagError(f"{self.path}: {total / 2**30:.1f} GiB of data files, more than the "
-                               f"{MAX_BAG_BYTES >> 30} GiB a bag may have (it is read into memory)")
+                raise BagError(
+                    f"{self.path}: {total / 2**30:.1f} GiB of data files, more than the "
+                    f"{MAX_BAG_BYTES >> 30} GiB a bag may have (it is read into memory)"
+                )
             for file in files:
                 if self.storage == "mcap":
                     self._scan_mcap(file, index, recover)

@@ -43,7 +43,7 @@ from manipulator_kinematics.bag.types import BagError, TopicQos
 from manipulator_kinematics.bag.writer import STORAGES, BagWriter
 from manipulator_kinematics.executor import ERROR_LOG_PERIOD, executor_name, spin
 from manipulator_kinematics.executor import guarded as guarded_callback
-from manipulator_kinematics.params import ConfigError, unflatten
+from manipulator_kinematics.param_files import ConfigError, unflatten
 from manipulator_kinematics.throttle import ThrottledLog
 
 NAME = "mk_record"
@@ -166,8 +166,10 @@ class Recorder:
                 msgtype = self.fallback[topic]
             if msgtype is None:
                 self.refused.add(topic)
-                say(f"not recording {topic}: it has the types {', '.join(shown)}; give one with "
-                    f"--type {topic}:=pkg/msg/Type")
+                say(
+                    f"not recording {topic}: it has the types {', '.join(shown)}; give one with "
+                    f"--type {topic}:=pkg/msg/Type"
+                )
                 continue
             try:
                 self.subscribe(topic, msgtype, offered_qos(self.node, topic))
@@ -219,8 +221,10 @@ class Recorder:
     def _got(self, name: str, names: list[str], response: Any) -> None:
         values = [] if response is None else [parameter_value_to_python(v) for v in response.values]
         # Array parameters come as array.array or lists: JSON takes lists.
-        flat = {key: v if isinstance(v, (str, bool, int, float)) or v is None else list(v)
-                for key, v in zip(names, values)}
+        flat = {
+            key: v if isinstance(v, (str, bool, int, float)) or v is None else list(v)
+            for key, v in zip(names, values)
+        }
         self.settings[name] = unflatten(flat)
         self._asking.pop(name, None)
         self.writer.set_custom_data(SETTINGS_KEY, encode_recorded_settings(self.settings))
@@ -299,13 +303,20 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
         "(default: the shipped ones)",
     )
     parser.add_argument(
-        "--frame-prefix", nargs="+", default=[], metavar="NS:=PREFIX",
+        "--frame-prefix",
+        nargs="+",
+        default=[],
+        metavar="NS:=PREFIX",
         help="with --visuals: the frame prefix of the machine in namespace NS, e.g. /m1:=m1/ (as its "
         "nodes' frame_prefix; default: none for one machine, <ns>_<machine>/ for several)",
     )
-    parser.add_argument("--root-frame", default="", metavar="FRAME",
-                        help="with --visuals: a static identity transform FRAME -> each machine's base "
-                        "frame (several machines in one TF tree)")
+    parser.add_argument(
+        "--root-frame",
+        default="",
+        metavar="FRAME",
+        help="with --visuals: a static identity transform FRAME -> each machine's base "
+        "frame (several machines in one TF tree)",
+    )
     parser.add_argument(
         "--flush-interval", type=float, default=0.5, metavar="S", help="most data a SIGKILL can lose (s)"
     )
@@ -351,8 +362,10 @@ def record(argv: Sequence[str]) -> int:
         fallback = {resolve(node, name): msgtype for name, msgtype in own.items()}
         writer = BagWriter(output, args.storage, overwrite=args.overwrite, flush_interval=args.flush_interval)
         recorder = Recorder(node, writer, wanted, fallback)
-        say(f"writing {output} ({args.storage}); each of {len(wanted)} topics is recorded from when a "
-            f"publisher of it appears: {', '.join(wanted)}")
+        say(
+            f"writing {output} ({args.storage}); each of {len(wanted)} topics is recorded from when a "
+            f"publisher of it appears: {', '.join(wanted)}"
+        )
         recorder.run(args.duration, stop, executor)
         writer.close()
         absent = recorder.pending()
@@ -370,8 +383,9 @@ def record(argv: Sequence[str]) -> int:
         rclpy.try_shutdown()
 
 
-def add_visuals_to_recording(output: Path, params: Sequence[Path], frame_prefix: dict[str, str] | None = None,
-                             root_frame: str = "") -> None:
+def add_visuals_to_recording(
+    output: Path, params: Sequence[Path], frame_prefix: dict[str, str] | None = None, root_frame: str = ""
+) -> None:
     """``--visuals``: the recorded bag rewritten with its visual topics (the recording stays as it
     is when that fails)."""
     from manipulator_kinematics.bag.visual import add_visuals  # URDF and scene code: only when asked

@@ -173,8 +173,10 @@ def load(args: argparse.Namespace) -> Playlist:
     if unknown:
         # The package's own bags carry /tf and /tf_static (tf2_msgs) for Foxglove, and rclpy can
         # publish only types whose generated Python module is installed: the rest still plays.
-        print(f"{NAME}: skipping {_listed(unknown)}: no Python message module for its type here",
-              file=sys.stderr)
+        print(
+            f"{NAME}: skipping {_listed(unknown)}: no Python message module for its type here",
+            file=sys.stderr,
+        )
         topics = [topic for topic in topics if topic in classes]
         if not topics:
             raise BagError(f"{args.bag}: no topic of the bag has a type this ROS installation can publish")
@@ -210,11 +212,15 @@ def schedule(messages: Sequence[tuple[str, int, bytes]], start: int, args: argpa
     for index, (topic, log_time, _) in enumerate(messages):
         gap = log_time - previous
         if gap > limit:
-            where = (f"{gap * 1e-9:.1f} s of record time without a message before message {index} "
-                     f"({topic}, record time {log_time} ns)")
+            where = (
+                f"{gap * 1e-9:.1f} s of record time without a message before message {index} "
+                f"({topic}, record time {log_time} ns)"
+            )
             if not args.skip_gaps:
-                raise BagError(f"{args.bag}: {where}, more than --max-gap {args.max_gap:g} s (a damaged "
-                               "stamp?); --skip-gaps plays on across it")
+                raise BagError(
+                    f"{args.bag}: {where}, more than --max-gap {args.max_gap:g} s (a damaged "
+                    "stamp?); --skip-gaps plays on across it"
+                )
             print(f"{NAME}: skipping {where}", file=sys.stderr)
             skipped += gap
         due.append(log_time - start - skipped)

@@ -12,7 +12,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from manipulator_kinematics.params import CONFIG_DIR, ConfigError, config_path, merge, read_document
+from manipulator_kinematics.param_files import CONFIG_DIR, ConfigError, config_path, merge, read_document
 from manipulator_kinematics.registry import machines
 
 JOINT_STATE = "sensor_msgs/msg/JointState"

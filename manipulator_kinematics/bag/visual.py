@@ -94,13 +94,23 @@ def urdf_joints(text: str) -> list[UrdfJoint]:
         axis = joint.find("axis")
         direction = np.array([float(v) for v in (axis.get("xyz") if axis is not None else "1 0 0").split()])
         mimic = joint.find("mimic")
-        out.append(UrdfJoint(
-            joint.get("name"), joint.get("type"),
-            joint.find("parent").get("link"), joint.find("child").get("link"),
-            pose, direction / np.linalg.norm(direction),
-            None if mimic is None else (mimic.get("joint"), float(mimic.get("multiplier", "1")),
-                                        float(mimic.get("offset", "0"))),
-        ))
+        out.append(
+            UrdfJoint(
+                joint.get("name"),
+                joint.get("type"),
+                joint.find("parent").get("link"),
+                joint.find("child").get("link"),
+                pose,
+                direction / np.linalg.norm(direction),
+                None
+                if mimic is None
+                else (
+                    mimic.get("joint"),
+                    float(mimic.get("multiplier", "1")),
+                    float(mimic.get("offset", "0")),
+                ),
+            )
+        )
     return out
 
 
@@ -130,8 +140,9 @@ def joint_transforms(joints: Sequence[UrdfJoint], values: Mapping[str, np.ndarra
     return out
 
 
-def link_pose(joints: Sequence[UrdfJoint], moving: Mapping[str, np.ndarray], frame: str,
-              root: str = BASE_FRAME) -> np.ndarray:
+def link_pose(
+    joints: Sequence[UrdfJoint], moving: Mapping[str, np.ndarray], frame: str, root: str = BASE_FRAME
+) -> np.ndarray:
     """``root`` -> ``frame`` (..., 4, 4) through the URDF's joints (``moving``: joint_transforms)."""
     parent_of = {j.child: j for j in joints}
     pose = np.eye(4)
@@ -144,8 +155,9 @@ def link_pose(joints: Sequence[UrdfJoint], moving: Mapping[str, np.ndarray], fra
     return pose
 
 
-def level_poses(tilt: TopicArrays, stamp_ns: np.ndarray, joints: Sequence[UrdfJoint],
-                moving: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+def level_poses(
+    tilt: TopicArrays, stamp_ns: np.ndarray, joints: Sequence[UrdfJoint], moving: Mapping[str, np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
     """Which states (M,) have a tilt and base_level -> base_link (K, 4, 4) for them: the latest
     finite, unit (1e-3), upward tilt at or before each stamp, turned into base_link through the
     URDF at that state."""
@@ -168,8 +180,9 @@ def level_poses(tilt: TopicArrays, stamp_ns: np.ndarray, joints: Sequence[UrdfJo
 
 
 # ---------------------------------------------------------------------------------------- states
-def gather_states(data: Mapping[str, TopicArrays], names: Sequence[str], topics: Iterable[str] = STATE_TOPICS
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def gather_states(
+    data: Mapping[str, TopicArrays], names: Sequence[str], topics: Iterable[str] = STATE_TOPICS
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(record times (M,), header stamps (M,) ns, states (M, n)) of a machine with joints ``names``:
     after each JointState message of ``topics`` (record order) that carries one of them, the
     latest finite position of every joint, once every joint has one; of consecutive messages
@@ -228,10 +241,13 @@ def _header(stamp_ns: int, frame_id: str) -> Any:
 def _transform(stamp_ns: int, parent: str, child: str, pose: np.ndarray, quaternion: np.ndarray) -> Any:
     t = _T
     return t["geometry_msgs/msg/TransformStamped"](
-        header=_header(stamp_ns, parent), child_frame_id=child,
+        header=_header(stamp_ns, parent),
+        child_frame_id=child,
         transform=t["geometry_msgs/msg/Transform"](
             translation=t["geometry_msgs/msg/Vector3"](*(float(v) for v in pose[:3, 3])),
-            rotation=t["geometry_msgs/msg/Quaternion"](*(float(v) for v in quaternion))))
+            rotation=t["geometry_msgs/msg/Quaternion"](*(float(v) for v in quaternion)),
+        ),
+    )
 
 
 def tf_messages(
@@ -241,8 +257,10 @@ def tf_messages(
     quaternions = [matrix_quaternion(p[..., :3, :3]) for p in poses]
     out = []
     for k, stamp in enumerate(stamp_ns.tolist()):
-        transforms = [_transform(stamp, parent, child, poses[i][k], quaternions[i][k])
-                      for i, (parent, child) in enumerate(edges)]
+        transforms = [
+            _transform(stamp, parent, child, poses[i][k], quaternions[i][k])
+            for i, (parent, child) in enumerate(edges)
+        ]
         message = _T["tf2_msgs/msg/TFMessage"](transforms=transforms)
         out.append(_STORE.serialize_cdr(message, "tf2_msgs/msg/TFMessage"))
     return out
@@ -256,7 +274,8 @@ def marker_messages(scene: Scene, stamp_ns: np.ndarray, frame_id: str) -> list[b
     colors = [t["std_msgs/msg/ColorRGBA"](*(float(v) for v in c)) for c in parts.color]
     shapes = [marker.CYLINDER if c else marker.SPHERE for c in parts.cylinder.tolist()]
     empty_image = t["sensor_msgs/msg/CompressedImage"](
-        header=_header(0, ""), format="", data=np.empty(0, np.uint8))
+        header=_header(0, ""), format="", data=np.empty(0, np.uint8)
+    )
     no_mesh = t["visualization_msgs/msg/MeshFile"](filename="", data=np.empty(0, np.uint8))
     forever = t["builtin_interfaces/msg/Duration"](sec=0, nanosec=0)
     out = []
@@ -266,13 +285,31 @@ def marker_messages(scene: Scene, stamp_ns: np.ndarray, frame_id: str) -> list[b
         for i, kind in enumerate(parts.kinds):
             pose = t["geometry_msgs/msg/Pose"](
                 position=t["geometry_msgs/msg/Point"](*(float(v) for v in parts.position[k, i])),
-                orientation=t["geometry_msgs/msg/Quaternion"](*(float(v) for v in parts.orientation[k, i])))
-            markers.append(marker(
-                header=header, ns=kind, id=i, type=shapes[i], action=0, pose=pose,
-                scale=t["geometry_msgs/msg/Vector3"](*(float(v) for v in parts.scale[k, i])), color=colors[i],
-                lifetime=forever, frame_locked=False, points=[], colors=[], texture_resource="",
-                texture=empty_image, uv_coordinates=[], text="", mesh_resource="", mesh_file=no_mesh,
-                mesh_use_embedded_materials=False))
+                orientation=t["geometry_msgs/msg/Quaternion"](*(float(v) for v in parts.orientation[k, i])),
+            )
+            markers.append(
+                marker(
+                    header=header,
+                    ns=kind,
+                    id=i,
+                    type=shapes[i],
+                    action=0,
+                    pose=pose,
+                    scale=t["geometry_msgs/msg/Vector3"](*(float(v) for v in parts.scale[k, i])),
+                    color=colors[i],
+                    lifetime=forever,
+                    frame_locked=False,
+                    points=[],
+                    colors=[],
+                    texture_resource="",
+                    texture=empty_image,
+                    uv_coordinates=[],
+                    text="",
+                    mesh_resource="",
+                    mesh_file=no_mesh,
+                    mesh_use_embedded_materials=False,
+                )
+            )
         array = t["visualization_msgs/msg/MarkerArray"](markers=markers)
         out.append(_STORE.serialize_cdr(array, "visualization_msgs/msg/MarkerArray"))
     return out
@@ -293,9 +330,14 @@ class Added:
     topics: dict[str, tuple[str, TopicQos, list[int], list[bytes]]]
 
 
-def visual_topics(bag: BagReader, params: Sequence[Path] = (), rate: float = 30.0,
-                  frame_prefix: Mapping[str, str] | None = None, root_frame: str = "",
-                  extra_static: Sequence[tuple[str, str, np.ndarray]] = ()) -> list[Added]:
+def visual_topics(
+    bag: BagReader,
+    params: Sequence[Path] = (),
+    rate: float = 30.0,
+    frame_prefix: Mapping[str, str] | None = None,
+    root_frame: str = "",
+    extra_static: Sequence[tuple[str, str, np.ndarray]] = (),
+) -> list[Added]:
     """The visual topics (module docstring) of every machine with a scene hook found in ``bag``;
     ``extra_static``: (parent, child, (4, 4) pose) transforms for /tf_static."""
     frame_prefix = {"/" + ns.strip("/"): p for ns, p in (frame_prefix or {}).items()}
@@ -307,8 +349,14 @@ def visual_topics(bag: BagReader, params: Sequence[Path] = (), rate: float = 30.
         if split is not None and info.count and info.msgtype == ours[split[1]]:
             grouped.setdefault(split[0], {})[split[1]] = topic
     # The JointState topics are all it takes: to find the machines (evaluate's rule) and their states.
-    arrays = bag.arrays([t for names in grouped.values() for n, t in names.items()
-                         if bag.topics[t].msgtype == JOINT_STATE or n == TILT])
+    arrays = bag.arrays(
+        [
+            t
+            for names in grouped.values()
+            for n, t in names.items()
+            if bag.topics[t].msgtype == JOINT_STATE or n == TILT
+        ]
+    )
     found = []
     for namespace, names in sorted(grouped.items()):
         data = {name: arrays[topic] for name, topic in names.items() if topic in arrays}
@@ -350,8 +398,12 @@ def visual_topics(bag: BagReader, params: Sequence[Path] = (), rate: float = 30.
             marker_times += t_log[shown].tolist()
         first = int(log_time[0])
         topics[TF] = ("tf2_msgs/msg/TFMessage", TopicQos(reliable=True, depth=100), tf_times, tf_raw)
-        topics[f"{base}/{MARKERS}"] = ("visualization_msgs/msg/MarkerArray", TopicQos(reliable=True),
-                                       marker_times, marker_raw)
+        topics[f"{base}/{MARKERS}"] = (
+            "visualization_msgs/msg/MarkerArray",
+            TopicQos(reliable=True),
+            marker_times,
+            marker_raw,
+        )
         extras = () if added else extra_static  # once, with the first machine
         fixed = [j for j in joints if j.kind == "fixed"]
         edges = [(prefix + j.parent, prefix + j.child) for j in fixed] + [e[:2] for e in extras]
@@ -363,8 +415,12 @@ def visual_topics(bag: BagReader, params: Sequence[Path] = (), rate: float = 30.
             static = tf_messages(np.array([stamp[0]]), edges, origins)
             topics[TF_STATIC] = ("tf2_msgs/msg/TFMessage", LATCHED, [first], static)
         if urdf is not None:
-            topics[f"{base}{DESCRIPTION}"] = ("std_msgs/msg/String", LATCHED, [first],
-                                             [string_message(prefixed_urdf(urdf, prefix))])
+            topics[f"{base}{DESCRIPTION}"] = (
+                "std_msgs/msg/String",
+                LATCHED,
+                [first],
+                [string_message(prefixed_urdf(urdf, prefix))],
+            )
         added.append(Added(machine.name, namespace, len(states), topics))
     return added
 
@@ -412,8 +468,11 @@ def add_visuals(
             writer.add_topic(topic, info.msgtype, info.qos)
         for topic, (msgtype, qos, _, _) in merged.items():
             writer.add_topic(topic, msgtype, qos)
-        extra = [(t, time, raw) for t, (_, _, times, raws) in merged.items()
-                 for time, raw in zip(times, raws, strict=True)]
+        extra = [
+            (t, time, raw)
+            for t, (_, _, times, raws) in merged.items()
+            for time, raw in zip(times, raws, strict=True)
+        ]
         extra.sort(key=lambda item: item[1])
         pending = iter(extra)
         upcoming = next(pending, None)
@@ -433,7 +492,16 @@ def add_visuals(
 
 
 __all__ = [
-    "Added", "UrdfJoint", "add_visuals", "decimate", "gather_states", "joint_transforms", "level_poses",
-    "link_pose", "marker_messages",
-    "tf_messages", "urdf_joints", "visual_topics",
+    "Added",
+    "UrdfJoint",
+    "add_visuals",
+    "decimate",
+    "gather_states",
+    "joint_transforms",
+    "level_poses",
+    "link_pose",
+    "marker_messages",
+    "tf_messages",
+    "urdf_joints",
+    "visual_topics",
 ]

@@ -24,8 +24,19 @@ from manipulator_kinematics.codec import cdr
 
 # IDL names of primitive types (as rclpy message classes report them) -> cdr.PRIMITIVES keys.
 _IDL = {"double": "float64", "float": "float32", "boolean": "bool"}
-_STRUCT = {"f8": "d", "f4": "f", "i8": "q", "u8": "Q", "i4": "i", "u4": "I", "i2": "h", "u2": "H",
-           "i1": "b", "u1": "B", "b1": "?"}
+_STRUCT = {
+    "f8": "d",
+    "f4": "f",
+    "i8": "q",
+    "u8": "Q",
+    "i4": "i",
+    "u4": "I",
+    "i2": "h",
+    "u2": "H",
+    "i1": "b",
+    "u1": "B",
+    "b1": "?",
+}
 _TYPE = re.compile(r"^(?:sequence<(?P<seq>[^,>]+)(?:, *\d+)?>|(?P<elem>[^\[<]+)(?:\[(?P<size>\d+)\])?)")
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from manipulator_kinematics.hydraulic.model import HydraulicModel
-from manipulator_kinematics.params import ConfigError
+from manipulator_kinematics.param_files import ConfigError
 
 __all__ = ["box_grid", "main", "report", "side_views"]
 
@@ -64,8 +64,10 @@ def report(model: HydraulicModel, n: int = 41) -> str:
             if np.max(np.abs(column)) > 1e-12:
                 lines.append(f"  d{name}/d{actuator}: {column.min():9.4f} .. {column.max():9.4f}")
     r = np.hypot(Q[:, 0], Q[:, 1])
-    lines.append(f"tool {d.tool_pin}: reach {r.min():.3f} .. {r.max():.3f} m, height {Q[:, 2].min():.3f} .. "
-                 f"{Q[:, 2].max():.3f} m")
+    lines.append(
+        f"tool {d.tool_pin}: reach {r.min():.3f} .. {r.max():.3f} m, height {Q[:, 2].min():.3f} .. "
+        f"{Q[:, 2].max():.3f} m"
+    )
     return "\n".join(lines)
 
 
@@ -78,8 +80,10 @@ def side_views(model: HydraulicModel, path: Path) -> None:
 
     d = model.description
     first = int(model.swing)
-    corners = [np.array(([model.reference[0]] if model.swing else []) + list(c))
-               for c in itertools.product(*zip(model.lower[first:], model.upper[first:], strict=True))]
+    corners = [
+        np.array(([model.reference[0]] if model.swing else []) + list(c))
+        for c in itertools.product(*zip(model.lower[first:], model.upper[first:], strict=True))
+    ]
     columns = min(4, len(corners))
     rows = -(-len(corners) // columns)
     figure, axes = plt.subplots(rows, columns, figsize=(4.2 * columns, 4.0 * rows), squeeze=False)
@@ -94,8 +98,9 @@ def side_views(model: HydraulicModel, path: Path) -> None:
                 centre = points.mean(axis=0)
                 points = points[np.argsort(np.arctan2(*(points - centre).T[::-1]))]
                 points = np.vstack((points, points[:1]))
-            ax.plot(points[:, 0], points[:, 1], "-o", color=colours[i % len(colours)], ms=3, lw=1.5,
-                    label=body)
+            ax.plot(
+                points[:, 0], points[:, 1], "-o", color=colours[i % len(colours)], ms=3, lw=1.5, label=body
+            )
         for c in d.cylinders:
             ends = np.array([plane[c.base], plane[c.rod]])
             ax.plot(ends[:, 0], ends[:, 1], "-", color="0.3", lw=4, alpha=0.5)
@@ -105,11 +110,14 @@ def side_views(model: HydraulicModel, path: Path) -> None:
         ax.set_aspect("equal")
         ax.set_title("D = " + ", ".join(f"{v:.3g}" for v in D[first:]), fontsize=9)
         ax.grid(alpha=0.3)
-    for ax in list(axes.flat)[len(corners):]:
+    for ax in list(axes.flat)[len(corners) :]:
         ax.set_visible(False)
     axes.flat[0].legend(fontsize=7, loc="best")
-    figure.suptitle(f"{d.name}: the linkage at the corners of the stroke box (side view, r right, z up; "
-                    "grey: cylinders, red star: tool)", fontsize=10)
+    figure.suptitle(
+        f"{d.name}: the linkage at the corners of the stroke box (side view, r right, z up; "
+        "grey: cylinders, red star: tool)",
+        fontsize=10,
+    )
     figure.tight_layout()
     figure.savefig(path, dpi=90)
     plt.close(figure)
@@ -123,11 +131,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         "ranges, K and the reach over the stroke box, and draw the linkage at the stroke box's "
         "corners.",
     )
-    parser.add_argument("machine", type=Path, help="the machine file (ROS 2 parameters file with a "
-                        "hydraulic_machine section)")
+    parser.add_argument(
+        "machine", type=Path, help="the machine file (ROS 2 parameters file with a hydraulic_machine section)"
+    )
     parser.add_argument("--grid", type=int, default=41, help="points per cylinder stroke (default 41)")
-    parser.add_argument("--png", type=Path, default=None,
-                        help="side-view picture to write (default: <machine file stem>_check.png here)")
+    parser.add_argument(
+        "--png",
+        type=Path,
+        default=None,
+        help="side-view picture to write (default: <machine file stem>_check.png here)",
+    )
     parser.add_argument("--no-png", action="store_true", help="print the report only")
     args = parser.parse_args(argv)
     if args.grid < 2:

@@ -6,7 +6,7 @@ with their pins (each in its own frame), rigid two-pin links, cylinders (base pi
 stroke, speed), an optional swing, optional prismatic joints (a telescope), the solve order as
 dyads with their branch signs, the main chain's joints and the tool point. docs/hydraulic_family.md
 describes the format; :func:`parse` validates a ``hydraulic_machine`` section into a
-:class:`Description` with :mod:`manipulator_kinematics.config` (every unknown, missing or wrong key
+:class:`Description` with :mod:`manipulator_kinematics.schema` (every unknown, missing or wrong key
 refused with the key named, in one line) and derives the solve plan
 (:class:`Dyad`, :class:`Place`, :class:`Slide` steps), refusing a dyad whose centres are not known
 when it is solved, a loop left open (a dyad side that is neither one body nor one cylinder), a pin
@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from manipulator_kinematics.config import Flag, Names, Number, Numbers, Text, require, validate
-from manipulator_kinematics.params import ConfigError, load_parameters, shown
+from manipulator_kinematics.param_files import ConfigError, load_parameters, shown
+from manipulator_kinematics.schema import Flag, Names, Number, Numbers, Text, require, validate
 
 __all__ = ["SECTION", "Cylinder", "Description", "Dyad", "Joint", "Place", "Slide", "parse", "read"]
 

@@ -38,7 +38,7 @@ from manipulator_kinematics.hydraulic.calibration import (
 )
 from manipulator_kinematics.hydraulic.description import SECTION, Description, read
 from manipulator_kinematics.hydraulic.model import HydraulicModel, StrokeError
-from manipulator_kinematics.params import ConfigError
+from manipulator_kinematics.param_files import ConfigError
 
 __all__ = ["main", "predict", "read_points", "report", "write_machine"]
 

@@ -25,7 +25,7 @@ import numpy as np
 
 from manipulator_kinematics.hydraulic import dyads
 from manipulator_kinematics.hydraulic.description import SECTION, Description, Dyad, Place, Slide, read
-from manipulator_kinematics.params import ConfigError
+from manipulator_kinematics.param_files import ConfigError
 
 __all__ = ["HydraulicModel", "HydraulicState", "IKResult", "RateSolution", "StrokeError"]
 

@@ -17,7 +17,7 @@ Rules (:func:`machine_section`): with no machine file on the command line a node
 machine of the package, and ``-p <section>.<key>:=v`` may change single values of it; a machine
 file that is given must be complete, and is never filled from the default machine. Unknown,
 missing and invalid keys, in the machine and in the settings, are refused at start-up with the
-key named (:func:`manipulator_kinematics.config.validate`). Every parameter is declared read-only
+key named (:func:`manipulator_kinematics.schema.validate`). Every parameter is declared read-only
 with a description: a run-time ``ros2 param set`` is refused with that reason.
 """
 
@@ -31,9 +31,8 @@ import yaml
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from manipulator_kinematics.config import Number, Schema, Text, validate
 from manipulator_kinematics.node_util import param
-from manipulator_kinematics.params import (
+from manipulator_kinematics.param_files import (
     ConfigError,
     RosLoader,
     config_path,
@@ -46,6 +45,7 @@ from manipulator_kinematics.params import (
     unflatten,
 )
 from manipulator_kinematics.registry import Machine
+from manipulator_kinematics.schema import Number, Schema, Text, validate
 
 #: Parameters rclpy declares on every node by itself.
 _RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
@@ -106,7 +106,8 @@ def node_settings(
     for prefix in ignore:
         defaults.pop(prefix, None)
     given = {
-        name: value for name, value in _values(node, "").items()
+        name: value
+        for name, value in _values(node, "").items()
         if name not in _RCLPY_PARAMETERS and name.split(".", 1)[0] not in ignore
     }
     settings = validate(merge(defaults, unflatten(given)), schema)
@@ -136,14 +137,19 @@ RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": Reliabilit
 
 
 #: Setting ``frame_prefix`` of every node that publishes or accepts frame_ids.
-FRAME_PREFIX = Text(doc="put before base_frame (and every other frame_id the node publishes or accepts), as "
-                        "robot_state_publisher's frame_prefix: 'm1/' puts a machine's frames under m1/")
+FRAME_PREFIX = Text(
+    doc="put before base_frame (and every other frame_id the node publishes or accepts), as "
+    "robot_state_publisher's frame_prefix: 'm1/' puts a machine's frames under m1/"
+)
 
 
 def input_reliability(what: str) -> Text:
     """The ``input_reliability`` setting of a node whose inputs are ``what``."""
-    return Text(choices=tuple(RELIABILITY), doc=f"QoS reliability of the subscriptions to {what}: "
-                "best_effort hears both kinds of publisher, reliable only reliable ones")
+    return Text(
+        choices=tuple(RELIABILITY),
+        doc=f"QoS reliability of the subscriptions to {what}: "
+        "best_effort hears both kinds of publisher, reliable only reliable ones",
+    )
 
 
 def input_qos(depth: int, reliability: str) -> QoSProfile:
@@ -168,8 +174,13 @@ class MachineNode(Node):
         section = machine_section(self, machine, argv)
         declare(self, section, machine.schema, machine.section)
         self.model = machine.factory(section)
-        self.settings = node_settings(self, self.SETTINGS, self.DEFAULTS_FILE or machine.config_file,
-                                      node_name, ignore=(machine.section,))
+        self.settings = node_settings(
+            self,
+            self.SETTINGS,
+            self.DEFAULTS_FILE or machine.config_file,
+            node_name,
+            ignore=(machine.section,),
+        )
 
 
 def _values(node: Node, prefix: str) -> dict[str, Any]:

@@ -29,7 +29,6 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
 from manipulator_kinematics.codec.packed import PackedMessage
-from manipulator_kinematics.config import Number, Text
 from manipulator_kinematics.joint_state import (
     InputError,
     check_plausible_positions,
@@ -40,14 +39,16 @@ from manipulator_kinematics.model import describe_limits, matrix_quaternion
 from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes.base import FRAME_PREFIX, MachineNode, input_qos, input_reliability
 from manipulator_kinematics.registry import Machine
+from manipulator_kinematics.schema import Number, Text
 
 SETTINGS = {
     "base_frame": Text(empty=False, doc="frame_id of tool_pose and tool_twist (the machine's base)"),
     "frame_prefix": FRAME_PREFIX,
     "qos_depth": Number(min=1, max=100_000, integer=True, doc="keep-last depth of every topic"),
     "input_reliability": input_reliability("joint_states"),
-    "warning_period": Number(min=0.0, max=3600.0, unit="s",
-                             doc="the same kind of rejection is logged at most this often"),
+    "warning_period": Number(
+        min=0.0, max=3600.0, unit="s", doc="the same kind of rejection is logged at most this often"
+    ),
     "topics": {
         "joint_states": Text(empty=False, doc="input: sensor_msgs/JointState"),
         "tool_pose": Text(empty=False, doc="output: geometry_msgs/PoseStamped"),
@@ -77,11 +78,17 @@ class ForwardNode(MachineNode):
         self.twist = PackedMessage(TwistStamped(header=header), STAMPED)
         self.pose_pub = self.create_publisher(PoseStamped, topics["tool_pose"], qos)
         self.twist_pub = self.create_publisher(TwistStamped, topics["tool_twist"], qos)
-        self.create_subscription(JointState, topics["joint_states"], self.on_joint_state,
-                                 input_qos(s["qos_depth"], s["input_reliability"]), raw=True)
+        self.create_subscription(
+            JointState,
+            topics["joint_states"],
+            self.on_joint_state,
+            input_qos(s["qos_depth"], s["input_reliability"]),
+            raw=True,
+        )
         self.get_logger().info(
             f"{machine.name}: {topics['joint_states']} {list(self.joint_names)} -> {topics['tool_pose']}, "
-            f"{topics['tool_twist']} in frame {self.frame!r}")
+            f"{topics['tool_twist']} in frame {self.frame!r}"
+        )
 
     def on_joint_state(self, raw: bytes) -> None:
         try:
@@ -100,8 +107,11 @@ class ForwardNode(MachineNode):
             self.log("warning", f"dropped joint_states: non-finite pose or twist from {q.tolist()}")
             return
         if not self.limits.within(q):
-            self.log("warning", "joint_states outside the limits (published all the same): "
-                     + describe_limits(q, self.limits))
+            self.log(
+                "warning",
+                "joint_states outside the limits (published all the same): "
+                + describe_limits(q, self.limits),
+            )
         stamp = (msg.sec, msg.nanosec)
         self.pose_pub.publish(self.pose.pack((*stamp, *pose)))
         if twist:

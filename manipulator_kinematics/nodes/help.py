@@ -11,10 +11,10 @@ import textwrap
 from collections.abc import Mapping
 from typing import Any
 
-from manipulator_kinematics.config import REQUIRED, Schema
-from manipulator_kinematics.params import config_path, flatten, load_parameters
-from manipulator_kinematics.plain import plain
+from manipulator_kinematics.help_text import plain
+from manipulator_kinematics.param_files import config_path, flatten, load_parameters
 from manipulator_kinematics.registry import Machine, machines
+from manipulator_kinematics.schema import REQUIRED, Schema
 
 HELP_FLAGS = ("-h", "--help")
 WIDTH = 100
@@ -43,7 +43,9 @@ def help_text(node_class: type, machine: Machine | None, node_name: str, default
         "",
         textwrap.fill(
             f"Settings (section /**/{node_name} of a params file; defaults from config/{settings_file}). "
-            "Topic names are relative: remap with -r or a namespace.", WIDTH),
+            "Topic names are relative: remap with -r or a namespace.",
+            WIDTH,
+        ),
         *settings,
         "",
         "Every parameter is read at start-up and read-only: restart the node to change one.",
@@ -51,18 +53,25 @@ def help_text(node_class: type, machine: Machine | None, node_name: str, default
     if machine is None:
         files = [f"  {m.name}: config/{m.config_file} (section {m.section!r})" for m in machines().values()]
         return "\n".join([*head, "Machine: the one whose section the params files hold:", *files, *tail])
-    machine_rows = _rows(machine.schema, flatten(load_parameters(config_path(machine.config_file))
-                                                   .get(machine.section, {})), machine.section)
-    return "\n".join([
-        *head,
-        textwrap.fill(
-            f"Machine ({machine.name}: {machine.summary}): the section {machine.section!r} of a params "
-            f"file (default: config/{machine.config_file}). A file that is given must be complete; "
-            f"without one, -p {machine.section}.<key>:=<value> changes single values of the default "
-            "machine.", WIDTH),
-        *machine_rows,
-        *tail,
-    ])
+    machine_rows = _rows(
+        machine.schema,
+        flatten(load_parameters(config_path(machine.config_file)).get(machine.section, {})),
+        machine.section,
+    )
+    return "\n".join(
+        [
+            *head,
+            textwrap.fill(
+                f"Machine ({machine.name}: {machine.summary}): the section {machine.section!r} of a params "
+                f"file (default: config/{machine.config_file}). A file that is given must be complete; "
+                f"without one, -p {machine.section}.<key>:=<value> changes single values of the default "
+                "machine.",
+                WIDTH,
+            ),
+            *machine_rows,
+            *tail,
+        ]
+    )
 
 
 def _rows(schema: Schema, defaults: Mapping[str, Any], prefix: str = "") -> list[str]:

@@ -27,7 +27,6 @@ import numpy as np
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from sensor_msgs.msg import JointState
 
-from manipulator_kinematics.config import Text
 from manipulator_kinematics.joint_state import (
     PLAUSIBILITY_FACTOR,
     InputError,
@@ -45,6 +44,7 @@ from manipulator_kinematics.nodes.messages import (
 )
 from manipulator_kinematics.plan_bounds import MAX_WAYPOINTS
 from manipulator_kinematics.registry import Machine
+from manipulator_kinematics.schema import Text
 from manipulator_kinematics.time_scaling import TimeScaling
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes
 from manipulator_kinematics_interfaces.srv import PlanPath, SolveFK, SolveIK
@@ -88,7 +88,8 @@ class IKServerNode(MachineNode):
         self.get_logger().info(
             f"{machine.name}: joints {list(self.joint_names)}, frame {self.frame!r}, modes "
             f"{list(self.model.ik_modes)}, branches {list(self.model.ik_branches)}: "
-            "serving solve_ik, solve_fk")
+            "serving solve_ik, solve_fk"
+        )
 
     # ---- SolveIK ------------------------------------------------------------------------------
     def solve_ik(self, request: SolveIK.Request, response: SolveIK.Response) -> SolveIK.Response:
@@ -98,19 +99,25 @@ class IKServerNode(MachineNode):
         self._check_frame(request.target.header.frame_id)
         position, quaternion = pose_array(request.target.pose)
         if not np.all(np.isfinite(position)):
-            raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
-                           f"target position is not finite: ({', '.join(map(str, position))})")
+            raise Rejected(
+                KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
+                f"target position is not finite: ({', '.join(map(str, position))})",
+            )
         distance = float(np.max(np.abs(position)))
         if distance > self.max_distance:
-            raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
-                           f"target position {position.tolist()} is beyond {PLAUSIBILITY_FACTOR:g} x the "
-                           f"machine's reach (|coordinate| <= {self.max_distance:.6g} m): implausible")
+            raise Rejected(
+                KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
+                f"target position {position.tolist()} is beyond {PLAUSIBILITY_FACTOR:g} x the "
+                f"machine's reach (|coordinate| <= {self.max_distance:.6g} m): implausible",
+            )
         # The norm of a finite quaternion can still overflow (1e308): that is not a rotation either.
         with np.errstate(over="ignore"):  # inf: refused below, not a RuntimeWarning on stderr
             norm = float(np.linalg.norm(quaternion))
         if request.use_orientation and not (np.isfinite(norm) and norm >= 1e-9):
-            raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
-                           f"target orientation is not a rotation: {quaternion.tolist()}")
+            raise Rejected(
+                KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
+                f"target orientation is not a rotation: {quaternion.tolist()}",
+            )
         mode = request.mode or None
         try:
             # A machine may answer some modes in other joints (the palletizer's D-H angles).
@@ -118,8 +125,13 @@ class IKServerNode(MachineNode):
             names = self.joint_names if names_for is None else tuple(names_for(mode))
             seed = self._seed(request.seed, names)
             target = pose_matrix(position, quaternion if request.use_orientation else None)
-            result = self.model.solve_ik(target, use_orientation=request.use_orientation, mode=mode,
-                                         seed=seed, branch=request.branch or None)
+            result = self.model.solve_ik(
+                target,
+                use_orientation=request.use_orientation,
+                mode=mode,
+                seed=seed,
+                branch=request.branch or None,
+            )
         except RequestError as error:
             code = KinematicsErrorCodes.INVALID_MODE if error.status is None else CODES[error.status]
             raise Rejected(code, str(error)) from None
@@ -130,8 +142,10 @@ class IKServerNode(MachineNode):
             raise Rejected(CODES[result.failure(branch=request.branch or None)], response.message)
         ordered = result.ordered()
         if not (np.all(np.isfinite(result.solution)) and np.all(np.isfinite(result.q[ordered]))):
-            raise Rejected(KinematicsErrorCodes.FAILURE,
-                           f"the solver gave a non-finite solution for {position.tolist()}: not sent")
+            raise Rejected(
+                KinematicsErrorCodes.FAILURE,
+                f"the solver gave a non-finite solution for {position.tolist()}: not sent",
+            )
         stamp = self.get_clock().now().to_msg()
         response.solution = joint_state(stamp, names, result.solution)
         response.solutions = [joint_state(stamp, names, result.q[i]) for i in ordered]
@@ -149,14 +163,17 @@ class IKServerNode(MachineNode):
         except InputError as error:
             raise Rejected(KinematicsErrorCodes.INVALID_ROBOT_STATE, f"joint_state: {error}") from None
         if not self.limits.within(q):
-            raise Rejected(KinematicsErrorCodes.JOINT_LIMITS_VIOLATED,
-                           f"joint_state outside the limits: {describe_limits(q, self.limits)}")
+            raise Rejected(
+                KinematicsErrorCodes.JOINT_LIMITS_VIOLATED,
+                f"joint_state outside the limits: {describe_limits(q, self.limits)}",
+            )
         with np.errstate(all="ignore"):  # overflow shows as a non-finite result, checked below
             pose = self.model.fkine(q)
             twist = np.zeros(6) if qd is None else self.model.jacob0(q) @ qd
         if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(twist))):
-            raise Rejected(KinematicsErrorCodes.INVALID_ROBOT_STATE,
-                           "joint_state gives a non-finite pose or twist")
+            raise Rejected(
+                KinematicsErrorCodes.INVALID_ROBOT_STATE, "joint_state gives a non-finite pose or twist"
+            )
         stamp = request.joint_state.header.stamp
         response.pose = pose_stamped(stamp, self.frame, pose)
         response.twist = twist_stamped(stamp, self.frame, twist)
@@ -187,8 +204,10 @@ class IKServerNode(MachineNode):
 
     def _check_frame(self, frame_id: str) -> None:
         if frame_id not in ("", self.frame):
-            raise Rejected(KinematicsErrorCodes.FRAME_TRANSFORM_FAILURE,
-                           f"frame {frame_id!r} is not the base frame {self.frame!r} (no TF lookup here)")
+            raise Rejected(
+                KinematicsErrorCodes.FRAME_TRANSFORM_FAILURE,
+                f"frame {frame_id!r} is not the base frame {self.frame!r} (no TF lookup here)",
+            )
 
     def _answer(self, solve: Callable[[Any, Any], None], request: Any, response: Any) -> Any:
         try:
@@ -203,7 +222,6 @@ class IKServerNode(MachineNode):
             response.error_code.val = KinematicsErrorCodes.FAILURE
             response.message = f"internal error: {error!r}"
         return response
-
 
 
 class Plan(Protocol):
@@ -241,8 +259,9 @@ class PlanPathServer(IKServerNode):
 
     def __init__(self, node_name: str, machine: Machine, argv: Sequence[str]) -> None:
         super().__init__(node_name, machine, argv)
-        self.create_service(PlanPath, "plan_path", self.plan_path,
-                            callback_group=MutuallyExclusiveCallbackGroup())
+        self.create_service(
+            PlanPath, "plan_path", self.plan_path, callback_group=MutuallyExclusiveCallbackGroup()
+        )
 
     def plan(self, request: PlanPath.Request, waypoints: np.ndarray, seed: np.ndarray | None) -> Plan:
         """The machine's plan through ``waypoints`` (K, 3) (checked finite and plausible) from
@@ -256,21 +275,26 @@ class PlanPathServer(IKServerNode):
 
     def _plan_path(self, request: PlanPath.Request, response: PlanPath.Response) -> None:
         if request.mode not in ("", *self.PLAN_MODES):
-            raise Rejected(KinematicsErrorCodes.INVALID_MODE,
-                           f"unknown mode {request.mode!r}; known: {', '.join(self.PLAN_MODES)}")
+            raise Rejected(
+                KinematicsErrorCodes.INVALID_MODE,
+                f"unknown mode {request.mode!r}; known: {', '.join(self.PLAN_MODES)}",
+            )
         count, most = len(request.waypoints), self.MAX_WAYPOINTS
         if not 1 <= count <= most:
-            raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
-                           f"waypoints: need 1 to {most}, got {count}")
+            raise Rejected(
+                KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS, f"waypoints: need 1 to {most}, got {count}"
+            )
         waypoints = np.array([[p.x, p.y, p.z] for p in request.waypoints], dtype=float).reshape(-1, 3)
         if not np.all(np.isfinite(waypoints)):
             raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS, "waypoints must be finite")
         far = np.flatnonzero(np.max(np.abs(waypoints), axis=1) > self.max_distance)
         if len(far):
-            raise Rejected(KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
-                           f"waypoint {far[0]} {waypoints[far[0]].tolist()} is beyond "
-                           f"{PLAUSIBILITY_FACTOR:g} x the machine's reach (|coordinate| <= "
-                           f"{self.max_distance:.6g} m): implausible")
+            raise Rejected(
+                KinematicsErrorCodes.INVALID_GOAL_CONSTRAINTS,
+                f"waypoint {far[0]} {waypoints[far[0]].tolist()} is beyond "
+                f"{PLAUSIBILITY_FACTOR:g} x the machine's reach (|coordinate| <= "
+                f"{self.max_distance:.6g} m): implausible",
+            )
         seed = self._seed(request.seed, self.joint_names)
         try:
             plan = self.plan(request, waypoints, seed)

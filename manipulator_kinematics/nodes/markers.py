@@ -35,7 +35,6 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-from manipulator_kinematics.config import Names, Number, Text
 from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes import run_node
 from manipulator_kinematics.nodes.base import (
@@ -45,9 +44,10 @@ from manipulator_kinematics.nodes.base import (
     input_reliability,
 )
 from manipulator_kinematics.nodes.help import help_text, wants_help
-from manipulator_kinematics.params import ConfigError, given_parameters
+from manipulator_kinematics.param_files import ConfigError, given_parameters
 from manipulator_kinematics.registry import Machine, by_section, machines
 from manipulator_kinematics.scene import Solids, solids
+from manipulator_kinematics.schema import Names, Number, Text
 
 NODE_NAME = "machine_markers"
 DEFAULTS_FILE = "machine_markers.yaml"
@@ -55,12 +55,18 @@ DEFAULTS_FILE = "machine_markers.yaml"
 SETTINGS = {
     "base_frame": Text(empty=False, doc="frame_id of the markers (the machine's base)"),
     "frame_prefix": FRAME_PREFIX,
-    "rate": Number(min=0.0, max=1000.0, exclusive_min=True, unit="Hz",
-                   doc="most MarkerArrays per second; a new state is drawn at the next tick"),
+    "rate": Number(
+        min=0.0,
+        max=1000.0,
+        exclusive_min=True,
+        unit="Hz",
+        doc="most MarkerArrays per second; a new state is drawn at the next tick",
+    ),
     "qos_depth": Number(min=1, max=100_000, integer=True, doc="keep-last depth of every topic"),
     "input_reliability": input_reliability("topics.states"),
-    "warning_period": Number(min=0.0, max=3600.0, unit="s",
-                             doc="the same kind of rejection is logged at most this often"),
+    "warning_period": Number(
+        min=0.0, max=3600.0, unit="s", doc="the same kind of rejection is logged at most this often"
+    ),
     "topics": {
         "states": Names(doc="inputs: sensor_msgs/JointState topics, merged by joint name"),
         "markers": Text(empty=False, doc="output: visualization_msgs/MarkerArray"),
@@ -73,8 +79,13 @@ def marker_array(parts: Solids, stamp: Time, frame_id: str) -> MarkerArray:
     header = Header(stamp=stamp, frame_id=frame_id)
     markers = []
     for i, (kind, cylinder) in enumerate(zip(parts.kinds, parts.cylinder.tolist(), strict=True)):
-        m = Marker(header=header, ns=kind, id=i, type=Marker.CYLINDER if cylinder else Marker.SPHERE,
-                   action=Marker.ADD)
+        m = Marker(
+            header=header,
+            ns=kind,
+            id=i,
+            type=Marker.CYLINDER if cylinder else Marker.SPHERE,
+            action=Marker.ADD,
+        )
         m.pose.position.x, m.pose.position.y, m.pose.position.z = parts.position[i].tolist()
         o = m.pose.orientation
         o.x, o.y, o.z, o.w = parts.orientation[i].tolist()
@@ -104,28 +115,35 @@ class MarkersNode(MachineNode):
         # A value beyond a joint's limits by more than their span is no state of this machine
         # (1e308 drew markers of infinite size); one a little beyond is still drawn, as measured.
         limits = machine.limits(self.model)
-        bounds = dict(zip(limits.names, zip(limits.lower.tolist(), limits.upper.tolist(), strict=True),
-                          strict=True))
-        self.bounds = {name: (low - (high - low), high + (high - low))
-                       for name, (low, high) in bounds.items() if name in self.index}
+        bounds = dict(
+            zip(limits.names, zip(limits.lower.tolist(), limits.upper.tolist(), strict=True), strict=True)
+        )
+        self.bounds = {
+            name: (low - (high - low), high + (high - low))
+            for name, (low, high) in bounds.items()
+            if name in self.index
+        }
         self.stamp: Time | None = None
         self.fresh = False
         self.log = ThrottledLog(self, s["warning_period"])
         qos = QoSProfile(depth=s["qos_depth"], reliability=ReliabilityPolicy.RELIABLE)
         self.publisher = self.create_publisher(MarkerArray, s["topics"]["markers"], qos)
         for topic in s["topics"]["states"]:
-            self.create_subscription(JointState, topic, self.on_state,
-                                     input_qos(s["qos_depth"], s["input_reliability"]))
+            self.create_subscription(
+                JointState, topic, self.on_state, input_qos(s["qos_depth"], s["input_reliability"])
+            )
         self.create_timer(1.0 / s["rate"], self.on_tick)
         self.get_logger().info(
             f"{machine.name}: {s['topics']['states']} {list(self.joint_names)} -> {s['topics']['markers']} "
-            f"in frame {self.frame!r}, at most {s['rate']:g} Hz")
+            f"in frame {self.frame!r}, at most {s['rate']:g} Hz"
+        )
 
     def on_state(self, msg: JointState) -> None:
         if len(msg.position) != len(msg.name):
             if msg.position:  # a velocity-only message is no state, and no error
-                self.log("warning",
-                         f"ignored JointState: {len(msg.name)} names, {len(msg.position)} positions")
+                self.log(
+                    "warning", f"ignored JointState: {len(msg.name)} names, {len(msg.position)} positions"
+                )
             return
         taken = False
         for name, value in zip(msg.name, msg.position, strict=True):
@@ -134,8 +152,11 @@ class MarkersNode(MachineNode):
                 continue
             low, high = self.bounds.get(name, (-math.inf, math.inf))
             if not low <= value <= high:
-                self.log("warning", f"ignored {name} = {value:.6g}: beyond its limits by more than "
-                         f"their span [{low:.6g}, {high:.6g}]")
+                self.log(
+                    "warning",
+                    f"ignored {name} = {value:.6g}: beyond its limits by more than "
+                    f"their span [{low:.6g}, {high:.6g}]",
+                )
                 continue
             self.state[i] = value
             taken = True
@@ -164,8 +185,10 @@ def machine_of(argv: Sequence[str]) -> Machine:
     if len(found) == 1:
         return next(iter(found.values()))
     if found:
-        raise ConfigError(f"the params files describe several machines ({', '.join(sorted(found))}); "
-                          "give one machine's file")
+        raise ConfigError(
+            f"the params files describe several machines ({', '.join(sorted(found))}); "
+            "give one machine's file"
+        )
     files = ", ".join(f"config/{m.config_file} ({m.name})" for m in machines().values())
     raise ConfigError(f"no machine section in the params files; give a machine's file: {files}")
 

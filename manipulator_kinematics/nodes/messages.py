@@ -45,7 +45,6 @@ def pose_array(pose: Pose) -> tuple[np.ndarray, np.ndarray]:
     return np.array([p.x, p.y, p.z]), np.array([o.x, o.y, o.z, o.w])
 
 
-
 def joint_trajectory(frame_id: str, names: Sequence[str], samples: Samples) -> JointTrajectory:
     """Timed joint samples (t, q, qd, qdd) as a JointTrajectory with positions, velocities and
     accelerations. ValueError when a value is not finite or a time is outside what a Duration holds."""
@@ -57,7 +56,13 @@ def joint_trajectory(frame_id: str, names: Sequence[str], samples: Samples) -> J
         raise ValueError("positions, velocities and accelerations must be finite")
     nanoseconds = np.rint(t * 1e9).astype(np.int64).tolist()
     q, qd, qdd = (np.asarray(v, dtype=float).tolist() for v in values)
-    points = [JointTrajectoryPoint(positions=p, velocities=v, accelerations=a,
-                                   time_from_start=Duration(sec=ns // 10**9, nanosec=ns % 10**9))
-              for p, v, a, ns in zip(q, qd, qdd, nanoseconds, strict=True)]
+    points = [
+        JointTrajectoryPoint(
+            positions=p,
+            velocities=v,
+            accelerations=a,
+            time_from_start=Duration(sec=ns // 10**9, nanosec=ns % 10**9),
+        )
+        for p, v, a, ns in zip(q, qd, qdd, nanoseconds, strict=True)
+    ]
     return JointTrajectory(header=Header(frame_id=frame_id), joint_names=list(names), points=points)

@@ -66,8 +66,13 @@ class _CheckedComposer(yaml.composer.Composer):
     def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node:
         event = self.peek_event()
         problem = ""
-        items = (index if isinstance(parent, yaml.SequenceNode) else
-                 len(parent.value) if isinstance(parent, yaml.MappingNode) and index is None else 0)
+        items = (
+            index
+            if isinstance(parent, yaml.SequenceNode)
+            else len(parent.value)
+            if isinstance(parent, yaml.MappingNode) and index is None
+            else 0
+        )
         if items >= MAX_ITEMS:
             problem = f"more than the {MAX_ITEMS} items a list or mapping may have"
         elif isinstance(event, yaml.AliasEvent):
@@ -111,8 +116,10 @@ class RosLoader(_CheckedComposer, _Base):  # type: ignore[misc,valid-type]  # a 
 
 
 RosLoader.add_implicit_resolver(
-    "tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)[eE][-+]?[0-9]+$"),
-    list("-+0123456789."))
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."),
+)
 
 
 class ConfigError(ValueError):
@@ -244,14 +251,19 @@ def _open(path: str | Path, max_bytes: int) -> BinaryIO:
 
 def _check_file(status: os.stat_result, max_bytes: int) -> None:
     if not stat.S_ISREG(status.st_mode):
-        kinds = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"),
-                 (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
-                 (stat.S_ISSOCK, "a socket"))
+        kinds = (
+            (stat.S_ISDIR, "a directory"),
+            (stat.S_ISFIFO, "a FIFO"),
+            (stat.S_ISCHR, "a character device"),
+            (stat.S_ISBLK, "a block device"),
+            (stat.S_ISSOCK, "a socket"),
+        )
         kind = next((name for test, name in kinds if test(status.st_mode)), "something")
         raise ConfigError(f"{kind}, not a regular file")
     if status.st_size > max_bytes:
-        raise ConfigError(f"{status.st_size / 2**20:.1f} MiB, more than the {max_bytes >> 20} MiB "
-                          "such a file may have")
+        raise ConfigError(
+            f"{status.st_size / 2**20:.1f} MiB, more than the {max_bytes >> 20} MiB such a file may have"
+        )
 
 
 @lru_cache(maxsize=64)
@@ -279,8 +291,9 @@ def parse_yaml(data: bytes | str) -> Any:
         raise ConfigError(f"not UTF-8 text (byte {error.start})") from None
     except _Refused as error:
         line = f"line {error.problem_mark.line + 1}"
-        raise ConfigError(f"{error.where} ({line}): {error.problem}" if error.where else
-                          f"{line}: {error.problem}") from None
+        raise ConfigError(
+            f"{error.where} ({line}): {error.problem}" if error.where else f"{line}: {error.problem}"
+        ) from None
     except yaml.YAMLError as error:
         mark = getattr(error, "problem_mark", None)
         line = f" (line {mark.line + 1})" if mark is not None else ""
@@ -339,8 +352,10 @@ def _check_params_file(path: Path) -> None:
             raise ConfigError(f"--params-file {path}: {node}: expected a mapping 'ros__parameters:'")
         for name, value in _leaves(section["ros__parameters"]):
             if not _parameter_value(value):
-                raise ConfigError(f"--params-file {path}: {node}: {name} = {shown(value)} is not a ROS "
-                                  "parameter value (a number, string, bool, or a list of one of those)")
+                raise ConfigError(
+                    f"--params-file {path}: {node}: {name} = {shown(value)} is not a ROS "
+                    "parameter value (a number, string, bool, or a list of one of those)"
+                )
 
 
 def _leaves(nested: dict[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
@@ -356,8 +371,10 @@ def _parameter_value(value: Any) -> bool:
     if isinstance(value, (bool, int, float, str)):
         return True
     if isinstance(value, list) and value:
-        kinds = {bool if isinstance(v, bool) else (float if isinstance(v, (int, float)) else type(v))
-                 for v in value}
+        kinds = {
+            bool if isinstance(v, bool) else (float if isinstance(v, (int, float)) else type(v))
+            for v in value
+        }
         return len(kinds) == 1 and kinds <= {bool, float, str}
     return False
 

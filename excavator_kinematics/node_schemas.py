@@ -1,10 +1,10 @@
-"""Settings schemas of the excavator nodes (manipulator_kinematics.config); their defaults live in
+"""Settings schemas of the excavator nodes (manipulator_kinematics.schema); their defaults live in
 ``config/excavator_nodes.yaml`` (sections ``/**/<node>``), the one place a user reads them."""
 
 from __future__ import annotations
 
-from manipulator_kinematics.config import Flag, Number, Numbers, Schema, Text
 from manipulator_kinematics.nodes.base import FRAME_PREFIX, input_reliability
+from manipulator_kinematics.schema import Flag, Number, Numbers, Schema, Text
 
 NODES_CONFIG = "excavator_nodes.yaml"
 
@@ -20,8 +20,12 @@ def _seconds(doc: str, exclusive_min: bool = False) -> Number:
 
 _WARNING_PERIOD = _seconds("the same kind of rejection is logged at most this often")
 _QOS_DEPTH = Number(min=1, max=100_000, integer=True, doc="reliable keep-last depth of the publishers")
-_INPUT_DEPTH = Number(min=1, max=100_000, integer=True,
-                      doc="depth of the input subscriptions: act on the latest input, drop a backlog")
+_INPUT_DEPTH = Number(
+    min=1,
+    max=100_000,
+    integer=True,
+    doc="depth of the input subscriptions: act on the latest input, drop a backlog",
+)
 _SWING_MAX_AGE = _seconds("max |stamp(cylinder_lengths) - stamp(joint_states)|")
 
 FORWARD: Schema = {
@@ -31,25 +35,46 @@ FORWARD: Schema = {
     "acceleration_time_constant": _seconds("low-pass on the accelerations; 0 = raw"),
     "acceleration_max_gap": _seconds("a longer gap between messages restarts the differencing"),
     "warning_period": _WARNING_PERIOD,
-    "qos_depth": Number(min=1, max=100_000, integer=True,
-                        doc="reliable keep-last depth of every topic (400: 0.4 s of 1 kHz input; "
-                            "Fast DDS caps a keep-last depth at 400 unless a profile raises "
-                            "max_samples_per_instance)"),
+    "qos_depth": Number(
+        min=1,
+        max=100_000,
+        integer=True,
+        doc="reliable keep-last depth of every topic (400: 0.4 s of 1 kHz input; "
+        "Fast DDS caps a keep-last depth at 400 unless a profile raises "
+        "max_samples_per_instance)",
+    ),
     "input_reliability": input_reliability("cylinder_lengths and joint_states"),
     "urdf_joint_states_rate": Number(
-        min=0.0, max=10_000.0, unit="Hz",
+        min=0.0,
+        max=10_000.0,
+        unit="Hz",
         doc="most urdf_joint_states per second of input stamps; 0 = every input",
     ),
     "grade": {
         "enabled": Flag(doc="publish grade_height: the bucket tip above the design plane"),
-        "point": Numbers(3, Number(min=-1e4, max=1e4, unit="m"),
-                         doc="a point [x, y, z] of the plane (m, base frame)"),
-        "normal": Numbers(3, Number(min=-1e6, max=1e6), default=None,
-                          doc="the plane's upward normal [x, y, z] (any length); or give slope/cross_slope"),
-        "slope": Number(min=-1e4, max=1e4, unit="%", default=None,
-                        doc="rise of the plane per run along base x, percent (default 0)"),
-        "cross_slope": Number(min=-1e4, max=1e4, unit="%", default=None,
-                              doc="rise of the plane per run along base y, percent (default 0)"),
+        "point": Numbers(
+            3, Number(min=-1e4, max=1e4, unit="m"), doc="a point [x, y, z] of the plane (m, base frame)"
+        ),
+        "normal": Numbers(
+            3,
+            Number(min=-1e6, max=1e6),
+            default=None,
+            doc="the plane's upward normal [x, y, z] (any length); or give slope/cross_slope",
+        ),
+        "slope": Number(
+            min=-1e4,
+            max=1e4,
+            unit="%",
+            default=None,
+            doc="rise of the plane per run along base x, percent (default 0)",
+        ),
+        "cross_slope": Number(
+            min=-1e4,
+            max=1e4,
+            unit="%",
+            default=None,
+            doc="rise of the plane per run along base y, percent (default 0)",
+        ),
         "frame": Text(empty=False, doc="frame_id of grade_height: the design surface's frame"),
     },
     "level": {
@@ -61,13 +86,18 @@ FORWARD: Schema = {
         "file": Text(doc="LandXML 1.2 file of the design TIN (read at start-up); empty: none"),
         "surface": Text(doc="name of the Surface in the file; empty: the file's only surface"),
         "site_frame": Text(empty=False, doc="frame_id of the site (x easting, y northing, z up)"),
-        "site_pose_source": Text(choices=("fixed", "topic"),
-                                 doc="base_link in the site frame: fixed (site_position, site_rpy) "
-                                     "or from topics.site_pose"),
-        "site_position": Numbers(3, Number(min=-1e8, max=1e8, unit="m"),
-                                 doc="fixed position of base_link in the site frame (m)"),
-        "site_rpy": Numbers(3, Number(min=-7.0, max=7.0, unit="rad"),
-                            doc="fixed roll, pitch, yaw of base_link in the site frame (rad, fixed axes)"),
+        "site_pose_source": Text(
+            choices=("fixed", "topic"),
+            doc="base_link in the site frame: fixed (site_position, site_rpy) or from topics.site_pose",
+        ),
+        "site_position": Numbers(
+            3, Number(min=-1e8, max=1e8, unit="m"), doc="fixed position of base_link in the site frame (m)"
+        ),
+        "site_rpy": Numbers(
+            3,
+            Number(min=-7.0, max=7.0, unit="rad"),
+            doc="fixed roll, pitch, yaw of base_link in the site frame (rad, fixed axes)",
+        ),
         "site_pose_max_age": _seconds("max |stamp(cylinder_lengths) - stamp(site pose)|"),
     },
     "topics": {
@@ -95,17 +125,24 @@ VELOCITY_IK: Schema = {
     "command_timeout": _seconds("no accepted target for this long: zero rates once, then hold"),
     "state_timeout": _seconds("a cylinder/swing state older than this is refused"),
     "swing_max_age": _SWING_MAX_AGE,
-    "condition_threshold": Number(min=1.0, max=1e12,
-                                  doc="cond(JC0) above which damped least squares starts"),
-    "stroke_horizon": _seconds(exclusive_min=True,
-                             doc="the whole command slows: no actuator reaches its end sooner than this"),
-    "bucket_angle_gives_way": Flag(doc="at a stroke end keep the tip's linear direction and let the bucket "
-                                       "angle rate give way; false: the whole twist's direction is kept"),
-    "line_gain": Number(min=0.0, max=100.0, unit="1/s",
-                        doc="a constant target's drift from its line is corrected at this rate; 0 = off"),
+    "condition_threshold": Number(min=1.0, max=1e12, doc="cond(JC0) above which damped least squares starts"),
+    "stroke_horizon": _seconds(
+        exclusive_min=True, doc="the whole command slows: no actuator reaches its end sooner than this"
+    ),
+    "bucket_angle_gives_way": Flag(
+        doc="at a stroke end keep the tip's linear direction and let the bucket "
+        "angle rate give way; false: the whole twist's direction is kept"
+    ),
+    "line_gain": Number(
+        min=0.0,
+        max=100.0,
+        unit="1/s",
+        doc="a constant target's drift from its line is corrected at this rate; 0 = off",
+    ),
     "status_period": _seconds("an unchanged status is published again after this long"),
-    "twist_residual_tolerance": Number(min=0.0, max=1e3, unit="rad/s",
-                                       doc="unachievable angular velocity before a (throttled) warning"),
+    "twist_residual_tolerance": Number(
+        min=0.0, max=1e3, unit="rad/s", doc="unachievable angular velocity before a (throttled) warning"
+    ),
     "warning_period": _WARNING_PERIOD,
     "publish_array": Flag(doc="also publish Float64MultiArray for a ros2_control forward command controller"),
     "qos_depth": _QOS_DEPTH,
@@ -123,15 +160,25 @@ VELOCITY_IK: Schema = {
 
 IMU_STATE: Schema = {
     "max_skew": _seconds("largest spread of the four sensors' latest stamps in one set"),
-    "max_age": _seconds(exclusive_min=True,
-                      doc="a sensor whose newest message arrived longer ago (node clock) is stale: no "
-                          "output, a reason; also the grace after start-up; checked every max_age / 4"),
-    "gravity_time_constant": _seconds("complementary filter of the gravity direction "
-                                    "(sensors without orientation); 0 = the accelerometer as it is"),
-    "max_angular_rate": Number(min=0.0, max=1e3, unit="rad/s", exclusive_min=True,
-                               doc="a gyro reading beyond this is implausible"),
-    "max_dynamic_acceleration": Number(min=0.0, max=1e3, unit="m/s^2", exclusive_min=True,
-                                       doc="| |linear_acceleration| - g | beyond this: no gravity direction"),
+    "max_age": _seconds(
+        exclusive_min=True,
+        doc="a sensor whose newest message arrived longer ago (node clock) is stale: no "
+        "output, a reason; also the grace after start-up; checked every max_age / 4",
+    ),
+    "gravity_time_constant": _seconds(
+        "complementary filter of the gravity direction "
+        "(sensors without orientation); 0 = the accelerometer as it is"
+    ),
+    "max_angular_rate": Number(
+        min=0.0, max=1e3, unit="rad/s", exclusive_min=True, doc="a gyro reading beyond this is implausible"
+    ),
+    "max_dynamic_acceleration": Number(
+        min=0.0,
+        max=1e3,
+        unit="m/s^2",
+        exclusive_min=True,
+        doc="| |linear_acceleration| - g | beyond this: no gravity direction",
+    ),
     "upper_structure_frame": Text(empty=False, doc="frame_id of machine_tilt"),
     "frame_prefix": FRAME_PREFIX,
     "warning_period": _WARNING_PERIOD,
@@ -148,15 +195,19 @@ IMU_STATE: Schema = {
 }
 
 SIM: Schema = {
-    "rate": Number(min=0.0, max=10_000.0, unit="Hz", exclusive_min=True,
-                   doc="rate of cylinder_lengths and joint_states"),
+    "rate": Number(
+        min=0.0, max=10_000.0, unit="Hz", exclusive_min=True, doc="rate of cylinder_lengths and joint_states"
+    ),
     "time_constant": _seconds("first-order lag of the actuators; 0 = ideal"),
     "command_timeout": _seconds("no rate command for this long: the actuators stop"),
     "warning_period": _WARNING_PERIOD,
     "initial_swing_angle": Number(min=-7.0, max=7.0, unit="rad", doc="swing angle at start (rad)"),
-    "initial_cylinder_lengths": Numbers(3, Number(min=0.0, max=20.0, unit="m"), default=None,
-                                        doc="boom, arm, bucket cylinder lengths at start (m); "
-                                            "default: the machine's reference lengths"),
+    "initial_cylinder_lengths": Numbers(
+        3,
+        Number(min=0.0, max=20.0, unit="m"),
+        default=None,
+        doc="boom, arm, bucket cylinder lengths at start (m); default: the machine's reference lengths",
+    ),
     "qos_depth": _QOS_DEPTH,
     "input_queue_depth": _INPUT_DEPTH,
     "input_reliability": input_reliability("rate_commands"),

@@ -32,7 +32,7 @@ from numpy.typing import ArrayLike
 
 from excavator_kinematics.kinematics import Excavator
 from excavator_kinematics.urdf_joints import URDF_JOINTS, joint_positions
-from manipulator_kinematics.config import require
+from manipulator_kinematics.schema import require
 
 # Which D column drives each URDF joint: 0 the swing, 1-3 the boom, arm and bucket cylinder.
 _DRIVER = np.array([0, 1, 2, 3, 1, 1, 2, 2, 3, 3, 3, 3])
@@ -63,14 +63,20 @@ class DesignPlane:
         """From the node's ``grade`` settings: ``point`` and either ``normal`` or ``slope`` and
         ``cross_slope`` (%), or neither (level). ConfigError naming the key when inconsistent."""
         normal, slope, cross = section.get("normal"), section.get("slope"), section.get("cross_slope")
-        require(normal is None or (slope is None and cross is None), f"{prefix}.normal",
-                f"give either {prefix}.normal or {prefix}.slope/{prefix}.cross_slope, not both")
+        require(
+            normal is None or (slope is None and cross is None),
+            f"{prefix}.normal",
+            f"give either {prefix}.normal or {prefix}.slope/{prefix}.cross_slope, not both",
+        )
         if normal is None:
             normal = [-(slope or 0.0) / 100.0, -(cross or 0.0) / 100.0, 1.0]
         n = np.asarray(normal, dtype=float)
         length = float(np.linalg.norm(n))
-        require(length > 0.0 and n[2] > 1e-6 * length, f"{prefix}.normal",
-                f"must point up (n_z > 0: the height is measured upward), got {list(normal)}")
+        require(
+            length > 0.0 and n[2] > 1e-6 * length,
+            f"{prefix}.normal",
+            f"must point up (n_z > 0: the height is measured upward), got {list(normal)}",
+        )
         return cls(np.asarray(section["point"], dtype=float), n / length)
 
     def height(self, tip: ArrayLike) -> np.ndarray:
@@ -82,8 +88,9 @@ class DesignPlane:
         return (np.asarray(tip, dtype=float) - self.point) @ self.rotation.T
 
 
-def urdf_joint_states(model: Excavator, D: ArrayLike, D_dot: ArrayLike,
-                      step: float = STEP) -> tuple[np.ndarray, np.ndarray]:
+def urdf_joint_states(
+    model: Excavator, D: ArrayLike, D_dot: ArrayLike, step: float = STEP
+) -> tuple[np.ndarray, np.ndarray]:
     """Positions and rates (12,) or (N, 12) of every URDF joint for states D (4,) or (N, 4) moving at
     D_dot (broadcast to D).
 

@@ -18,8 +18,9 @@ BLOCK = 4096
 Outputs = np.ndarray | tuple[np.ndarray, ...]
 
 
-def in_blocks(function: Callable[..., Outputs], *arrays: np.ndarray | None, block: int = BLOCK,
-              rows: bool = False) -> Outputs:
+def in_blocks(
+    function: Callable[..., Outputs], *arrays: np.ndarray | None, block: int = BLOCK, rows: bool = False
+) -> Outputs:
     """``function(*arrays)`` computed ``block`` rows at a time (axis 0; None passes as None).
 
     ``function`` maps arrays of ``k`` rows to an array or a tuple of arrays of ``k`` rows each;
@@ -31,14 +32,14 @@ def in_blocks(function: Callable[..., Outputs], *arrays: np.ndarray | None, bloc
     n = next(len(a) for a in arrays if a is not None)
 
     def part(start: int) -> Outputs:
-        return function(*(None if a is None else a[start:start + block] for a in arrays))
+        return function(*(None if a is None else a[start : start + block] for a in arrays))
 
     first = part(0)
     if rows:
         table = np.empty((len(first), n))
         for start in range(0, n, block):
             for row, entry in zip(table, first if start == 0 else part(start), strict=True):
-                row[start:start + block] = entry
+                row[start : start + block] = entry
         return table
     if n <= block:
         return first
@@ -48,5 +49,5 @@ def in_blocks(function: Callable[..., Outputs], *arrays: np.ndarray | None, bloc
     for start in range(0, n, block):
         piece = first if start == 0 else part(start)
         for target, value in zip(out, (piece,) if single else piece, strict=True):
-            target[start:start + block] = value
+            target[start : start + block] = value
     return out[0] if single else out

@@ -14,6 +14,7 @@ _LITERAL = re.compile(r"``(.+?)``", re.S)
 
 def plain(text: str) -> str:
     """``text`` (reST from a docstring) with roles and inline literals reduced to their words."""
+
     def role(match: re.Match[str]) -> str:
         name = match[2].strip()
         return name.rsplit(".", 1)[-1] if match[1] else name

@@ -1,7 +1,7 @@
 """The excavator's machine file: its schema and the conversion to the model's description.
 
 The ``excavator:`` section of a parameters file (config/excavator_cet200.yaml, docs/excavator.md)
-is checked key by key by the shared :func:`manipulator_kinematics.config.validate` against
+is checked key by key by the shared :func:`manipulator_kinematics.schema.validate` against
 :data:`SCHEMA` (unknown, missing, mistyped and out-of-range keys are errors naming the dotted
 key); :func:`describe` then checks what one key alone cannot (a stroke's ends in order, reference
 values inside their limits) and folds the values into a :class:`Description`, the geometry the
@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from manipulator_kinematics.config import Number, Numbers, Schema, Text, require, validate
+from manipulator_kinematics.schema import Number, Numbers, Schema, Text, require, validate
 
 SECTION = "excavator"
 CYLINDERS = ("boom_cylinder", "arm_cylinder", "bucket_cylinder")
@@ -37,8 +37,13 @@ _CYLINDER_SPEED = Number(min=0.0, max=5.0, unit="m/s", exclusive_min=True)
 # A swing range of up to a full turn either way of the reference heading, or open at both ends
 # (-.inf, .inf): a continuous swing, its angles wrapped to (-pi, pi].
 _SWING_ANGLE = Number(min=-2.0 * math.pi, max=2.0 * math.pi, unit="rad")
-_SWING_LIMIT = Number(min=-2.0 * math.pi, max=2.0 * math.pi, unit="rad", open=True,
-                      doc="swing stop; -.inf (min) and .inf (max) together: continuous swing")
+_SWING_LIMIT = Number(
+    min=-2.0 * math.pi,
+    max=2.0 * math.pi,
+    unit="rad",
+    open=True,
+    doc="swing stop; -.inf (min) and .inf (max) together: continuous swing",
+)
 
 
 def wrap_swing(angle: Any) -> Any:
@@ -157,27 +162,42 @@ def describe(params: Mapping[str, Any], prefix: str = SECTION) -> Description:
     swing = params["swing"]
     lower, upper = math.isinf(swing["min_angle"]), math.isinf(swing["max_angle"])
     if lower or upper:
-        require(lower and upper and swing["min_angle"] < 0.0 < swing["max_angle"],
-                f"{prefix}.swing.{'max_angle' if lower else 'min_angle'}",
-                "a continuous swing has both limits open (min_angle: -.inf, max_angle: .inf), got "
-                f"[{swing['min_angle']}, {swing['max_angle']}] rad")
-        require(-math.pi < swing["reference_angle"] <= math.pi, f"{prefix}.swing.reference_angle",
-                f"{swing['reference_angle']} rad: a continuous swing's angles are in (-pi, pi]")
-    require(swing["min_angle"] < swing["max_angle"], f"{prefix}.swing.max_angle",
-            f"{swing['max_angle']} must be above min_angle {swing['min_angle']}")
-    require(swing["min_angle"] <= swing["reference_angle"] <= swing["max_angle"],
+        require(
+            lower and upper and swing["min_angle"] < 0.0 < swing["max_angle"],
+            f"{prefix}.swing.{'max_angle' if lower else 'min_angle'}",
+            "a continuous swing has both limits open (min_angle: -.inf, max_angle: .inf), got "
+            f"[{swing['min_angle']}, {swing['max_angle']}] rad",
+        )
+        require(
+            -math.pi < swing["reference_angle"] <= math.pi,
             f"{prefix}.swing.reference_angle",
-            f"{swing['reference_angle']} rad outside [min_angle, max_angle] = "
-            f"[{swing['min_angle']}, {swing['max_angle']}] rad")
+            f"{swing['reference_angle']} rad: a continuous swing's angles are in (-pi, pi]",
+        )
+    require(
+        swing["min_angle"] < swing["max_angle"],
+        f"{prefix}.swing.max_angle",
+        f"{swing['max_angle']} must be above min_angle {swing['min_angle']}",
+    )
+    require(
+        swing["min_angle"] <= swing["reference_angle"] <= swing["max_angle"],
+        f"{prefix}.swing.reference_angle",
+        f"{swing['reference_angle']} rad outside [min_angle, max_angle] = "
+        f"[{swing['min_angle']}, {swing['max_angle']}] rad",
+    )
     for name in (*CYLINDERS, "h_link"):
         require(params[name]["orientation"] != 0, f"{prefix}.{name}.orientation", "must be 1 or -1, got 0")
     for name in CYLINDERS:
         c = params[name]
-        require(c["min_length"] < c["max_length"], f"{prefix}.{name}.max_length",
-                f"{c['max_length']} m must be above min_length {c['min_length']} m")
-        require(c["min_length"] <= c["reference_length"] <= c["max_length"],
-                f"{prefix}.{name}.reference_length",
-                f"{c['reference_length']} m outside the stroke [{c['min_length']}, {c['max_length']}] m")
+        require(
+            c["min_length"] < c["max_length"],
+            f"{prefix}.{name}.max_length",
+            f"{c['max_length']} m must be above min_length {c['min_length']} m",
+        )
+        require(
+            c["min_length"] <= c["reference_length"] <= c["max_length"],
+            f"{prefix}.{name}.reference_length",
+            f"{c['reference_length']} m outside the stroke [{c['min_length']}, {c['max_length']}] m",
+        )
 
     def point(value: list[float]) -> tuple[float, float]:
         return value[0], value[1]

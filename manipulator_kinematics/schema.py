@@ -27,7 +27,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Union
 
-from manipulator_kinematics.params import SHOWN, ConfigError, shown
+from manipulator_kinematics.param_files import SHOWN, ConfigError, shown
 
 __all__ = [
     "ConfigError",
@@ -215,8 +215,9 @@ def defaults(schema: Schema) -> dict[str, Any]:
 
 
 def _all_defaulted(schema: Schema) -> bool:
-    return all(_all_defaulted(s) if isinstance(s, Mapping) else s.default is not REQUIRED
-               for s in schema.values())
+    return all(
+        _all_defaulted(s) if isinstance(s, Mapping) else s.default is not REQUIRED for s in schema.values()
+    )
 
 
 def _join(prefix: str, key: Any) -> str:
