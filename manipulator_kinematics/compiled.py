@@ -223,7 +223,12 @@ def cache_is_cold(module: str) -> bool:
         places = [Path(os.environ["NUMBA_CACHE_DIR"], sub)]  # numba then looks nowhere else first
     stamp = source.stat().st_mtime
     for place in places:
-        indexes = list(place.glob(f"{source.stem}.*.nbi"))
-        if indexes and all(index.stat().st_mtime >= stamp for index in indexes):
+        # <stem>.<function>-<line>.py311.nbi: an edit above a function leaves its index under the
+        # old line behind, so each function counts by its newest index.
+        newest: dict[str, float] = {}
+        for index in place.glob(f"{source.stem}.*.nbi"):
+            function = index.name[len(source.stem) + 1 :].rsplit("-", 1)[0]
+            newest[function] = max(newest.get(function, 0.0), index.stat().st_mtime)
+        if newest and all(mtime >= stamp for mtime in newest.values()):
             return False
     return True

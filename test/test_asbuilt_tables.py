@@ -80,6 +80,7 @@ def test_the_as_built_surface_is_the_lowest_edge_per_cell(tmp_path: Path) -> Non
         assert (tmp_path / "out" / "run1" / f"excavator_asbuilt{suffix}").stat().st_size > 0
 
 
+@pytest.mark.slow
 def test_fleet_merges_tables_skips_a_corrupt_bag_and_reports_per_day(
     tmp_path: Path, capsys: pytest.CaptureFixture
 ) -> None:

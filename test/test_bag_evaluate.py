@@ -198,6 +198,7 @@ def test_cylinder_speed_and_stroke_statistics(tmp_path: Path) -> None:
     assert machine["accepted_inputs"] == 98
 
 
+@pytest.mark.ros
 def test_non_finite_cylinder_values_are_counted_per_field_not_dropped(tmp_path: Path) -> None:
     """A cylinder whose recorded values are all NaN keeps its row, with its NaN count (the fuzzer's
     bag had the boom cylinder vanish from the report); partly NaN fields are counted too."""
@@ -399,6 +400,7 @@ def with_settings(bag: Path, settings: dict) -> Path:
     return bag
 
 
+@pytest.mark.ros
 def test_node_settings_come_from_the_bag_else_are_named_as_assumed(tmp_path: Path) -> None:
     """Without settings in the bag the report says it assumed the package's defaults; with them
     (a filtered acceleration, as the demo runs) it uses them; ``--params`` wins over the bag."""
@@ -434,6 +436,7 @@ def test_node_settings_come_from_the_bag_else_are_named_as_assumed(tmp_path: Pat
     assert machine["consistency"]["bucket_accel"]["linear_mps2"]["max"] < 1e-12
 
 
+@pytest.mark.ros
 def test_inputs_without_outputs_are_counted_and_a_shortfall_flagged(tmp_path: Path) -> None:
     """The fuzzer's bag had 1491 cylinder_lengths and 1163 bucket_pose unflagged. Outputs lost in
     the middle are missing; the first ones (before the recorder had the output topic) are not."""

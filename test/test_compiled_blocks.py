@@ -162,6 +162,7 @@ def test_a_compile_on_a_cold_cache_is_abandoned_at_exit(tmp_path: Path) -> None:
         assert not Path(f"/proc/{pid}").exists() or " Z " in Path(f"/proc/{pid}/stat").read_text(), pid
 
 
+@pytest.mark.ros
 def test_the_cold_cache_guess_follows_numba(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """cache_is_cold finds the index numba writes: cold in an empty NUMBA_CACHE_DIR, warm once a
     kernel module was compiled into it (a small module of this test)."""
@@ -181,5 +182,22 @@ def test_the_cold_cache_guess_follows_numba(tmp_path: Path, monkeypatch: pytest.
         timeout=120,
         env={**os.environ, "PYTHONPATH": str(tmp_path)},
     )
+    assert not cache_is_cold("mk_cold_guess.kernel")
+    # An edit above the function moves it: cold until compiled again, then warm although the
+    # index under its old line number stays behind (a developer's tree after any edit).
+    source = package / "kernel.py"
+    now = time.time()
+    for index in cache.rglob("*.nbi"):  # clear of the file system's timestamp granularity
+        os.utime(index, (now - 10, now - 10))
+    source.write_text("# moved\n" + source.read_text())
+    os.utime(source, (now - 5, now - 5))
+    assert cache_is_cold("mk_cold_guess.kernel")
+    subprocess.run(
+        [sys.executable, "-c", "import mk_cold_guess.kernel as k; k.f(1.0)"],
+        check=True,
+        timeout=120,
+        env={**os.environ, "PYTHONPATH": str(tmp_path)},
+    )
+    assert len(list(cache.rglob("kernel.f-*.nbi"))) == 2
     assert not cache_is_cold("mk_cold_guess.kernel")
     assert not cache_is_cold("math") and not cache_is_cold("no_such_module_anywhere")

@@ -25,6 +25,8 @@ from excavator_kinematics.twist import bucket_angles, twist_from_q_dot
 from manipulator_kinematics.param_files import config_path, load_parameters
 from manipulator_kinematics_interfaces.srv import SolveIK
 
+pytestmark = pytest.mark.ros
+
 QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 PARAMS = (
     "--params-file",

@@ -748,6 +748,7 @@ def test_mounting_figure_is_drawn(tmp_path):
     assert imread(tmp_path / "frames.png").shape[1] > 500
 
 
+@pytest.mark.ros
 def test_imu_state_node_refuses_bad_stamps_and_answers_the_sets_after_them():
     """Issue 29 defect 1: a set stamped an hour ahead held back every later set for good, and a
     negative stamp raised in the callback. Now a stamp ahead of the node clock by more than max_age,

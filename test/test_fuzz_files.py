@@ -346,12 +346,14 @@ def one_line(command: list[str], code: int = 2) -> str:
         "dev_zero",
     ],
 )
+@pytest.mark.ros
 def test_mk_urdf_refuses_a_bad_params_file_in_one_line(tmp_path: Path, seed: str) -> None:
     path = next(p for name, p in cases({seed: YAML_SEEDS[seed]}, b"", tmp_path, 0) if name == seed)
     assert str(path) in one_line([console_script("mk_urdf"), "scara", "--params-file", str(path)])
 
 
 @pytest.mark.parametrize("seed", ["deep_nesting", "alias_bomb"])
+@pytest.mark.ros
 def test_mk_evaluate_refuses_a_bad_params_file_in_one_line(tmp_path: Path, seed: str) -> None:
     path = tmp_path / "params.yaml"
     path.write_bytes(YAML_SEEDS[seed])
@@ -370,11 +372,13 @@ def test_mk_evaluate_refuses_a_bad_params_file_in_one_line(tmp_path: Path, seed:
 
 
 @pytest.mark.parametrize("seed", ["fifo", "alias_bomb", "dev_zero"])
+@pytest.mark.ros
 def test_a_node_refuses_a_bad_params_file_in_one_line(tmp_path: Path, seed: str) -> None:
     path = next(p for name, p in cases({seed: YAML_SEEDS[seed]}, b"", tmp_path, 0) if name == seed)
     assert str(path) in one_line([console_script("scara_forward"), "--ros-args", "--params-file", str(path)])
 
 
+@pytest.mark.ros
 def test_pump_boom_regions_lists_a_table_that_is_not_yaml_in_one_line(tmp_path: Path) -> None:
     path = tmp_path / "table.yaml"
     path.write_bytes(b"\x89PNG\r\n\x1a\n not a table")
@@ -382,6 +386,7 @@ def test_pump_boom_regions_lists_a_table_that_is_not_yaml_in_one_line(tmp_path: 
     assert f"{path}: not UTF-8 text (byte 0)" in line, line
 
 
+@pytest.mark.ros
 def test_pump_boom_ik_server_given_a_table_that_is_not_yaml_serves_fk(tmp_path: Path, probe) -> None:
     """The table is read at start-up: a warning naming the file and its reason, no traceback; FK
     serves, IK answers failure with that reason (kinematics.PumpBoom.table)."""

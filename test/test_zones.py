@@ -215,6 +215,7 @@ def drive(
 @pytest.mark.parametrize(
     "name", ["excavator_cet200_family.yaml", "wheel_loader_wl20.yaml", "knuckle_crane_kc100.yaml"]
 )
+@pytest.mark.slow
 def test_random_commands_never_cross_a_ceiling_and_still_reach_it(name: str) -> None:
     from manipulator_kinematics.hydraulic import HydraulicModel
     from manipulator_kinematics.param_files import config_path
