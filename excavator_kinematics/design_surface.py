@@ -135,6 +135,7 @@ class Tin:
         if np.any(flat):
             raise ConfigError(f"{what}: face {int(np.argmax(flat))} has no area in plan view (degenerate)")
         _refuse_overlaps(faces, normal[:, 2] > 0.0, what)
+        _refuse_islands_inside(local[:, :2], faces, normal[:, 2] > 0.0, what)
         a, b = -normal[:, 0] / normal[:, 2], -normal[:, 1] / normal[:, 2]
         planes = np.column_stack([a, b, p0[:, 2] - a * p0[:, 0] - b * p0[:, 1]])
         try:
@@ -192,7 +193,8 @@ def _refuse_overlaps(faces: np.ndarray, counterclockwise: np.ndarray, what: str)
     view, the faces of a surface that does not fold over itself use each directed edge once (a
     shared edge in opposite directions), so a duplicate face or one folded over its neighbour
     uses one twice. (Faces that overlap without a shared edge mostly have crossing edges, which
-    the trapezoid map refuses; a face wholly inside another, sharing no edge, is not found.)"""
+    the trapezoid map refuses; a patch wholly inside another face, sharing no edge, is
+    :func:`_refuse_islands_inside`'s.)"""
     turned = np.where(counterclockwise[:, None], faces, faces[:, ::-1]).astype(np.int64)
     edges = np.concatenate([turned[:, [0, 1]], turned[:, [1, 2]], turned[:, [2, 0]]])  # row k: face k % F
     key = edges[:, 0] * (int(edges.max()) + 1) + edges[:, 1]  # one integer per directed edge
@@ -205,6 +207,48 @@ def _refuse_overlaps(faces: np.ndarray, counterclockwise: np.ndarray, what: str)
             f"side of their edge {edges[first].tolist()}: they overlap (a duplicate face or "
             "a fold)"
         )
+
+
+def _refuse_islands_inside(
+    xy: np.ndarray, faces: np.ndarray, counterclockwise: np.ndarray, what: str
+) -> None:
+    """ConfigError naming a patch of faces that lies wholly inside another face (no edge shared
+    or crossed, so neither the edge rule nor the trapezoid map sees it): one vertex of each
+    boundary loop (edges used once) is tested against every face it is not a corner of. Loops
+    are few (the outline, holes, islands), so this is O(loops x faces)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    turned = np.where(counterclockwise[:, None], faces, faces[:, ::-1]).astype(np.int64)
+    edges = np.concatenate([turned[:, [0, 1]], turned[:, [1, 2]], turned[:, [2, 0]]])
+    n = int(edges.max()) + 1
+    key, reverse = edges[:, 0] * n + edges[:, 1], edges[:, 1] * n + edges[:, 0]
+    boundary = edges[~np.isin(key, reverse)]
+    graph = coo_matrix((np.ones(len(boundary)), (boundary[:, 0], boundary[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    on_boundary = np.unique(boundary)
+    _, first = np.unique(label[on_boundary], return_index=True)
+    tri = xy[faces]  # (F, 3, 2)
+    for vertex in on_boundary[first]:
+        p = xy[vertex]
+        sides = np.stack(
+            [
+                (tri[:, (i + 1) % 3, 0] - tri[:, i, 0]) * (p[1] - tri[:, i, 1])
+                - (tri[:, (i + 1) % 3, 1] - tri[:, i, 1]) * (p[0] - tri[:, i, 0])
+                for i in range(3)
+            ],
+            axis=1,
+        )
+        scale = np.abs(sides).max(axis=1) + 1e-300
+        strictly = np.all(sides > 1e-9 * scale[:, None], axis=1) | np.all(
+            sides < -1e-9 * scale[:, None], axis=1
+        )
+        strictly &= ~np.any(faces == vertex, axis=1)
+        if strictly.any():
+            raise ConfigError(
+                f"{what}: vertex {int(vertex)} lies inside face {int(np.argmax(strictly))}: a patch of "
+                "faces overlaps another face in plan view"
+            )
 
 
 def read_landxml(path: str | Path, surface: str = "") -> Tin:

@@ -266,6 +266,9 @@ LANDXML_SEEDS: dict[str, bytes | Callable[[Path], Path]] = {
     "crossing": landxml(
         [(0, 0, 0), (10, 0, 0), (5, 9, 0), (0, 6, 1), (10, 6, 1), (5, -3, 1)], [(1, 2, 3), (4, 5, 6)]
     ).encode(),
+    "face_inside_a_face": landxml(
+        [*SQUARE, (2.0, 3.0, 0.0), (4.0, 3.0, 0.0), (3.0, 5.0, 0.0)], [(1, 2, 3), (1, 3, 4), (5, 6, 7)]
+    ).encode(),
     "coordinates_1e300": landxml([(0, 0, 0), (1e300, 0, 0), (0, 1e300, 0)], [(1, 2, 3)]).encode(),
     "elevation_1e300": landxml([(0, 0, 0), (1, 0, 1e300), (0, 1, 0)], [(1, 2, 3)]).encode(),
     "billion_laughs": landxml(SQUARE, [(1, 2, 3)], LAUGHS).replace('"Ditch design"', '"&b9;"').encode(),
@@ -290,6 +293,7 @@ def test_fuzzed_design_surfaces_are_read_or_refused_in_one_line(tmp_path: Path) 
         "reversed_duplicate": "faces 0 and 2 lie on the same side",
         "fold": "faces 0 and 2 lie on the same side",
         "crossing": "faces overlap in plan view (edges of two faces cross)",
+        "face_inside_a_face": "vertex 4 lies inside face 1",
         "coordinates_1e300": "vertex 1 at [1e+300, 0.0, 0.0] m is no place on a site",
         "elevation_1e300": "vertex 1 at [1.0, 0.0, 1e+300] m is no place on a site",
         "billion_laughs": "cannot read a LandXML file",
