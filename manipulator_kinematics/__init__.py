@@ -6,4 +6,13 @@ from manipulator_kinematics.stopping import install_for
 
 # The first code of ours its console scripts run: a signal during the imports that follow ends
 # them with exit 0 (manipulator_kinematics.stopping).
-install_for("mk_record", "mk_replay", "mk_evaluate", "mk_urdf", "machine_markers")
+install_for(
+    "mk_record",
+    "mk_replay",
+    "mk_evaluate",
+    "mk_asbuilt",
+    "mk_urdf",
+    "machine_markers",
+    "mk_machine_check",
+    "mk_calibrate",
+)

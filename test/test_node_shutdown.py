@@ -338,6 +338,19 @@ def test_record_stops_on_sigint_while_a_publisher_keeps_sending(probe: Probe, tm
 
 
 # Every executable (console script): the nodes, the mk_* tools and the batch tools.
+LOADER = REPO / "config" / "wheel_loader_wl20.yaml"
+
+
+def predict_files(work: Path) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """mk_calibrate's control-point check on the shipped loader: a report and two poses."""
+    (work / "report.json").write_text('{"instrument_from_base": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}')
+    (work / "poses.csv").write_text(
+        "pose,lift_cylinder,tilt_cylinder,point\n1,1.323,1.624,tip\n2,2.0,1.8,left_corner\n"
+    )
+    predict = ("--predict", str(work / "poses.csv"), "--report", str(work / "report.json"))
+    return (str(LOADER), *predict, "-o", str(work / "predicted.csv")), ()
+
+
 BAG = str(sorted((Path(__file__).resolve().parent / "data").glob("*_golden"))[0])
 EXECUTABLES: dict[str, Callable[[Path], tuple[tuple[str, ...], tuple[str, ...]]]] = {
     # name: scratch directory -> (our arguments, ROS arguments)
@@ -375,6 +388,9 @@ EXECUTABLES: dict[str, Callable[[Path], tuple[tuple[str, ...], tuple[str, ...]]]
     "mk_replay --loop": lambda _: ((BAG, "--loop"), ()),
     "mk_evaluate": lambda work: ((BAG, "-o", str(work / "report")), ()),
     "mk_urdf": lambda work: (("--all", str(work)), ()),
+    "mk_asbuilt": lambda work: ((BAG, "-o", str(work / "asbuilt")), ()),
+    "mk_machine_check": lambda _: ((str(LOADER), "--no-png"), ()),
+    "mk_calibrate": lambda work: predict_files(work),
     # The batch tools: plots, tables, the examples and the demo (which starts five processes).
     "excavator_demo": lambda work: (("--output", str(work / "demo")), ()),
     "excavator_slope_example": lambda work: (("--output", str(work / "slope")), ()),
@@ -390,6 +406,9 @@ EXECUTABLES: dict[str, Callable[[Path], tuple[tuple[str, ...], tuple[str, ...]]]
 # Executables that take no ROS arguments (no namespace to give them).
 NO_ROS_ARGS = {
     "mk_evaluate",
+    "mk_asbuilt",
+    "mk_machine_check",
+    "mk_calibrate",
     "mk_urdf",
     "excavator_demo",
     "excavator_slope_example",
