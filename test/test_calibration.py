@@ -420,3 +420,21 @@ def test_the_calibrated_file_keeps_strokes_and_adds_offsets(tmp_path: Path) -> N
         for key in ("min_length", "max_length", "reference_length"):
             assert new["cylinders"][name][key] == cylinder[key]
         assert abs(new["cylinders"][name]["zero_offset"]) < 0.2
+
+
+def test_an_input_that_is_no_regular_file_or_too_large_is_refused_in_one_line(tmp_path: Path, capsys) -> None:
+    import os
+
+    fifo = tmp_path / "measured.csv"
+    os.mkfifo(fifo)
+    big = tmp_path / "big.csv"
+    with open(big, "wb") as f:
+        f.truncate(5 << 20)
+    machine = str(config_path("wheel_loader_wl20.yaml"))
+    for path, reason in ((fifo, "a FIFO, not a regular file"), (big, "more than the 4 MiB")):
+        code = main(
+            [machine, str(path), "-o", str(tmp_path / "c.yaml"), "--report", str(tmp_path / "r.json")]
+        )
+        err = capsys.readouterr().err
+        assert code == 1 and reason in err and err.count("\n") == 1, err
+        assert not (tmp_path / "c.yaml").exists()

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 import json
 import math
 import sys
@@ -38,7 +39,7 @@ from manipulator_kinematics.hydraulic.calibration import (
 )
 from manipulator_kinematics.hydraulic.description import SECTION, Description, read
 from manipulator_kinematics.hydraulic.model import HydraulicModel, StrokeError
-from manipulator_kinematics.param_files import ConfigError
+from manipulator_kinematics.param_files import ConfigError, open_input
 
 __all__ = ["main", "predict", "read_points", "report", "write_machine"]
 
@@ -56,12 +57,28 @@ def _point_name(name: str, description: Description) -> str | None:
     return None
 
 
+#: A measure-up has tens to a few thousand rows; a larger file (or a FIFO, a device) is refused
+#: before it is read, as every file input of the package (docs/architecture.md).
+MAX_INPUT_BYTES = 4 << 20
+
+
+def _text(path: Path) -> str:
+    """The UTF-8 text of an input file, within MAX_INPUT_BYTES (ConfigError naming the file)."""
+    with open_input(path, MAX_INPUT_BYTES) as stream:
+        data = stream.read(MAX_INPUT_BYTES + 1)
+    if len(data) > MAX_INPUT_BYTES:
+        raise ConfigError(f"{path}: more than the {MAX_INPUT_BYTES >> 20} MiB such a file may have")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not UTF-8 text") from None
+
+
 def read_points(path: Path, description: Description, with_xyz: bool = True) -> Measurements:
     """The rows of a MEASURED.csv (``with_xyz``) or POSES.csv; CalibrationError names row and column."""
     actuators = list(description.actuator_names)
     want = ["pose", *actuators, "point"] + (["x", "y", "z"] if with_xyz else [])
-    with open(path, newline="") as f:
-        rows = list(csv.reader(f))
+    rows = list(csv.reader(io.StringIO(_text(path), newline="")))
     if not rows:
         raise CalibrationError(f"{path}: empty (expected the header {','.join(want)})")
     header = [h.strip() for h in rows[0]]
@@ -395,7 +412,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _predict(args: argparse.Namespace, description: Description) -> int:
-    report_ = json.loads(args.report.read_text())
+    report_ = json.loads(_text(args.report))
     T = np.asarray(report_.get("instrument_from_base"), dtype=float)
     if T.shape != (4, 4) or not np.all(np.isfinite(T)):
         raise CalibrationError(f"{args.report}: instrument_from_base: expected a 4x4 matrix")
