@@ -125,6 +125,9 @@ def _on_signal(signum: int, frame: object) -> None:
     global _received
     _received = signum
     if not _holding:
+        # A second signal (Ctrl-C twice, launch's escalation) may run this handler again while
+        # the first waits for the children: one line, one ending.
+        _ignore_signals()
         # Nothing to clean up but the children; os.write bypasses Python's buffers, which the
         # interrupted main thread may be holding.
         name = os.path.basename(getattr(sys.modules.get("__main__"), "__file__", None) or sys.argv[0])
