@@ -649,7 +649,12 @@ def test_demo_bag_replays_skipping_tf_and_the_recorded_settings_reach_evaluate(
     # Publishers of the inputs before the recorder: it subscribes to them at once, not when the
     # replay's publishers appear (and would then miss the first messages).
     inputs = ("/cylinder_lengths", "/joint_states")
-    stand_ins = [probe.node.create_publisher(JointState, topic, QOS) for topic in inputs]
+    # With the QoS the replay will offer: the recorder subscribes with what it sees offered first
+    # (a reliable stand-in for a best-effort replay recorded nothing, twice in full runs).
+    stand_ins = [
+        probe.node.create_publisher(JointState, topic, replay.publisher_qos(topics[topic].qos))
+        for topic in inputs
+    ]
     chosen = ("cylinder_lengths", "joint_states", "bucket_pose", "bucket_accel")
     with NodeProcess("excavator_forward", *RELIABLE_INPUTS, params=settings) as node:
         probe.wait_until(
