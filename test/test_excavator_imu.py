@@ -224,6 +224,31 @@ def test_a_machine_rolled_near_90_deg_gets_no_rates_it_cannot_have():
     assert refused == 4 * len(D)  # every set at 70 deg and beyond
 
 
+def imu_node(namespace: str, settings: dict):
+    """excavator_imu_state on the shipped machine and node files in ``namespace`` with
+    ``settings`` over them, a probe, the cylinder_lengths it hears, and a publisher per sensor."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from ros_harness import NodeProcess, Probe
+    from sensor_msgs.msg import Imu, JointState
+
+    from manipulator_kinematics.param_files import config_path
+
+    files = [config_path("excavator_cet200.yaml"), config_path("excavator_nodes.yaml")]
+    process = NodeProcess(
+        "excavator_imu_state",
+        *[a for p in files for a in ("--params-file", str(p))],
+        "-r",
+        f"__ns:=/{namespace}",
+        params={f"/{namespace}/excavator_imu_state": {"ros__parameters": settings}},
+    )
+    qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+    probe = Probe(f"{namespace}_probe")
+    got: list[JointState] = []
+    probe.node.create_subscription(JointState, f"/{namespace}/cylinder_lengths", got.append, qos)
+    pubs = [probe.node.create_publisher(Imu, f"/{namespace}/imu/{name}", qos) for name in SENSORS]
+    return process, probe, got, pubs
+
+
 def stamp_of(msg) -> int:
     """A message's header stamp in ns."""
     return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
@@ -234,30 +259,14 @@ def test_imu_state_node_publishes_cylinder_lengths_and_refuses_bad_sensors():
     """excavator_imu_state across processes on the machine file's mounting (all zero, H-link):
     orientation sets and gravity-only sets give back the lengths and rates; a stale boom sensor
     and an implausible arm reading stop the output with a logged reason."""
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from ros_harness import NodeProcess, Probe
-    from sensor_msgs.msg import Imu, JointState
 
     from excavator_kinematics.kinematics import CYLINDERS
-    from manipulator_kinematics.param_files import config_path
 
     D = LIM.reference + np.array([0.5, 0.12, -0.3, 0.2])
     D_dot = np.array([0.3, 0.05, -0.08, 0.1])
     q, omega, f = readings(D, D_dot, "h_link", mountings={key: [0.0, 0.0, 0.0] for key in SENSORS})
-    files = [config_path("excavator_cet200.yaml"), config_path("excavator_nodes.yaml")]
-    process = NodeProcess(
-        "excavator_imu_state",
-        *[a for p in files for a in ("--params-file", str(p))],
-        "-r",
-        "__ns:=/imu_t",
-        params={"/imu_t/excavator_imu_state": {"ros__parameters": {"gravity_time_constant": 0.0}}},
-    )
-    qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-    probe = Probe("imu_probe")
+    process, probe, got, pubs = imu_node("imu_t", {"gravity_time_constant": 0.0})
     node = probe.node
-    got: list[JointState] = []
-    node.create_subscription(JointState, "/imu_t/cylinder_lengths", got.append, qos)
-    pubs = [node.create_publisher(Imu, f"/imu_t/imu/{name}", qos) for name in SENSORS]
 
     def send(stamp_ns: int, with_orientation: bool, skip: str = "", arm_rate: float | None = None) -> None:
         for i, (name, pub) in enumerate(zip(SENSORS, pubs, strict=True)):
@@ -757,28 +766,9 @@ def test_imu_state_node_refuses_bad_stamps_and_answers_the_sets_after_them():
     the sets over."""
     import time
 
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from ros_harness import NodeProcess, Probe
-    from sensor_msgs.msg import Imu, JointState
-
-    from manipulator_kinematics.param_files import config_path
-
     D = LIM.reference + np.array([0.5, 0.12, -0.3, 0.2])
     q, omega, f = readings(D, np.zeros(4), "h_link", mountings={key: [0.0, 0.0, 0.0] for key in SENSORS})
-    files = [config_path("excavator_cet200.yaml"), config_path("excavator_nodes.yaml")]
-    process = NodeProcess(
-        "excavator_imu_state",
-        *[a for p in files for a in ("--params-file", str(p))],
-        "-r",
-        "__ns:=/imu_stamps",
-        params={"/imu_stamps/excavator_imu_state": {"ros__parameters": {"warning_period": 0.1}}},
-    )
-    qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-    probe = Probe("imu_stamps_probe")
-    node = probe.node
-    got: list[JointState] = []
-    node.create_subscription(JointState, "/imu_stamps/cylinder_lengths", got.append, qos)
-    pubs = [node.create_publisher(Imu, f"/imu_stamps/imu/{name}", qos) for name in SENSORS]
+    process, probe, got, pubs = imu_node("imu_stamps", {"warning_period": 0.1})
 
     sent = []
 
