@@ -4,13 +4,9 @@ package (machines are found through the registry), and nothing uses rclpy's priv
 from __future__ import annotations
 
 import ast
-import subprocess
-import sys
 from pathlib import Path
 
-import pytest
-
-from manipulator_kinematics.registry import Hook, machines
+from manipulator_kinematics.registry import machines
 
 REPO = Path(__file__).resolve().parent.parent
 SHARED = REPO / "manipulator_kinematics"
@@ -54,32 +50,3 @@ def test_every_machine_package_is_registered_under_its_name() -> None:
     assert registered == set(MACHINE_PACKAGES)
     for name, machine in machines().items():
         assert machine.name == name and machine.schema and machine.topics
-
-
-@pytest.mark.ros
-def test_loading_the_registry_imports_no_hook_code_and_every_hook_resolves() -> None:
-    # Every node loads the registry at start-up: the bag, URDF and drawing hooks wait for a call.
-    code = (
-        "import sys; from manipulator_kinematics.registry import machines; machines(); "
-        "print(' '.join(sorted(sys.modules)))"
-    )
-    loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    hook_modules = (
-        "manipulator_kinematics.bag",
-        "manipulator_kinematics.urdf",
-        "manipulator_kinematics.scene",
-        "excavator_kinematics.evaluation",
-        "excavator_kinematics.scene",
-        "rosbags",
-        "mcap",
-    )
-    assert [m for m in loaded.stdout.split() if m.startswith(hook_modules)] == []
-    hooks = [
-        (m.name, getattr(m, field))
-        for m in machines().values()
-        for field in ("analyse", "synthesize", "urdf", "scene")
-        if isinstance(getattr(m, field), Hook)
-    ]
-    assert len(hooks) >= 3 * len(machines())
-    for name, hook in hooks:
-        assert callable(hook.resolve()), (name, hook)
