@@ -734,6 +734,7 @@ def solve_ik(
                 f"target position is {float(lateral[where]):.6g} m off the boom plane of the "
                 f"orientation's heading {math.degrees(float(heading[where])):.6g} deg"
             )
+        assert solutions.explain is not None  # _solutions always gives one
         return solutions.explain(result, where)
 
     return IKSolutions(

@@ -141,7 +141,9 @@ class _Triangle:
             orientation,
         )
 
-    def closes(self, d: np.ndarray, angle: bool = True) -> tuple[np.ndarray | None, ...]:
+    def closes(
+        self, d: np.ndarray, angle: bool = True
+    ) -> tuple[np.ndarray | None, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Joint angle (None unless ``angle``), its derivatives w.r.t. d (eq. 1: k21, k22) and
         its cosine and sine times ``radius``.
 
@@ -476,7 +478,7 @@ class Excavator:
                 )
 
     # ------------------------------------------------------------------ closed loops (eqs. 1-2, 7)
-    def _linkages(self, d2: np.ndarray, d3: np.ndarray, d4: np.ndarray) -> tuple[tuple[np.ndarray, ...], ...]:
+    def _linkages(self, d2: np.ndarray, d3: np.ndarray, d4: np.ndarray) -> tuple[tuple[Any, ...], ...]:
         """theta2..4 (eqs. 1-2) with their first (K, eq. 7) and second (K1) derivatives w.r.t.
         d2..d4 and their cosines and sines, plus the bucket linkage's rod pin R and H-link pin H
         relative to the bucket pin (arm frame): ``(theta, k, dk, trig, (R, H))``."""
@@ -529,7 +531,10 @@ class Excavator:
         self._check_lengths(lengths)
         flat = lengths.reshape(-1, 3)
         _, k, dk, _, _ = self._linkages(*_columns(flat))
-        return tuple(_table(entries, flat.shape[:-1]).reshape(lengths.shape) for entries in (k, dk))
+        return (
+            _table(k, flat.shape[:-1]).reshape(lengths.shape),
+            _table(dk, flat.shape[:-1]).reshape(lengths.shape),
+        )
 
     def cylinder_lengths(self, angles: Any) -> np.ndarray:
         """Joint angles [theta2, theta3, theta4] (..., 3) -> cylinder lengths (inverse of eqs. 1-2).
@@ -738,10 +743,10 @@ class Excavator:
             # values; the numpy path below raises the error for what it refuses. _compiled written
             # out: calling it costs 0.17 us, a fifth of the benchmark's peer (a numba pose call).
             rates = np.asarray(D_dot, dtype=float)
-            accelerations = _NO_ACCELERATION if D_ddot is None else np.asarray(D_ddot, dtype=float)
+            given = _NO_ACCELERATION if D_ddot is None else np.asarray(D_ddot, dtype=float)
             rows = np.empty((10, 4))  # a new table per call: the caller keeps the views
             try:
-                if kernel.state(self._packed, D, rates, accelerations, rows):
+                if kernel.state(self._packed, D, rates, given, rows):
                     return BucketState(rows)
             except TypeError:  # arguments of types the kernel does not take (_warm)
                 pass

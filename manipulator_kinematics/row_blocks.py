@@ -9,6 +9,7 @@ faults), so a large batch is computed block by block into preallocated outputs. 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Literal, overload
 
 import numpy as np
 
@@ -18,6 +19,25 @@ BLOCK = 4096
 Outputs = np.ndarray | tuple[np.ndarray, ...]
 
 
+# Typed per call shape, so a caller's result is an array or a tuple as its function returns.
+@overload
+def in_blocks(
+    function: Callable[..., Outputs], *arrays: np.ndarray | None, block: int = ..., rows: Literal[True]
+) -> np.ndarray: ...
+@overload
+def in_blocks(
+    function: Callable[..., np.ndarray],
+    *arrays: np.ndarray | None,
+    block: int = ...,
+    rows: Literal[False] = ...,
+) -> np.ndarray: ...
+@overload
+def in_blocks(
+    function: Callable[..., tuple[np.ndarray, ...]],
+    *arrays: np.ndarray | None,
+    block: int = ...,
+    rows: Literal[False] = ...,
+) -> tuple[np.ndarray, ...]: ...
 def in_blocks(
     function: Callable[..., Outputs], *arrays: np.ndarray | None, block: int = BLOCK, rows: bool = False
 ) -> Outputs:

@@ -393,10 +393,11 @@ class JointLimits:
         inside = q <= self.upper + tol
         return np.where(below, -1, np.where(inside, 0, 1)).astype(np.int8)
 
-    def within(self, q: ArrayLike, tol: float = 0.0) -> np.ndarray | np.bool_:
-        """(...,) True where every joint is inside its limits (within ``tol``); False for NaN."""
+    def within(self, q: ArrayLike, tol: float = 0.0) -> np.ndarray:
+        """(...,) True where every joint is inside its limits (within ``tol``); False for NaN.
+        A 0-d array for one state: indexable like a batch's."""
         q = np.asarray(q, dtype=float)
-        return ((q >= self.lower - tol) & (q <= self.upper + tol)).all(axis=-1)
+        return np.asarray(((q >= self.lower - tol) & (q <= self.upper + tol)).all(axis=-1))
 
     def clip(self, q: ArrayLike) -> np.ndarray:
         """q moved into the limits (NaN stays NaN)."""

@@ -45,13 +45,13 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 
-from manipulator_kinematics.schema import Number
+from manipulator_kinematics.schema import Number, Schema
 
 _KG = Number(min=0.0, max=10_000.0, unit="kg")
 _M = Number(min=-10.0, max=10.0, unit="m")
 
 #: ``palletizer.masses``: the lumped bodies of the module docstring.
-MASS_SCHEMA = {
+MASS_SCHEMA: Schema = {
     "gravity": Number(min=0.0, max=100.0, unit="m/s^2", doc="gravitational acceleration"),
     "payload": Number(min=0.0, max=10_000.0, unit="kg", doc="payload at the TCP, gripper included"),
     "lower_arm": {"mass": _KG, "com": _M},

@@ -71,7 +71,11 @@ LIMIT_TOL = 1e-10
 #: A joint this close (m) below the chord still counts as positive envelope (round-off).
 ENVELOPE_TOL = 1e-9
 #: The paper's example (section 2.2, Fig. 5), deg: fixed theta1..theta4, ranges of theta5, theta6.
-PAPER_EXAMPLE = {"fixed": (0.0, 75.0, 165.0, 160.0), "theta5": (160.0, 240.0), "theta6": (30.0, 170.0)}
+PAPER_EXAMPLE: dict[str, tuple[float, ...]] = {
+    "fixed": (0.0, 75.0, 165.0, 160.0),
+    "theta5": (160.0, 240.0),
+    "theta6": (30.0, 170.0),
+}
 
 
 SCHEMA: Schema = {
@@ -210,7 +214,10 @@ class PumpBoom:
         self.root = np.asarray(root, dtype=float)
         self.lengths = np.asarray(lengths, dtype=float)
         if self.root.shape != (2,) or self.lengths.shape != (5,) or not np.all(self.lengths > 0.0):
-            raise ValueError(f"need a root pin (r, z) and five positive lengths, got {root}, {lengths}")
+            raise ValueError(
+                f"need a root pin (r, z) and five positive lengths, got {self.root.tolist()}, "
+                f"{self.lengths.tolist()}"
+            )
         if len(limits.names) != 6:
             raise ValueError("the pump boom has six joints: slew and five sections")
         self.limits = limits
@@ -223,7 +230,7 @@ class PumpBoom:
         #: Joint speed limits (6,) rad/s (inf: none), which pours respect (:mod:`.pour`).
         self.joint_speed = np.full(6, np.inf) if joint_speed is None else np.asarray(joint_speed, dtype=float)
         if self.joint_speed.shape != (6,) or not np.all(self.joint_speed > 0.0):
-            raise ValueError(f"need six joint speed limits > 0 (inf: none), got {joint_speed}")
+            raise ValueError(f"need six joint speed limits > 0 (inf: none), got {self.joint_speed.tolist()}")
         self.reach = float(self.lengths.sum())
 
     # ---- construction -------------------------------------------------------------------------
@@ -294,6 +301,7 @@ class PumpBoom:
                         "--output <table file> and point regions.table_file at it"
                     )
             if self._table is None:
+                assert self._table_error is not None  # set with the table's absence above
                 raise self._table_error
         return self._table
 
@@ -419,8 +427,9 @@ class PumpBoom:
     def example_sweep(self, n: int = 201) -> np.ndarray:
         """Joint states (n, n, 6) of the paper's Fig. 5 example: theta1..theta4 fixed, theta5 and
         theta6 over their ranges (n values each, ends included)."""
-        theta5 = np.radians(np.linspace(*PAPER_EXAMPLE["theta5"], n))
-        theta6 = np.radians(np.linspace(*PAPER_EXAMPLE["theta6"], n))
+        (first5, last5), (first6, last6) = PAPER_EXAMPLE["theta5"], PAPER_EXAMPLE["theta6"]
+        theta5 = np.radians(np.linspace(first5, last5, n))
+        theta6 = np.radians(np.linspace(first6, last6, n))
         q = np.empty((n, n, 6))
         q[..., :4] = np.radians(PAPER_EXAMPLE["fixed"])
         q[..., 4], q[..., 5] = np.meshgrid(theta5, theta6, indexing="ij")
@@ -526,9 +535,9 @@ class PumpBoom:
             failure = Failure(int(result.failure))
             return (tuple(result.q.tolist()) if failure is Failure.NONE else None), failure
         q = np.empty(6)
-        seeded = seed_slew is not None
+        slew = 0.0 if seed_slew is None else float(seed_slew)
         failure, _ = kernel.region_ik(
-            *self._kernel_args, float(x), float(y), float(z), float(seed_slew) if seeded else 0.0, seeded, q
+            *self._kernel_args, float(x), float(y), float(z), slew, seed_slew is not None, q
         )
         return (None if failure else tuple(q.tolist())), _FAILURES[failure]
 
@@ -606,7 +615,7 @@ class PumpBoom:
         q = np.empty(6)
         seeded = seed is not None
         failure, _ = kernel.region_ik(
-            *self._kernel_args, *point.tolist(), float(seed[0]) if seeded else 0.0, seeded, q
+            *self._kernel_args, *point.tolist(), float(seed[0]) if seed is not None else 0.0, seeded, q
         )
         if failure:
             q[:] = np.nan
