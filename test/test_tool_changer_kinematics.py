@@ -259,18 +259,20 @@ def mixed_targets(arm: ToolChanger, n: int, seed: int) -> np.ndarray:
     return T
 
 
-@pytest.mark.parametrize("tooled", [False, True])
-def test_the_compiled_kernel_is_the_numpy_path_for_one_target(arm: ToolChanger, tooled: bool) -> None:
+@pytest.mark.parametrize(
+    ("tooled", "n"), [(True, 2_000), (False, 2_000), pytest.param(False, 10_000, marks=pytest.mark.slow)]
+)
+def test_the_compiled_kernel_is_the_numpy_path_for_one_target(arm: ToolChanger, tooled: bool, n: int) -> None:
     """ik_kernel (one target, and its loop over a batch) against the vectorised numpy path over
-    10^4 targets, seeded and not and with a branch asked for: the same statuses, selections, ties
-    and texts, q within 1e-12."""
+    n targets (2,000; 10^4 in the slow tier), seeded and not and with a branch asked for: the same
+    statuses, selections, ties and texts, q within 1e-12."""
     model = arm
     if tooled:
         params = section()
         params["tool_xyz"], params["tool_rpy"] = [0.05, -0.02, 0.3], [0.3, -0.2, 1.1]
         model = ToolChanger.from_parameters(params)
     assert model.compiled_kernel(wait=True) is not None
-    T = mixed_targets(model, 10_000 if not tooled else 2_000, 41 + tooled)
+    T = mixed_targets(model, n, 41 + tooled)
     seeds = in_limits(model, len(T), 42)
     seen = set()
     for seed, branch in ((None, None), (seeds, None), (seeds, "back_down_flip")):
