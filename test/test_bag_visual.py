@@ -18,7 +18,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_harness import REPO, Probe
 from sensor_msgs.msg import JointState
 
-from excavator_kinematics.kinematics import bucket_quaternion
+from excavator_kinematics.core.kinematics import bucket_quaternion
 from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.bag.types import BagError
 from manipulator_kinematics.bag.visual import add_visuals

@@ -1,5 +1,5 @@
-"""Grade indication and the URDF joints' rates (excavator_kinematics.display_outputs) against hand geometry,
-finite differences and the forward node across processes."""
+"""Grade indication and the URDF joints' rates (excavator_kinematics.nodes.display_outputs) against hand
+geometry, finite differences and the forward node across processes."""
 
 from __future__ import annotations
 
@@ -13,9 +13,9 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe
 from sensor_msgs.msg import JointState
 
-from excavator_kinematics.display_outputs import DesignPlane, urdf_joint_states
-from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator
-from excavator_kinematics.urdf_joints import URDF_JOINTS, joint_positions
+from excavator_kinematics.core.kinematics import CYLINDERS, JOINTS, Excavator
+from excavator_kinematics.core.urdf_joints import URDF_JOINTS, joint_positions
+from excavator_kinematics.nodes.display_outputs import DesignPlane, urdf_joint_states
 from manipulator_kinematics.param_files import ConfigError, config_path
 
 EXC = Excavator.default()

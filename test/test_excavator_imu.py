@@ -1,4 +1,4 @@
-"""Cylinder states from inclination sensors (excavator_kinematics.imu): IMU readings generated from
+"""Cylinder states from inclination sensors (excavator_kinematics.sensing.imu): IMU readings generated from
 known states (orientation, gyro and gravity in each sensor's frame, mounting rotations, a tilted
 machine, a different heading per sensor) give back the cylinder lengths and rates."""
 
@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from excavator_kinematics.design_surface import read_landxml
-from excavator_kinematics.imu import (
+from excavator_kinematics.core.kinematics import Excavator, StrokeError
+from excavator_kinematics.grade.design_surface import read_landxml
+from excavator_kinematics.sensing.imu import (
     GRAVITY,
     MAX_SIDEWAYS_TILT,
     SENSORS,
@@ -23,7 +24,6 @@ from excavator_kinematics.imu import (
     up_from_acceleration,
     up_from_orientation,
 )
-from excavator_kinematics.kinematics import Excavator, StrokeError
 
 EXC = Excavator.default()
 LIM = EXC.limits
@@ -199,7 +199,7 @@ def test_a_machine_rolled_near_90_deg_gets_no_rates_it_cannot_have():
     15.6 m/s to 1.6e7 m/s: the side angle's rate divides by ux^2 + uz^2, which vanishes when a
     sensor's y axis points up. A set beyond MAX_SIDEWAYS_TILT is refused with the reason; below it
     the noise stays well inside RATE_MARGIN x the speed limits."""
-    from excavator_kinematics.imu_state_node import RATE_MARGIN
+    from excavator_kinematics.nodes.imu_state_node import RATE_MARGIN
 
     arm = ImuArm(EXC, imu_section("h_link"))
     rng = np.random.default_rng(29)
@@ -260,7 +260,7 @@ def test_imu_state_node_publishes_cylinder_lengths_and_refuses_bad_sensors():
     orientation sets and gravity-only sets give back the lengths and rates; a stale boom sensor
     and an implausible arm reading stop the output with a logged reason."""
 
-    from excavator_kinematics.kinematics import CYLINDERS
+    from excavator_kinematics.core.kinematics import CYLINDERS
 
     D = LIM.reference + np.array([0.5, 0.12, -0.3, 0.2])
     D_dot = np.array([0.3, 0.05, -0.08, 0.1])
@@ -429,7 +429,7 @@ def test_whole_chain_on_imus_across_processes():
     from ros_harness import NodeProcess, Probe
     from sensor_msgs.msg import Imu, JointState
 
-    from excavator_kinematics.kinematics import JOINTS
+    from excavator_kinematics.core.kinematics import JOINTS
     from manipulator_kinematics.param_files import config_path
 
     tilt = (math.atan(0.02), -math.atan(0.05), 0.0)
@@ -506,7 +506,7 @@ def test_whole_chain_on_imus_across_processes():
 def test_mk_evaluate_checks_bucket_pose_level(tmp_path):
     """mk_evaluate recomputes bucket_pose_level from machine_tilt: exact messages give zero, a
     planted 2 mm error in 5 of 50 is reported as such."""
-    from excavator_kinematics.synthetic import excavator_bag
+    from excavator_kinematics.tools.synthetic import excavator_bag
     from manipulator_kinematics.bag.evaluate import Setup, evaluate_bag
     from manipulator_kinematics.bag.reader import BagReader
     from manipulator_kinematics.bag.synthetic import Topic, write_bag
@@ -552,7 +552,7 @@ def test_mk_evaluate_checks_bucket_pose_level(tmp_path):
 
 def test_simulated_readings_match_the_independent_generator():
     """imu.simulated_readings (used by the slope example) against this file's pin-based generator."""
-    from excavator_kinematics.imu import simulated_readings
+    from excavator_kinematics.sensing.imu import simulated_readings
 
     for body in ("h_link", "bucket"):
         arm = ImuArm(EXC, imu_section(body))
@@ -571,7 +571,7 @@ def test_slope_example_writes_bag_and_png(tmp_path):
     first-order bound of its noise."""
     from matplotlib.image import imread
 
-    from excavator_kinematics.slope_example import run
+    from excavator_kinematics.demo.slope_example import run
     from manipulator_kinematics.bag.reader import BagReader
 
     result = run(tmp_path, seconds=2.0, rate=50.0)
@@ -631,7 +631,7 @@ def test_slope_example_bag_is_one_tf_tree(tmp_path):
     and base_level -> base_link is the level rotation of machine_tilt."""
     from rosbags.typesys import Stores, get_typestore
 
-    from excavator_kinematics.slope_example import run
+    from excavator_kinematics.demo.slope_example import run
     from manipulator_kinematics.bag.reader import BagReader
     from manipulator_kinematics.bag.visual import urdf_joints
     from manipulator_kinematics.registry import machine
@@ -692,7 +692,7 @@ def test_bag_visuals_write_the_level_frame_from_machine_tilt(tmp_path):
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Header
 
-    from excavator_kinematics.kinematics import CYLINDERS, JOINTS
+    from excavator_kinematics.core.kinematics import CYLINDERS, JOINTS
     from manipulator_kinematics.bag.synthetic import Topic, write_bag
     from manipulator_kinematics.bag.visual import add_visuals
     from manipulator_kinematics.codec.packed import serialize_unpadded
@@ -751,7 +751,7 @@ def test_bag_visuals_write_the_level_frame_from_machine_tilt(tmp_path):
 def test_mounting_figure_is_drawn(tmp_path):
     from matplotlib.image import imread
 
-    from excavator_kinematics.imu_figure import draw
+    from excavator_kinematics.sensing.imu_figure import draw
 
     draw(EXC, tmp_path / "frames.png")
     assert imread(tmp_path / "frames.png").shape[1] > 500

@@ -24,7 +24,7 @@ import pytest
 from ros_harness import IK_FK, start_with_services
 from sensor_msgs.msg import JointState
 
-from excavator_kinematics.design_surface import MAX_ELEMENTS, read_landxml
+from excavator_kinematics.grade.design_surface import MAX_ELEMENTS, read_landxml
 from manipulator_kinematics.bag.evaluate import load_setup
 from manipulator_kinematics.bag.reader import MAX_BAG_BYTES, BagReader
 from manipulator_kinematics.bag.types import BagError
