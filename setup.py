@@ -26,13 +26,13 @@ setup(
     entry_points={
         "console_scripts": [
             # excavator (paper 000)
-            "excavator_demo = excavator_kinematics.demo:main",
-            "excavator_forward = excavator_kinematics.forward_node:main",
-            "excavator_velocity_ik = excavator_kinematics.velocity_ik_node:main",
-            "excavator_sim = excavator_kinematics.sim_node:main",
-            "excavator_ik_server = excavator_kinematics.ik_server_node:main",
-            "excavator_imu_state = excavator_kinematics.imu_state_node:main",
-            "excavator_slope_example = excavator_kinematics.slope_example:main",
+            "excavator_demo = excavator_kinematics.demo.demo:main",
+            "excavator_forward = excavator_kinematics.nodes.forward_node:main",
+            "excavator_velocity_ik = excavator_kinematics.nodes.velocity_ik_node:main",
+            "excavator_sim = excavator_kinematics.nodes.sim_node:main",
+            "excavator_ik_server = excavator_kinematics.nodes.ik_server_node:main",
+            "excavator_imu_state = excavator_kinematics.nodes.imu_state_node:main",
+            "excavator_slope_example = excavator_kinematics.demo.slope_example:main",
             # SCARA-type arm (paper 002)
             "scara_ik_server = scara_kinematics.nodes:ik_server",
             "scara_forward = scara_kinematics.nodes:forward",
@@ -58,7 +58,7 @@ setup(
             "mk_urdf = manipulator_kinematics.urdf:main",
             "mk_machine_check = manipulator_kinematics.hydraulic.check:main",
             "mk_calibrate = manipulator_kinematics.hydraulic.measure_up:main",
-            "excavator_working_ranges = excavator_kinematics.working_ranges:main",
+            "excavator_working_ranges = excavator_kinematics.tools.working_ranges:main",
         ],
         # The machine registry (manipulator_kinematics.registry): one Machine per machine package.
         "manipulator_kinematics.machines": [

@@ -18,8 +18,8 @@ import shutil
 import time
 from pathlib import Path
 
-from excavator_kinematics.kinematics import Excavator
-from excavator_kinematics.synthetic import excavator_bag
+from excavator_kinematics.core.kinematics import Excavator
+from excavator_kinematics.tools.synthetic import excavator_bag
 from manipulator_kinematics.bag.asbuilt import process_bag, run_fleet
 from manipulator_kinematics.bag.synthetic import write_bag
 

@@ -18,8 +18,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from excavator_kinematics.kinematics import Excavator
-from excavator_kinematics.synthetic import excavator_bag
+from excavator_kinematics.core.kinematics import Excavator
+from excavator_kinematics.tools.synthetic import excavator_bag
 from manipulator_kinematics.bag.evaluate import evaluate_bag, render, write_plots
 from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.bag.synthetic import write_bag

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.tri import Triangulation
 
-from excavator_kinematics.design_surface import SitePose, Tin, cutting_edge, read_landxml, write_landxml
+from excavator_kinematics.grade.design_surface import SitePose, Tin, cutting_edge, read_landxml, write_landxml
 
 E0, N0 = 431_000.0, 5_861_000.0
 

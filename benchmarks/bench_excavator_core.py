@@ -28,8 +28,8 @@ from collections.abc import Callable
 import numpy as np
 from numba import njit
 
-from excavator_kinematics import state_kernel
-from excavator_kinematics.kinematics import BucketState, Excavator, compiled_kernel
+from excavator_kinematics.core import state_kernel
+from excavator_kinematics.core.kinematics import BucketState, Excavator, compiled_kernel
 
 SAMPLES = 240
 

@@ -29,15 +29,15 @@ import time
 import numpy as np
 from scipy.optimize import least_squares
 
-from excavator_kinematics.inverse import compiled_kernel, solve_pose
-from excavator_kinematics.kinematics import Excavator
+from excavator_kinematics.core.inverse import compiled_kernel, solve_pose
+from excavator_kinematics.core.kinematics import Excavator
 from manipulator_kinematics.planar import wrap_angle
 
 _FIRST_CALL = """
 import time
 start = time.perf_counter()
-from excavator_kinematics.inverse import compiled_kernel
-from excavator_kinematics.kinematics import Excavator
+from excavator_kinematics.core.inverse import compiled_kernel
+from excavator_kinematics.core.kinematics import Excavator
 model = Excavator.default()
 ready = time.perf_counter()
 compiled_kernel(model, wait=True)

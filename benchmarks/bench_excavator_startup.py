@@ -31,9 +31,9 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from excavator_kinematics import message_codec
-from excavator_kinematics.demo import node_command
-from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator
+from excavator_kinematics.core.kinematics import CYLINDERS, JOINTS, Excavator
+from excavator_kinematics.demo.demo import node_command
+from excavator_kinematics.nodes import message_codec
 from manipulator_kinematics.ros_domain import reserved_domain
 
 

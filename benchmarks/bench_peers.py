@@ -110,9 +110,9 @@ def worker() -> None:
 
     job = json.load(sys.stdin)
     sys.path.insert(0, str(REPO))
-    from excavator_kinematics.inverse import compiled_kernel as excavator_ik_kernel
-    from excavator_kinematics.kinematics import Excavator
-    from excavator_kinematics.kinematics import compiled_kernel as excavator_state_kernel
+    from excavator_kinematics.core.inverse import compiled_kernel as excavator_ik_kernel
+    from excavator_kinematics.core.kinematics import Excavator
+    from excavator_kinematics.core.kinematics import compiled_kernel as excavator_state_kernel
     from manipulator_kinematics import serial_chain
     from palletizer_kinematics.kinematics import Palletizer
     from palletizer_kinematics.kinematics import compiled_kernel as palletizer_kernel

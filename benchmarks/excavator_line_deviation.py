@@ -28,9 +28,9 @@ import time
 import numpy as np
 import yaml
 
-from excavator_kinematics.kinematics import Excavator
-from excavator_kinematics.plant import Plant
-from excavator_kinematics.rate_command import rate_command, toward_line
+from excavator_kinematics.core.kinematics import Excavator
+from excavator_kinematics.core.plant import Plant
+from excavator_kinematics.core.rate_command import rate_command, toward_line
 from manipulator_kinematics.node_util import console_script
 from manipulator_kinematics.param_files import config_path
 
@@ -77,7 +77,7 @@ def across_processes(linear: np.ndarray, duration: float, gives_way: bool) -> tu
     from rclpy.node import Node
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from excavator_kinematics import message_codec
+    from excavator_kinematics.nodes import message_codec
 
     files = [
         arg

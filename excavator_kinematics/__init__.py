@@ -1,6 +1,6 @@
 """Hydraulic excavator kinematics (paper 000) and its ROS 2 nodes.
 
-The numpy core is :mod:`excavator_kinematics.kinematics` (no rclpy); nodes are thin adapters.
+The numpy core is :mod:`excavator_kinematics.core.kinematics` (no rclpy); nodes are thin adapters.
 """
 
 from manipulator_kinematics.stopping import install_for

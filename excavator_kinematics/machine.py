@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from excavator_kinematics.kinematics import ACTUATORS, Excavator
-from excavator_kinematics.machine_file import SCHEMA, SECTION, describe
+from excavator_kinematics.core.kinematics import ACTUATORS, Excavator
+from excavator_kinematics.core.machine_file import SCHEMA, SECTION, describe
 from manipulator_kinematics.registry import Hook, Machine
 from manipulator_kinematics.serial_chain import JointLimits
 
@@ -62,10 +62,10 @@ MACHINE = Machine(
     },
     joint_names=lambda model: ACTUATORS,
     limits=_limits,
-    analyse=Hook("excavator_kinematics.evaluation:analyse"),
-    synthesize=Hook("excavator_kinematics.synthetic:excavator_bag"),
-    samples=Hook("excavator_kinematics.evaluation:samples"),
+    analyse=Hook("excavator_kinematics.tools.evaluation:analyse"),
+    synthesize=Hook("excavator_kinematics.tools.synthetic:excavator_bag"),
+    samples=Hook("excavator_kinematics.tools.evaluation:samples"),
     forward_node="excavator_forward",
-    urdf=Hook("excavator_kinematics.urdf_joints:excavator_urdf"),
-    scene=Hook("excavator_kinematics.scene:excavator_scene"),
+    urdf=Hook("excavator_kinematics.core.urdf_joints:excavator_urdf"),
+    scene=Hook("excavator_kinematics.tools.scene:excavator_scene"),
 )

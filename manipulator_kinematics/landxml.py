@@ -2,7 +2,7 @@
 
 Points are written as LandXML orders them, "northing easting elevation", from site-frame x =
 easting, y = northing, z = elevation (metres). Reading a design TIN, with its bounds and checks,
-is the excavator's :mod:`excavator_kinematics.design_surface`.
+is the excavator's :mod:`excavator_kinematics.grade.design_surface`.
 """
 
 from __future__ import annotations

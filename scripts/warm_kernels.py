@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import time
 
-from excavator_kinematics import inverse
-from excavator_kinematics import kinematics as excavator
+from excavator_kinematics.core import inverse
+from excavator_kinematics.core import kinematics as excavator
 from manipulator_kinematics import serial_chain
 from palletizer_kinematics import kinematics as palletizer
 from pump_boom_kinematics import kinematics as pump_boom

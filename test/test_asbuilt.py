@@ -118,7 +118,7 @@ def test_gaps_in_the_record_and_bad_cells_are_handled() -> None:
 
 
 def test_the_landxml_surface_reads_back_with_the_design_reader(tmp_path) -> None:
-    from excavator_kinematics.design_surface import read_landxml
+    from excavator_kinematics.grade.design_surface import read_landxml
 
     left, right = sweep(301, 3.0)
     grid = lowest_elevation(left, right, 0.25)

@@ -9,9 +9,9 @@ import duckdb
 import numpy as np
 import pytest
 
-from excavator_kinematics.design_surface import cutting_edge
-from excavator_kinematics.kinematics import Excavator
-from excavator_kinematics.synthetic import excavator_bag
+from excavator_kinematics.core.kinematics import Excavator
+from excavator_kinematics.grade.design_surface import cutting_edge
+from excavator_kinematics.tools.synthetic import excavator_bag
 from manipulator_kinematics.asbuilt import lowest_elevation
 from manipulator_kinematics.bag.asbuilt import fleet_bags, main, merge_tables, process_bag
 from manipulator_kinematics.bag.synthetic import write_bag
@@ -118,7 +118,7 @@ def test_bad_arguments_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixtur
 
 
 def test_the_slope_example_maps_its_cut_against_the_design(tmp_path: Path) -> None:
-    from excavator_kinematics.slope_example import run
+    from excavator_kinematics.demo.slope_example import run
     from manipulator_kinematics.bag.reader import BagReader
 
     run(tmp_path, seconds=2.0, rate=25.0)

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import yaml
 
-from excavator_kinematics.kinematics import CYLINDERS, Excavator
-from excavator_kinematics.synthetic import excavator_bag
+from excavator_kinematics.core.kinematics import CYLINDERS, Excavator
+from excavator_kinematics.tools.synthetic import excavator_bag
 from manipulator_kinematics.bag.evaluate import Setup, evaluate_bag, load_setup
 from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.bag.synthetic import (

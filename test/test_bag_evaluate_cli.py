@@ -15,8 +15,8 @@ import pytest
 import yaml
 from test_bag_evaluate import DATA, EXC, RATE, SETUP, changed, only
 
-from excavator_kinematics.kinematics import CYLINDERS
-from excavator_kinematics.synthetic import excavator_bag
+from excavator_kinematics.core.kinematics import CYLINDERS
+from excavator_kinematics.tools.synthetic import excavator_bag
 from manipulator_kinematics.bag.evaluate import evaluate_bag, load_setup
 from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.bag.synthetic import (

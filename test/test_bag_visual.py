@@ -13,7 +13,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from ros_harness import REPO
 
-from excavator_kinematics.kinematics import bucket_quaternion
+from excavator_kinematics.core.kinematics import bucket_quaternion
 from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.bag.types import BagError
 from manipulator_kinematics.bag.visual import add_visuals

@@ -23,13 +23,13 @@ import numpy as np
 atexit.register(lambda: print("loaded at exit:", kinematics.KERNEL.ready is not None))
 if sys.argv[1] == "rclpy":
     import rclpy
-from excavator_kinematics import kinematics
+from excavator_kinematics.core import kinematics
 exc = kinematics.Excavator.default()
 D = np.concatenate([[0.1], 0.5 * (exc.limits.stroke_min + exc.limits.stroke_max)[-3:]])
 exc.state(D, np.zeros(4))  # starts the kernel's load, answered by numpy
 assert kinematics.KERNEL.ready is None
 deadline = time.monotonic() + 60
-while "excavator_kinematics.state_kernel" not in sys.modules and time.monotonic() < deadline:
+while "excavator_kinematics.core.state_kernel" not in sys.modules and time.monotonic() < deadline:
     time.sleep(0.001)  # until the loader is inside the import
 """
 
@@ -56,7 +56,7 @@ EXIT_DURING_THE_COMPILE = """
 import os, sys, time
 from pathlib import Path
 import numpy as np
-from excavator_kinematics import kinematics
+from excavator_kinematics.core import kinematics
 
 exc = kinematics.Excavator.default()
 D = np.concatenate([[0.1], 0.5 * (exc.limits.stroke_min + exc.limits.stroke_max)[-3:]])

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from excavator_kinematics.cycle_report import spike_limit
+from excavator_kinematics.demo.cycle_report import spike_limit
 
 
 def test_the_axis_follows_the_signal_whatever_share_of_spikes() -> None:

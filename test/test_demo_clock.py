@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from excavator_kinematics.bucket_path import CycleClock, path_deviation
-from excavator_kinematics.demo import expected_graph, missing_endpoints
+from excavator_kinematics.demo.bucket_path import CycleClock, path_deviation
+from excavator_kinematics.demo.demo import expected_graph, missing_endpoints
 
 MS = 1_000_000  # ns
 

@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from excavator_kinematics.bucket_path import to_task
-from excavator_kinematics.demo import PLAN_TIP_SPEED, demo_cycle
-from excavator_kinematics.kinematics import ACTUATORS, Excavator
-from excavator_kinematics.path import plan_path
-from excavator_kinematics.planned_move import GAIN, LEAD, SETTLE, TOLERANCE, Trajectory, arrival
-from excavator_kinematics.plant import Plant
+from excavator_kinematics.core.kinematics import ACTUATORS, Excavator
+from excavator_kinematics.core.path import plan_path
+from excavator_kinematics.core.plant import Plant
+from excavator_kinematics.demo.bucket_path import to_task
+from excavator_kinematics.demo.demo import PLAN_TIP_SPEED, demo_cycle
+from excavator_kinematics.demo.planned_move import GAIN, LEAD, SETTLE, TOLERANCE, Trajectory, arrival
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Design TIN (excavator_kinematics.design_surface): LandXML 1.2 loading, heights against hand
+"""Design TIN (excavator_kinematics.grade.design_surface): LandXML 1.2 loading, heights against hand
 geometry and the design plane, the point location against brute force, the cutting edge."""
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from matplotlib.tri import Triangulation
 
-from excavator_kinematics.design_surface import SitePose, Tin, cutting_edge, read_landxml, write_landxml
-from excavator_kinematics.display_outputs import DesignPlane
-from excavator_kinematics.kinematics import Excavator
+from excavator_kinematics.core.kinematics import Excavator
+from excavator_kinematics.grade.design_surface import SitePose, Tin, cutting_edge, read_landxml, write_landxml
+from excavator_kinematics.nodes.display_outputs import DesignPlane
 from manipulator_kinematics.param_files import ConfigError
 
 DITCH = Path(__file__).parent / "data" / "landxml" / "ditch.xml"

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from test_design_surface import DITCH, E0, N0, ditch_by_hand
 
-from excavator_kinematics.design_surface import SitePose, cutting_edge, read_landxml
-from excavator_kinematics.kinematics import Excavator
+from excavator_kinematics.core.kinematics import Excavator
+from excavator_kinematics.grade.design_surface import SitePose, cutting_edge, read_landxml
 
 pytestmark = pytest.mark.ros
 
@@ -24,7 +24,7 @@ def test_forward_node_publishes_cutting_edge_grade_over_the_tin():
     from ros_harness import NodeProcess, Probe
     from sensor_msgs.msg import JointState
 
-    from excavator_kinematics.kinematics import CYLINDERS, JOINTS
+    from excavator_kinematics.core.kinematics import CYLINDERS, JOINTS
     from manipulator_kinematics.param_files import config_path
 
     exc = Excavator.default()

@@ -19,9 +19,9 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe, start_with_services
 from sensor_msgs.msg import JointState
 
-from excavator_kinematics import message_codec
-from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
-from excavator_kinematics.twist import bucket_angles, twist_from_q_dot
+from excavator_kinematics.core.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
+from excavator_kinematics.core.twist import bucket_angles, twist_from_q_dot
+from excavator_kinematics.nodes import message_codec
 from manipulator_kinematics.param_files import config_path, load_parameters
 from manipulator_kinematics_interfaces.srv import SolveIK
 

@@ -1,5 +1,6 @@
-"""Grade indication and the URDF joints' rates (excavator_kinematics.display_outputs) against hand geometry,
-finite differences and the forward node across processes."""
+"""Grade indication and the URDF joints' rates (excavator_kinematics.nodes.display_outputs)
+against hand geometry and finite differences (the forward node publishing them:
+test_excavator_grade_ros.py)."""
 
 from __future__ import annotations
 
@@ -8,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from excavator_kinematics.display_outputs import DesignPlane, urdf_joint_states
-from excavator_kinematics.kinematics import Excavator
-from excavator_kinematics.urdf_joints import joint_positions
+from excavator_kinematics.core.kinematics import Excavator
+from excavator_kinematics.core.urdf_joints import joint_positions
+from excavator_kinematics.nodes.display_outputs import DesignPlane, urdf_joint_states
 from manipulator_kinematics.param_files import ConfigError
 
 EXC = Excavator.default()

@@ -14,9 +14,9 @@ from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe
 from sensor_msgs.msg import JointState
 from test_excavator_grade import EXC, LIM
 
-from excavator_kinematics.display_outputs import urdf_joint_states
-from excavator_kinematics.kinematics import CYLINDERS, JOINTS
-from excavator_kinematics.urdf_joints import URDF_JOINTS
+from excavator_kinematics.core.kinematics import CYLINDERS, JOINTS
+from excavator_kinematics.core.urdf_joints import URDF_JOINTS
+from excavator_kinematics.nodes.display_outputs import urdf_joint_states
 from manipulator_kinematics.param_files import config_path
 
 pytestmark = pytest.mark.ros

@@ -1,4 +1,4 @@
-"""Excavator pose IK (excavator_kinematics.inverse) against independent checks: FK(IK) round trips
+"""Excavator pose IK (excavator_kinematics.core.inverse) against independent checks: FK(IK) round trips
 over 10^4 random states (the generating state among the solutions), eq. 3 of every open-chain
 candidate, a multi-start bounded least-squares solve giving the same solution set, the stroke-box
 boundary (a wider machine's states just outside), and one target = a batch of one (same bits)."""
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from excavator_kinematics.inverse import (
+from excavator_kinematics.core.inverse import (
     BRANCHES,
     compiled_kernel,
     open_chain_candidates,
@@ -20,7 +20,7 @@ from excavator_kinematics.inverse import (
     solve_position,
     stroke_margins,
 )
-from excavator_kinematics.kinematics import Excavator
+from excavator_kinematics.core.kinematics import Excavator
 from manipulator_kinematics.model import IKStatus, RequestError, matrix_quaternion, quaternion_matrix
 from manipulator_kinematics.param_files import config_path, load_parameters
 from manipulator_kinematics.planar import wrap_angle
@@ -277,7 +277,7 @@ def test_fkine_jacob0_and_the_six_d_pose_solve() -> None:
     pose = EXC.fkine(D)
     state = EXC.state(D, D_dot)
     np.testing.assert_allclose(pose[:, :3, 3], state.Q[:, :3], atol=1e-12)
-    from excavator_kinematics.kinematics import bucket_angular_velocity, bucket_quaternion
+    from excavator_kinematics.core.kinematics import bucket_angular_velocity, bucket_quaternion
 
     np.testing.assert_allclose(
         pose[:, :3, :3], quaternion_matrix(bucket_quaternion(D[:, 0], state.Q[:, 3])), atol=1e-12

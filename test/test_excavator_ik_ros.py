@@ -16,8 +16,8 @@ from geometry_msgs.msg import Point
 from ros_harness import IK_FK, NodeProcess, Probe, start_with_services
 from sensor_msgs.msg import JointState
 
-from excavator_kinematics.kinematics import ACTUATORS, Excavator
-from excavator_kinematics.path import plan_path
+from excavator_kinematics.core.kinematics import ACTUATORS, Excavator
+from excavator_kinematics.core.path import plan_path
 from manipulator_kinematics.model import matrix_quaternion
 from manipulator_kinematics.param_files import config_path, load_parameters
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes

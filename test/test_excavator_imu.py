@@ -1,4 +1,4 @@
-"""Cylinder states from inclination sensors (excavator_kinematics.imu): IMU readings generated from
+"""Cylinder states from inclination sensors (excavator_kinematics.sensing.imu): IMU readings generated from
 known states (orientation, gyro and gravity in each sensor's frame, mounting rotations, a tilted
 machine, a different heading per sensor) give back the cylinder lengths and rates."""
 
@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from excavator_kinematics.design_surface import read_landxml
-from excavator_kinematics.imu import (
+from excavator_kinematics.core.kinematics import Excavator, StrokeError
+from excavator_kinematics.grade.design_surface import read_landxml
+from excavator_kinematics.sensing.imu import (
     GRAVITY,
     MAX_SIDEWAYS_TILT,
     SENSORS,
@@ -23,7 +24,6 @@ from excavator_kinematics.imu import (
     up_from_acceleration,
     up_from_orientation,
 )
-from excavator_kinematics.kinematics import Excavator, StrokeError
 
 EXC = Excavator.default()
 LIM = EXC.limits
@@ -183,7 +183,7 @@ def test_a_machine_rolled_near_90_deg_gets_no_rates_it_cannot_have():
     15.6 m/s to 1.6e7 m/s: the side angle's rate divides by ux^2 + uz^2, which vanishes when a
     sensor's y axis points up. A set beyond MAX_SIDEWAYS_TILT is refused with the reason; below it
     the noise stays well inside RATE_MARGIN x the speed limits."""
-    from excavator_kinematics.imu_state_node import RATE_MARGIN
+    from excavator_kinematics.nodes.imu_state_node import RATE_MARGIN
 
     arm = ImuArm(EXC, imu_section("h_link"))
     rng = np.random.default_rng(29)
@@ -235,7 +235,7 @@ def test_level_frame_from_the_cab_imu_gives_heights_along_gravity():
 def test_mk_evaluate_checks_bucket_pose_level(tmp_path):
     """mk_evaluate recomputes bucket_pose_level from machine_tilt: exact messages give zero, a
     planted 2 mm error in 5 of 50 is reported as such."""
-    from excavator_kinematics.synthetic import excavator_bag
+    from excavator_kinematics.tools.synthetic import excavator_bag
     from manipulator_kinematics.bag.evaluate import Setup, evaluate_bag
     from manipulator_kinematics.bag.reader import BagReader
     from manipulator_kinematics.bag.synthetic import Topic, write_bag
@@ -281,7 +281,7 @@ def test_mk_evaluate_checks_bucket_pose_level(tmp_path):
 
 def test_simulated_readings_match_the_independent_generator():
     """imu.simulated_readings (used by the slope example) against this file's pin-based generator."""
-    from excavator_kinematics.imu import simulated_readings
+    from excavator_kinematics.sensing.imu import simulated_readings
 
     for body in ("h_link", "bucket"):
         arm = ImuArm(EXC, imu_section(body))
@@ -300,7 +300,7 @@ def test_slope_example_writes_bag_and_png(tmp_path):
     first-order bound of its noise."""
     from matplotlib.image import imread
 
-    from excavator_kinematics.slope_example import run
+    from excavator_kinematics.demo.slope_example import run
     from manipulator_kinematics.bag.reader import BagReader
 
     result = run(tmp_path, seconds=2.0, rate=50.0)
@@ -360,7 +360,7 @@ def test_slope_example_bag_is_one_tf_tree(tmp_path):
     and base_level -> base_link is the level rotation of machine_tilt."""
     from rosbags.typesys import Stores, get_typestore
 
-    from excavator_kinematics.slope_example import run
+    from excavator_kinematics.demo.slope_example import run
     from manipulator_kinematics.bag.reader import BagReader
     from manipulator_kinematics.bag.visual import urdf_joints
     from manipulator_kinematics.registry import machine
@@ -421,7 +421,7 @@ def test_bag_visuals_write_the_level_frame_from_machine_tilt(tmp_path):
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Header
 
-    from excavator_kinematics.kinematics import CYLINDERS, JOINTS
+    from excavator_kinematics.core.kinematics import CYLINDERS, JOINTS
     from manipulator_kinematics.bag.synthetic import Topic, write_bag
     from manipulator_kinematics.bag.visual import add_visuals
     from manipulator_kinematics.codec.packed import serialize_unpadded
@@ -480,7 +480,7 @@ def test_bag_visuals_write_the_level_frame_from_machine_tilt(tmp_path):
 def test_mounting_figure_is_drawn(tmp_path):
     from matplotlib.image import imread
 
-    from excavator_kinematics.imu_figure import draw
+    from excavator_kinematics.sensing.imu_figure import draw
 
     draw(EXC, tmp_path / "frames.png")
     assert imread(tmp_path / "frames.png").shape[1] > 500

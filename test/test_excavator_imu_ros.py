@@ -11,7 +11,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 from test_excavator_imu import EXC, LIM, readings
 
-from excavator_kinematics.imu import SENSORS
+from excavator_kinematics.sensing.imu import SENSORS
 
 pytestmark = pytest.mark.ros
 
@@ -67,7 +67,7 @@ def test_imu_state_node_publishes_cylinder_lengths_and_refuses_bad_sensors():
     orientation sets and gravity-only sets give back the lengths and rates; a stale boom sensor
     and an implausible arm reading stop the output with a logged reason."""
 
-    from excavator_kinematics.kinematics import CYLINDERS
+    from excavator_kinematics.core.kinematics import CYLINDERS
 
     D = LIM.reference + np.array([0.5, 0.12, -0.3, 0.2])
     D_dot = np.array([0.3, 0.05, -0.08, 0.1])
@@ -210,7 +210,7 @@ def test_whole_chain_on_imus_across_processes():
     from ros_harness import NodeProcess, Probe
     from sensor_msgs.msg import Imu, JointState
 
-    from excavator_kinematics.kinematics import JOINTS
+    from excavator_kinematics.core.kinematics import JOINTS
     from manipulator_kinematics.param_files import config_path
 
     tilt = (math.atan(0.02), -math.atan(0.05), 0.0)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import yaml
 
-from excavator_kinematics.kinematics import (
+from excavator_kinematics.core.kinematics import (
     ACTUATORS,
     CYLINDERS,
     Excavator,
@@ -20,8 +20,8 @@ from excavator_kinematics.kinematics import (
     bucket_angular_velocity,
     bucket_quaternion,
 )
+from excavator_kinematics.core.machine_file import SCHEMA
 from excavator_kinematics.machine import MACHINE
-from excavator_kinematics.machine_file import SCHEMA
 from manipulator_kinematics.bag.topics import ACCEL, JOINT_STATE, POSE, TWIST
 from manipulator_kinematics.param_files import ConfigError, config_path, load_parameters
 from manipulator_kinematics.schema import validate

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 import yaml
 
-from excavator_kinematics.kinematics import Excavator
-from excavator_kinematics.plant import Plant
-from excavator_kinematics.urdf_joints import excavator_urdf
+from excavator_kinematics.core.kinematics import Excavator
+from excavator_kinematics.core.plant import Plant
+from excavator_kinematics.core.urdf_joints import excavator_urdf
 from manipulator_kinematics.param_files import ConfigError, config_path, load_parameters
 
 LIMITED = Excavator.default()

@@ -21,9 +21,7 @@ from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from excavator_kinematics import message_codec
-from excavator_kinematics.bucket_path import follow
-from excavator_kinematics.kinematics import (
+from excavator_kinematics.core.kinematics import (
     CYLINDERS,
     JOINTS,
     Excavator,
@@ -31,7 +29,9 @@ from excavator_kinematics.kinematics import (
     bucket_angular_velocity,
     bucket_quaternion,
 )
-from excavator_kinematics.twist import bucket_angles, twist_from_q_dot
+from excavator_kinematics.core.twist import bucket_angles, twist_from_q_dot
+from excavator_kinematics.demo.bucket_path import follow
+from excavator_kinematics.nodes import message_codec
 from manipulator_kinematics.param_files import config_path
 
 pytestmark = pytest.mark.ros

@@ -1,4 +1,4 @@
-"""Excavator plan_path (excavator_kinematics.path): straight tip lines at a constant bucket angle,
+"""Excavator plan_path (excavator_kinematics.core.path): straight tip lines at a constant bucket angle,
 timed within every actuator's max speed, the tip speed and the acceleration bound; a path that
 leaves the workspace ends at the farthest reachable point."""
 
@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from excavator_kinematics.kinematics import Excavator
-from excavator_kinematics.path import END_TOLERANCE, plan_path
+from excavator_kinematics.core.kinematics import Excavator
+from excavator_kinematics.core.path import END_TOLERANCE, plan_path
 from manipulator_kinematics.plan_bounds import MAX_POINTS, MAX_WAYPOINTS
 from manipulator_kinematics.time_scaling import ACCELERATION, TIP_SPEED
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from excavator_kinematics.kinematics import Excavator
-from excavator_kinematics.plant import Plant
-from excavator_kinematics.state_input import InputError, RateDifferentiator, SwingHold
+from excavator_kinematics.core.kinematics import Excavator
+from excavator_kinematics.core.plant import Plant
+from excavator_kinematics.nodes.state_input import InputError, RateDifferentiator, SwingHold
 from manipulator_kinematics.param_files import ConfigError
 
 LIMITS = Excavator.default().limits

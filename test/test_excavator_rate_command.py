@@ -9,9 +9,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from excavator_kinematics.kinematics import ACTUATORS, Excavator, bucket_quaternion
-from excavator_kinematics.plant import Plant
-from excavator_kinematics.rate_command import (
+from excavator_kinematics.core.kinematics import ACTUATORS, Excavator, bucket_quaternion
+from excavator_kinematics.core.plant import Plant
+from excavator_kinematics.core.rate_command import (
     END_ZONE,
     SINGULAR,
     STROKE,
@@ -22,7 +22,7 @@ from excavator_kinematics.rate_command import (
     stroke_scale,
     toward_line,
 )
-from excavator_kinematics.twist import bucket_angles, split_twist, swing_rate, twist_from_q_dot
+from excavator_kinematics.core.twist import bucket_angles, split_twist, swing_rate, twist_from_q_dot
 
 EXC = Excavator.default()
 LIMITS = EXC.limits

@@ -1,4 +1,4 @@
-"""The excavator's compiled single call (excavator_kinematics.state_kernel) against the numpy path,
+"""The excavator's compiled single call (excavator_kinematics.core.state_kernel) against the numpy path,
 the reference: 10^4 random states in and out of the limits, with rates and accelerations; and
 one state through the numpy path = that row of a batch, bit for bit (the same code)."""
 
@@ -9,8 +9,8 @@ import pickle
 import numpy as np
 import pytest
 
-from excavator_kinematics import kinematics
-from excavator_kinematics.kinematics import BucketState, Excavator, StrokeError, compiled_kernel
+from excavator_kinematics.core import kinematics
+from excavator_kinematics.core.kinematics import BucketState, Excavator, StrokeError, compiled_kernel
 
 EXC = Excavator.default()
 LIM = EXC.limits

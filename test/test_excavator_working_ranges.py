@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from excavator_kinematics.working_ranges import QUANTITIES, WorkingRanges, main
+from excavator_kinematics.tools.working_ranges import QUANTITIES, WorkingRanges, main
 from manipulator_kinematics.registry import machine
 
 

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from excavator_kinematics.design_surface import MAX_ELEMENTS, read_landxml
+from excavator_kinematics.grade.design_surface import MAX_ELEMENTS, read_landxml
 from manipulator_kinematics.bag.evaluate import load_setup
 from manipulator_kinematics.bag.reader import MAX_BAG_BYTES, BagReader
 from manipulator_kinematics.bag.types import BagError

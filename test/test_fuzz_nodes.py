@@ -47,12 +47,18 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import Header
 
-from excavator_kinematics import message_codec
-from excavator_kinematics.display_outputs import DesignPlane
-from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator, bucket_angular_velocity
-from excavator_kinematics.plant import Plant
-from excavator_kinematics.rate_command import rate_command
-from excavator_kinematics.twist import split_twist
+from excavator_kinematics.core.kinematics import (
+    ACTUATORS,
+    CYLINDERS,
+    JOINTS,
+    Excavator,
+    bucket_angular_velocity,
+)
+from excavator_kinematics.core.plant import Plant
+from excavator_kinematics.core.rate_command import rate_command
+from excavator_kinematics.core.twist import split_twist
+from excavator_kinematics.nodes import message_codec
+from excavator_kinematics.nodes.display_outputs import DesignPlane
 from manipulator_kinematics.model import RequestError, matrix_quaternion
 from manipulator_kinematics.param_files import config_path, load_parameters
 from manipulator_kinematics.registry import machine
@@ -490,8 +496,8 @@ def test_excavator_imu_state_survives_any_input(probe: Probe, nodes: dict[str, N
     level pose; no rate beyond 2 x a speed limit, nothing non-finite."""
     import time
 
-    from excavator_kinematics.imu import SENSORS, ImuArm, simulated_readings
-    from excavator_kinematics.imu_state_node import RATE_MARGIN
+    from excavator_kinematics.nodes.imu_state_node import RATE_MARGIN
+    from excavator_kinematics.sensing.imu import SENSORS, ImuArm, simulated_readings
 
     ns = "/fz_imu"
     imu_node, forward = nodes.pop("excavator_imu_state"), nodes.pop("excavator_imu_forward")

@@ -400,7 +400,7 @@ def test_k_ranges_and_reach_over_the_box(name: str) -> None:
 
 # ------------------------------------------------------------------ the CET200 equals today's model
 def test_cet200_equals_excavator_kinematics() -> None:
-    from excavator_kinematics.kinematics import Excavator
+    from excavator_kinematics.core.kinematics import Excavator
 
     excavator = Excavator.default()
     lo, hi = excavator.limits.d_min, excavator.limits.d_max

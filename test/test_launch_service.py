@@ -269,8 +269,8 @@ def excavator_chain_traffic(probe: Probe, namespace: str) -> Callable[[], int]:
 
 def excavator_traffic(probe: Probe, namespace: str) -> Callable[[], int]:
     """Cylinder lengths and swing in, bucket_pose out (the machine's own sensors' role)."""
-    from excavator_kinematics import message_codec
-    from excavator_kinematics.kinematics import CYLINDERS, JOINTS, Excavator
+    from excavator_kinematics.core.kinematics import CYLINDERS, JOINTS, Excavator
+    from excavator_kinematics.nodes import message_codec
 
     cylinders = probe.node.create_publisher(JointState, f"{namespace}/cylinder_lengths", QOS)
     swing = probe.node.create_publisher(JointState, f"{namespace}/joint_states", QOS)

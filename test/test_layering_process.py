@@ -24,8 +24,8 @@ def test_loading_the_registry_imports_no_hook_code_and_every_hook_resolves() -> 
         "manipulator_kinematics.bag",
         "manipulator_kinematics.urdf",
         "manipulator_kinematics.scene",
-        "excavator_kinematics.evaluation",
-        "excavator_kinematics.scene",
+        "excavator_kinematics.tools.evaluation",
+        "excavator_kinematics.tools.scene",
         "rosbags",
         "mcap",
     )

@@ -29,8 +29,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Int64
 from std_srvs.srv import Trigger
 
-from excavator_kinematics import message_codec
-from excavator_kinematics.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
+from excavator_kinematics.core.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
+from excavator_kinematics.nodes import message_codec
 from manipulator_kinematics.executor import EXECUTORS
 from manipulator_kinematics.param_files import config_path
 from manipulator_kinematics_interfaces.srv import SolveFK

@@ -22,7 +22,7 @@ from sensor_msgs.msg import JointState
 from test_bag_visual import read
 from visualization_msgs.msg import MarkerArray
 
-from excavator_kinematics.kinematics import CYLINDERS, Excavator
+from excavator_kinematics.core.kinematics import CYLINDERS, Excavator
 from manipulator_kinematics import ros_domain
 from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.bag.visual import add_visuals

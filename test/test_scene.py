@@ -1,4 +1,4 @@
-"""The drawing description (manipulator_kinematics.scene, excavator_kinematics.scene) against the
+"""The drawing description (manipulator_kinematics.scene, excavator_kinematics.tools.scene) against the
 kinematics it draws: link ends on the FK frames, cylinder ends on the pins at the commanded
 lengths, link lengths from the machine file, marker poses that turn z onto each segment."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from excavator_kinematics.kinematics import bucket_quaternion
+from excavator_kinematics.core.kinematics import bucket_quaternion
 from manipulator_kinematics.model import quaternion_matrix
 from manipulator_kinematics.registry import machine, machines
 from manipulator_kinematics.scene import cylinder_pose, middle_state, serial_scene, solids

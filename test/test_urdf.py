@@ -18,8 +18,8 @@ import pinocchio as pin
 import pytest
 from artefacts import xml_differences
 
-from excavator_kinematics.kinematics import bucket_quaternion
-from excavator_kinematics.urdf_joints import URDF_JOINTS, joint_positions
+from excavator_kinematics.core.kinematics import bucket_quaternion
+from excavator_kinematics.core.urdf_joints import URDF_JOINTS, joint_positions
 from manipulator_kinematics.model import quaternion_matrix
 from manipulator_kinematics.registry import machine, machines
 from manipulator_kinematics.urdf import (

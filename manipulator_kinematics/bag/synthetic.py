@@ -1,7 +1,7 @@
 """Bags made from the numpy cores alone: inputs along a smooth motion plus the outputs the nodes
 must publish for them. Used for the golden test bags (scripts/make_golden_bags.py, through each
 machine's ``synthesize`` hook) and the evaluate benchmark; no rclpy, no machine package: serial
-machines share :func:`serial_bag`, the excavator has its own (excavator_kinematics.synthetic).
+machines share :func:`serial_bag`, the excavator has its own (excavator_kinematics.tools.synthetic).
 
 Timing mirrors a live system: at each sample the inputs are recorded first, outputs a little
 later (``OUTPUT_DELAY``), all stamped with the sample time, so a replay delivers every input

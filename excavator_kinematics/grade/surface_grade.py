@@ -1,0 +1,143 @@
+"""The forward node's grade outputs against a design TIN (ROS side of :mod:`.design_surface`).
+
+Settings ``design_surface.*`` of excavator_forward (docs/excavator_nodes.md):
+
+* ``file``: a LandXML 1.2 file (``surface``: the Surface's name, empty = the only one), read at
+  start-up into a :class:`~excavator_kinematics.grade.design_surface.Tin` in the site frame
+  ``site_frame`` (x easting, y northing, z up);
+* where the machine is: ``site_pose_source: fixed`` (``site_position`` m, ``site_rpy`` rad of
+  base_link in the site frame) or ``topic``: geometry_msgs/PoseStamped on ``topics.site_pose``
+  (GNSS localisation; frame_id must be ``site_frame``), at most ``site_pose_max_age`` s from the
+  cylinder stamp.
+
+On each forward result it publishes, with the cylinder message's stamp, three
+geometry_msgs/PointStamped in ``site_frame``: ``topics.grade_tip``, ``grade_left``,
+``grade_right`` for the middle and the two ends of the cutting edge, ``point.x``/``point.y`` =
+the point's easting and northing, ``point.z`` = its height above the surface vertically below it
+(m, + above = cut, - below = fill). A point outside the surface gets no message; the status,
+``topics.grade_status`` (diagnostic_msgs/DiagnosticArray, transient local: a late subscriber gets
+the latest), says per point OK (on the surface), WARN (outside the surface) or ERROR (no site
+pose), and is published whenever it changes.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PointStamped, PoseStamped
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Header
+
+from excavator_kinematics.grade.design_surface import SitePose, Tin, cutting_edge, read_landxml
+from manipulator_kinematics.codec.packed import PackedMessage
+from manipulator_kinematics.node_util import ThrottledLog
+
+POINTS = ("tip", "left", "right")
+_FIELDS = ("header.stamp", "point")
+_OK, _OUTSIDE, _NO_POSE = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+_TEXT = {_OK: "on the design surface", _OUTSIDE: "outside the design surface", _NO_POSE: "no site pose"}
+
+
+class SurfaceGrade:
+    """Publishers, site pose and TIN of the surface grade outputs of one node."""
+
+    def __init__(
+        self,
+        node: Node,
+        settings: dict[str, Any],
+        topics: dict[str, str],
+        width: float,
+        qos: QoSProfile,
+        log: ThrottledLog,
+    ) -> None:
+        self.surface: Tin = read_landxml(settings["file"], settings["surface"])
+        self.frame = settings["site_frame"]
+        self.width = width
+        self.log = log
+        self.max_age_ns = int(settings["site_pose_max_age"] * 1e9)
+        self.from_topic = settings["site_pose_source"] == "topic"
+        self.pose: SitePose | None = (
+            None if self.from_topic else SitePose.from_rpy(settings["site_position"], settings["site_rpy"])
+        )
+        self.pose_stamp_ns = 0
+        header = Header(frame_id=self.frame)
+        self.messages = [PackedMessage(PointStamped(header=header), _FIELDS) for _ in POINTS]
+        self.publishers = [node.create_publisher(PointStamped, topics[f"grade_{p}"], qos) for p in POINTS]
+        latched = QoSProfile(
+            depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+        )
+        self.status_pub = node.create_publisher(DiagnosticArray, topics["grade_status"], latched)
+        self.status: tuple[int, ...] | None = None
+        self.clock = node.get_clock()
+        if self.from_topic:
+            node.create_subscription(PoseStamped, topics["site_pose"], self.on_pose, qos)
+        node.get_logger().info(
+            f"design surface {self.surface.name!r}: {len(self.surface.faces)} triangles from "
+            f"{settings['file']} in frame {self.frame!r}; site pose "
+            + (f"from {topics['site_pose']}" if self.from_topic else "fixed")
+        )
+
+    def on_pose(self, msg: PoseStamped) -> None:
+        p, q = msg.pose.position, msg.pose.orientation
+        values = (p.x, p.y, p.z, q.x, q.y, q.z, q.w)
+        norm = math.sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w)
+        if msg.header.frame_id != self.frame or not all(map(math.isfinite, values)) or abs(norm - 1.0) > 1e-3:
+            self.log(
+                "error",
+                f"rejected site pose: needs frame_id {self.frame!r} (got "
+                f"{msg.header.frame_id!r}), finite values and a unit quaternion (|q| = {norm:.6g})",
+            )
+            return
+        self.pose = SitePose.from_quaternion(values[:3], values[3:])
+        self.pose_stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+    def values(self, stamp_ns: int, theta1: float, tip: list[float]) -> list[list[float] | None]:
+        """[x, y, height] (site frame) of tip, left and right end of the cutting edge, None where
+        outside the surface or without a site pose (the status says which)."""
+        pose = self.pose
+        if pose is not None and self.from_topic and abs(stamp_ns - self.pose_stamp_ns) > self.max_age_ns:
+            self.log(
+                "warning",
+                f"no grade: the site pose is {(stamp_ns - self.pose_stamp_ns) * 1e-9:+.3f} s "
+                f"from the cylinder stamp (max age {self.max_age_ns * 1e-9:g} s)",
+            )
+            pose = None
+        if pose is None:
+            self.report((_NO_POSE,) * 3)
+            return [None] * 3
+        points = pose.apply(cutting_edge(tip, theta1, self.width))
+        heights = self.surface.heights(points)
+        self.report(tuple(_OK if inside else _OUTSIDE for inside in heights.inside.tolist()))
+        return [
+            [x, y, h] if inside else None
+            for (x, y, _), h, inside in zip(
+                points.tolist(), heights.height.tolist(), heights.inside.tolist(), strict=True
+            )
+        ]
+
+    def publish(self, sec_nanosec: tuple[int, int], values: list[list[float] | None]) -> None:
+        for message, publisher, value in zip(self.messages, self.publishers, values, strict=True):
+            if value is not None:
+                publisher.publish(message.pack((*sec_nanosec, *value)))
+
+    def report(self, status: tuple[int, ...]) -> None:
+        if status == self.status:
+            return
+        self.status = status
+        outside = [p for p, s in zip(POINTS, status, strict=True) if s != _OK]
+        if outside:
+            self.log("warning", f"no grade for {', '.join(outside)}: {_TEXT[max(status)]}")
+        self.status_pub.publish(
+            DiagnosticArray(
+                header=Header(stamp=self.clock.now().to_msg(), frame_id=self.frame),
+                status=[
+                    DiagnosticStatus(
+                        level=s, name=f"grade {p}", message=_TEXT[s], hardware_id=self.surface.name
+                    )
+                    for p, s in zip(POINTS, status, strict=True)
+                ],
+            )
+        )

@@ -1,0 +1,97 @@
+"""``excavator_ik_server``: the shared IK/FK server (:mod:`manipulator_kinematics.nodes.ik_server`)
+for the excavator, in the actuator coordinates D = [theta1, d2, d3, d4], plus ``plan_path``.
+
+* ``solve_ik``: a bucket pose -> D (joints ``swing_joint`` rad, ``boom_cylinder``,
+  ``arm_cylinder``, ``bucket_cylinder`` lengths m, as on ``cylinder_lengths`` / ``joint_states``),
+  closed form (:mod:`excavator_kinematics.core.inverse`). Mode ``pose`` (default with
+  ``use_orientation``): the orientation gives the swing heading and the bucket angle alpha;
+  mode ``position`` (default without): alpha of the seed, else the widest stroke margin. Branches
+  ``front_elbow_up``, ``front_elbow_down``, ``behind_elbow_up``, ``behind_elbow_down``.
+* ``solve_fk``: D (and its rates) -> bucket pose (the tip; yaw theta1, then -alpha about y) and
+  twist (eq. 8 and the bucket frame's turn).
+* ``plan_path`` (manipulator_kinematics_interfaces/srv/PlanPath): straight bucket-tip lines through
+  the waypoints at the bucket angle of the seed (else of the first waypoint's solution), timed
+  within every actuator's max speed, the tip speed and ``path.acceleration``, at rest at both
+  ends (:mod:`excavator_kinematics.core.path`); positions, velocities and accelerations. A path that
+  leaves the workspace ends at the farthest reachable point: success false (NO_IK_SOLUTION), the
+  reason, ``last_reachable_waypoint`` and the trajectory up to there. A request beyond the bounds
+  of every machine's plan (:mod:`manipulator_kinematics.plan_bounds`: waypoints, points, duration,
+  the ranges of step, speed and acceleration) is refused before any work, INVALID_GOAL_CONSTRAINTS.
+
+Settings in config/excavator_nodes.yaml (``/**/excavator_ik_server``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import ClassVar
+
+import numpy as np
+
+from excavator_kinematics.core.path import BucketPlan, plan_path
+from excavator_kinematics.nodes.node_schemas import NODES_CONFIG
+from manipulator_kinematics.nodes import run_node
+from manipulator_kinematics.nodes.ik_server import SETTINGS, PlanPathServer
+from manipulator_kinematics.plan_bounds import ACCELERATION_RANGE, STEP_RANGE, TIP_SPEED_RANGE
+from manipulator_kinematics.registry import Machine
+from manipulator_kinematics.schema import Number, Schema
+from manipulator_kinematics_interfaces.srv import PlanPath
+
+NODE = "excavator_ik_server"
+PATH_SETTINGS = {
+    "step": Number(
+        min=STEP_RANGE[0],
+        max=STEP_RANGE[1],
+        unit="m",
+        doc="plan_path: sample spacing along each line when the request's step is 0",
+    ),
+    "tip_speed": Number(
+        min=TIP_SPEED_RANGE[0],
+        max=TIP_SPEED_RANGE[1],
+        unit="m/s",
+        doc="plan_path: tip speed limit when the request's tip_speed is 0",
+    ),
+    "acceleration": Number(
+        min=ACCELERATION_RANGE[0],
+        max=ACCELERATION_RANGE[1],
+        unit="m/s^2",
+        doc="plan_path: bound of the tip's acceleration along the path",
+    ),
+}
+
+
+class ExcavatorIKServer(PlanPathServer):
+    """The shared SolveIK / SolveFK / PlanPath server, settings in the excavator nodes' file."""
+
+    DEFAULTS_FILE = NODES_CONFIG
+    SETTINGS: ClassVar[Schema] = {**SETTINGS, "path": PATH_SETTINGS}
+    #: IK mode of every path sample: the bucket angle is held, so the pose IK.
+    PLAN_MODES = ("pose",)
+
+    def __init__(self, node_name: str, machine: Machine, argv: Sequence[str]) -> None:
+        super().__init__(node_name, machine, argv)
+        self.path = self.settings["path"]
+        path = self.path
+        self.get_logger().info(
+            f"serving plan_path (defaults: step {path['step']:g} m, tip speed "
+            f"{path['tip_speed']:g} m/s, acceleration {path['acceleration']:g} m/s^2)"
+        )
+
+    def plan(self, request: PlanPath.Request, waypoints: np.ndarray, seed: np.ndarray | None) -> BucketPlan:
+        # 0 = the default; anything else (negative, NaN, tiny, huge) the shared bounds check.
+        return plan_path(
+            self.model,
+            waypoints,
+            request.step or self.path["step"],
+            request.tip_speed or self.path["tip_speed"],
+            self.path["acceleration"],
+            seed,
+        )
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    return run_node(ExcavatorIKServer, "excavator", NODE, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
