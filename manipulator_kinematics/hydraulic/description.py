@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from manipulator_kinematics.param_files import ConfigError, load_parameters, shown
-from manipulator_kinematics.schema import Flag, Names, Number, Numbers, Text, require, validate
+from manipulator_kinematics.schema import Flag, Names, Number, Numbers, Schema, Text, require, validate
 
 __all__ = ["SECTION", "Cylinder", "Description", "Dyad", "Joint", "Place", "Slide", "parse", "read"]
 
@@ -33,15 +33,15 @@ SECTION = "hydraulic_machine"
 
 _POINT = Numbers(2, Number(-30.0, 30.0, "m"))
 _NAME = Text(empty=False)
-_TOP = {
+_TOP: Schema = {
     "name": Text(empty=False, doc="machine name"),
     "ground": Text(empty=False, doc="the body whose frame is the boom plane (r, z)"),
     "actuators": Names(doc="cylinders in the order of D (after the swing angle, if any)"),
     "assembly": Names(doc="unknown pins in solve order, one dyad each"),
     "joints": Names(doc="main-chain joints in order (theta2, theta3, ...)"),
 }
-_LINK = {"from": _NAME, "to": _NAME, "length": Number(0.0, 30.0, "m", exclusive_min=True)}
-_CYLINDER = {
+_LINK: Schema = {"from": _NAME, "to": _NAME, "length": Number(0.0, 30.0, "m", exclusive_min=True)}
+_CYLINDER: Schema = {
     "base_pin": _NAME,
     "rod_pin": _NAME,
     "min_length": Number(0.0, 20.0, "m", exclusive_min=True),
@@ -50,7 +50,7 @@ _CYLINDER = {
     "max_speed": Number(0.0, 5.0, "m/s", exclusive_min=True),
     "zero_offset": Number(-1.0, 1.0, "m", default=0.0, doc="true length = sensor reading + zero_offset"),
 }
-_SWING = {
+_SWING: Schema = {
     "actuator": _NAME,
     "min_angle": Number(-2 * math.pi, 2 * math.pi, "rad"),
     "max_angle": Number(-2 * math.pi, 2 * math.pi, "rad"),
@@ -60,16 +60,16 @@ _SWING = {
         -math.pi, math.pi, "rad", default=0.0, doc="true angle = encoder reading + zero_offset"
     ),
 }
-_PRISMATIC = {
+_PRISMATIC: Schema = {
     "parent": _NAME,
     "child": _NAME,
     "cylinder": _NAME,
     "axis_point": _POINT,
     "offset": Number(-20.0, 20.0, "m"),
 }
-_DYAD = {"pivot": _NAME, "first": _NAME, "orientation": Number(-1, 1, integer=True)}
-_JOINT = {"parent": _NAME, "child": _NAME, "limits": Numbers(2, Number(-2 * math.pi, 2 * math.pi))}
-_TOOL = {
+_DYAD: Schema = {"pivot": _NAME, "first": _NAME, "orientation": Number(-1, 1, integer=True)}
+_JOINT: Schema = {"parent": _NAME, "child": _NAME, "limits": Numbers(2, Number(-2 * math.pi, 2 * math.pi))}
+_TOOL: Schema = {
     "body": _NAME,
     "pin": _NAME,
     "width": Number(0.0, 20.0, "m"),
@@ -146,6 +146,13 @@ class Joint:
     upper: float
     pivot: str | None  # the hinge pin (revolute); None for a prismatic joint
     slide: Slide | None
+
+    @property
+    def hinge(self) -> str:
+        """The hinge pin of a revolute joint (a prismatic joint has none)."""
+        if self.pivot is None:
+            raise ValueError(f"{self.name} is prismatic: it has no hinge pin")
+        return self.pivot
 
 
 @dataclass(frozen=True)
@@ -457,6 +464,7 @@ def _chain(
                 f"{j['parent']!r} and {j['child']!r} must share one hinge pin, they share {len(shared)}",
             )
             pivot = shared[0]
-        joints.append(Joint(name, j["parent"], j["child"], *j["limits"], pivot, slide))
+        lower, upper = j["limits"]
+        joints.append(Joint(name, j["parent"], j["child"], lower, upper, pivot, slide))
         parent = j["child"]
     return tuple(joints)

@@ -476,7 +476,7 @@ class HydraulicModel:
         out = []
         for joint in d.joints:
             if joint.slide is None:
-                out.append((d.bodies[joint.parent][joint.pivot], d.bodies[joint.child][joint.pivot]))
+                out.append((d.bodies[joint.parent][joint.hinge], d.bodies[joint.child][joint.hinge]))
             else:
                 out.append((np.asarray(joint.slide.axis_point, dtype=float), np.zeros(2)))
         return out
@@ -632,6 +632,8 @@ class HydraulicModel:
         for body, (origin, phi) in frames.items():
             for pin, local in d.bodies[body].items():
                 known[pin] = origin + _rot(phi, np.broadcast_to(local, origin.shape))
+        if self._inverse is None:
+            raise NotImplementedError(f"{d.name}: no closed-form inverse of its linkage")
         for x, a, b, ra, rb, branch in self._inverse:
             if branch:
                 known[x] = dyads.intersect(known[a], known[b], ra, rb, branch)[0]
@@ -734,14 +736,14 @@ class HydraulicModel:
             if not d.has_angle:
                 raise NotImplementedError(f"{d.name}: three revolute joints need the tool angle")
             tool_body = d.bodies[rest[0].child]
-            w_local = B[rest[0].pivot]
-            back = tool_local - tool_body[rest[0].pivot]
+            w_local = B[rest[0].hinge]
+            back = tool_local - tool_body[rest[0].hinge]
             wrist = target - _rot(Q[..., 3], np.broadcast_to(back, target.shape))
-        pa = np.broadcast_to(d.bodies[d.ground][ja.pivot], target.shape)
-        l1 = float(np.linalg.norm(A[jb.pivot] - A[ja.pivot]))
-        arm = np.broadcast_to(w_local - B[jb.pivot], target.shape)
+        pa = np.broadcast_to(d.bodies[d.ground][ja.hinge], target.shape)
+        l1 = float(np.linalg.norm(A[jb.hinge] - A[ja.hinge]))
+        arm = np.broadcast_to(w_local - B[jb.hinge], target.shape)
         l2 = np.linalg.norm(arm, axis=-1)
-        link = A[jb.pivot] - A[ja.pivot]
+        link = A[jb.hinge] - A[ja.hinge]
         for branch in (1, -1):
             pb, h2 = dyads.intersect(pa, wrist, l1, l2, branch)
             phi_a = np.arctan2(pb[..., 1] - pa[..., 1], pb[..., 0] - pa[..., 0]) - np.arctan2(
