@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import copy
 import csv
+import dataclasses
 import json
 import re
 from pathlib import Path
@@ -22,7 +23,11 @@ from manipulator_kinematics.hydraulic.calibration import CalibrationError, Geome
 from manipulator_kinematics.hydraulic.measure_up import main, read_points
 from manipulator_kinematics.param_files import ConfigError, config_path, load_parameters
 
-FILES = {"CET200": "excavator_cet200_family.yaml", "WL20": "wheel_loader_wl20.yaml"}
+FILES = {
+    "CET200": "excavator_cet200_family.yaml",
+    "WL20": "wheel_loader_wl20.yaml",
+    "KC100": "knuckle_crane_kc100.yaml",
+}
 EDGE = ["tip", "left_corner", "right_corner"]
 DEG = np.pi / 180.0
 
@@ -60,6 +65,10 @@ def _as_built(name: str, rng: np.random.Generator, swing_offset: float) -> tuple
         link["length"] += rng.choice([-1, 1]) * rng.uniform(0.01, 0.03)
     for cylinder in section["cylinders"].values():
         cylinder["zero_offset"] = float(rng.choice([-1, 1]) * rng.uniform(0.01, 0.02))
+    if section["tool"]["width"] > 0.0:  # a cutting edge as built; a crane's rotator has none
+        section["tool"]["width"] += float(rng.choice([-1, 1]) * rng.uniform(0.01, 0.03))
+    for slide in section.get("prismatic", {}).values():  # the telescope's line off its drawing
+        slide["axis_point"][1] += float(rng.choice([-1, 1]) * rng.uniform(0.01, 0.03))
     if "swing" in section:
         section["swing"]["zero_offset"] = swing_offset
     for joint in section["chain"].values():  # the as-built linkage may reach further than the drawing's
@@ -192,6 +201,10 @@ def _parameters_of(section: dict, g: Geometry, T: np.ndarray) -> np.ndarray:
             p[k] = section["links"][keys[1]]["length"]
         elif keys[0] in ("cylinders", "swing"):
             p[k] = (section[keys[0]][keys[1]] if keys[0] == "cylinders" else section["swing"])["zero_offset"]
+        elif keys[0] == "tool":
+            p[k] = section["tool"]["width"]
+        elif keys[0] == "prismatic" and keys[2] == "axis_point":
+            p[k] = section["prismatic"][keys[1]]["axis_point"]["xz".index(keys[3])]
     rv = Rotation.from_matrix(T[:3, :3]).as_rotvec()
     for k, a in enumerate("xyz"):
         p[g.index[f"instrument.r{a}"]], p[g.index[f"instrument.t{a}"]] = rv[k], T[k, 3]
@@ -438,3 +451,21 @@ def test_an_input_that_is_no_regular_file_or_too_large_is_refused_in_one_line(tm
         err = capsys.readouterr().err
         assert code == 1 and reason in err and err.count("\n") == 1, err
         assert not (tmp_path / "c.yaml").exists()
+
+
+def test_std_without_a_sigma_column_is_scaled_by_the_residuals_scatter() -> None:
+    """With sigmas from the CSV the standard deviations take them as given; with the default sigma
+    (no column) they are scaled by sqrt(chi2/dof), as curve_fit does without absolute_sigma. Noise
+    of 4 mm against the default 2 mm: chi2/dof near 4, every std twice the unscaled one."""
+    rng = np.random.default_rng(11)
+    _, truth = as_built("WL20", rng)
+    description = read(config_path(FILES["WL20"]))
+    rows = measure(truth, instrument(rng), poses(truth, rng, 36), EDGE, rng, 0.004)
+    data = read_points_rows(rows, truth, description)
+    assert not data.sigma_given
+    scaled = calibrate(description, data)
+    given = calibrate(description, dataclasses.replace(data, sigma_given=True))
+    chi2 = scaled.cost["chi2_per_dof"]
+    assert 2.5 < chi2 < 6.0 and scaled.cost["std_scaled_by_chi2"] and not given.cost["std_scaled_by_chi2"]
+    fitted = given.std > 0
+    np.testing.assert_allclose(scaled.std[fitted], np.sqrt(chi2) * given.std[fitted], rtol=1e-9)

@@ -45,7 +45,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from manipulator_kinematics.hydraulic import dyads
-from manipulator_kinematics.hydraulic.description import Description, Dyad, Place
+from manipulator_kinematics.hydraulic.description import Description, Dyad, Place, Slide
 
 __all__ = [
     "REACH",
@@ -85,13 +85,15 @@ class Parameter:
 @dataclass(frozen=True)
 class Measurements:
     """Measured points: ``readings`` (N, m) per row, ``point`` names, ``xyz`` (N, 3) in the
-    instrument frame, ``sigma`` (N,) and the ``pose`` label of each row."""
+    instrument frame, ``sigma`` (N,) and the ``pose`` label of each row; ``sigma_given``: the
+    sigmas are the crew's (a CSV column), not the default."""
 
     pose: tuple[str, ...]
     readings: np.ndarray
     point: tuple[str, ...]
     xyz: np.ndarray
     sigma: np.ndarray
+    sigma_given: bool = False
 
 
 class Geometry:
@@ -102,6 +104,7 @@ class Geometry:
     def __init__(self, description: Description) -> None:
         self.description = d = description
         self.links = {b for b, pins in d.bodies.items() if len(pins) == 2 and _is_link(pins)}
+        self.slides = [step for step in d.steps if isinstance(step, Slide)]
         self.parameters = self._parameters()
         self.index = {p.name: i for i, p in enumerate(self.parameters)}
         self.drawing = np.array([p.drawing for p in self.parameters])
@@ -135,6 +138,19 @@ class Geometry:
                     out.append(
                         Parameter(f"bodies.{body}.pins.{pin}.{axis}", float(xz[k]), 1.0, PIN_BOUND, why)
                     )
+        # The tool's width: the corners' distance (fitted when corners are measured); a tool
+        # drawn without one (a crane's rotator pin) has no corners to fit.
+        edgeless = "the tool has no cutting edge (width 0 in the drawing)" if d.width == 0.0 else ""
+        out.append(Parameter("tool.width", float(d.width), 1.0, PIN_BOUND, edgeless))
+        for slide in self.slides:
+            key = f"prismatic.{slide.name}"
+            # Along the slide, the axis point and the offset move the child exactly as the
+            # cylinder's zero offset does: one quantity, fitted as that offset.
+            cylinder = next(c.name for c in d.cylinders if c.index == slide.index)
+            same = f"gauge: along the slide the same as cylinders.{cylinder}.zero_offset"
+            out.append(Parameter(f"{key}.axis_point.x", slide.axis_point[0], 1.0, PIN_BOUND, same))
+            out.append(Parameter(f"{key}.axis_point.z", slide.axis_point[1], 1.0, PIN_BOUND))
+            out.append(Parameter(f"{key}.offset", slide.offset, 1.0, PIN_BOUND, same))
         if d.swing:
             out.append(
                 Parameter(
@@ -236,13 +252,12 @@ class Geometry:
                 put(step.body, pins[step.one] - _turn(phi, l1), phi)
             else:
                 origin, phi = frames[step.parent]
-                s = D[:, step.index] + step.offset
-                put(
-                    step.child,
-                    origin
-                    + _turn(phi, np.stack((step.axis_point[0] + s, np.full(n, step.axis_point[1])), axis=-1)),
-                    phi,
+                key = f"prismatic.{step.name}"
+                ax, az, offset = (
+                    p[self.index[f"{key}.{k}"]] for k in ("axis_point.x", "axis_point.z", "offset")
                 )
+                s = D[:, step.index] + offset
+                put(step.child, origin + _turn(phi, np.stack((ax + s, np.full(n, az)), axis=-1)), phi)
         return pins, frames
 
     def joints(self, p: np.ndarray, D: np.ndarray) -> np.ndarray:
@@ -262,7 +277,7 @@ class Geometry:
         t1 = D[:, 0] if d.swing else np.zeros(n)
         c, s = np.cos(t1), np.sin(t1)
         out = {name: np.stack((xz[:, 0] * c, xz[:, 0] * s, xz[:, 1]), axis=-1) for name, xz in pins.items()}
-        half = 0.5 * d.width * np.stack((-s, c, np.zeros(n)), axis=-1)
+        half = 0.5 * p[self.index["tool.width"]] * np.stack((-s, c, np.zeros(n)), axis=-1)
         out[TIP] = out[d.tool_pin]
         out[LEFT], out[RIGHT] = out[TIP] + half, out[TIP] - half
         return out
@@ -438,8 +453,15 @@ def calibrate(
         )
     Jc = result.jac
     cov_c = np.linalg.pinv(Jc.T @ Jc)
+    chi2_per_dof = float(np.sum(result.fun**2) / max(n_data - V_obs.shape[1], 1))
+    # Given sigmas are taken as the truth about the instrument (absolute); the default sigma is a
+    # guess, so the covariance is scaled by the scatter the residuals show (as scipy's curve_fit
+    # does without absolute_sigma).
+    variance_scale = 1.0 if data.sigma_given else chi2_per_dof
     std = np.zeros(len(p))
-    std[free] = g.scale[free] * np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", V_obs, cov_c, V_obs), 0.0))
+    std[free] = g.scale[free] * np.sqrt(
+        variance_scale * np.maximum(np.einsum("ij,jk,ik->i", V_obs, cov_c, V_obs), 0.0)
+    )
     held_share = np.ones(len(p))
     held_share[free] = np.linalg.norm(V_null, axis=1) ** 2
 
@@ -478,7 +500,8 @@ def calibrate(
         measurements=data,
         cost={
             "nfev": int(result.nfev),
-            "chi2_per_dof": float(np.sum(result.fun**2) / max(n_data - V_obs.shape[1], 1)),
+            "chi2_per_dof": chi2_per_dof,
+            "std_scaled_by_chi2": not data.sigma_given,
             "message": result.message,
             "fitted_directions": int(V_obs.shape[1]),
             "held_directions": int(V_null.shape[1]),

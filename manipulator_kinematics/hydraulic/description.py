@@ -133,6 +133,7 @@ class Slide:
     axis_point: tuple[float, float]
     offset: float
     index: int
+    name: str  # its key under prismatic:
 
 
 @dataclass(frozen=True)
@@ -303,7 +304,12 @@ def parse(section: Any, prefix: str = SECTION) -> Description:
             require(p[end] in bodies, f"{key}.{end}", f"no body {p[end]!r}")
         require(p["cylinder"] in by_cylinder, f"{key}.cylinder", f"no cylinder {p['cylinder']!r}")
         slides[(p["parent"], p["child"])] = Slide(
-            p["parent"], p["child"], tuple(p["axis_point"]), p["offset"], by_cylinder[p["cylinder"]].index
+            p["parent"],
+            p["child"],
+            tuple(p["axis_point"]),
+            p["offset"],
+            by_cylinder[p["cylinder"]].index,
+            name,
         )
 
     steps = _plan(top, bodies, owners, cylinders, slides, section["dyads"], prefix)

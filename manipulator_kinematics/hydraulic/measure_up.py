@@ -144,6 +144,7 @@ def read_points(path: Path, description: Description, with_xyz: bool = True) -> 
         tuple(point),
         np.array(xyz) if with_xyz else np.full((n, 3), np.nan),
         np.array(sigma) if with_xyz else np.full(n, SIGMA),
+        sigma_given="sigma" in header,
     )
 
 
@@ -268,6 +269,12 @@ def write_machine(cal: Calibration, machine: Path, out: Path) -> list[str]:
             section["cylinders"][keys[1]]["zero_offset"] = value
         elif keys[0] == "swing":
             section["swing"]["zero_offset"] = value
+        elif keys[0] == "tool":
+            section["tool"]["width"] = value
+        elif keys[0] == "prismatic" and keys[2] == "axis_point":
+            section["prismatic"][keys[1]]["axis_point"]["xz".index(keys[3])] = value
+        elif keys[0] == "prismatic":
+            section["prismatic"][keys[1]]["offset"] = value
     margin = math.radians(0.5)
     for i, joint in enumerate(d.joints):
         if joint.slide is not None:
