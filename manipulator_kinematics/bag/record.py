@@ -136,6 +136,8 @@ class Recorder:
         self.wanted, self.fallback = dict(wanted), dict(fallback)
         self.counts: dict[str, int] = {}
         self.refused: set[str] = set()
+        # Per recorded topic: its subscription, the profile it was made with, its message class.
+        self._subscriptions: dict[str, tuple[Any, QoSProfile, type]] = {}
         self._log = ThrottledLog(node, ERROR_LOG_PERIOD)
         self._counted = -1
         self._stopped_at: float | None = None
@@ -152,7 +154,9 @@ class Recorder:
         return [t for t in self.wanted if t not in self.counts and t not in self.refused]
 
     def discover(self) -> None:
-        """Subscribe to every pending topic that has a publisher now (the discovery timer)."""
+        """Subscribe to every pending topic that has a publisher now, and widen a subscription a
+        new publisher cannot serve (the discovery timer)."""
+        self.widen()
         pending = self.pending()
         if not pending:
             return
@@ -234,17 +238,42 @@ class Recorder:
         msg_class = message_class(msgtype)
         self.writer.add_topic(topic, msgtype, offered[0] if offered else None)
         self.counts[topic] = 0
+        qos = subscription_qos(offered)
+        self._create(topic, msg_class, qos)
+        say(f"recording {topic} [{msgtype}] ({describe_qos(qos)}; {len(offered)} publishers)")
+
+    def _create(self, topic: str, msg_class: type, qos: QoSProfile) -> None:
         clock, write, counts = self.node.get_clock(), self.writer.write, self.counts
 
         def store(raw: bytes) -> None:
             write(topic, clock.now().nanoseconds, raw)
             counts[topic] += 1
 
-        qos = subscription_qos(offered)
         # Created while spinning: executor.spin's guard does not reach it, so it is guarded here.
         callback = guarded_callback(store, self._log, f"subscription to {topic}")
-        self.node.create_subscription(msg_class, topic, callback, qos, raw=True)
-        say(f"recording {topic} [{msgtype}] ({describe_qos(qos)}; {len(offered)} publishers)")
+        subscription = self.node.create_subscription(msg_class, topic, callback, qos, raw=True)
+        self._subscriptions[topic] = (subscription, qos, msg_class)
+
+    def widen(self) -> None:
+        """A reliable reader matches no best-effort writer, a transient-local reader no volatile
+        one: a topic subscribed while only reliable or transient-local publishers were in the
+        graph (a latched one, or one left over from a run that just ended) would record nothing of
+        a publisher that appears later and offers less. Such a subscription is made again with a
+        profile every publisher now matches."""
+        for topic, (subscription, qos, msg_class) in list(self._subscriptions.items()):
+            offered = offered_qos(self.node, topic)
+            wider = subscription_qos(offered)
+            unmatched = (
+                qos.reliability == ReliabilityPolicy.RELIABLE and wider.reliability != qos.reliability
+            ) or (qos.durability == DurabilityPolicy.TRANSIENT_LOCAL and wider.durability != qos.durability)
+            if not offered or not unmatched:
+                continue
+            self.node.destroy_subscription(subscription)
+            self._create(topic, msg_class, wider)
+            say(
+                f"recording {topic} now {describe_qos(wider)}: a publisher offers less than "
+                f"{describe_qos(qos)}"
+            )
 
     def run(self, duration: float | None, stop: threading.Event, executor: str) -> None:
         """Record for ``duration`` s (None: until ``stop`` is set), then take what is still queued
