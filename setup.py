@@ -68,6 +68,9 @@ setup(
             "tool_changer = tool_changer_kinematics.machine:MACHINE",
             # pump_boom, tool_changer, palletizer: added by their packages
             "palletizer = palletizer_kinematics.machine:MACHINE",
+            # the hydraulic family: machine files, one shared record factory
+            "wheel_loader = manipulator_kinematics.hydraulic.machine:WHEEL_LOADER",
+            "knuckle_crane = manipulator_kinematics.hydraulic.machine:KNUCKLE_CRANE",
         ],
     },
 )
