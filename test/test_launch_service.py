@@ -295,6 +295,8 @@ FILES = {
     "palletizer.launch.xml": ("palletizer", "irb460.yaml"),
     "excavator.launch.xml": ("excavator", "excavator_cet200.yaml"),
     "excavator_chain.launch.xml": ("excavator", "excavator_cet200.yaml"),
+    "wheel_loader.launch.xml": ("wheel_loader", "wheel_loader_wl20.yaml"),
+    "knuckle_crane.launch.xml": ("knuckle_crane", "knuckle_crane_kc100.yaml"),
 }
 
 
