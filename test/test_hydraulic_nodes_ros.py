@@ -1,6 +1,7 @@
 """The hydraulic family's nodes as processes over DDS (isolated domain), run from the machine files
 alone: hydraulic_sim -> hydraulic_velocity_ik -> hydraulic_forward closes the loop for the wheel
-loader and the knuckle crane (the published tool pose is the model's FK of the published state,
+loader and the knuckle crane (the published tool pose, urdf_joint_states and machine_markers'
+tool are the model's of the published state,
 and the tool moves in the commanded direction: the loader's height rises with its bucket angle
 held, the crane's rotator pin along the commanded line), and hydraulic_ik_server answers solve_fk
 and solve_ik (a round trip) and refuses what it cannot do."""
@@ -13,6 +14,7 @@ from geometry_msgs.msg import PoseStamped, TwistStamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_harness import IK_FK, NodeProcess, Probe, start_with_services
 from sensor_msgs.msg import JointState
+from visualization_msgs.msg import MarkerArray
 
 from manipulator_kinematics.hydraulic.drawing import urdf_joint_values
 from manipulator_kinematics.model import quaternion_matrix
@@ -69,14 +71,29 @@ def test_sim_velocity_ik_forward_loop_follows_the_target(probe: Probe, name: str
         lambda m: urdf.__setitem__(stamp_ns(m.header), dict(zip(m.name, m.position, strict=True))),
         QOS,
     )
+    markers: dict[int, np.ndarray] = {}  # stamp -> the tool sphere's centre
+    probe.node.create_subscription(
+        MarkerArray,
+        f"{ns}/machine_markers",
+        lambda m: markers.__setitem__(
+            stamp_ns(m.markers[0].header),
+            np.array(
+                [
+                    [k.pose.position.x, k.pose.position.y, k.pose.position.z]
+                    for k in m.markers
+                    if k.ns == "tool"
+                ]
+            ),
+        ),
+        QOS,
+    )
     target = probe.node.create_publisher(TwistStamped, f"{ns}/target_twist", QOS)
     message = TwistStamped()
     message.header.frame_id = "base_link"
     t = message.twist
     t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z = TARGETS[name]
-    nodes = [
-        NodeProcess(exe, *args) for exe in ("hydraulic_sim", "hydraulic_velocity_ik", "hydraulic_forward")
-    ]
+    executables = ("hydraulic_sim", "hydraulic_velocity_ik", "hydraulic_forward", "machine_markers")
+    nodes = [NodeProcess(exe, *args) for exe in executables]
     try:
         probe.wait_until(lambda: len(poses) >= 5 or not all(n.alive() for n in nodes), TIMEOUT, "tool poses")
         assert all(n.alive() for n in nodes), [n.log() for n in nodes]
@@ -105,6 +122,11 @@ def test_sim_velocity_ik_forward_loop_follows_the_target(probe: Probe, name: str
         expected = urdf_joint_values(arm, states[s])
         assert set(urdf[s]) == set(expected)
         np.testing.assert_allclose([urdf[s][k] for k in expected], list(expected.values()), atol=1e-12)
+    # machine_markers draws the family machine from the same file: its tool sphere on the tool point.
+    shown = sorted(set(markers) & set(states))
+    assert shown
+    for s in shown[:20]:
+        np.testing.assert_allclose(markers[s], arm.fkine(states[s])[None, :3, 3], atol=1e-9)
     # The direction: the commanded task rows moved along the target, nothing else commanded moved.
     h = arm.hydraulic
     Q = h.pose(np.clip(D, h.lower, h.upper))

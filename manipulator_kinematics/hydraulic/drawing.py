@@ -160,9 +160,9 @@ def _size(model: Any) -> float:
 def family_scene(model: Any, D: Any) -> Scene:
     """The machine at actuator states D (..., m): each body a star of segments from its first pin
     to its other pins (the ground body's kind ``base``, the main chain's ``link``, the linkage's
-    ``linkage``), each cylinder a barrel from its base pin and a rod to its rod pin, a sphere on
-    every pin and the tool point; frames: every URDF link and ``tool``; joints: every moving URDF
-    joint (:func:`urdf_joint_values`)."""
+    ``linkage``), a telescope's sleeve to its axis point, each cylinder a barrel from its base pin
+    and a rod to its rod pin, a sphere on every pin and the tool point; frames: every URDF link
+    and ``tool``; joints: every moving URDF joint (:func:`urdf_joint_values`)."""
     D = np.asarray(D, dtype=float)
     h = model.hydraulic
     d = h.description
@@ -175,6 +175,11 @@ def family_scene(model: Any, D: Any) -> Scene:
         kind = "base" if body == d.ground else "link" if body in chain else "linkage"
         first, *rest = pin_map
         segments += [Segment(f"{body}_{pin}", kind, pins[first], pins[pin], link) for pin in rest]
+    for hinge in d.joints:  # a telescope's sleeve: its parent from the first pin to the slide's axis point
+        if hinge.slide is not None:
+            start = pins[next(iter(d.bodies[hinge.parent]))]
+            end = _points(model, D, hinge.parent, np.asarray(hinge.slide.axis_point, dtype=float))
+            segments.append(Segment(f"{hinge.parent}_sleeve", "link", start, end, link))
     for c in d.cylinders:
         base, rod = pins[c.base], pins[c.rod]
         u = (rod - base) / np.linalg.norm(rod - base, axis=-1)[..., None]
@@ -207,6 +212,17 @@ def _pins(model: Any, D: np.ndarray) -> dict[str, np.ndarray]:
                 z = origin[..., 1] + s * xz[0] + c * xz[1]
                 out[pin] = np.stack((r * np.cos(t1), r * np.sin(t1), z), axis=-1)
     return out
+
+
+def _points(model: Any, D: np.ndarray, body: str, local: np.ndarray) -> np.ndarray:
+    """The point ``local`` (x, z) of ``body`` in the base frame (..., 3)."""
+    h = model.hydraulic
+    origin, phi = h.placements(D)[body]
+    c, s = np.cos(phi), np.sin(phi)
+    r = origin[..., 0] + c * local[0] - s * local[1]
+    z = origin[..., 1] + s * local[0] + c * local[1]
+    t1 = D[..., 0] if h.swing else np.zeros(D.shape[:-1])
+    return np.stack((r * np.cos(t1), r * np.sin(t1), z), axis=-1)
 
 
 def family_urdf(model: Any) -> str:
@@ -260,6 +276,13 @@ def family_urdf(model: Any) -> str:
             robot.segment(body, local(body, pin_map[first]), local(body, pin_map[pin]), radius, material)
         for xz in pin_map.values():
             robot.sphere(body, local(body, xz), JOINT_FACTOR * radius, "pin")
+    for joint in d.joints:  # a telescope's sleeve, as in the scene
+        if joint.slide is not None:
+            first = d.bodies[joint.parent][next(iter(d.bodies[joint.parent]))]
+            axis = np.asarray(joint.slide.axis_point, dtype=float)
+            robot.segment(
+                joint.parent, local(joint.parent, first), local(joint.parent, axis), radius, "structure"
+            )
     for (name, body, _), c in zip(layout.cylinders, d.cylinders, strict=True):
         barrel, rod = f"{name}_barrel", f"{name}_rod"
         robot.link(barrel)
