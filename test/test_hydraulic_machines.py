@@ -188,3 +188,27 @@ def test_plant_saturates_and_stops_at_the_stroke_ends(arm) -> None:
     np.testing.assert_array_equal(plant.d_dot, 0.0)
     with pytest.raises(ValueError, match="finite"):
         plant.step(np.full(h.m, np.nan), 0.01)
+
+
+def test_a_family_file_no_record_ships_runs_the_same_way() -> None:
+    """The CET200 in the family form (alpha beyond a turn over its box): read by the family's
+    record, IK with orientation round-trips (alpha taken modulo a turn), its URDF is Pinocchio's."""
+    section = load_parameters(config_path("excavator_cet200_family.yaml"))["hydraulic_machine"]
+    entry = by_section("hydraulic_machine", section)
+    arm = entry.model_from(section)
+    assert arm.name == "CET200" and arm.joint_names[0] == "swing_joint"
+    D = states(arm, 300)
+    T = arm.fkine(D)
+    assert np.ptp(arm.hydraulic.pose(D)[:, 3]) > np.pi  # more than half a turn of bucket angle
+    result = arm.solve_ik(T)
+    assert np.all(result.ok)
+    np.testing.assert_allclose(arm.fkine(result.solution), T, atol=1e-9)
+    pm = pin.buildModelFromXML(entry.urdf(arm))
+    data = pm.createData()
+    scene = entry.scene(arm, D[:20])
+    for k in range(20):
+        q = pin.neutral(pm)
+        for name, values in scene.joints.items():
+            q[pm.joints[pm.getJointId(name)].idx_q] = values[k]
+        pin.framesForwardKinematics(pm, data, q)
+        np.testing.assert_allclose(data.oMf[pm.getFrameId("tool")].homogeneous, T[k], atol=1e-9)

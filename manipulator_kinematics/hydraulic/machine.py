@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from manipulator_kinematics.hydraulic.description import SECTION, parse
-from manipulator_kinematics.hydraulic.model import HydraulicModel
+from manipulator_kinematics.hydraulic.model import HydraulicModel, IKResult
 from manipulator_kinematics.model import IKSolutions, IKStatus, RequestError
 from manipulator_kinematics.param_files import config_path, load_parameters
 from manipulator_kinematics.registry import Hook, Machine
@@ -192,7 +192,20 @@ class FamilyArm:
         if use_orientation:
             R = np.where(finite[..., None, None], T[..., :3, :3], np.eye(3))
             alpha = np.arctan2(R[..., 2, 0], R[..., 2, 2])
-            result = h.ik(np.concatenate((position, alpha[..., None]), axis=-1), seed_D)
+            # The rotation gives alpha modulo a turn; Q's alpha is the joints' plain sum (the
+            # CET200's spans more than a turn): the turn nearest the seed's first, then the next.
+            near = alpha + 2.0 * np.pi * np.round((h.pose(seed_D)[..., 3] - alpha) / (2.0 * np.pi))
+            result = None
+            for turn in (0.0, -1.0, 1.0):
+                Q = np.concatenate((position, (near + 2.0 * np.pi * turn)[..., None]), axis=-1)
+                found = h.ik(Q, seed_D)
+                if result is None:
+                    result = found
+                else:
+                    better = found.valid & ~result.valid
+                    result = IKResult(
+                        np.where(better[..., None], found.D, result.D), result.valid | found.valid
+                    )
         else:
             result = h.position_ik(position, seed_D)
         valid = result.valid & finite
