@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from ros_harness import IK_FK, NodeProcess, Probe, start_with_services
+from ros_harness import IK_FK, NodeProcess, Probe, runtime_warnings, start_with_services
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
@@ -186,3 +187,104 @@ def test_ik_server_answers_fk_and_ik_for_both_machines(probe: Probe) -> None:
         finally:
             log = process.stop()
         assert "Traceback" not in log, log
+
+
+def test_bad_inputs_are_refused_and_nothing_non_finite_goes_out(probe: Probe) -> None:
+    """Each family node survives what its inputs carry: NaN, 1e300, a missing actuator, a foreign
+    frame; it says why (log, status) and publishes nothing non-finite."""
+    entry = machine("knuckle_crane")
+    arm = entry.model()
+    h = arm.hydraulic
+    ns = "/bad_inputs"
+    args = (*entry.node_arguments, "-r", f"__ns:={ns}")
+    poses: list[np.ndarray] = []
+    rates: list[np.ndarray] = []
+    sim_states: list[np.ndarray] = []
+    statuses: list[str] = []
+    probe.node.create_subscription(
+        PoseStamped, f"{ns}/tool_pose", lambda m: poses.append(pose_matrix_of(m)), QOS
+    )
+    probe.node.create_subscription(
+        JointState, f"{ns}/rate_commands", lambda m: rates.append(np.array(m.velocity)), QOS
+    )
+    probe.node.create_subscription(
+        JointState, f"{ns}/sim/joint_states", lambda m: sim_states.append(np.array(m.position)), QOS
+    )
+    probe.node.create_subscription(
+        DiagnosticArray, f"{ns}/velocity_ik_status", lambda m: statuses.append(m.status[0].message), QOS
+    )
+    states = probe.node.create_publisher(JointState, f"{ns}/joint_states", QOS)
+    targets = probe.node.create_publisher(TwistStamped, f"{ns}/target_twist", QOS)
+    commands = probe.node.create_publisher(JointState, f"{ns}/sim/rate_commands", QOS)
+    names = list(arm.joint_names)
+
+    def state(position: list[float], names: list[str] = names) -> JointState:
+        msg = JointState(name=names, position=position)
+        msg.header.stamp = probe.node.get_clock().now().to_msg()
+        return msg
+
+    def twist(values: list[float], frame: str = "base_link") -> TwistStamped:
+        msg = TwistStamped()
+        msg.header.frame_id = frame
+        t = msg.twist
+        t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z = values
+        return msg
+
+    good = h.reference.tolist()
+    nodes = [
+        NodeProcess("hydraulic_forward", *args),
+        NodeProcess("hydraulic_velocity_ik", *args),
+        # The simulator on topics of its own: the probe's bad commands are not the velocity IK's.
+        NodeProcess(
+            "hydraulic_sim",
+            *args,
+            "-r",
+            "joint_states:=sim/joint_states",
+            "-r",
+            "rate_commands:=sim/rate_commands",
+        ),
+    ]
+    try:
+        bad_states = [
+            state([np.nan, *good[1:]]),
+            state([1e300, *good[1:]]),
+            state(good[1:], names[1:]),
+            state([0.0, 1e6, 1e6, 1e6]),  # finite, the linkage cannot close: no output
+        ]
+        bad_targets = [
+            twist([np.nan, 0, 0, 0, 0, 0]),
+            twist([1e300, 0, 0, 0, 0, 0]),
+            twist([0.1, 0, 0, 0, 0, 0], "elsewhere"),
+        ]
+        bad_commands = [
+            JointState(name=names, velocity=[np.nan, 0.0, 0.0, 0.0]),
+            JointState(name=names, velocity=[0.0, 1e6, 0.0, 0.0]),
+            JointState(name=names[:2], velocity=[0.0, 0.0]),
+        ]
+
+        def sent() -> bool:
+            for msg in bad_states:
+                states.publish(msg)
+            for msg in bad_targets:
+                targets.publish(msg)
+            for msg in bad_commands:
+                commands.publish(msg)
+            states.publish(state(good))
+            targets.publish(twist([0.1, 0.0, 0.0, 0.0, 0.0, 0.0]))
+            rejected = sum("rejected target_twist" in s for s in statuses)
+            return (
+                len(poses) >= 3 and len(rates) >= 3 and len(sim_states) >= 3 and rejected >= 1
+            ) or not all(n.alive() for n in nodes)
+
+        probe.wait_until(sent, TIMEOUT, "outputs of the good inputs among the bad")
+        assert all(n.alive() for n in nodes), [n.log() for n in nodes]
+    finally:
+        logs = [n.stop() for n in nodes]
+    assert not any("Traceback" in log for log in logs), logs
+    assert not [w for log in logs for w in runtime_warnings(log)], logs
+    assert "dropped joint_states" in logs[0]
+    assert "rejected rate command" in logs[2]
+    for pose in poses:
+        np.testing.assert_allclose(pose, arm.fkine(h.reference), atol=1e-9)  # only the good state's
+    assert all(np.all(np.isfinite(r)) and np.all(np.abs(r) <= h.max_speed) for r in rates)
+    assert all(np.all(np.isfinite(s)) and np.all((s >= h.lower) & (s <= h.upper)) for s in sim_states)
