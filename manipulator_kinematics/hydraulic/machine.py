@@ -82,6 +82,15 @@ class FamilyArm:
             model.upper,
             tuple(not (swing and i == 0) for i in range(model.m)),
         )
+        self._last: tuple[Any, Any] | None = None
+
+    def _measured(self, D: np.ndarray) -> Any:
+        """``hydraulic.measured(D)``, the last one kept: the forward node asks for the pose and
+        the Jacobian of each state in turn, and the solve is the whole cost of both."""
+        key = (D.shape, D.tobytes())
+        if self._last is None or self._last[0] != key:
+            self._last = (key, self.hydraulic.measured(D))
+        return self._last[1]
 
     @classmethod
     def from_parameters(cls, params: dict[str, Any]) -> FamilyArm:
@@ -115,7 +124,7 @@ class FamilyArm:
     def fkine(self, q: ArrayLike) -> np.ndarray:
         """Tool pose (..., 4, 4) for actuator states (..., m) (finite; NaN where it does not close)."""
         D = np.asarray(q, dtype=float)
-        Q = self.hydraulic.measured(D).Q
+        Q = self._measured(D).Q
         T = np.zeros(D.shape[:-1] + (4, 4))
         T[..., :3, :3] = self._rotation(D, Q)
         T[..., :3, 3] = Q[..., :3]
@@ -126,7 +135,7 @@ class FamilyArm:
         """(..., 6, m): [v; omega] of the tool frame per actuator rate (module docstring)."""
         D = np.asarray(q, dtype=float)
         h = self.hydraulic
-        jc0 = h.measured(D).jc0
+        jc0 = self._measured(D).jc0
         J = np.zeros(D.shape[:-1] + (6, h.m))
         J[..., :3, :] = jc0[..., :3, :]
         if h.description.has_angle:
