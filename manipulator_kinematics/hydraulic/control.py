@@ -13,6 +13,7 @@ factor in [0, 1] scales them all, the smallest of: near a singularity (cond abov
 where Q_dot is outside the range of JC0[rows]); the stroke ends (no actuator reaches its end
 sooner than ``stroke_horizon``; within END_ZONE of it: stopped); the speed limits. So the commanded
 rows move at ``scale`` x Q_dot[rows]; the rows not commanded (the loader's reach) follow as they must.
+:func:`toward_line` gives the node's correction toward a constant target's line.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import numpy as np
 
 from manipulator_kinematics.param_files import ConfigError
 
-__all__ = ["END_ZONE", "Plant", "RateCommand", "describe", "rate_command"]
+__all__ = ["END_ZONE", "LINE_RESTART", "Plant", "RateCommand", "describe", "rate_command", "toward_line"]
 
 #: Within this distance of an end (m, rad) an actuator is at it (the stroke horizon's exponential
 #: approach would never get there).
@@ -97,6 +98,41 @@ def rate_command(
     # The clip moves a rate by an ulp at most: the speed limits hold exactly, the direction to round-off.
     d_dot = np.clip(x * scale, -max_speed, max_speed)
     return RateCommand(d_dot, condition, damping, scale, limit, actuator)
+
+
+#: Farther than this from its line (m, or rad for the tool angle) the tool did not drift: it was
+#: moved (or the state jumped); a new line begins there instead of a correction.
+LINE_RESTART = 0.05
+
+
+def toward_line(
+    start: np.ndarray, q_dot: np.ndarray, Q: np.ndarray, rows: list[int], gain: float
+) -> np.ndarray | None:
+    """Task rates (nq,) that bring the tool at Q back onto the commanded line Q0 + t q_dot (t >= 0,
+    ``start`` = Q0) on the commanded ``rows``: ``gain`` (1/s) times the way back, the across-line
+    part of the linear rows' offset and the tool angle's offset from the angle the target gives at
+    this progress (excavator_kinematics.rate_command.toward_line, for any rows). None when the way
+    back is longer than LINE_RESTART (begin a new line at Q). No linear rate: no line, no correction.
+
+    Each command is tangent to the line at its state and the machine moves a control period on it:
+    the small offsets add up along a path; added to the target, this returns the tool to its line."""
+    correction = np.zeros_like(Q)
+    linear = [r for r in rows if r < 3]
+    v = q_dot[linear]
+    speed = float(np.linalg.norm(v))
+    if speed == 0.0:
+        return correction
+    u = v / speed
+    offset = Q[linear] - start[linear]
+    progress = float(offset @ u)
+    across = offset - progress * u
+    angle = Q[3] - (start[3] + q_dot[3] * max(progress, 0.0) / speed) if 3 in rows else 0.0
+    if not (np.linalg.norm(across) <= LINE_RESTART and abs(angle) <= LINE_RESTART):
+        return None
+    correction[linear] = -gain * across
+    if 3 in rows:
+        correction[3] = -gain * angle
+    return correction
 
 
 def describe(command: RateCommand, actuators: tuple[str, ...]) -> tuple[str, str]:

@@ -16,8 +16,10 @@ defaults are config/hydraulic_nodes.yaml. The actuators are joints named as in t
   rate_commands (JointState velocities of the actuators) by
   :func:`manipulator_kinematics.hydraulic.control.rate_command` on the task rows the machine file
   commands (``tool.velocity_rows``: the loader z and alpha, so the reach follows; the crane x, y,
-  z); a status (DiagnosticArray: tracking, slowed, stopped and why). No accepted target for
-  ``command_timeout`` s, or a state that cannot be used: zero rates once, then nothing.
+  z); a status (DiagnosticArray: tracking, slowed, stopped and why); a constant target's drift
+  off its line corrected at ``line_gain`` (a stop there holds until the target changes). No
+  accepted target for ``command_timeout`` s, or a state that cannot be used: zero rates once,
+  then nothing.
 * ``hydraulic_sim``: rate_commands -> joint_states at ``rate`` Hz
   (:class:`manipulator_kinematics.hydraulic.control.Plant`).
 * ``hydraulic_ik_server``: solve_ik, solve_fk (the generic server; one branch, ``nearest``).
@@ -37,7 +39,15 @@ from rclpy.time import Time
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
-from manipulator_kinematics.hydraulic.control import SLOWED, STOPPED, TRACKING, Plant, describe, rate_command
+from manipulator_kinematics.hydraulic.control import (
+    SLOWED,
+    STOPPED,
+    TRACKING,
+    Plant,
+    describe,
+    rate_command,
+    toward_line,
+)
 from manipulator_kinematics.hydraulic.description import SECTION
 from manipulator_kinematics.hydraulic.drawing import urdf_joint_values
 from manipulator_kinematics.joint_state import (
@@ -157,6 +167,9 @@ VELOCITY_IK = {
     "state_timeout": Number(0.0, 60.0, "s", exclusive_min=True, doc="a state older than this is not used"),
     "condition_threshold": Number(1.0, 1e12, doc="cond(JC0 S) above which the command slows (damped size)"),
     "stroke_horizon": Number(0.0, 60.0, "s", exclusive_min=True, doc="no actuator reaches an end sooner"),
+    "line_gain": Number(
+        0.0, 100.0, "1/s", doc="drift off a constant target's line is corrected at this rate; 0 = off"
+    ),
     "status_period": Number(0.0, 3600.0, "s", exclusive_min=True, doc="an unchanged status is resent after"),
     "input_queue_depth": Number(1, 1000, integer=True, doc="subscriptions: act on the latest input"),
     "input_reliability": input_reliability("target_twist and joint_states"),
@@ -190,6 +203,11 @@ class HydraulicVelocityIK(MachineNode):
         # a target beyond PLAUSIBILITY_FACTOR x that is refused.
         fastest = np.abs(self.h.jc0(self.h.reference)) @ self.h.max_speed
         self.max_speed = PLAUSIBILITY_FACTOR * float(np.max(fastest) + np.max(self.h.max_speed))
+        # The commanded line: (target twist, Q where it began, its Q_dot); another target begins a
+        # new one, so does a tool farther than LINE_RESTART from it. A stop on the line holds until
+        # the target changes (the correction must not creep the machine on and off at an end).
+        self.line: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.stopped_on_line: str | None = None
         self.state: tuple[int, np.ndarray] | None = None  # (receipt ns, D)
         self.target: tuple[int, np.ndarray] | None = None  # (receipt ns, [linear, angular])
         self.moving = False
@@ -260,14 +278,27 @@ class HydraulicVelocityIK(MachineNode):
             if self.state is None or self.now_ns() - self.state[0] > self.state_timeout_ns:
                 raise InputError("no fresh joint_states" if self.state else "no joint_states received yet")
             D = self.state[1]
-            jc0 = self.h.measured(D).jc0
-            if not np.all(np.isfinite(jc0)):
+            measured = self.h.measured(D)
+            jc0, Q = measured.jc0, measured.Q
+            if not (np.all(np.isfinite(jc0)) and np.all(np.isfinite(Q))):
                 raise InputError(f"the linkage does not close at D = {D.tolist()}")
-            q_dot = self.task_rates(D, self.target[1])
+            twist = self.target[1]
+            q_dot = self.task_rates(D, twist)
+            if self.line is None or not np.array_equal(self.line[0], twist):
+                self.line, self.stopped_on_line = (twist, Q, q_dot), None
+            gain = self.settings["line_gain"]
+            correction = toward_line(self.line[1], self.line[2], Q, self.rows, gain)
+            if correction is None:  # moved, not drifted: a new line from here
+                self.line, self.stopped_on_line = (twist, Q, q_dot), None
+                correction = np.zeros_like(Q)
+            if self.stopped_on_line is not None:
+                self.publish(stamp, np.zeros(len(self.names)))
+                self.report(stamp, LEVELS[STOPPED], self.stopped_on_line)
+                return
             rates = rate_command(
                 jc0[self.rows],
                 D,
-                q_dot[self.rows],
+                (q_dot + correction)[self.rows],
                 self.h.lower,
                 self.h.upper,
                 self.h.max_speed,
@@ -280,6 +311,8 @@ class HydraulicVelocityIK(MachineNode):
         self.publish(stamp, rates.d_dot)
         self.moving = True
         state, message = describe(rates, self.names)
+        if state == STOPPED:
+            self.stopped_on_line = message
         self.report(stamp, LEVELS[state], message, rates.scale, rates.condition)
 
     def report(
