@@ -49,6 +49,11 @@ setup(
             "palletizer_ik_server = palletizer_kinematics.nodes:ik_server",
             "palletizer_forward = palletizer_kinematics.nodes:forward",
             "palletizer_plots = palletizer_kinematics.plots:main",
+            # the hydraulic family (wheel loader, knuckle crane, any machine file)
+            "hydraulic_forward = manipulator_kinematics.nodes.hydraulic:forward",
+            "hydraulic_velocity_ik = manipulator_kinematics.nodes.hydraulic:velocity_ik",
+            "hydraulic_sim = manipulator_kinematics.nodes.hydraulic:sim",
+            "hydraulic_ik_server = manipulator_kinematics.nodes.hydraulic:ik_server",
             # bag tools and shared displays
             "mk_record = manipulator_kinematics.bag.record:main",
             "mk_replay = manipulator_kinematics.bag.replay:main",
@@ -68,6 +73,9 @@ setup(
             "tool_changer = tool_changer_kinematics.machine:MACHINE",
             # pump_boom, tool_changer, palletizer: added by their packages
             "palletizer = palletizer_kinematics.machine:MACHINE",
+            # the hydraulic family: machine files, one shared record factory
+            "wheel_loader = manipulator_kinematics.hydraulic.machine:WHEEL_LOADER",
+            "knuckle_crane = manipulator_kinematics.hydraulic.machine:KNUCKLE_CRANE",
         ],
     },
 )

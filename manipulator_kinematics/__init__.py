@@ -15,4 +15,8 @@ install_for(
     "machine_markers",
     "mk_machine_check",
     "mk_calibrate",
+    "hydraulic_forward",
+    "hydraulic_velocity_ik",
+    "hydraulic_sim",
+    "hydraulic_ik_server",
 )

@@ -51,6 +51,12 @@ The drawing hook:
   (:mod:`manipulator_kinematics.bag.visual`) and animations draw it. Serial machines use
   :func:`manipulator_kinematics.scene.serial_scene`.
 
+Machines of one family share a parameter section (the hydraulic family's ``hydraulic_machine``,
+:mod:`manipulator_kinematics.hydraulic.machine`): their records differ in name, default file and
+``describes`` (which of them a section's values are); the family's shared nodes run whatever
+machine file they are given, so a family machine also names the ``node_arguments`` that make them
+run it (``--params-file <its file>``).
+
 Hooks are usually given as :class:`Hook` ("module:function", imported on the first call), so that
 loading the registry, which every node does at start-up, imports no bag, URDF or drawing code.
 """
@@ -110,7 +116,9 @@ class Machine:
     topic its nodes use (relative name) to its message type (``pkg/msg/Type``); ``analyse``,
     ``synthesize``, ``samples`` and ``forward_node`` are the bag hooks (module docstring), None where the
     machine has none; ``urdf`` builds the machine's URDF from a model (module docstring);
-    ``scene`` draws it (module docstring).
+    ``scene`` draws it (module docstring). ``describes(values)``: whether a section's values are
+    this machine (None: every value of its section is; needed where machines share a section);
+    ``node_arguments``: the ROS arguments its nodes need to run it (``forward_node`` included).
     """
 
     name: str
@@ -128,6 +136,8 @@ class Machine:
     forward_node: str | None = None
     urdf: Callable[[Any], str] | None = None
     scene: Callable[[Any, Any], Any] | None = None  # (model, state array) -> scene.Scene
+    describes: Callable[[Mapping[str, Any]], bool] | None = None
+    node_arguments: tuple[str, ...] = ()
 
     def parameters(self, path: str | Path | None = None, node_name: str = "/**") -> dict[str, Any]:
         """The machine's section of ``path`` (default: its shipped config file), validated."""
@@ -168,6 +178,15 @@ def machine(name: str) -> Machine:
     raise KeyError(f"no machine {name!r}{hint}; installed: {', '.join(known) or 'none'}")
 
 
-def by_section(section: str) -> Machine | None:
-    """The machine whose parameter section is ``section`` (a params file's top-level key)."""
-    return next((m for m in machines().values() if m.section == section), None)
+def by_section(section: str, values: Any = None) -> Machine | None:
+    """The machine that a params file's top-level key ``section`` with its ``values`` describes.
+
+    Where several machines share the section (one family), the one whose ``describes`` accepts
+    ``values``; a section none of them ships (a user's own machine of the family) gets the
+    family's first machine by name: every machine of a family has the same model factory, which
+    reads any file of the section, so that record lends it its defaults and name only. None when
+    no machine has the section."""
+    candidates = [m for m in machines().values() if m.section == section]
+    if len(candidates) > 1 and isinstance(values, Mapping):
+        return next((m for m in candidates if m.describes is not None and m.describes(values)), candidates[0])
+    return candidates[0] if candidates else None

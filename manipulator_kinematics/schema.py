@@ -37,6 +37,7 @@ __all__ = [
     "Numbers",
     "Schema",
     "Text",
+    "Tree",
     "defaults",
     "require",
     "validate",
@@ -169,7 +170,27 @@ class Flag:
         return "true or false"
 
 
-Field = Number | Numbers | Names | Text | Flag
+@dataclass(frozen=True)
+class Tree:
+    """A nested mapping taken as it is (plain Python values), checked by the model that reads it:
+    the parts of a hydraulic-family machine file whose keys are names the user chooses (bodies,
+    pins, cylinders, dyads), which no fixed schema can list (its parser names the key)."""
+
+    default: Any = REQUIRED
+    doc: str = ""
+
+    def check(self, value: Any, key: str) -> dict[str, Any] | None:
+        if value is None and self.default is None:  # an optional part left out
+            return None
+        if not isinstance(value, Mapping) or not value:
+            raise ConfigError(f"{key}: expected a mapping of names, got {shown(value)}")
+        return _tree(value)
+
+    def describe(self) -> str:
+        return "mapping of names (checked by the machine's parser)"
+
+
+Field = Number | Numbers | Names | Text | Flag | Tree
 Schema = Mapping[str, Union[Field, "Schema"]]
 
 
@@ -218,6 +239,13 @@ def _all_defaulted(schema: Schema) -> bool:
     return all(
         _all_defaulted(s) if isinstance(s, Mapping) else s.default is not REQUIRED for s in schema.values()
     )
+
+
+def _tree(value: Any) -> Any:
+    """Nested mappings as plain dicts with string keys (lists and scalars as they are)."""
+    if isinstance(value, Mapping):
+        return {str(k): _tree(v) for k, v in value.items()}
+    return list(value) if isinstance(value, (list, tuple)) else value
 
 
 def _join(prefix: str, key: Any) -> str:

@@ -212,7 +212,7 @@ def test_forward_node_reproduces_its_golden_bag(probe: Probe, machine: Machine) 
     assert bag.is_dir(), f"{machine.name}: a forward node but no golden bag (scripts/make_golden_bags.py)"
     inputs, outputs = split_golden(bag)
     assert inputs and outputs
-    errors = replay_into(probe, [machine.forward_node], bag, inputs, outputs)
+    errors = replay_into(probe, [machine.forward_node, *machine.node_arguments], bag, inputs, outputs)
     assert max(errors.values()) < MATCH, errors
 
 
@@ -220,7 +220,8 @@ def test_forward_node_reproduces_its_golden_bag(probe: Probe, machine: Machine) 
 def test_a_changed_machine_value_fails_the_golden_comparison(probe: Probe, machine: Machine) -> None:
     change, predicted = changed_value(machine)
     inputs, outputs = split_golden(golden(machine.name))
-    errors = replay_into(probe, [machine.forward_node, "-p", change], golden(machine.name), inputs, outputs)
+    node = [machine.forward_node, *machine.node_arguments, "-p", change]
+    errors = replay_into(probe, node, golden(machine.name), inputs, outputs)
     # The node runs the changed machine: each output is off by what the numpy core predicts.
     assert max(errors.values()) > 1e-3, (change, errors)
     for topic in outputs:

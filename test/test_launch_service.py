@@ -36,10 +36,14 @@ from manipulator_kinematics.param_files import config_path
 from manipulator_kinematics.registry import machines
 from manipulator_kinematics_interfaces.srv import SolveFK
 
-pytestmark = pytest.mark.skipif(
-    importlib.util.find_spec("launch_ros") is None or importlib.util.find_spec("launch_xml") is None,
-    reason="launch and launch_ros (jazzy) are not installed: bash scripts/install_launch.sh (README)",
-)
+pytestmark = [
+    pytest.mark.skipif(
+        importlib.util.find_spec("launch_ros") is None or importlib.util.find_spec("launch_xml") is None,
+        reason="launch and launch_ros (jazzy) are not installed: bash scripts/install_launch.sh (README)",
+    ),
+    pytest.mark.ros,
+    pytest.mark.slow,
+]
 
 TIMEOUT = 60.0  # a launch starts 3-5 Python processes: several seconds each on a loaded machine
 QOS = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
@@ -295,6 +299,8 @@ FILES = {
     "palletizer.launch.xml": ("palletizer", "irb460.yaml"),
     "excavator.launch.xml": ("excavator", "excavator_cet200.yaml"),
     "excavator_chain.launch.xml": ("excavator", "excavator_cet200.yaml"),
+    "wheel_loader.launch.xml": ("wheel_loader", "wheel_loader_wl20.yaml"),
+    "knuckle_crane.launch.xml": ("knuckle_crane", "knuckle_crane_kc100.yaml"),
 }
 
 

@@ -339,6 +339,7 @@ def test_record_stops_on_sigint_while_a_publisher_keeps_sending(probe: Probe, tm
 
 # Every executable (console script): the nodes, the mk_* tools and the batch tools.
 LOADER = REPO / "config" / "wheel_loader_wl20.yaml"
+CRANE = REPO / "config" / "knuckle_crane_kc100.yaml"
 
 
 def predict_files(work: Path) -> tuple[tuple[str, ...], tuple[str, ...]]:
@@ -371,6 +372,10 @@ EXECUTABLES: dict[str, Callable[[Path], tuple[tuple[str, ...], tuple[str, ...]]]
             ("pump_boom_forward", ()),
             ("pump_boom_ik_server", ()),
             ("machine_markers", SCARA),
+            ("hydraulic_forward", ("--params-file", str(LOADER))),
+            ("hydraulic_velocity_ik", ("--params-file", str(CRANE))),
+            ("hydraulic_sim", ("--params-file", str(CRANE))),
+            ("hydraulic_ik_server", ("--params-file", str(LOADER))),
         )
     },
     "mk_record": lambda work: (

@@ -152,7 +152,7 @@ def load_setup(files: Sequence[Path]) -> Setup:
                 nodes[node] = merge(nodes.get(node, {}), settings)
         models = {}
         for key, section in unflatten(params).items():
-            machine = by_section(key)
+            machine = by_section(key, section)
             if machine is not None:
                 models[machine.name] = machine.model_from(section)
             elif isinstance(section, dict):

@@ -447,6 +447,29 @@ class HydraulicModel:
         v = np.concatenate((v, (tool_v + turning)[..., None, :], (tool_v - turning)[..., None, :]), axis=-2)
         return names, p, v
 
+    def measured(self, D: Any, D_dot: Any = None) -> HydraulicState:
+        """:meth:`state` of a measurement: D (..., m) checked finite, not against the stroke box (a
+        sensor a little beyond an end is still a state the forward node reports); Q and the rest
+        are NaN where the linkage does not close there."""
+        D = _finite(D, np.shape(D), "D")
+        if D.ndim == 0 or D.shape[-1] != self.m:
+            raise StrokeError(f"D: expected (..., {self.m}) values [{', '.join(self.actuator_names)}]")
+        D_dot = np.zeros(D.shape) if D_dot is None else _finite(D_dot, D.shape, "D_dot")
+        with np.errstate(invalid="ignore"):  # a dyad that does not close: NaN, the caller's to drop
+            s = self._solve(D, D_dot)
+        return HydraulicState(s.theta.p, s.theta.v, s.theta.a, s.Q.p, s.Q.v, s.Q.a, s.Q.J, s.theta.J)
+
+    def placements(self, D: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Every body's frame in the boom plane: name -> (origin (..., 2) as (r, z), angle (...)
+        counter-clockwise seen from the machine's right); D checked finite only, as :meth:`measured`
+        (drawings of measured states)."""
+        D = _finite(D, np.shape(D), "D")
+        if D.ndim == 0 or D.shape[-1] != self.m:
+            raise StrokeError(f"D: expected (..., {self.m}) values [{', '.join(self.actuator_names)}]")
+        with np.errstate(invalid="ignore"):
+            bodies = self._solve(D).bodies
+        return {name: (body.origin.p, body.angle.p) for name, body in bodies.items()}
+
     def margins(self, D: Any) -> np.ndarray:
         """Dead-centre margin (rad) of every dyad (..., n_dyads), in the order of ``dyad_names``."""
         return self._solve(self.validate(D)).margins

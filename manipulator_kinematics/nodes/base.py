@@ -190,7 +190,9 @@ def _values(node: Node, prefix: str) -> dict[str, Any]:
 def _field(schema: Schema, path: list[str]) -> Any:
     spec: Any = schema
     for part in path:
-        if not isinstance(spec, Mapping) or part not in spec:
+        if not isinstance(spec, Mapping):  # a field that holds a whole subtree (schema.Tree)
+            return spec
+        if part not in spec:
             return None
         spec = spec[part]
     return spec

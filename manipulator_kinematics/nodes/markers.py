@@ -181,7 +181,8 @@ class MarkersNode(MachineNode):
 
 def machine_of(argv: Sequence[str]) -> Machine:
     """The one registered machine whose section the ``--params-file`` files of ``argv`` hold."""
-    found = {m.name: m for key in given_parameters(argv) if (m := by_section(key)) is not None}
+    given = given_parameters(argv)
+    found = {m.name: m for key, values in given.items() if (m := by_section(key, values)) is not None}
     if len(found) == 1:
         return next(iter(found.values()))
     if found:
