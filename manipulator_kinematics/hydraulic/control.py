@@ -2,7 +2,7 @@
 Numpy only; the family's velocity IK and simulator nodes wire them
 (:mod:`manipulator_kinematics.nodes.hydraulic`).
 
-The rule of the house (excavator_kinematics.rate_command, docs/excavator_nodes.md "The direction
+The rule of the house (excavator_kinematics.core.rate_command, docs/excavator_nodes.md "The direction
 rule at stroke ends"), for any number of actuators m and commanded task rows k: a command the
 machine cannot follow is slowed or stopped in its own direction, never bent. The rates solve
 JC0[rows] D_dot = Q_dot[rows] (paper eq. 9) in actuator-speed units (D_dot = S u, S =
@@ -111,7 +111,7 @@ def toward_line(
     """Task rates (nq,) that bring the tool at Q back onto the commanded line Q0 + t q_dot (t >= 0,
     ``start`` = Q0) on the commanded ``rows``: ``gain`` (1/s) times the way back, the across-line
     part of the linear rows' offset and the tool angle's offset from the angle the target gives at
-    this progress (excavator_kinematics.rate_command.toward_line, for any rows). None when the way
+    this progress (excavator_kinematics.core.rate_command.toward_line, for any rows). None when the way
     back is longer than LINE_RESTART (begin a new line at Q). No linear rate: no line, no correction.
 
     Each command is tangent to the line at its state and the machine moves a control period on it:
@@ -155,7 +155,7 @@ def describe(command: RateCommand, actuators: tuple[str, ...]) -> tuple[str, str
 class Plant:
     """Simulated actuators D (m,) and D_dot: each saturates at its speed, follows the command with
     a first-order lag ``time_constant`` (0 = ideal; integrated exactly over a held step) and stops
-    at its stroke end (excavator_kinematics.plant, for any machine of the family)."""
+    at its stroke end (excavator_kinematics.core.plant, for any machine of the family)."""
 
     def __init__(
         self,
