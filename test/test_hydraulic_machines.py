@@ -258,3 +258,28 @@ def test_the_line_correction_keeps_a_sampled_loop_on_its_line() -> None:
     with_gain, without = run(2.0), run(0.0)
     print(f"largest distance from the line: {with_gain * 1e3:.2f} mm corrected, {without * 1e3:.2f} mm not")
     assert with_gain < 0.001 and without > 4.0 * with_gain, (with_gain, without)
+
+
+def test_a_calibrated_file_reads_its_sensors_through_the_zero_offsets() -> None:
+    """A calibrated machine file (issue 33: true = reading + zero_offset): the joint values are
+    sensor readings; the pose of readings q is the model's Q at D = q + offset, the IK answers
+    readings, the limits are the stroke box in readings, the scene draws D."""
+    section = load_parameters(config_path("wheel_loader_wl20.yaml"))["hydraulic_machine"]
+    offsets = {"lift_cylinder": 0.013, "tilt_cylinder": -0.008}
+    for name, offset in offsets.items():
+        section["cylinders"][name]["zero_offset"] = offset
+    entry = by_section("hydraulic_machine", section)
+    arm = entry.model_from(section)
+    h = arm.hydraulic
+    offset = np.array([offsets[n] for n in arm.joint_names])
+    D = states(arm, 200)
+    q = D - offset
+    np.testing.assert_allclose(arm.fkine(q)[:, :3, 3], h.pose(D)[:, :3], atol=1e-12)
+    np.testing.assert_allclose(arm.limits.lower, h.lower - offset)
+    np.testing.assert_allclose(arm.limits.upper, h.upper - offset)
+    result = arm.solve_ik(arm.fkine(q), seed=q)
+    assert np.all(result.ok)
+    np.testing.assert_allclose(result.solution, q, atol=1e-9)
+    scene = entry.scene(arm, q[:5])
+    for name, i in (("lift_cylinder", 0), ("tilt_cylinder", 1)):
+        np.testing.assert_allclose(scene.joints[name], D[:5, i], atol=1e-12)

@@ -8,8 +8,11 @@ and solve_ik (a round trip) and refuses what it cannot do."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TwistStamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -45,12 +48,29 @@ def pose_matrix_of(msg: PoseStamped) -> np.ndarray:
     return T
 
 
-@pytest.mark.parametrize("name", list(TARGETS))
-def test_sim_velocity_ik_forward_loop_follows_the_target(probe: Probe, name: str) -> None:
+#: A measure-up's zero offsets (true = reading + offset), as mk_calibrate writes them.
+CALIBRATED = {"lift_cylinder": 0.013, "tilt_cylinder": -0.008}
+
+
+@pytest.mark.parametrize(("name", "calibrated"), [(n, False) for n in TARGETS] + [("wheel_loader", True)])
+def test_sim_velocity_ik_forward_loop_follows_the_target(
+    probe: Probe, name: str, calibrated: bool, tmp_path: Path
+) -> None:
+    """Also with a calibrated file (issue 33): the nodes publish and take sensor readings, the
+    geometry runs on D = reading + zero_offset."""
     entry = machine(name)
     arm = entry.model()
-    ns = f"/{name}"
-    args = (*entry.node_arguments, "-r", f"__ns:={ns}")
+    args = entry.node_arguments
+    ns = f"/{name}{'_calibrated' if calibrated else ''}"
+    if calibrated:
+        document = yaml.safe_load(Path(entry.node_arguments[1]).read_text())
+        section = document["/**"]["ros__parameters"]["hydraulic_machine"]
+        for cylinder, offset in CALIBRATED.items():
+            section["cylinders"][cylinder]["zero_offset"] = offset
+        (tmp_path / "calibrated.yaml").write_text(yaml.safe_dump(document))
+        args = ("--params-file", str(tmp_path / "calibrated.yaml"))
+        arm = entry.model_from(section)
+    args = (*args, "-r", f"__ns:={ns}")
     states: dict[int, np.ndarray] = {}
     poses: dict[int, np.ndarray] = {}
     probe.node.create_subscription(
@@ -120,7 +140,7 @@ def test_sim_velocity_ik_forward_loop_follows_the_target(probe: Probe, name: str
     drawn = sorted(set(urdf) & set(states))
     assert drawn
     for s in drawn[:20]:
-        expected = urdf_joint_values(arm, states[s])
+        expected = urdf_joint_values(arm, arm.true_state(states[s]))
         assert set(urdf[s]) == set(expected)
         np.testing.assert_allclose([urdf[s][k] for k in expected], list(expected.values()), atol=1e-12)
     # machine_markers draws the family machine from the same file: its tool sphere on the tool point.
@@ -130,7 +150,7 @@ def test_sim_velocity_ik_forward_loop_follows_the_target(probe: Probe, name: str
         np.testing.assert_allclose(markers[s], arm.fkine(states[s])[None, :3, 3], atol=1e-9)
     # The direction: the commanded task rows moved along the target, nothing else commanded moved.
     h = arm.hydraulic
-    Q = h.pose(np.clip(D, h.lower, h.upper))
+    Q = h.pose(np.clip(arm.true_state(D), h.lower, h.upper))
     move = Q[-1] - Q[0]
     rows = list(h.description.velocity_rows)
     wanted = np.array(TARGETS[name][:3] + ([0.0] if h.description.has_angle else []))[rows]

@@ -157,13 +157,14 @@ def _size(model: Any) -> float:
     return float(np.max(np.linalg.norm(pins[:, None] - pins[None], axis=-1)))
 
 
-def family_scene(model: Any, D: Any) -> Scene:
-    """The machine at actuator states D (..., m): each body a star of segments from its first pin
+def family_scene(model: Any, q: Any) -> Scene:
+    """The machine at sensor readings q (..., m) (the joint_states values; D = q + zero_offset,
+    :meth:`FamilyArm.true_state`): each body a star of segments from its first pin
     to its other pins (the ground body's kind ``base``, the main chain's ``link``, the linkage's
     ``linkage``), a telescope's sleeve to its axis point, each cylinder a barrel from its base pin
     and a rod to its rod pin, a sphere on every pin and the tool point; frames: every URDF link
     and ``tool``; joints: every moving URDF joint (:func:`urdf_joint_values`)."""
-    D = np.asarray(D, dtype=float)
+    D = model.true_state(q)
     h = model.hydraulic
     d = h.description
     pins = _pins(model, D)
@@ -192,7 +193,7 @@ def family_scene(model: Any, D: Any) -> Scene:
     spheres.append(Sphere("tool", "tool", tool, joint))
     plane, t1 = _plane_frames(model, D)
     frames = {name: _pose(origin, phi, t1) for name, (origin, phi) in plane.items()}
-    frames["tool"] = model.fkine(D)
+    frames["tool"] = model.fkine(q)
     return Scene(tuple(segments), tuple(spheres), frames, "tool", urdf_joint_values(model, D))
 
 

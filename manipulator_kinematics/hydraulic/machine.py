@@ -6,7 +6,10 @@ machine. The record's model is :class:`FamilyArm`, the
 :class:`~manipulator_kinematics.model.SerialModel` view of a
 :class:`~manipulator_kinematics.hydraulic.model.HydraulicModel` whose joints are the actuators
 (D: the swing angle in rad if the machine swings, then the cylinder lengths in m), so that the
-generic forward node, IK/FK server, markers and bag tools run it unchanged.
+generic forward node, IK/FK server, markers and bag tools run it unchanged. Its joint values are
+what the machine's sensors read (the values on joint_states and in IK answers): a calibrated machine
+file's zero offsets turn them into true states, D = reading + zero_offset (issue 33), before any
+geometry, and the IK's D back into readings.
 
 The tool frame (REP 103, base frame x forward, z up): the tool point, turned by the swing theta1
 about z and, where Q has the tool angle alpha (counter-clockwise seen from the machine's right,
@@ -76,10 +79,11 @@ class FamilyArm:
         self.hydraulic = model
         self.name = model.description.name
         swing = model.swing
+        self._offset = model.zero_offset
         self._limits = JointLimits(
             model.actuator_names,
-            model.lower,
-            model.upper,
+            model.lower - self._offset,
+            model.upper - self._offset,
             tuple(not (swing and i == 0) for i in range(model.m)),
         )
         self._last: tuple[Any, Any] | None = None
@@ -91,6 +95,10 @@ class FamilyArm:
         if self._last is None or self._last[0] != key:
             self._last = (key, self.hydraulic.measured(D))
         return self._last[1]
+
+    def true_state(self, q: ArrayLike) -> np.ndarray:
+        """D (..., m) of sensor readings q: reading + zero_offset."""
+        return np.asarray(q, dtype=float) + self._offset
 
     @classmethod
     def from_parameters(cls, params: dict[str, Any]) -> FamilyArm:
@@ -122,8 +130,8 @@ class FamilyArm:
         )
 
     def fkine(self, q: ArrayLike) -> np.ndarray:
-        """Tool pose (..., 4, 4) for actuator states (..., m) (finite; NaN where it does not close)."""
-        D = np.asarray(q, dtype=float)
+        """Tool pose (..., 4, 4) for sensor readings (..., m) (finite; NaN where it does not close)."""
+        D = self.true_state(q)
         Q = self._measured(D).Q
         T = np.zeros(D.shape[:-1] + (4, 4))
         T[..., :3, :3] = self._rotation(D, Q)
@@ -133,7 +141,7 @@ class FamilyArm:
 
     def jacob0(self, q: ArrayLike) -> np.ndarray:
         """(..., 6, m): [v; omega] of the tool frame per actuator rate (module docstring)."""
-        D = np.asarray(q, dtype=float)
+        D = self.true_state(q)
         h = self.hydraulic
         jc0 = self._measured(D).jc0
         J = np.zeros(D.shape[:-1] + (6, h.m))
@@ -149,7 +157,7 @@ class FamilyArm:
     def frames(self, q: ArrayLike) -> np.ndarray:
         """(..., k, 4, 4): the base, every main-chain body's frame (x along its x axis, y the
         machine's y turned by the swing) and the tool last."""
-        D = np.asarray(q, dtype=float)
+        D = self.true_state(q)
         h = self.hydraulic
         placed = h.placements(D)
         t1 = D[..., 0] if h.swing else np.zeros(D.shape[:-1])
@@ -165,7 +173,7 @@ class FamilyArm:
             T[..., :3, 3] = np.stack((origin[..., 0] * c1, origin[..., 0] * s1, origin[..., 1]), axis=-1)
             T[..., 3, 3] = 1.0
             out.append(T)
-        out.append(self.fkine(D))
+        out.append(self.fkine(q))
         return np.stack(out, axis=-3)
 
     def solve_ik(
@@ -196,7 +204,7 @@ class FamilyArm:
         shape = T.shape[:-2]
         finite = np.all(np.isfinite(T), axis=(-2, -1))
         position = np.where(finite[..., None], T[..., :3, 3], 0.0)
-        seed_D = h.reference if seed is None else np.clip(np.asarray(seed, dtype=float), h.lower, h.upper)
+        seed_D = h.reference if seed is None else np.clip(self.true_state(seed), h.lower, h.upper)
         seed_D = np.broadcast_to(seed_D, shape + (h.m,))
         if use_orientation:
             R = np.where(finite[..., None, None], T[..., :3, :3], np.eye(3))
@@ -219,10 +227,10 @@ class FamilyArm:
             result = h.position_ik(position, seed_D)
         valid = result.valid & finite
         if use_orientation:  # the whole rotation, not only alpha: a heading off the boom plane fails
-            reached = self.fkine(np.where(valid[..., None], result.D, h.reference))
+            reached = self.fkine(np.where(valid[..., None], result.D, h.reference) - self._offset)
             valid &= np.all(np.abs(reached[..., :3, :3] - T[..., :3, :3]) < 1e-9, axis=(-2, -1))
         status = np.where(finite, np.where(valid, IKStatus.SUCCESS, IKStatus.UNREACHABLE), IKStatus.INVALID)
-        q = np.where(valid[..., None], result.D, np.nan)[..., None, :]
+        q = np.where(valid[..., None], result.D - self._offset, np.nan)[..., None, :]
         return IKSolutions(
             q,
             status.astype(np.int8)[..., None],

@@ -147,7 +147,7 @@ class HydraulicForward(ForwardNode):
         if self.urdf_sent_ns is not None and 0 <= stamp_ns - self.urdf_sent_ns < self.urdf_period_ns:
             return
         with np.errstate(all="ignore"):
-            values = urdf_joint_values(self.model, q)
+            values = urdf_joint_values(self.model, self.model.true_state(q))
         if not all(np.isfinite(v) for v in values.values()):
             return  # the linkage does not close there: the forward node said so
         self.urdf_sent_ns = stamp_ns
@@ -234,11 +234,11 @@ class HydraulicVelocityIK(MachineNode):
 
     def on_state(self, msg: JointState) -> None:
         try:
-            D, _ = joint_values(msg, self.names, require_position=True)
+            readings, _ = joint_values(msg, self.names, require_position=True)
         except InputError as error:
             self.log("error", f"rejected joint_states: {error}")
             return
-        self.state = (self.now_ns(), D)
+        self.state = (self.now_ns(), self.model.true_state(readings))
         if self.target is not None:
             self.command(msg.header.stamp)
 
@@ -431,7 +431,7 @@ class HydraulicSim(MachineNode):
             JointState(
                 header=Header(stamp=Time(nanoseconds=now).to_msg()),
                 name=list(self.names),
-                position=[float(v) for v in d],
+                position=[float(v) for v in d - self.model.hydraulic.zero_offset],  # what sensors read
                 velocity=[float(v) for v in d_dot],
             )
         )
