@@ -55,6 +55,7 @@ MACHINE = Machine(
         "cylinder_rate_commands": _JOINT_STATE,
         "velocity_controller/commands": "std_msgs/msg/Float64MultiArray",
         "velocity_ik_status": "diagnostic_msgs/msg/DiagnosticArray",
+        "zone_clearance": "diagnostic_msgs/msg/DiagnosticArray",
         "bucket_pose": "geometry_msgs/msg/PoseStamped",
         "bucket_twist": _TWIST,
         "bucket_accel": "geometry_msgs/msg/AccelStamped",

@@ -14,9 +14,12 @@ machine's site pose as the grade outputs are) and a ``margin`` (m) kept from its
   below`` (nothing below it: a buried service's protective surface) or ``above``.
 
 **Clearance** of a point is its signed distance from the zone grown by the margin: positive
-outside, zero on the boundary plus margin, negative inside; with it the direction ``g`` in which
-it grows (vertical for ceilings, floors and surfaces, the wall's normal, the box's outward
-direction, the tangent of the swing for sectors, at the point's radius).
+outside, zero on the boundary plus margin, negative inside; with it ``g``, its gradient (the
+direction in which it grows: vertical for ceilings and floors, the wall's normal, the box's
+outward direction, the tangent of the swing for sectors, at the point's radius; for surfaces,
+whose clearance is the vertical height above or below the TIN, (-a, -b, 1) of the triangle's
+plane z = a x + b y + c, turned for ``side: above``). A TIN zone covers its footprint only: a point
+outside it (clearance inf) is not watched.
 
 **Speed scale.** A command moves each point at velocity ``v`` (at full command); it approaches a
 zone at ``u = -g . v``. Scaled by ``s``, the point needs ``s u dt`` until the next command can
@@ -73,7 +76,11 @@ SCHEMAS: dict[str, Schema] = {
 
 
 class Surface(Protocol):
-    """A TIN's heights: ``heights(points (..., 3)).height`` (..., ) above it, NaN outside it."""
+    """A TIN: ``heights(points (..., 3))`` gives ``.height`` (..., ) above it (NaN outside it) and
+    ``.triangle`` (..., ) the index of the triangle below (-1 outside); ``planes`` (T, 3) holds
+    each triangle's [a, b, c] of z = a x + b y + c (the slopes a, b are what the zone needs)."""
+
+    planes: Any
 
     def heights(self, points: Any) -> Any: ...
 
@@ -90,47 +97,89 @@ class Zone:
     surface: Surface | None = None
 
     def clearance(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Clearance (..., P) of points (..., P, 3) in the zone's frame, and its direction g
-        (..., P, 3) (unit, or zero where it has none)."""
-        p = np.asarray(points, dtype=float)
-        g = np.zeros_like(p)
+        """Clearance (..., P) of points (..., P, 3) in the zone's frame, and its gradient g
+        (..., P, 3) (unit but for sloped surfaces, zero where it has none)."""
+        c, g = _Kind.of([self]).clearance(np.asarray(points, dtype=float))
+        return c[..., 0], g[..., 0, :]
+
+    def half_space(self) -> tuple[np.ndarray, float]:
+        """(n, b) of a ceiling, floor or wall: clearance n . p + b with n the unit gradient."""
         v, m = self.values, self.margin
-        if self.kind in ("ceiling", "floor"):
-            up = 1.0 if self.kind == "floor" else -1.0
-            g[..., 2] = up
-            return up * (p[..., 2] - v["height"]) - m, g
         if self.kind == "wall":
-            n = np.asarray(v["normal"], float) / np.linalg.norm(v["normal"])
-            g[..., :2] = -n
-            return -((p[..., :2] - v["point"]) @ n) - m, g
+            inward = np.asarray(v["normal"], float) / np.linalg.norm(v["normal"])
+            return np.array([-inward[0], -inward[1], 0.0]), float(np.dot(v["point"], inward)) - m
+        up = 1.0 if self.kind == "floor" else -1.0
+        return np.array([0.0, 0.0, up]), -up * v["height"] - m
+
+
+#: Zone kinds that are evaluated together, as one array operation over all zones of the kind.
+_PLANES = ("ceiling", "floor", "wall")
+
+
+@dataclass(frozen=True)
+class _Kind:
+    """Zones of one kind (planes: ceilings, floors and walls together) as arrays, evaluated at
+    once: clearances (..., P, K) and gradients (..., P, K, 3) for points (..., P, 3)."""
+
+    kind: str
+    arrays: tuple[Any, ...]
+    zones: tuple[Zone, ...]
+
+    @staticmethod
+    def of(zones: Sequence[Zone]) -> _Kind:
+        kind = "plane" if zones[0].kind in _PLANES else zones[0].kind
+        margins = np.array([z.margin for z in zones])
+        if kind == "plane":
+            normals, offsets = zip(*(z.half_space() for z in zones), strict=True)
+            arrays: tuple[Any, ...] = (np.array(normals), np.array(offsets))
+        elif kind == "box":
+            lo = np.array([z.values["min"] for z in zones], float)
+            hi = np.array([z.values["max"] for z in zones], float)
+            arrays = (0.5 * (lo + hi), 0.5 * (hi - lo), margins)
+        elif kind == "sector":
+            start = np.array([z.values["from"] for z in zones], float)
+            arrays = (
+                start,
+                np.mod(np.array([z.values["to"] for z in zones], float) - start, 2 * np.pi),
+                margins,
+            )
+        else:
+            arrays = ()
+        return _Kind(kind, arrays, tuple(zones))
+
+    def clearance(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self.kind == "plane":
+            normals, offsets = self.arrays
+            c = p @ normals.T + offsets
+            return c, np.broadcast_to(normals, c.shape + (3,))
         if self.kind == "box":
-            lo, hi = np.asarray(v["min"], float), np.asarray(v["max"], float)
-            centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
-            d = p - centre
-            q = np.abs(d) - half
-            outside = np.maximum(q, 0.0)
-            distance = np.linalg.norm(outside, axis=-1)
-            inside = np.minimum(np.max(q, axis=-1), 0.0)
-            out_g = outside * np.sign(d) / np.where(distance > 0, distance, 1.0)[..., None]
-            axis = np.argmax(q, axis=-1)
-            in_g = np.sign(np.take_along_axis(d, axis[..., None], -1)) * (np.arange(3) == axis[..., None])
-            return distance + inside - m, np.where((distance > 0)[..., None], out_g, in_g)
+            return _boxes(p, *self.arrays)
         if self.kind == "sector":
-            return _sector(p, v["from"], v["to"], m, g)
-        assert self.surface is not None
-        sign = 1.0 if v["side"] == "below" else -1.0
-        h = np.asarray(self.surface.heights(p).height, dtype=float)
-        g[..., 2] = np.where(np.isfinite(h), sign, 0.0)
-        return np.where(np.isfinite(h), sign * h - m, np.inf), g
+            return _sectors(p, *self.arrays)
+        out = [_surface(p, z) for z in self.zones]
+        return np.stack([c for c, _ in out], axis=-1), np.stack([g for _, g in out], axis=-2)
 
 
-def _sector(
-    p: np.ndarray, start: float, end: float, margin: float, g: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Clearance from the swing sector [start, end] (ccw), as arc length at each point's radius."""
-    r = np.hypot(p[..., 0], p[..., 1])
-    bearing = np.arctan2(p[..., 1], p[..., 0])
-    width = np.mod(end - start, 2 * np.pi)
+def _boxes(p: np.ndarray, centre: np.ndarray, half: np.ndarray, margin: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Signed distance from axis-aligned boxes (K, 3) less their margins, and its gradient."""
+    d = p[..., None, :] - centre
+    q = np.abs(d) - half
+    outside = np.maximum(q, 0.0)
+    distance = np.linalg.norm(outside, axis=-1)
+    inside = np.minimum(np.max(q, axis=-1), 0.0)
+    out_g = outside * np.sign(d) / np.where(distance > 0, distance, 1.0)[..., None]
+    axis = np.argmax(q, axis=-1)
+    in_g = np.sign(np.take_along_axis(d, axis[..., None], -1)) * (np.arange(3) == axis[..., None])
+    return distance + inside - margin, np.where((distance > 0)[..., None], out_g, in_g)
+
+
+def _sectors(
+    p: np.ndarray, start: np.ndarray, width: np.ndarray, margin: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """Clearance from swing sectors [start, start + width] (K,) (ccw), as arc length at each
+    point's radius, and its gradient (the swing tangent: a radial motion never crosses an edge)."""
+    r = np.hypot(p[..., 0], p[..., 1])[..., None]
+    bearing = np.arctan2(p[..., 1], p[..., 0])[..., None]
     into = np.mod(bearing - start, 2 * np.pi)  # ccw angle from the sector's start
     inside = into <= width
     past_end = into - width  # ccw beyond the end
@@ -139,8 +188,24 @@ def _sector(
     angle = np.where(inside, -np.minimum(into, width - into), np.minimum(past_end, before_start))
     tangent = np.stack((-np.sin(bearing), np.cos(bearing), np.zeros_like(bearing)), axis=-1)
     # Away from the sector: ccw past its end, cw before its start (and the same way out from inside).
-    g[...] = np.where(nearer_end[..., None], tangent, -tangent) * (r > 1e-9)[..., None]
+    g = np.where(nearer_end[..., None], tangent, -tangent) * (r > 1e-9)[..., None]
     return np.where(r > 1e-9, r * angle - margin, np.inf), g
+
+
+def _surface(p: np.ndarray, zone: Zone) -> tuple[np.ndarray, np.ndarray]:
+    """Vertical clearance from a TIN (..., P) and its gradient (..., P, 3); inf off its footprint."""
+    assert zone.surface is not None
+    sign = 1.0 if zone.values["side"] == "below" else -1.0
+    below = zone.surface.heights(p)
+    h = np.asarray(below.height, dtype=float)
+    inside = np.isfinite(h)
+    # The clearance is a vertical height, h = z - (a x + b y + c): its gradient is (-a, -b, 1),
+    # so a point moving level toward rising ground approaches the surface too.
+    slopes = np.asarray(zone.surface.planes, dtype=float)[np.where(inside, below.triangle, 0), :2]
+    g = np.zeros(p.shape)
+    g[..., :2] = np.where(inside[..., None], -sign * slopes, 0.0)
+    g[..., 2] = np.where(inside, sign, 0.0)
+    return np.where(inside, sign * h - zone.margin, np.inf), g
 
 
 def load_zones(path: str | Path, read_surface: Callable[[str, str], Surface] | None = None) -> list[Zone]:
@@ -225,10 +290,22 @@ def scale_for(clearance: np.ndarray, approach: np.ndarray, stop_time: float, per
 
 
 class Monitor:
-    """The zones of a machine and its monitored points (by name), checked per command."""
+    """The zones of a machine and its monitored points (by name), checked per command: every zone
+    of a kind in one array operation (a plane, box and sector each cost about the same)."""
 
     def __init__(self, zones: Sequence[Zone], points: Sequence[str]) -> None:
         self.zones, self.points = list(zones), list(points)
+        # Per frame: the kinds' batches and where their columns go in the zones' order.
+        self._frames: dict[str, list[_Kind]] = {}
+        for frame in FRAMES:
+            here = [z for z in self.zones if z.frame == frame]
+            kinds: dict[str, list[Zone]] = {}
+            for z in here:
+                kinds.setdefault("plane" if z.kind in _PLANES else z.kind, []).append(z)
+            if kinds:
+                self._frames[frame] = [_Kind.of(group) for group in kinds.values()]
+        order = [z.name for kinds in self._frames.values() for k in kinds for z in k.zones]
+        self._order = np.array([order.index(z.name) for z in self.zones], dtype=int)
 
     def check(
         self,
@@ -243,27 +320,34 @@ class Monitor:
         ``site`` = (R, t) with p_site = R p + t, needed by site-frame zones (without it they are
         reported at clearance -inf and stop every approach: no pose, no motion toward them)."""
         p, v = np.asarray(positions, float), np.asarray(velocities, float)
-        scale, limit_zone, limit_point = 1.0, None, None
-        clearance: dict[str, tuple[float, str]] = {}
-        for zone in self.zones:
-            if zone.frame == "site":
+        cs, us = [], []
+        for frame, kinds in self._frames.items():
+            if frame == "site":
                 if site is None:
-                    clearance[zone.name] = (-math.inf, "")
-                    scale, limit_zone, limit_point = 0.0, zone.name, None
+                    n = sum(len(k.zones) for k in kinds)
+                    cs.append(np.full((len(p), n), -np.inf))
+                    us.append(np.full((len(p), n), np.inf))
                     continue
-                R, t = site
-                zp, zv = p @ np.asarray(R).T + t, v @ np.asarray(R).T
+                R = np.asarray(site[0], float)
+                zp, zv = p @ R.T + site[1], v @ R.T
             else:
                 zp, zv = p, v
-            c, g = zone.clearance(zp)
-            u = -np.sum(g * zv, axis=-1)
-            k = int(np.argmin(c))
-            clearance[zone.name] = (float(c[k]), self.points[k])
-            s = scale_for(c, u, stop_time, period)
-            j = int(np.argmin(s))
-            if s[j] < scale:
-                scale, limit_zone, limit_point = float(s[j]), zone.name, self.points[j]
-        return Check(scale, limit_zone, limit_point, clearance)
+            for kind in kinds:
+                c, g = kind.clearance(zp)
+                cs.append(c)
+                us.append(-np.einsum("pzk,pk->pz", g, zv))
+        c = np.concatenate(cs, axis=1)[:, self._order]
+        s = scale_for(c, np.concatenate(us, axis=1)[:, self._order], stop_time, period)
+        nearest = np.argmin(c, axis=0)
+        clearance = {
+            zone.name: (float(c[k, i]), self.points[k] if np.isfinite(c[k, i]) else "")
+            for i, (zone, k) in enumerate(zip(self.zones, nearest.tolist(), strict=True))
+        }
+        j, i = np.unravel_index(int(np.argmin(s)), s.shape)
+        if s[j, i] >= 1.0:
+            return Check(1.0, None, None, clearance)
+        blind = self.zones[i].frame == "site" and site is None
+        return Check(float(s[j, i]), self.zones[i].name, None if blind else self.points[j], clearance)
 
 
 def stop_time(rates: np.ndarray, decelerations: np.ndarray) -> float:
