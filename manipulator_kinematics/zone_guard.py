@@ -108,6 +108,22 @@ class ZoneGuard:
         return self.monitor.check(p, np.zeros_like(p), 0.0, self.period, site)
 
 
+def first_entry(
+    zones: Sequence[Zone], names: Sequence[str], positions: np.ndarray
+) -> tuple[int, str, str] | None:
+    """(sample, zone, point) of the first of the samples ``positions`` (M, P, 3) (a planned path's
+    monitored points, base frame) at which a point is inside a zone (clearance < 0), None if
+    none is: where a path must end before a zone."""
+    first: tuple[int, str, str] | None = None
+    for zone in zones:
+        c = zone.clearance(positions)[0]  # (M, P)
+        inside = np.flatnonzero(np.any(c < 0.0, axis=1))
+        if len(inside) and (first is None or inside[0] < first[0]):
+            k = int(inside[0])
+            first = (k, zone.name, names[int(np.argmin(c[k]))])
+    return first
+
+
 def describe(check: Check, scale: float) -> tuple[str, str]:
     """(state, sentence) of a command the zones scaled by ``scale``, naming zone and point: e.g.
     ("stopped", "stopped: bucket_tip at zone power_line"). The sentence has no numbers, so a stop
@@ -125,4 +141,4 @@ def describe(check: Check, scale: float) -> tuple[str, str]:
     return SLOWED, f"{SLOWED}: {point} approaching zone {zone}"
 
 
-__all__ = ["CLEAR", "SLOWED", "STOPPED", "STOP_SCALE", "Verdict", "ZoneGuard", "describe"]
+__all__ = ["CLEAR", "SLOWED", "STOPPED", "STOP_SCALE", "Verdict", "ZoneGuard", "describe", "first_entry"]

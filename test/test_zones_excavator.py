@@ -134,3 +134,24 @@ def test_a_bad_zone_file_is_refused_in_one_line_naming_the_key(tmp_path, text: s
         ZoneGuard.from_file(path, POINTS.names, EXC.limits.max_rates, PERIOD, read_landxml)
     message = str(error.value)
     assert message.startswith(key.format(path=path) + ":") and "\n" not in message
+
+
+def test_plan_path_ends_before_a_zone_with_the_reason() -> None:
+    from excavator_kinematics.path_zones import plan_clear
+
+    zones = guard().zones
+    tip = EXC.pose(EXC.limits.reference)[:3]
+    waypoints = [tip, tip + [0.5, 0.0, 0.0], tip + [0.5, 0.0, 5.0]]  # then straight up, through the ceiling
+    plan = plan_clear(EXC, POINTS, zones, waypoints, 0.05, 0.5, 0.5)
+    assert plan.truncated and plan.last_waypoint == 1 and plan.timing is not None
+    assert "enters zone power_line" in plan.message and "the path ends before it" in plan.message
+    # Every sample is clear of every zone; the last one within a step (at the tip) of the ceiling.
+    clear = clearances(POINTS.positions(plan.timing.q))
+    assert min(c.min() for c in clear.values()) >= 0.0
+    assert clear["power_line"][-1] < 0.06
+    np.testing.assert_allclose(plan.timing.qd[-1], 0.0, atol=1e-9)  # at rest at its end
+    # A path clear of every zone is left as it is; one that starts inside a zone is refused.
+    low = plan_clear(EXC, POINTS, zones, waypoints[:2], 0.05, 0.5, 0.5)
+    assert not low.truncated and low.last_waypoint == 1
+    inside = plan_clear(EXC, POINTS, zones, [tip + [0.0, 0.0, -2.5], tip], 0.05, 0.5, 0.5)
+    assert inside.timing is None and inside.message.startswith("the path starts inside a zone")
