@@ -47,13 +47,20 @@ class Targets:
         np.array([0.0, -0.4, -0.5]),
     )
 
-    def __init__(self, seed: int, home: np.ndarray) -> None:
+    def __init__(
+        self, seed: int, home: np.ndarray, opening: tuple[tuple[float, np.ndarray], ...] = ()
+    ) -> None:
+        """``opening``: (seconds, linear velocity) held before the random targets begin."""
         self.rng = np.random.default_rng(seed)
         self.home = np.asarray(home, dtype=float)
         self.until, self.linear = -1.0, np.zeros(3)
+        self.opening = np.cumsum([0.0, *(d for d, _ in opening)]), [np.asarray(v, float) for _, v in opening]
 
     def __call__(self, t: float, tip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The target at time ``t`` (s) with the bucket tip at ``tip``."""
+        ends, scripted = self.opening
+        if t < ends[-1]:
+            return scripted[int(np.searchsorted(ends, t, side="right")) - 1], np.zeros(3)
         if t >= self.until:
             self.until = t + self.rng.uniform(0.5, 3.0)
             kind = self.rng.uniform()
