@@ -147,6 +147,14 @@ class _Kind:
             arrays = ()
         return _Kind(kind, arrays, tuple(zones))
 
+    def approach(self, p: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Clearances (P, K) of points p (P, 3) and their approach speeds u = -g . v (P, K)."""
+        if self.kind == "plane":
+            normals, offsets = self.arrays
+            return p @ normals.T + offsets, -(v @ normals.T)
+        c, g = self.clearance(p)
+        return c, -np.einsum("pzk,pk->pz", g, v)
+
     def clearance(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if self.kind == "plane":
             normals, offsets = self.arrays
@@ -276,17 +284,16 @@ class Check:
 def scale_for(clearance: np.ndarray, approach: np.ndarray, stop_time: float, period: float) -> np.ndarray:
     """Largest scale s in [0, 1] per pair with ``s u period + s^2 u T / 2 <= c`` (module
     docstring); 1 where the pair is not approaching (u <= 0), 0 where it approaches at c <= 0."""
-    c, u = np.asarray(clearance, float), np.asarray(approach, float)
-    s = np.ones(np.broadcast(c, u).shape)
+    room = np.maximum(np.asarray(clearance, float), 0.0)
+    u = np.asarray(approach, float)
     near = u > 0.0
-    c, u = np.broadcast_to(c, s.shape)[near], np.broadcast_to(u, s.shape)[near]
-    a, b = 0.5 * u * stop_time, u * period
-    with np.errstate(divide="ignore", invalid="ignore"):
-        root = np.where(
-            a > 0.0, (np.sqrt(b * b + 4.0 * a * np.maximum(c, 0.0)) - b) / (2.0 * a), np.maximum(c, 0.0) / b
-        )
-    s[near] = np.clip(np.where(c > 0.0, root, 0.0), 0.0, 1.0)
-    return s
+    u = np.maximum(u, 0.0)  # a pair moving away or along: a = b = 0, left at 1 below
+    a, b = 0.5 * stop_time * u, period * u
+    # The root of a s^2 + b s = c written as 2c / (b + sqrt(b^2 + 4ac)): no division by a (0 with
+    # T = 0), and the denominator of an approaching pair is at least b > 0.
+    denominator = b + np.sqrt(b * b + 4.0 * a * room)
+    s = np.divide(2.0 * room, denominator, out=np.ones(np.broadcast(room, u).shape), where=near)
+    return np.minimum(s, 1.0)
 
 
 class Monitor:
@@ -326,16 +333,16 @@ class Monitor:
                 if site is None:
                     n = sum(len(k.zones) for k in kinds)
                     cs.append(np.full((len(p), n), -np.inf))
-                    us.append(np.full((len(p), n), np.inf))
+                    us.append(np.ones((len(p), n)))  # approaching, at clearance -inf: 0
                     continue
                 R = np.asarray(site[0], float)
                 zp, zv = p @ R.T + site[1], v @ R.T
             else:
                 zp, zv = p, v
             for kind in kinds:
-                c, g = kind.clearance(zp)
+                c, u = kind.approach(zp, zv)
                 cs.append(c)
-                us.append(-np.einsum("pzk,pk->pz", g, zv))
+                us.append(u)
         c = np.concatenate(cs, axis=1)[:, self._order]
         s = scale_for(c, np.concatenate(us, axis=1)[:, self._order], stop_time, period)
         nearest = np.argmin(c, axis=0)
