@@ -7,8 +7,10 @@ TIN surface):
 
 * ``ZoneGuard.check``: what the velocity IK adds per command given the points' positions and
   velocities (stop time, clearances, the scale, the verdict);
-* ``Monitor.check`` alone, and the same check zone by zone (a loop over ``Zone.clearance`` and
-  ``scale_for`` per zone: the baseline the batched kinds replace);
+* ``Monitor.check`` alone: compiled (:mod:`manipulator_kinematics.zone_kernel`, the TIN in
+  numpy), without the TIN, on the numpy path (``compiled=False``: every zone of a kind in one
+  array operation), and zone by zone (a loop over ``Zone.clearance`` and ``scale_for``: the
+  baseline);
 * the excavator's 23 monitored points with their velocities (``MonitoredPoints``: one batched
   ``Excavator.pins`` of two states), the machine-specific part of the command's cost.
 
@@ -30,7 +32,7 @@ from excavator_kinematics.design_surface import Tin
 from excavator_kinematics.kinematics import Excavator
 from excavator_kinematics.monitored import MonitoredPoints
 from manipulator_kinematics.zone_guard import ZoneGuard
-from manipulator_kinematics.zones import Monitor, Zone, scale_for, stop_time
+from manipulator_kinematics.zones import KERNEL, Monitor, Zone, scale_for, stop_time
 
 POINTS, PERIOD, STOP = 30, 0.05, 0.3
 
@@ -91,8 +93,13 @@ def main() -> None:
     rates = rng.uniform(-0.2, 0.2, 4)
     decelerations = np.array([1.0, 0.15, 0.18, 0.2]) / STOP
     guard = ZoneGuard(all_zones, names, decelerations, PERIOD)
-    monitor = Monitor(all_zones, names)
+    monitor, without_tin = Monitor(all_zones, names), Monitor(all_zones[:-1], names)
     T = stop_time(rates, decelerations)
+    assert KERNEL.get(wait=True) is not None
+    assert (
+        abs(monitor.check(p, v, T, PERIOD, compiled=False).scale - monitor.check(p, v, T, PERIOD).scale)
+        < 1e-12
+    )
     # The batched check and the zone-by-zone baseline agree (the benchmark measures one answer).
     assert abs(monitor.check(p, v, T, PERIOD).scale - zone_by_zone(all_zones, p, v, T)) < 1e-12
 
@@ -109,6 +116,14 @@ def main() -> None:
         (
             f"Monitor.check, {POINTS} x 10",
             per_call_us(lambda: monitor.check(p, v, T, PERIOD), repeat, rounds),
+        ),
+        (
+            f"Monitor.check, {POINTS} x 9 (no TIN)",
+            per_call_us(lambda: without_tin.check(p, v, T, PERIOD), repeat, rounds),
+        ),
+        (
+            f"Monitor.check numpy path, {POINTS} x 10",
+            per_call_us(lambda: monitor.check(p, v, T, PERIOD, compiled=False), repeat, rounds),
         ),
         (
             f"zone by zone (baseline), {POINTS} x 10",
@@ -131,9 +146,9 @@ def main() -> None:
             for name, times in rows
         ],
     )
-    ratio = [b / a for a, b in zip(rows[1][1], rows[2][1], strict=True)]
+    ratio = [b / a for a, b in zip(rows[1][1], rows[4][1], strict=True)]
     print(
-        f"\nzone by zone / batched Monitor.check: median {statistics.median(ratio):.2f} x "
+        f"\nzone by zone / Monitor.check: median {statistics.median(ratio):.2f} x "
         f"(rounds: {', '.join(f'{r:.2f}' for r in ratio)}); budget 200 us per command: "
         f"ZoneGuard.check median {statistics.median(rows[0][1]):.1f} us"
     )

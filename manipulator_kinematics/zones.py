@@ -38,10 +38,12 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from types import ModuleType
 from typing import Any, Protocol
 
 import numpy as np
 
+from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.param_files import ConfigError, read_document
 from manipulator_kinematics.schema import Number, Numbers, Schema, Text, require, validate
 
@@ -76,13 +78,14 @@ SCHEMAS: dict[str, Schema] = {
 
 
 class Surface(Protocol):
-    """A TIN: ``heights(points (..., 3))`` gives ``.height`` (..., ) above it (NaN outside it) and
-    ``.triangle`` (..., ) the index of the triangle below (-1 outside); ``planes`` (T, 3) holds
-    each triangle's [a, b, c] of z = a x + b y + c (the slopes a, b are what the zone needs)."""
+    """A TIN (:class:`excavator_kinematics.design_surface.Tin`): ``locate(xy (..., 2))`` gives the
+    index of the triangle below each point (-1 outside), ``planes`` (T, 3) each triangle's
+    [a, b, c] of z - origin_z = a (x - origin_x) + b (y - origin_y) + c."""
 
     planes: Any
+    origin: Any
 
-    def heights(self, points: Any) -> Any: ...
+    def locate(self, xy: Any) -> Any: ...
 
 
 @dataclass(frozen=True)
@@ -202,17 +205,18 @@ def _sectors(
 
 def _surface(p: np.ndarray, zone: Zone) -> tuple[np.ndarray, np.ndarray]:
     """Vertical clearance from a TIN (..., P) and its gradient (..., P, 3); inf off its footprint."""
-    assert zone.surface is not None
+    surface = zone.surface
+    assert surface is not None
     sign = 1.0 if zone.values["side"] == "below" else -1.0
-    below = zone.surface.heights(p)
-    h = np.asarray(below.height, dtype=float)
-    inside = np.isfinite(h)
+    triangle = np.asarray(surface.locate(p[..., :2]))
+    inside = triangle >= 0
+    plane = surface.planes[np.maximum(triangle, 0)]  # (..., 3) [a, b, c]
+    local = p - surface.origin
     # The clearance is a vertical height, h = z - (a x + b y + c): its gradient is (-a, -b, 1),
     # so a point moving level toward rising ground approaches the surface too.
-    slopes = np.asarray(zone.surface.planes, dtype=float)[np.where(inside, below.triangle, 0), :2]
-    g = np.zeros(p.shape)
-    g[..., :2] = np.where(inside[..., None], -sign * slopes, 0.0)
-    g[..., 2] = np.where(inside, sign, 0.0)
+    ones = np.ones(p.shape[:-1] + (1,))
+    h = local[..., 2] - np.sum(plane * np.concatenate((local[..., :2], ones), axis=-1), axis=-1)
+    g = np.concatenate((-sign * plane[..., :2], sign * ones), axis=-1) * inside[..., None]
     return np.where(inside, sign * h - zone.margin, np.inf), g
 
 
@@ -284,10 +288,12 @@ class Check:
 def scale_for(clearance: np.ndarray, approach: np.ndarray, stop_time: float, period: float) -> np.ndarray:
     """Largest scale s in [0, 1] per pair with ``s u period + s^2 u T / 2 <= c`` (module
     docstring); 1 where the pair is not approaching (u <= 0), 0 where it approaches at c <= 0."""
-    room = np.maximum(np.asarray(clearance, float), 0.0)
     u = np.asarray(approach, float)
     near = u > 0.0
-    u = np.maximum(u, 0.0)  # a pair moving away or along: a = b = 0, left at 1 below
+    # A pair moving away or along (also one with no clearance to speak of: inf off a TIN):
+    # a = b = 0 and no room, left at 1 below.
+    room = np.where(near, np.maximum(np.asarray(clearance, float), 0.0), 0.0)
+    u = np.maximum(u, 0.0)
     a, b = 0.5 * stop_time * u, period * u
     # The root of a s^2 + b s = c written as 2c / (b + sqrt(b^2 + 4ac)): no division by a (0 with
     # T = 0), and the denominator of an approaching pair is at least b > 0.
@@ -296,23 +302,44 @@ def scale_for(clearance: np.ndarray, approach: np.ndarray, stop_time: float, per
     return np.minimum(s, 1.0)
 
 
+#: Order of the kinds' columns within a frame: the compiled ones (:mod:`zone_kernel`), then TINs.
+_KIND_ORDER = ("plane", "box", "sector", "surface")
+
+
+def _warm(kernel: ModuleType) -> None:
+    """Run the kernel once (numba loads or compiles it) for one zone of each kind."""
+    plane = Zone("c", "ceiling", "base", 0.1, {"height": 3.0})
+    box = Zone("b", "box", "base", 0.1, {"min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 1.0]})
+    sector = Zone("s", "sector", "base", 0.1, {"from": 0.5, "to": 1.0})
+    _, arrays, n = Monitor([plane, box, sector], ["p"])._frames["base"]
+    kernel.check(np.ones((1, 3)), np.ones((1, 3)), *arrays, 0.3, 0.05, np.empty((1, n)), np.empty((1, n)))
+
+
+#: The compiled check (:mod:`manipulator_kinematics.zone_kernel`), see manipulator_kinematics.compiled.
+KERNEL = Kernel("manipulator_kinematics.zone_kernel", _warm)
+
+
 class Monitor:
-    """The zones of a machine and its monitored points (by name), checked per command: every zone
-    of a kind in one array operation (a plane, box and sector each cost about the same)."""
+    """The zones of a machine and its monitored points (by name), checked per command: ceilings,
+    floors, walls, boxes and sectors by the compiled kernel (:mod:`zone_kernel`; numpy, every zone
+    of a kind in one array operation, until it is loaded or with ``MK_COMPILED=0``), TINs in numpy."""
 
     def __init__(self, zones: Sequence[Zone], points: Sequence[str]) -> None:
         self.zones, self.points = list(zones), list(points)
-        # Per frame: the kinds' batches and where their columns go in the zones' order.
-        self._frames: dict[str, list[_Kind]] = {}
+        # Per frame: the kinds' batches (in _KIND_ORDER), the compiled kinds' arrays and their
+        # column count; and where the columns go in the zones' order.
+        self._frames: dict[str, tuple[list[_Kind], tuple[np.ndarray, ...], int]] = {}
         for frame in FRAMES:
-            here = [z for z in self.zones if z.frame == frame]
-            kinds: dict[str, list[Zone]] = {}
-            for z in here:
-                kinds.setdefault("plane" if z.kind in _PLANES else z.kind, []).append(z)
-            if kinds:
-                self._frames[frame] = [_Kind.of(group) for group in kinds.values()]
-        order = [z.name for kinds in self._frames.values() for k in kinds for z in k.zones]
+            groups: dict[str, list[Zone]] = {}
+            for z in self.zones:
+                if z.frame == frame:
+                    groups.setdefault("plane" if z.kind in _PLANES else z.kind, []).append(z)
+            if groups:
+                kinds = [_Kind.of(groups[k]) for k in _KIND_ORDER if k in groups]
+                self._frames[frame] = (kinds, *_packed(kinds))
+        order = [z.name for kinds, _, _ in self._frames.values() for k in kinds for z in k.zones]
         self._order = np.array([order.index(z.name) for z in self.zones], dtype=int)
+        self._reordered = bool(np.any(self._order != np.arange(len(self.zones))))
 
     def check(
         self,
@@ -321,40 +348,69 @@ class Monitor:
         stop_time: float,
         period: float,
         site: tuple[np.ndarray, np.ndarray] | None = None,
+        compiled: bool = True,
     ) -> Check:
         """``positions``, ``velocities`` (P, 3) of the monitored points in the base frame (the
         velocities at full command); ``stop_time`` T and ``period`` dt (module docstring);
         ``site`` = (R, t) with p_site = R p + t, needed by site-frame zones (without it they are
-        reported at clearance -inf and stop every approach: no pose, no motion toward them)."""
+        reported at clearance -inf and stop every approach: no pose, no motion toward them).
+        ``compiled`` false: the numpy path even where the kernel is loaded (tests compare them)."""
         p, v = np.asarray(positions, float), np.asarray(velocities, float)
-        cs, us = [], []
-        for frame, kinds in self._frames.items():
+        kernel = (KERNEL.ready or KERNEL.get()) if compiled else None
+        cs, ss = [], []
+        for frame, (kinds, arrays, columns) in self._frames.items():
             if frame == "site":
                 if site is None:
                     n = sum(len(k.zones) for k in kinds)
                     cs.append(np.full((len(p), n), -np.inf))
-                    us.append(np.ones((len(p), n)))  # approaching, at clearance -inf: 0
+                    ss.append(np.zeros((len(p), n)))  # no pose: no approach
                     continue
                 R = np.asarray(site[0], float)
                 zp, zv = p @ R.T + site[1], v @ R.T
             else:
                 zp, zv = p, v
-            for kind in kinds:
-                c, u = kind.approach(zp, zv)
+            rest = kinds
+            if kernel is not None and columns:
+                c, s = np.empty((len(p), columns)), np.empty((len(p), columns))
+                kernel.check(
+                    np.ascontiguousarray(zp), np.ascontiguousarray(zv), *arrays, stop_time, period, c, s
+                )
                 cs.append(c)
-                us.append(u)
-        c = np.concatenate(cs, axis=1)[:, self._order]
-        s = scale_for(c, np.concatenate(us, axis=1)[:, self._order], stop_time, period)
+                ss.append(s)
+                rest = [k for k in kinds if k.kind == "surface"]
+            if rest:
+                parts = [k.approach(zp, zv) for k in rest]
+                c = np.concatenate([c for c, _ in parts], axis=1)
+                cs.append(c)
+                ss.append(scale_for(c, np.concatenate([u for _, u in parts], axis=1), stop_time, period))
+        c, s = (cs[0], ss[0]) if len(cs) == 1 else (np.concatenate(cs, axis=1), np.concatenate(ss, axis=1))
+        if self._reordered:
+            c, s = c[:, self._order], s[:, self._order]
         nearest = np.argmin(c, axis=0)
+        smallest = c[nearest, np.arange(c.shape[1])].tolist()
         clearance = {
-            zone.name: (float(c[k, i]), self.points[k] if np.isfinite(c[k, i]) else "")
-            for i, (zone, k) in enumerate(zip(self.zones, nearest.tolist(), strict=True))
+            zone.name: (value, self.points[k] if math.isfinite(value) else "")
+            for zone, k, value in zip(self.zones, nearest.tolist(), smallest, strict=True)
         }
         j, i = np.unravel_index(int(np.argmin(s)), s.shape)
         if s[j, i] >= 1.0:
             return Check(1.0, None, None, clearance)
         blind = self.zones[i].frame == "site" and site is None
         return Check(float(s[j, i]), self.zones[i].name, None if blind else self.points[j], clearance)
+
+
+def _packed(kinds: list[_Kind]) -> tuple[tuple[np.ndarray, ...], int]:
+    """The kernel's arrays of a frame's planes, boxes and sectors (empty where it has none) and
+    how many columns they make."""
+    by = {k.kind: k.arrays for k in kinds}
+    normals, offsets = by.get("plane", (np.zeros((0, 3)), np.zeros(0)))
+    centre, half, box_margin = by.get("box", (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)))
+    start, width, sector_margin = by.get("sector", (np.zeros(0), np.zeros(0), np.zeros(0)))
+    arrays = tuple(
+        np.ascontiguousarray(a, dtype=float)
+        for a in (normals, offsets, centre, half, box_margin, start, width, sector_margin)
+    )
+    return arrays, len(offsets) + len(box_margin) + len(start)
 
 
 def stop_time(rates: np.ndarray, decelerations: np.ndarray) -> float:
