@@ -84,7 +84,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer repetitions")
     args = parser.parse_args()
-    rounds, repeat = (3, 300) if args.quick else (7, 3000)
+    rounds, repeat = (3, 300) if args.quick else (5, 1000)
     rng = np.random.default_rng(34)
     all_zones = zones(rng)
     names = [f"point_{i}" for i in range(POINTS)]

@@ -103,3 +103,33 @@ def check(
             c[i, col] = ck
             u = -sign * (-math.sin(bearing) * vx + math.cos(bearing) * vy)
             s[i, col] = _scale(ck, u, stop_time, period)
+
+
+@njit(cache=True)
+def surface(
+    p: np.ndarray,
+    v: np.ndarray,
+    triangle: np.ndarray,
+    planes: np.ndarray,
+    origin: np.ndarray,
+    sign: float,
+    margin: float,
+    stop_time: float,
+    period: float,
+    c: np.ndarray,
+    s: np.ndarray,
+    col: int,
+) -> None:
+    """Column ``col`` of ``c`` and ``s`` for a TIN: the points' located triangles ``triangle``
+    (P,) (-1 off the TIN: clearance inf, scale 1), their planes [a, b, c] about ``origin``;
+    ``sign`` 1 for ``side: below`` (the clearance is the height above), -1 for ``above``."""
+    for i in range(p.shape[0]):
+        t = triangle[i]
+        if t < 0:
+            c[i, col], s[i, col] = np.inf, 1.0
+            continue
+        a, b = planes[t, 0], planes[t, 1]
+        height = p[i, 2] - origin[2] - (a * (p[i, 0] - origin[0]) + b * (p[i, 1] - origin[1]) + planes[t, 2])
+        ck = sign * height - margin
+        c[i, col] = ck
+        s[i, col] = _scale(ck, -sign * (v[i, 2] - a * v[i, 0] - b * v[i, 1]), stop_time, period)

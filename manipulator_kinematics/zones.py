@@ -302,7 +302,7 @@ def scale_for(clearance: np.ndarray, approach: np.ndarray, stop_time: float, per
     return np.minimum(s, 1.0)
 
 
-#: Order of the kinds' columns within a frame: the compiled ones (:mod:`zone_kernel`), then TINs.
+#: Order of the kinds' columns within a frame (the kernel's: planes, boxes, sectors, then TINs).
 _KIND_ORDER = ("plane", "box", "sector", "surface")
 
 
@@ -312,7 +312,12 @@ def _warm(kernel: ModuleType) -> None:
     box = Zone("b", "box", "base", 0.1, {"min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 1.0]})
     sector = Zone("s", "sector", "base", 0.1, {"from": 0.5, "to": 1.0})
     _, arrays, n = Monitor([plane, box, sector], ["p"])._frames["base"]
-    kernel.check(np.ones((1, 3)), np.ones((1, 3)), *arrays, 0.3, 0.05, np.empty((1, n)), np.empty((1, n)))
+    c, s, p = np.empty((2, n)), np.empty((2, n)), np.ones((2, 3))
+    kernel.check(p, p, *arrays, 0.3, 0.05, c, s)
+    # A TIN's located triangles are matplotlib's int32 (-1: off the TIN).
+    kernel.surface(
+        p, p, np.array([0, -1], np.int32), np.ones((1, 3)), np.zeros(3), 1.0, 0.1, 0.3, 0.05, c, s, 0
+    )
 
 
 #: The compiled check (:mod:`manipulator_kinematics.zone_kernel`), see manipulator_kinematics.compiled.
@@ -320,9 +325,10 @@ KERNEL = Kernel("manipulator_kinematics.zone_kernel", _warm)
 
 
 class Monitor:
-    """The zones of a machine and its monitored points (by name), checked per command: ceilings,
-    floors, walls, boxes and sectors by the compiled kernel (:mod:`zone_kernel`; numpy, every zone
-    of a kind in one array operation, until it is loaded or with ``MK_COMPILED=0``), TINs in numpy."""
+    """The zones of a machine and its monitored points (by name), checked per command by the
+    compiled kernel (:mod:`zone_kernel`: every kind, a TIN's point location by matplotlib), or
+    until it is loaded (or with ``MK_COMPILED=0``) in numpy, every zone of a kind in one array
+    operation."""
 
     def __init__(self, zones: Sequence[Zone], points: Sequence[str]) -> None:
         self.zones, self.points = list(zones), list(points)
@@ -369,20 +375,26 @@ class Monitor:
                 zp, zv = p @ R.T + site[1], v @ R.T
             else:
                 zp, zv = p, v
-            rest = kinds
-            if kernel is not None and columns:
-                c, s = np.empty((len(p), columns)), np.empty((len(p), columns))
-                kernel.check(
-                    np.ascontiguousarray(zp), np.ascontiguousarray(zv), *arrays, stop_time, period, c, s
-                )
-                cs.append(c)
-                ss.append(s)
-                rest = [k for k in kinds if k.kind == "surface"]
-            if rest:
-                parts = [k.approach(zp, zv) for k in rest]
+            if kernel is not None:
+                surfaces = [z for k in kinds if k.kind == "surface" for z in k.zones]
+                width = columns + len(surfaces)
+                c, s = np.empty((len(p), width)), np.empty((len(p), width))
+                zp, zv = np.ascontiguousarray(zp), np.ascontiguousarray(zv)
+                kernel.check(zp, zv, *arrays, stop_time, period, c, s)
+                for col, z in enumerate(surfaces, start=columns):
+                    tin = z.surface
+                    assert tin is not None
+                    triangle = np.asarray(tin.locate(zp[:, :2]))
+                    sign = 1.0 if z.values["side"] == "below" else -1.0
+                    kernel.surface(
+                        zp, zv, triangle, tin.planes, tin.origin, sign, z.margin, stop_time, period, c, s, col
+                    )
+            else:
+                parts = [k.approach(zp, zv) for k in kinds]
                 c = np.concatenate([c for c, _ in parts], axis=1)
-                cs.append(c)
-                ss.append(scale_for(c, np.concatenate([u for _, u in parts], axis=1), stop_time, period))
+                s = scale_for(c, np.concatenate([u for _, u in parts], axis=1), stop_time, period)
+            cs.append(c)
+            ss.append(s)
         c, s = (cs[0], ss[0]) if len(cs) == 1 else (np.concatenate(cs, axis=1), np.concatenate(ss, axis=1))
         if self._reordered:
             c, s = c[:, self._order], s[:, self._order]

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from matplotlib.tri import Triangulation
 
 from manipulator_kinematics.param_files import ConfigError
 from manipulator_kinematics.zones import Monitor, Zone, load_zones, scale_for, stop_time
@@ -243,11 +244,15 @@ def test_random_commands_never_cross_a_ceiling_and_still_reach_it(name: str) -> 
 
 
 def test_the_compiled_check_is_the_numpy_check() -> None:
-    """zone_kernel against the numpy path: random planes, boxes and sectors (points inside and
-    outside, on a box's symmetry planes and on the swing axis too), clearances and scales."""
+    """zone_kernel against the numpy path: random planes, boxes, sectors and a sloped TIN (points
+    inside and outside, off the TIN, on a box's symmetry planes and on the swing axis too)."""
+    from excavator_kinematics.design_surface import Tin
     from manipulator_kinematics.zones import KERNEL
 
     assert KERNEL.get(wait=True) is not None
+    xy = RNG.uniform(-4.0, 4.0, (60, 2))
+    ground = Tin(np.column_stack([xy, 0.3 * xy[:, 0] - 0.2 * xy[:, 1]]), Triangulation(*xy.T).triangles)
+    tin = Zone("t", "surface", "base", 0.2, {"side": "below"}, ground)
     rng = np.random.default_rng(5)
     for trial in range(20):
         zones = [
@@ -270,7 +275,7 @@ def test_the_compiled_check_is_the_numpy_check() -> None:
             ),
             Zone("s1", "sector", "base", 0.1, {"from": rng.uniform(-3, 3), "to": rng.uniform(-3, 3)}),
             Zone("s2", "sector", "base", 0.3, {"from": 2.5, "to": -2.5}),
-        ][: 3 + trial % 5]
+        ][: 3 + trial % 5] + ([tin] if trial % 2 else [])
         p = rng.uniform(-5, 5, (40, 3))
         p[:3] = [[0.0, 0.0, 1.0], [0.0, 0.5, 0.0], [0.0, 0.0, 0.0]]  # swing axis, box symmetry
         v = rng.normal(size=(40, 3))
