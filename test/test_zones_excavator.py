@@ -16,6 +16,7 @@ from excavator_kinematics.plant import Plant
 from excavator_kinematics.rate_command import rate_command
 from excavator_kinematics.twist import split_twist
 from manipulator_kinematics.param_files import ConfigError
+from manipulator_kinematics.schema import validate
 from manipulator_kinematics.zone_guard import STOPPED, ZoneGuard
 
 EXC = MACHINE.model()
@@ -155,3 +156,36 @@ def test_plan_path_ends_before_a_zone_with_the_reason() -> None:
     assert not low.truncated and low.last_waypoint == 1
     inside = plan_clear(EXC, POINTS, zones, [tip + [0.0, 0.0, -2.5], tip], 0.05, 0.5, 0.5)
     assert inside.timing is None and inside.message.startswith("the path starts inside a zone")
+
+
+@pytest.mark.parametrize(
+    "section, key, value, named",
+    [
+        ("bucket", "outline", [0.1, 0.6, 0.7], "excavator.bucket.outline: expected [x, y] pairs"),
+        ("bucket", "outline", [0.1, float("nan")], "excavator.bucket.outline[1]"),
+        (
+            "swing",
+            "tail_heights",
+            None,
+            "excavator.swing.tail_heights: tail_radius and tail_heights go together",
+        ),
+        ("swing", "tail_radius", -1.0, "excavator.swing.tail_radius"),
+    ],
+)
+def test_the_optional_monitored_points_of_the_machine_file_are_checked(section, key, value, named) -> None:
+    """bucket.outline and swing.tail_radius/tail_heights: refused naming the key; left out, the
+    machine has only its pins and tool corners."""
+    description = MACHINE.parameters()
+    if value is None:
+        del description[section][key]
+    else:
+        description[section][key] = value
+    with pytest.raises(ConfigError) as error:
+        MACHINE.factory(validate(description, MACHINE.schema, "excavator"))
+    assert str(error.value).startswith(named), str(error.value)
+    for optional in ("outline",):
+        del description["bucket"][optional]
+    for optional in ("tail_radius", "tail_heights"):
+        description["swing"].pop(optional, None)
+    bare = MonitoredPoints(MACHINE.factory(validate(description, MACHINE.schema, "excavator")))
+    assert bare.names == POINTS.names[: len(POINTS.names) - 8]
