@@ -254,7 +254,9 @@ class VelocityIk(MachineNode):
                 self.bucket_angle_gives_way,
             )
             zone = (
-                None if self.zones is None else self.zones(stamp, *self.points(D, rates.d_dot), rates.d_dot)
+                None
+                if self.zones is None
+                else self.zones(stamp, *self.points(D, rates.d_dot), rates.d_dot, self.cylinders[0])
             )
         except ValueError as error:  # InputError, StrokeError, an overflowing target
             # A late state (StaleInput: start-up, a loaded machine) stops the motion as any other

@@ -93,12 +93,13 @@ class ZoneGuard:
         velocities: np.ndarray,
         rates: np.ndarray,
         site: tuple[np.ndarray, np.ndarray] | None = None,
+        period: float | None = None,
     ) -> Verdict:
         """The verdict on the command ``rates`` (the node's actuator rates) that moves the points at
-        ``positions`` (P, 3) with ``velocities`` (P, 3) (base frame)."""
-        check = self.monitor.check(
-            positions, velocities, stop_time(rates, self.decelerations), self.period, site
-        )
+        ``positions`` (P, 3) with ``velocities`` (P, 3) (base frame); ``period``: the time this
+        command may act, when the node knows it is longer than the set one (else that)."""
+        period = self.period if period is None else max(period, self.period)
+        check = self.monitor.check(positions, velocities, stop_time(rates, self.decelerations), period, site)
         scale = check.scale if check.scale >= STOP_SCALE else 0.0
         return Verdict(scale, *describe(check, scale), check)
 
