@@ -69,4 +69,6 @@ MACHINE = Machine(
     forward_node="excavator_forward",
     urdf=Hook("excavator_kinematics.urdf_joints:excavator_urdf"),
     scene=Hook("excavator_kinematics.scene:excavator_scene"),
+    monitored=Hook("excavator_kinematics.monitored:MonitoredPoints"),
+    read_surface=Hook("excavator_kinematics.design_surface:read_landxml"),
 )

@@ -51,6 +51,13 @@ The drawing hook:
   (:mod:`manipulator_kinematics.bag.visual`) and animations draw it. Serial machines use
   :func:`manipulator_kinematics.scene.serial_scene`.
 
+The avoidance-zone hooks (docs/zones.md), for the markers' zones and monitored points:
+
+* ``monitored(model)``: the points avoidance zones watch, an object with ``names`` and
+  ``positions(state) -> (..., P, 3)`` (base frame) for states in the order of ``joint_names``;
+* ``read_surface(file, name)``: a LandXML TIN for ``kind: surface`` zones
+  (:class:`manipulator_kinematics.zones.Surface`).
+
 Hooks are usually given as :class:`Hook` ("module:function", imported on the first call), so that
 loading the registry, which every node does at start-up, imports no bag, URDF or drawing code.
 """
@@ -110,7 +117,8 @@ class Machine:
     topic its nodes use (relative name) to its message type (``pkg/msg/Type``); ``analyse``,
     ``synthesize``, ``samples`` and ``forward_node`` are the bag hooks (module docstring), None where the
     machine has none; ``urdf`` builds the machine's URDF from a model (module docstring);
-    ``scene`` draws it (module docstring).
+    ``scene`` draws it, ``monitored`` and ``read_surface`` serve its avoidance zones (module
+    docstring).
     """
 
     name: str
@@ -128,6 +136,8 @@ class Machine:
     forward_node: str | None = None
     urdf: Callable[[Any], str] | None = None
     scene: Callable[[Any, Any], Any] | None = None  # (model, state array) -> scene.Scene
+    monitored: Callable[[Any], Any] | None = None  # model -> names + positions(state) (module docstring)
+    read_surface: Callable[[str, str], Any] | None = None  # (file, surface name) -> zones.Surface
 
     def parameters(self, path: str | Path | None = None, node_name: str = "/**") -> dict[str, Any]:
         """The machine's section of ``path`` (default: its shipped config file), validated."""

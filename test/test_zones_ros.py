@@ -138,3 +138,61 @@ def test_random_targets_never_cross_a_zone_and_the_machine_reaches_them(probe: P
 
 def vec(v: object) -> np.ndarray:
     return np.array([v.x, v.y, v.z])
+
+
+def test_the_markers_draw_the_zones_and_the_monitored_points(probe: Probe) -> None:
+    """machine_markers with zones_file: every zone of the file (boundary and margin), and the 23
+    monitored points at the state drawn, coloured by clearance (the reference state: all clear)."""
+    from visualization_msgs.msg import MarkerArray
+
+    received: list[MarkerArray] = []
+    sub = probe.node.create_subscription(MarkerArray, "/zm/machine_markers", received.append, QOS)
+    pubs = [
+        probe.node.create_publisher(JointState, f"/zm/{t}", QOS) for t in ("joint_states", "cylinder_lengths")
+    ]
+    D = EXC.limits.reference
+    when = probe.node.get_clock().now().to_msg()
+    states = [
+        message_codec.joint_state(when, (JOINTS[0],), positions=D[:1]),
+        message_codec.joint_state(when, CYLINDERS, positions=D[1:]),
+    ]
+    process = NodeProcess(
+        "machine_markers",
+        "--params-file",
+        str(config_path("excavator_cet200.yaml")),
+        *RELIABLE_INPUTS,
+        "-r",
+        "__ns:=/zm",
+        "-p",
+        f"zones_file:={ZONES}",
+    )
+
+    def arrived() -> bool:
+        assert process.alive(), process.log()
+        for pub, msg in zip(pubs, states, strict=True):
+            if pub.get_subscription_count():
+                pub.publish(msg)
+        return bool(received)
+
+    try:
+        probe.wait_until(arrived, 30.0, "machine_markers")
+    finally:
+        log = process.stop()
+        for pub in pubs:
+            probe.node.destroy_publisher(pub)
+        probe.node.destroy_subscription(sub)
+    assert "Traceback" not in log, log
+    markers = received[-1].markers
+    by_ns: dict[str, list] = {}
+    for m in markers:
+        by_ns.setdefault(m.ns, []).append(m)
+    assert len(by_ns["zone"]) == len(by_ns["zone_margin"]) == 4  # every zone of the file has a margin
+    (points,) = by_ns["monitored_point"]
+    names = MonitoredPoints(EXC).names
+    expected = MonitoredPoints(EXC).positions(D)
+    np.testing.assert_allclose([[p.x, p.y, p.z] for p in points.points], expected, atol=1e-9)
+    assert len(points.colors) == len(names) and all(c.g > 0.5 for c in points.colors)  # all clear
+    ceiling = next(m for m in by_ns["zone"] if m.type == m.CUBE and m.scale.z < 0.1 and m.pose.position.z > 0)
+    assert ceiling.pose.position.z == pytest.approx(7.0)
+    tin = [m for m in by_ns["zone"] if m.type == m.TRIANGLE_LIST]
+    assert len(tin) == 1 and len(tin[0].points) == 3 * 32  # the 32 triangles of service.xml
