@@ -71,11 +71,11 @@ def guard() -> ZoneGuard:
     return ZoneGuard.from_file(ZONES, POINTS.names, EXC.limits.max_rates / STOP_TIME, PERIOD, read_landxml)
 
 
-def run(seconds: float, seed: int, rate: float) -> tuple[np.ndarray, np.ndarray]:
+def run(seconds: float, seed: int, rate: float, opening: tuple = ()) -> tuple[np.ndarray, np.ndarray]:
     """The velocity IK's steps at ``rate`` Hz (each command from the state one step old, as
     across processes) on ideal actuators (excavator_sim's default); states and zone factors."""
     zones, plant = guard(), Plant(EXC.limits, EXC.limits.reference)
-    targets = Targets(seed, EXC.pose(EXC.limits.reference)[:3])
+    targets = Targets(seed, EXC.pose(EXC.limits.reference)[:3], opening)
     dt = 1.0 / rate
     seen = plant.d.copy()
     states, scales = [], []
@@ -90,6 +90,13 @@ def run(seconds: float, seed: int, rate: float) -> tuple[np.ndarray, np.ndarray]
         states.append(plant.d.copy())
         scales.append(verdict.scale)
     return np.array(states), np.array(scales)
+
+
+def test_straight_up_stops_at_the_ceiling() -> None:
+    """The loop's short form for the fast tier: 5 s of the tip commanded straight up."""
+    states, scales = run(5.0, seed=1, rate=50.0, opening=((5.0, np.array([0.0, 0.0, 0.6])),))
+    ceiling = clearances(POINTS.positions(states))["power_line"]
+    assert -1e-3 <= ceiling.min() < 0.01 and scales[-1] == 0.0
 
 
 @pytest.mark.slow
