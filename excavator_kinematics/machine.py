@@ -55,6 +55,7 @@ MACHINE = Machine(
         "cylinder_rate_commands": _JOINT_STATE,
         "velocity_controller/commands": "std_msgs/msg/Float64MultiArray",
         "velocity_ik_status": "diagnostic_msgs/msg/DiagnosticArray",
+        "zone_clearance": "diagnostic_msgs/msg/DiagnosticArray",
         "bucket_pose": "geometry_msgs/msg/PoseStamped",
         "bucket_twist": _TWIST,
         "bucket_accel": "geometry_msgs/msg/AccelStamped",
@@ -68,4 +69,6 @@ MACHINE = Machine(
     forward_node="excavator_forward",
     urdf=Hook("excavator_kinematics.core.urdf_joints:excavator_urdf"),
     scene=Hook("excavator_kinematics.tools.scene:excavator_scene"),
+    monitored=Hook("excavator_kinematics.core.monitored:MonitoredPoints"),
+    read_surface=Hook("excavator_kinematics.grade.design_surface:read_landxml"),
 )

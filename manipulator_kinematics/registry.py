@@ -57,6 +57,13 @@ Machines of one family share a parameter section (the hydraulic family's ``hydra
 machine file they are given, so a family machine also names the ``node_arguments`` that make them
 run it (``--params-file <its file>``).
 
+The avoidance-zone hooks (docs/zones.md), for the markers' zones and monitored points:
+
+* ``monitored(model)``: the points avoidance zones watch, an object with ``names`` and
+  ``positions(state) -> (..., P, 3)`` (base frame) for states in the order of ``joint_names``;
+* ``read_surface(file, name)``: a LandXML TIN for ``kind: surface`` zones
+  (:class:`manipulator_kinematics.zones.Surface`).
+
 Hooks are usually given as :class:`Hook` ("module:function", imported on the first call), so that
 loading the registry, which every node does at start-up, imports no bag, URDF or drawing code.
 """
@@ -116,7 +123,8 @@ class Machine:
     topic its nodes use (relative name) to its message type (``pkg/msg/Type``); ``analyse``,
     ``synthesize``, ``samples`` and ``forward_node`` are the bag hooks (module docstring), None where the
     machine has none; ``urdf`` builds the machine's URDF from a model (module docstring);
-    ``scene`` draws it (module docstring). ``describes(values)``: whether a section's values are
+    ``scene`` draws it, ``monitored`` and ``read_surface`` serve its avoidance zones (module
+    docstring). ``describes(values)``: whether a section's values are
     this machine (None: every value of its section is; needed where machines share a section);
     ``node_arguments``: the ROS arguments its nodes need to run it (``forward_node`` included).
     """
@@ -138,6 +146,8 @@ class Machine:
     scene: Callable[[Any, Any], Any] | None = None  # (model, state array) -> scene.Scene
     describes: Callable[[Mapping[str, Any]], bool] | None = None
     node_arguments: tuple[str, ...] = ()
+    monitored: Callable[[Any], Any] | None = None  # model -> names + positions(state) (module docstring)
+    read_surface: Callable[[str, str], Any] | None = None  # (file, surface name) -> zones.Surface
 
     def parameters(self, path: str | Path | None = None, node_name: str = "/**") -> dict[str, Any]:
         """The machine's section of ``path`` (default: its shipped config file), validated."""

@@ -14,9 +14,12 @@ machine's site pose as the grade outputs are) and a ``margin`` (m) kept from its
   below`` (nothing below it: a buried service's protective surface) or ``above``.
 
 **Clearance** of a point is its signed distance from the zone grown by the margin: positive
-outside, zero on the boundary plus margin, negative inside; with it the direction ``g`` in which
-it grows (vertical for ceilings, floors and surfaces, the wall's normal, the box's outward
-direction, the tangent of the swing for sectors, at the point's radius).
+outside, zero on the boundary plus margin, negative inside; with it ``g``, its gradient (the
+direction in which it grows: vertical for ceilings and floors, the wall's normal, the box's
+outward direction, the tangent of the swing for sectors, at the point's radius; for surfaces,
+whose clearance is the vertical height above or below the TIN, (-a, -b, 1) of the triangle's
+plane z = a x + b y + c, turned for ``side: above``). A TIN zone covers its footprint only: a point
+outside it (clearance inf) is not watched.
 
 **Speed scale.** A command moves each point at velocity ``v`` (at full command); it approaches a
 zone at ``u = -g . v``. Scaled by ``s``, the point needs ``s u dt`` until the next command can
@@ -35,10 +38,12 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from types import ModuleType
 from typing import Any, Protocol
 
 import numpy as np
 
+from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.param_files import ConfigError, read_document
 from manipulator_kinematics.schema import Number, Numbers, Schema, Text, require, validate
 
@@ -73,9 +78,14 @@ SCHEMAS: dict[str, Schema] = {
 
 
 class Surface(Protocol):
-    """A TIN's heights: ``heights(points (..., 3)).height`` (..., ) above it, NaN outside it."""
+    """A TIN (:class:`excavator_kinematics.grade.design_surface.Tin`): ``locate(xy (..., 2))`` gives the
+    index of the triangle below each point (-1 outside), ``planes`` (T, 3) each triangle's
+    [a, b, c] of z - origin_z = a (x - origin_x) + b (y - origin_y) + c."""
 
-    def heights(self, points: Any) -> Any: ...
+    planes: Any
+    origin: Any
+
+    def locate(self, xy: Any) -> Any: ...
 
 
 @dataclass(frozen=True)
@@ -90,47 +100,97 @@ class Zone:
     surface: Surface | None = None
 
     def clearance(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Clearance (..., P) of points (..., P, 3) in the zone's frame, and its direction g
-        (..., P, 3) (unit, or zero where it has none)."""
-        p = np.asarray(points, dtype=float)
-        g = np.zeros_like(p)
+        """Clearance (..., P) of points (..., P, 3) in the zone's frame, and its gradient g
+        (..., P, 3) (unit but for sloped surfaces, zero where it has none)."""
+        c, g = _Kind.of([self]).clearance(np.asarray(points, dtype=float))
+        return c[..., 0], g[..., 0, :]
+
+    def half_space(self) -> tuple[np.ndarray, float]:
+        """(n, b) of a ceiling, floor or wall: clearance n . p + b with n the unit gradient."""
         v, m = self.values, self.margin
-        if self.kind in ("ceiling", "floor"):
-            up = 1.0 if self.kind == "floor" else -1.0
-            g[..., 2] = up
-            return up * (p[..., 2] - v["height"]) - m, g
         if self.kind == "wall":
-            n = np.asarray(v["normal"], float) / np.linalg.norm(v["normal"])
-            g[..., :2] = -n
-            return -((p[..., :2] - v["point"]) @ n) - m, g
+            inward = np.asarray(v["normal"], float) / np.linalg.norm(v["normal"])
+            return np.array([-inward[0], -inward[1], 0.0]), float(np.dot(v["point"], inward)) - m
+        up = 1.0 if self.kind == "floor" else -1.0
+        return np.array([0.0, 0.0, up]), -up * v["height"] - m
+
+
+#: Zone kinds that are evaluated together, as one array operation over all zones of the kind.
+_PLANES = ("ceiling", "floor", "wall")
+
+
+@dataclass(frozen=True)
+class _Kind:
+    """Zones of one kind (planes: ceilings, floors and walls together) as arrays, evaluated at
+    once: clearances (..., P, K) and gradients (..., P, K, 3) for points (..., P, 3)."""
+
+    kind: str
+    arrays: tuple[Any, ...]
+    zones: tuple[Zone, ...]
+
+    @staticmethod
+    def of(zones: Sequence[Zone]) -> _Kind:
+        kind = "plane" if zones[0].kind in _PLANES else zones[0].kind
+        margins = np.array([z.margin for z in zones])
+        if kind == "plane":
+            normals, offsets = zip(*(z.half_space() for z in zones), strict=True)
+            arrays: tuple[Any, ...] = (np.array(normals), np.array(offsets))
+        elif kind == "box":
+            lo = np.array([z.values["min"] for z in zones], float)
+            hi = np.array([z.values["max"] for z in zones], float)
+            arrays = (0.5 * (lo + hi), 0.5 * (hi - lo), margins)
+        elif kind == "sector":
+            start = np.array([z.values["from"] for z in zones], float)
+            arrays = (
+                start,
+                np.mod(np.array([z.values["to"] for z in zones], float) - start, 2 * np.pi),
+                margins,
+            )
+        else:
+            arrays = ()
+        return _Kind(kind, arrays, tuple(zones))
+
+    def approach(self, p: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Clearances (P, K) of points p (P, 3) and their approach speeds u = -g . v (P, K)."""
+        if self.kind == "plane":
+            normals, offsets = self.arrays
+            return p @ normals.T + offsets, -(v @ normals.T)
+        c, g = self.clearance(p)
+        return c, -np.einsum("pzk,pk->pz", g, v)
+
+    def clearance(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self.kind == "plane":
+            normals, offsets = self.arrays
+            c = p @ normals.T + offsets
+            return c, np.broadcast_to(normals, c.shape + (3,))
         if self.kind == "box":
-            lo, hi = np.asarray(v["min"], float), np.asarray(v["max"], float)
-            centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
-            d = p - centre
-            q = np.abs(d) - half
-            outside = np.maximum(q, 0.0)
-            distance = np.linalg.norm(outside, axis=-1)
-            inside = np.minimum(np.max(q, axis=-1), 0.0)
-            out_g = outside * np.sign(d) / np.where(distance > 0, distance, 1.0)[..., None]
-            axis = np.argmax(q, axis=-1)
-            in_g = np.sign(np.take_along_axis(d, axis[..., None], -1)) * (np.arange(3) == axis[..., None])
-            return distance + inside - m, np.where((distance > 0)[..., None], out_g, in_g)
+            return _boxes(p, *self.arrays)
         if self.kind == "sector":
-            return _sector(p, v["from"], v["to"], m, g)
-        assert self.surface is not None
-        sign = 1.0 if v["side"] == "below" else -1.0
-        h = np.asarray(self.surface.heights(p).height, dtype=float)
-        g[..., 2] = np.where(np.isfinite(h), sign, 0.0)
-        return np.where(np.isfinite(h), sign * h - m, np.inf), g
+            return _sectors(p, *self.arrays)
+        out = [_surface(p, z) for z in self.zones]
+        return np.stack([c for c, _ in out], axis=-1), np.stack([g for _, g in out], axis=-2)
 
 
-def _sector(
-    p: np.ndarray, start: float, end: float, margin: float, g: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Clearance from the swing sector [start, end] (ccw), as arc length at each point's radius."""
-    r = np.hypot(p[..., 0], p[..., 1])
-    bearing = np.arctan2(p[..., 1], p[..., 0])
-    width = np.mod(end - start, 2 * np.pi)
+def _boxes(p: np.ndarray, centre: np.ndarray, half: np.ndarray, margin: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Signed distance from axis-aligned boxes (K, 3) less their margins, and its gradient."""
+    d = p[..., None, :] - centre
+    q = np.abs(d) - half
+    outside = np.maximum(q, 0.0)
+    distance = np.linalg.norm(outside, axis=-1)
+    inside = np.minimum(np.max(q, axis=-1), 0.0)
+    out_g = outside * np.sign(d) / np.where(distance > 0, distance, 1.0)[..., None]
+    axis = np.argmax(q, axis=-1)
+    in_g = np.sign(np.take_along_axis(d, axis[..., None], -1)) * (np.arange(3) == axis[..., None])
+    return distance + inside - margin, np.where((distance > 0)[..., None], out_g, in_g)
+
+
+def _sectors(
+    p: np.ndarray, start: np.ndarray, width: np.ndarray, margin: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """Clearance from swing sectors [start, start + width] (K,) (ccw), as arc length at each
+    point's radius, and its gradient (the swing tangent: a radial motion never crosses an edge)."""
+    r = np.hypot(p[..., 0], p[..., 1])[..., None]
+    bearing = np.arctan2(p[..., 1], p[..., 0])[..., None]
     into = np.mod(bearing - start, 2 * np.pi)  # ccw angle from the sector's start
     inside = into <= width
     past_end = into - width  # ccw beyond the end
@@ -139,8 +199,25 @@ def _sector(
     angle = np.where(inside, -np.minimum(into, width - into), np.minimum(past_end, before_start))
     tangent = np.stack((-np.sin(bearing), np.cos(bearing), np.zeros_like(bearing)), axis=-1)
     # Away from the sector: ccw past its end, cw before its start (and the same way out from inside).
-    g[...] = np.where(nearer_end[..., None], tangent, -tangent) * (r > 1e-9)[..., None]
+    g = np.where(nearer_end[..., None], tangent, -tangent) * (r > 1e-9)[..., None]
     return np.where(r > 1e-9, r * angle - margin, np.inf), g
+
+
+def _surface(p: np.ndarray, zone: Zone) -> tuple[np.ndarray, np.ndarray]:
+    """Vertical clearance from a TIN (..., P) and its gradient (..., P, 3); inf off its footprint."""
+    surface = zone.surface
+    assert surface is not None
+    sign = 1.0 if zone.values["side"] == "below" else -1.0
+    triangle = np.asarray(surface.locate(p[..., :2]))
+    inside = triangle >= 0
+    plane = surface.planes[np.maximum(triangle, 0)]  # (..., 3) [a, b, c]
+    local = p - surface.origin
+    # The clearance is a vertical height, h = z - (a x + b y + c): its gradient is (-a, -b, 1),
+    # so a point moving level toward rising ground approaches the surface too.
+    ones = np.ones(p.shape[:-1] + (1,))
+    h = local[..., 2] - np.sum(plane * np.concatenate((local[..., :2], ones), axis=-1), axis=-1)
+    g = np.concatenate((-sign * plane[..., :2], sign * ones), axis=-1) * inside[..., None]
+    return np.where(inside, sign * h - zone.margin, np.inf), g
 
 
 def load_zones(path: str | Path, read_surface: Callable[[str, str], Surface] | None = None) -> list[Zone]:
@@ -211,24 +288,64 @@ class Check:
 def scale_for(clearance: np.ndarray, approach: np.ndarray, stop_time: float, period: float) -> np.ndarray:
     """Largest scale s in [0, 1] per pair with ``s u period + s^2 u T / 2 <= c`` (module
     docstring); 1 where the pair is not approaching (u <= 0), 0 where it approaches at c <= 0."""
-    c, u = np.asarray(clearance, float), np.asarray(approach, float)
-    s = np.ones(np.broadcast(c, u).shape)
+    u = np.asarray(approach, float)
     near = u > 0.0
-    c, u = np.broadcast_to(c, s.shape)[near], np.broadcast_to(u, s.shape)[near]
-    a, b = 0.5 * u * stop_time, u * period
-    with np.errstate(divide="ignore", invalid="ignore"):
-        root = np.where(
-            a > 0.0, (np.sqrt(b * b + 4.0 * a * np.maximum(c, 0.0)) - b) / (2.0 * a), np.maximum(c, 0.0) / b
-        )
-    s[near] = np.clip(np.where(c > 0.0, root, 0.0), 0.0, 1.0)
-    return s
+    # A pair moving away or along (also one with no clearance to speak of: inf off a TIN):
+    # a = b = 0 and no room, left at 1 below.
+    room = np.where(near, np.maximum(np.asarray(clearance, float), 0.0), 0.0)
+    u = np.maximum(u, 0.0)
+    a, b = 0.5 * stop_time * u, period * u
+    # The root of a s^2 + b s = c written as 2c / (b + sqrt(b^2 + 4ac)): no division by a (0 with
+    # T = 0), and the denominator of an approaching pair is at least b > 0.
+    denominator = b + np.sqrt(b * b + 4.0 * a * room)
+    s = np.divide(2.0 * room, denominator, out=np.ones(np.broadcast(room, u).shape), where=near)
+    return np.minimum(s, 1.0)
+
+
+#: Order of the kinds' columns within a frame (the kernel's: planes, boxes, sectors, then TINs).
+_KIND_ORDER = ("plane", "box", "sector", "surface")
+
+
+def _warm(kernel: ModuleType) -> None:
+    """Run the kernel once (numba loads or compiles it) for one zone of each kind."""
+    plane = Zone("c", "ceiling", "base", 0.1, {"height": 3.0})
+    box = Zone("b", "box", "base", 0.1, {"min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 1.0]})
+    sector = Zone("s", "sector", "base", 0.1, {"from": 0.5, "to": 1.0})
+    _, arrays, n = Monitor([plane, box, sector], ["p"])._frames["base"]
+    c, s, p = np.empty((2, n)), np.empty((2, n)), np.ones((2, 3))
+    kernel.check(p, p, *arrays, 0.3, 0.05, c, s)
+    # A TIN's located triangles are matplotlib's int32 (-1: off the TIN).
+    kernel.surface(
+        p, p, np.array([0, -1], np.int32), np.ones((1, 3)), np.zeros(3), 1.0, 0.1, 0.3, 0.05, c, s, 0
+    )
+
+
+#: The compiled check (:mod:`manipulator_kinematics.zone_kernel`), see manipulator_kinematics.compiled.
+KERNEL = Kernel("manipulator_kinematics.zone_kernel", _warm)
 
 
 class Monitor:
-    """The zones of a machine and its monitored points (by name), checked per command."""
+    """The zones of a machine and its monitored points (by name), checked per command by the
+    compiled kernel (:mod:`zone_kernel`: every kind, a TIN's point location by matplotlib), or
+    until it is loaded (or with ``MK_COMPILED=0``) in numpy, every zone of a kind in one array
+    operation."""
 
     def __init__(self, zones: Sequence[Zone], points: Sequence[str]) -> None:
         self.zones, self.points = list(zones), list(points)
+        # Per frame: the kinds' batches (in _KIND_ORDER), the compiled kinds' arrays and their
+        # column count; and where the columns go in the zones' order.
+        self._frames: dict[str, tuple[list[_Kind], tuple[np.ndarray, ...], int]] = {}
+        for frame in FRAMES:
+            groups: dict[str, list[Zone]] = {}
+            for z in self.zones:
+                if z.frame == frame:
+                    groups.setdefault("plane" if z.kind in _PLANES else z.kind, []).append(z)
+            if groups:
+                kinds = [_Kind.of(groups[k]) for k in _KIND_ORDER if k in groups]
+                self._frames[frame] = (kinds, *_packed(kinds))
+        order = [z.name for kinds, _, _ in self._frames.values() for k in kinds for z in k.zones]
+        self._order = np.array([order.index(z.name) for z in self.zones], dtype=int)
+        self._reordered = bool(np.any(self._order != np.arange(len(self.zones))))
 
     def check(
         self,
@@ -237,33 +354,75 @@ class Monitor:
         stop_time: float,
         period: float,
         site: tuple[np.ndarray, np.ndarray] | None = None,
+        compiled: bool = True,
     ) -> Check:
         """``positions``, ``velocities`` (P, 3) of the monitored points in the base frame (the
         velocities at full command); ``stop_time`` T and ``period`` dt (module docstring);
         ``site`` = (R, t) with p_site = R p + t, needed by site-frame zones (without it they are
-        reported at clearance -inf and stop every approach: no pose, no motion toward them)."""
+        reported at clearance -inf and stop every approach: no pose, no motion toward them).
+        ``compiled`` false: the numpy path even where the kernel is loaded (tests compare them)."""
         p, v = np.asarray(positions, float), np.asarray(velocities, float)
-        scale, limit_zone, limit_point = 1.0, None, None
-        clearance: dict[str, tuple[float, str]] = {}
-        for zone in self.zones:
-            if zone.frame == "site":
+        kernel = (KERNEL.ready or KERNEL.get()) if compiled else None
+        cs, ss = [], []
+        for frame, (kinds, arrays, columns) in self._frames.items():
+            if frame == "site":
                 if site is None:
-                    clearance[zone.name] = (-math.inf, "")
-                    scale, limit_zone, limit_point = 0.0, zone.name, None
+                    n = sum(len(k.zones) for k in kinds)
+                    cs.append(np.full((len(p), n), -np.inf))
+                    ss.append(np.zeros((len(p), n)))  # no pose: no approach
                     continue
-                R, t = site
-                zp, zv = p @ np.asarray(R).T + t, v @ np.asarray(R).T
+                R = np.asarray(site[0], float)
+                zp, zv = p @ R.T + site[1], v @ R.T
             else:
                 zp, zv = p, v
-            c, g = zone.clearance(zp)
-            u = -np.sum(g * zv, axis=-1)
-            k = int(np.argmin(c))
-            clearance[zone.name] = (float(c[k]), self.points[k])
-            s = scale_for(c, u, stop_time, period)
-            j = int(np.argmin(s))
-            if s[j] < scale:
-                scale, limit_zone, limit_point = float(s[j]), zone.name, self.points[j]
-        return Check(scale, limit_zone, limit_point, clearance)
+            if kernel is not None:
+                surfaces = [z for k in kinds if k.kind == "surface" for z in k.zones]
+                width = columns + len(surfaces)
+                c, s = np.empty((len(p), width)), np.empty((len(p), width))
+                zp, zv = np.ascontiguousarray(zp), np.ascontiguousarray(zv)
+                kernel.check(zp, zv, *arrays, stop_time, period, c, s)
+                for col, z in enumerate(surfaces, start=columns):
+                    tin = z.surface
+                    assert tin is not None
+                    triangle = np.asarray(tin.locate(zp[:, :2]))
+                    sign = 1.0 if z.values["side"] == "below" else -1.0
+                    kernel.surface(
+                        zp, zv, triangle, tin.planes, tin.origin, sign, z.margin, stop_time, period, c, s, col
+                    )
+            else:
+                parts = [k.approach(zp, zv) for k in kinds]
+                c = np.concatenate([c for c, _ in parts], axis=1)
+                s = scale_for(c, np.concatenate([u for _, u in parts], axis=1), stop_time, period)
+            cs.append(c)
+            ss.append(s)
+        c, s = (cs[0], ss[0]) if len(cs) == 1 else (np.concatenate(cs, axis=1), np.concatenate(ss, axis=1))
+        if self._reordered:
+            c, s = c[:, self._order], s[:, self._order]
+        nearest = np.argmin(c, axis=0)
+        smallest = c[nearest, np.arange(c.shape[1])].tolist()
+        clearance = {
+            zone.name: (value, self.points[k] if math.isfinite(value) else "")
+            for zone, k, value in zip(self.zones, nearest.tolist(), smallest, strict=True)
+        }
+        j, i = np.unravel_index(int(np.argmin(s)), s.shape)
+        if s[j, i] >= 1.0:
+            return Check(1.0, None, None, clearance)
+        blind = self.zones[i].frame == "site" and site is None
+        return Check(float(s[j, i]), self.zones[i].name, None if blind else self.points[j], clearance)
+
+
+def _packed(kinds: list[_Kind]) -> tuple[tuple[np.ndarray, ...], int]:
+    """The kernel's arrays of a frame's planes, boxes and sectors (empty where it has none) and
+    how many columns they make."""
+    by = {k.kind: k.arrays for k in kinds}
+    normals, offsets = by.get("plane", (np.zeros((0, 3)), np.zeros(0)))
+    centre, half, box_margin = by.get("box", (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)))
+    start, width, sector_margin = by.get("sector", (np.zeros(0), np.zeros(0), np.zeros(0)))
+    arrays = tuple(
+        np.ascontiguousarray(a, dtype=float)
+        for a in (normals, offsets, centre, half, box_margin, start, width, sector_margin)
+    )
+    return arrays, len(offsets) + len(box_margin) + len(start)
 
 
 def stop_time(rates: np.ndarray, decelerations: np.ndarray) -> float:

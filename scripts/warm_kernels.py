@@ -9,7 +9,7 @@ import time
 
 from excavator_kinematics.core import inverse
 from excavator_kinematics.core import kinematics as excavator
-from manipulator_kinematics import serial_chain
+from manipulator_kinematics import serial_chain, zones
 from palletizer_kinematics import kinematics as palletizer
 from pump_boom_kinematics import kinematics as pump_boom
 from scara_kinematics import kinematics as scara
@@ -27,6 +27,7 @@ def main() -> None:
         tool_changer.ToolChanger.default().compiled_kernel(wait=True),
         palletizer.compiled_kernel(palletizer.Palletizer.default(), wait=True),
         pump_boom.compiled_kernel(pump_boom.PumpBoom.default(), wait=True),
+        zones.KERNEL.get(wait=True),
     ]
     names = ", ".join(kernel.__name__ for kernel in loaded if kernel is not None)
     print(f"compiled kernels ready in {time.monotonic() - started:.1f} s: {names}")

@@ -497,6 +497,7 @@ TYPE_OF_TOPIC_KEY = {
     "rate_commands": JOINT_STATE,
     "rate_command_array": "std_msgs/msg/Float64MultiArray",
     "status": "diagnostic_msgs/msg/DiagnosticArray",
+    "zone_clearance": "diagnostic_msgs/msg/DiagnosticArray",
     "bucket_pose": POSE,
     "bucket_twist": TWIST,
     "bucket_accel": ACCEL,

@@ -33,7 +33,7 @@ def test_loading_the_registry_imports_no_hook_code_and_every_hook_resolves() -> 
     hooks = [
         (m.name, getattr(m, field))
         for m in machines().values()
-        for field in ("analyse", "synthesize", "urdf", "scene")
+        for field in ("analyse", "synthesize", "urdf", "scene", "monitored", "read_surface")
         if isinstance(getattr(m, field), Hook)
     ]
     assert len(hooks) >= 3 * len(machines())

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from matplotlib.tri import Triangulation
 
 from manipulator_kinematics.param_files import ConfigError
 from manipulator_kinematics.zones import Monitor, Zone, load_zones, scale_for, stop_time
@@ -240,3 +241,52 @@ def test_random_commands_never_cross_a_ceiling_and_still_reach_it(name: str) -> 
     moved = np.ptp(states, axis=0).max()
     assert moved > 0.05
     assert final < 0.05 or np.any(np.isclose(states[-1], model.upper) | np.isclose(states[-1], model.lower))
+
+
+def test_the_compiled_check_is_the_numpy_check() -> None:
+    """zone_kernel against the numpy path: random planes, boxes, sectors and a sloped TIN (points
+    inside and outside, off the TIN, on a box's symmetry planes and on the swing axis too)."""
+    from excavator_kinematics.grade.design_surface import Tin
+    from manipulator_kinematics.zones import KERNEL
+
+    assert KERNEL.get(wait=True) is not None
+    xy = RNG.uniform(-4.0, 4.0, (60, 2))
+    ground = Tin(np.column_stack([xy, 0.3 * xy[:, 0] - 0.2 * xy[:, 1]]), Triangulation(*xy.T).triangles)
+    tin = Zone("t", "surface", "base", 0.2, {"side": "below"}, ground)
+    rng = np.random.default_rng(5)
+    for trial in range(20):
+        zones = [
+            zone("ceiling", 0.3, height=rng.uniform(2, 8)),
+            zone("floor", 0.1, height=rng.uniform(-3, 0)),
+            Zone(
+                "w",
+                "wall",
+                "base",
+                0.2,
+                {"point": rng.uniform(-5, 5, 2).tolist(), "normal": rng.normal(size=2).tolist()},
+            ),
+            Zone("b1", "box", "base", 0.2, {"min": [-1.0, -1.0, -1.0], "max": [1.0, 2.0, 3.0]}),
+            Zone(
+                "b2",
+                "box",
+                "base",
+                0.0,
+                {"min": rng.uniform(-4, 0, 3).tolist(), "max": rng.uniform(0.5, 4, 3).tolist()},
+            ),
+            Zone("s1", "sector", "base", 0.1, {"from": rng.uniform(-3, 3), "to": rng.uniform(-3, 3)}),
+            Zone("s2", "sector", "base", 0.3, {"from": 2.5, "to": -2.5}),
+        ][: 3 + trial % 5] + ([tin] if trial % 2 else [])
+        p = rng.uniform(-5, 5, (40, 3))
+        p[:3] = [[0.0, 0.0, 1.0], [0.0, 0.5, 0.0], [0.0, 0.0, 0.0]]  # swing axis, box symmetry
+        v = rng.normal(size=(40, 3))
+        names = [f"p{i}" for i in range(40)]
+        T, dt = rng.uniform(0, 0.5), rng.uniform(0.005, 0.1)
+        compiled = Monitor(zones, names).check(p, v, T, dt)
+        numpy_path = Monitor(zones, names).check(p, v, T, dt, compiled=False)
+        assert compiled.scale == pytest.approx(numpy_path.scale, abs=1e-12)
+        assert (compiled.zone, compiled.point) == (numpy_path.zone, numpy_path.point)
+        for name, (c, point) in numpy_path.clearance.items():
+            assert (
+                compiled.clearance[name][0] == pytest.approx(c, abs=1e-12)
+                and compiled.clearance[name][1] == point
+            )

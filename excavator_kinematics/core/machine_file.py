@@ -71,7 +71,16 @@ SCHEMA: Schema = {
     "boom": {"foot_pin": _POINT, "length": _LENGTH},
     "arm": {"length": _LENGTH},
     # width: of the cutting edge, whose ends the grade outputs report (design_surface).
-    "bucket": {"length": _LENGTH, "width": _LENGTH},
+    "bucket": {
+        "length": _LENGTH,
+        "width": _LENGTH,
+        "outline": Numbers(
+            item=_COORDINATE,
+            default=None,
+            doc="optional: points of the bucket's side outline [x1, y1, x2, y2, ...] (m, bucket "
+            "frame), watched by the avoidance zones on both side faces (docs/zones.md)",
+        ),
+    },
     "boom_cylinder": _cylinder(base_pin=_POINT, rod_pin=_POINT),
     "arm_cylinder": _cylinder(base_pin=_POINT, rod_pin=_POINT),
     "bucket_cylinder": _cylinder(base_pin=_POINT),
@@ -92,6 +101,21 @@ SCHEMA: Schema = {
         "max_angle": _SWING_LIMIT,
         "reference_angle": _SWING_ANGLE,
         "max_speed": Number(min=0.0, max=10.0, unit="rad/s", exclusive_min=True),
+        "tail_radius": Number(
+            min=0.0,
+            max=30.0,
+            unit="m",
+            exclusive_min=True,
+            default=None,
+            doc="optional: the upper structure's tail swing radius (the counterweight's rear), "
+            "watched by the avoidance zones at tail_heights",
+        ),
+        "tail_heights": Numbers(
+            item=_COORDINATE,
+            default=None,
+            doc="optional: heights (m, base frame) of the watched points at the tail swing radius, "
+            "e.g. the counterweight's bottom and top",
+        ),
     },
 }
 
@@ -154,6 +178,10 @@ class Description:
     orientations: tuple[int, int, int, int]  # boom, arm, bucket cylinder, H-link
     imu: dict[str, Any]  # the machine file's imu section (mounting rotations), as validated
     limits: Limits
+    # Optional points the avoidance zones watch besides the pins: [x, y] on the bucket's side
+    # outline (bucket frame), and [r, z] of the upper structure's tail (r behind the swing axis).
+    bucket_outline: tuple[tuple[float, float], ...] = ()
+    tail: tuple[tuple[float, float], ...] = ()
 
 
 def describe(params: Mapping[str, Any], prefix: str = SECTION) -> Description:
@@ -202,6 +230,15 @@ def describe(params: Mapping[str, Any], prefix: str = SECTION) -> Description:
     def point(value: list[float]) -> tuple[float, float]:
         return value[0], value[1]
 
+    outline = params["bucket"]["outline"] or []
+    require(len(outline) % 2 == 0, f"{prefix}.bucket.outline", "expected [x, y] pairs: an even count")
+    radius, heights = swing["tail_radius"], swing["tail_heights"]
+    require(
+        (radius is None) == (heights is None),
+        f"{prefix}.swing.{'tail_heights' if heights is None else 'tail_radius'}",
+        "tail_radius and tail_heights go together",
+    )
+
     cylinders = [params[name] for name in CYLINDERS]
     return Description(
         name=params["name"],
@@ -228,6 +265,8 @@ def describe(params: Mapping[str, Any], prefix: str = SECTION) -> Description:
             max_swing_speed=swing["max_speed"],
             reference=np.array([swing["reference_angle"], *(c["reference_length"] for c in cylinders)]),
         ),
+        bucket_outline=tuple(zip(outline[::2], outline[1::2], strict=True)),
+        tail=tuple((radius, z) for z in heights or ()),
     )
 
 

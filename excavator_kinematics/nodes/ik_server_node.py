@@ -17,6 +17,8 @@ for the excavator, in the actuator coordinates D = [theta1, d2, d3, d4], plus ``
   reason, ``last_reachable_waypoint`` and the trajectory up to there. A request beyond the bounds
   of every machine's plan (:mod:`manipulator_kinematics.plan_bounds`: waypoints, points, duration,
   the ranges of step, speed and acceleration) is refused before any work, INVALID_GOAL_CONSTRAINTS.
+  With ``zones_file`` set, a path on which a monitored point would enter an avoidance zone ends
+  before it, with the reason (:mod:`excavator_kinematics.core.path_zones`).
 
 Settings in config/excavator_nodes.yaml (``/**/excavator_ik_server``).
 """
@@ -28,13 +30,17 @@ from typing import ClassVar
 
 import numpy as np
 
-from excavator_kinematics.core.path import BucketPlan, plan_path
+from excavator_kinematics.core.monitored import MonitoredPoints
+from excavator_kinematics.core.path import BucketPlan
+from excavator_kinematics.core.path_zones import plan_clear
+from excavator_kinematics.grade.design_surface import read_landxml
 from excavator_kinematics.nodes.node_schemas import NODES_CONFIG
 from manipulator_kinematics.nodes import run_node
 from manipulator_kinematics.nodes.ik_server import SETTINGS, PlanPathServer
 from manipulator_kinematics.plan_bounds import ACCELERATION_RANGE, STEP_RANGE, TIP_SPEED_RANGE
 from manipulator_kinematics.registry import Machine
-from manipulator_kinematics.schema import Number, Schema
+from manipulator_kinematics.schema import Number, Schema, Text
+from manipulator_kinematics.zone_guard import ZoneGuard
 from manipulator_kinematics_interfaces.srv import PlanPath
 
 NODE = "excavator_ik_server"
@@ -64,7 +70,13 @@ class ExcavatorIKServer(PlanPathServer):
     """The shared SolveIK / SolveFK / PlanPath server, settings in the excavator nodes' file."""
 
     DEFAULTS_FILE = NODES_CONFIG
-    SETTINGS: ClassVar[Schema] = {**SETTINGS, "path": PATH_SETTINGS}
+    SETTINGS: ClassVar[Schema] = {
+        **SETTINGS,
+        "path": PATH_SETTINGS,
+        "zones_file": Text(
+            doc="avoidance zone file (docs/zones.md): plan_path ends before a zone; empty: none"
+        ),
+    }
     #: IK mode of every path sample: the bucket angle is held, so the pose IK.
     PLAN_MODES = ("pose",)
 
@@ -72,6 +84,13 @@ class ExcavatorIKServer(PlanPathServer):
         super().__init__(node_name, machine, argv)
         self.path = self.settings["path"]
         path = self.path
+        self.points = MonitoredPoints(self.model)
+        file = self.settings["zones_file"]
+        self.zones = (
+            ZoneGuard.from_file(file, self.points.names, self.model.limits.max_rates, 1.0, read_landxml).zones
+            if file
+            else []
+        )
         self.get_logger().info(
             f"serving plan_path (defaults: step {path['step']:g} m, tip speed "
             f"{path['tip_speed']:g} m/s, acceleration {path['acceleration']:g} m/s^2)"
@@ -79,8 +98,10 @@ class ExcavatorIKServer(PlanPathServer):
 
     def plan(self, request: PlanPath.Request, waypoints: np.ndarray, seed: np.ndarray | None) -> BucketPlan:
         # 0 = the default; anything else (negative, NaN, tiny, huge) the shared bounds check.
-        return plan_path(
+        return plan_clear(
             self.model,
+            self.points,
+            self.zones,
             waypoints,
             request.step or self.path["step"],
             request.tip_speed or self.path["tip_speed"],

@@ -148,6 +148,15 @@ VELOCITY_IK: Schema = {
     "qos_depth": _QOS_DEPTH,
     "input_queue_depth": _INPUT_DEPTH,
     "input_reliability": input_reliability("target_bucket_twist, cylinder_lengths and joint_states"),
+    "zones_file": Text(doc="avoidance zone file (YAML, docs/zones.md) read at start; empty: no zones"),
+    "zones_period": _seconds(
+        exclusive_min=True,
+        doc="longest a command acts before the next one can slow it (state period plus latency)",
+    ),
+    "zones_stop_time": _seconds(
+        exclusive_min=True,
+        doc="the actuators stop from full speed within this (deceleration limits: max speed / this)",
+    ),
     "topics": {
         "target_bucket_twist": _topic("input: geometry_msgs/TwistStamped in base_frame"),
         "cylinder_lengths": _topic("input: sensor_msgs/JointState, cylinder lengths"),
@@ -155,6 +164,7 @@ VELOCITY_IK: Schema = {
         "rate_commands": _topic("output: sensor_msgs/JointState velocities of swing_joint and the cylinders"),
         "rate_command_array": _topic("output: std_msgs/Float64MultiArray in that order (publish_array)"),
         "status": _topic("output: diagnostic_msgs/DiagnosticArray: tracking / slowed (by what) / stopped"),
+        "zone_clearance": _topic("output: diagnostic_msgs/DiagnosticArray, per zone its smallest clearance"),
     },
 }
 

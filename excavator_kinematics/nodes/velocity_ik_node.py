@@ -22,6 +22,12 @@ the target changes.
 Stopping: no accepted target for ``command_timeout`` s, or a target/state that cannot be used
 while moving, publishes zero rates once and holds (publishes nothing) until the next good target.
 
+Avoidance zones (``zones_file``, docs/zones.md): the command is scaled once more, by
+:class:`manipulator_kinematics.zone_guard.ZoneGuard`'s factor for the monitored points
+(:class:`excavator_kinematics.core.monitored.MonitoredPoints`), so it slows approaching a zone and stops
+at it in its own direction; the status names the zone and the point, and ``zone_clearance``
+carries each zone's smallest clearance.
+
 Inputs are checked where they enter, finite values included: a swing rate beyond 1000 x its speed
 limit (:class:`excavator_kinematics.nodes.state_input.Plausible`) and a target twist beyond 1000 x the
 fastest bucket motion the actuators give at the reference state are refused with a reason. Every
@@ -30,6 +36,7 @@ command is finite and within the speed limits exactly (checked again before it i
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Sequence
 
 import numpy as np
@@ -41,6 +48,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header
 
 from excavator_kinematics.core.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
+from excavator_kinematics.core.monitored import MonitoredPoints
 from excavator_kinematics.core.rate_command import (
     SLOWED,
     STOPPED,
@@ -50,6 +58,7 @@ from excavator_kinematics.core.rate_command import (
     toward_line,
 )
 from excavator_kinematics.core.twist import split_twist
+from excavator_kinematics.grade.design_surface import read_landxml
 from excavator_kinematics.nodes import message_codec
 from excavator_kinematics.nodes.node_schemas import NODES_CONFIG, VELOCITY_IK
 from excavator_kinematics.nodes.state_input import (
@@ -63,6 +72,7 @@ from manipulator_kinematics.joint_state import joint_values
 from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes import MachineNode, run_node
 from manipulator_kinematics.nodes.base import input_qos
+from manipulator_kinematics.nodes.zone_output import ZoneOutput
 from manipulator_kinematics.registry import Machine
 
 NODE = "excavator_velocity_ik"
@@ -135,6 +145,19 @@ class VelocityIk(MachineNode):
         self.create_subscription(JointState, s["topics"]["joint_states"], self.on_swing, latest)
         self.create_subscription(JointState, s["topics"]["cylinder_lengths"], self.on_cylinders, latest)
         self.create_timer(s["command_timeout"] / 5.0, self.on_timer)
+        # Avoidance zones (docs/zones.md): every command scaled so no monitored point enters one.
+        self.points = MonitoredPoints(self.exc)
+        self.zones = ZoneOutput.of(
+            self,
+            s["zones_file"],
+            self.points.names,
+            self.max_rates / s["zones_stop_time"],
+            s["zones_period"],
+            s["topics"]["zone_clearance"],
+            s["qos_depth"],
+            self.exc.name,
+            read_landxml,
+        )
         self.get_logger().info(
             f"{self.exc.name}: {s['topics']['target_bucket_twist']} (frame {self.frame!r}) -> "
             f"{s['topics']['rate_commands']}"
@@ -164,6 +187,9 @@ class VelocityIk(MachineNode):
         # recompute only for a target that is older than that (a slower target stream).
         if self.target is not None and not self.target_since_state:
             self.command(msg.header.stamp)
+        elif self.zones is not None and self.target is None:  # standing: the clearances still go out
+            with contextlib.suppress(ValueError):
+                self.zones.watch(msg.header.stamp, self.points.positions(self.exc.validate(self.state())))
         self.target_since_state = False
 
     def on_target(self, msg: TwistStamped) -> None:
@@ -240,6 +266,11 @@ class VelocityIk(MachineNode):
                 self.stroke_horizon,
                 self.bucket_angle_gives_way,
             )
+            zone = (
+                None
+                if self.zones is None
+                else self.zones(stamp, *self.points(D, rates.d_dot), rates.d_dot, self.cylinders[0])
+            )
         except ValueError as error:  # InputError, StrokeError, an overflowing target
             # A late state (StaleInput: start-up, a loaded machine) stops the motion as any other
             # reason does, but it is transient: a warning, not an error that needs a person.
@@ -251,12 +282,15 @@ class VelocityIk(MachineNode):
                 f"JC0 badly conditioned (cond {rates.condition:.0f}): slowed to the speed of damped least "
                 "squares, direction kept",
             )
-        self.publish(stamp, rates.d_dot)
+        self.publish(stamp, rates.d_dot if zone is None else zone.scale * rates.d_dot)
         self.moving = True
         state, message = describe(rates, ACTUATORS)
         if state == STOPPED:
             self.stopped_on_line = message
-        self.report(stamp, LEVELS[state], message, scale=rates.scale, condition=rates.condition)
+        elif zone is not None and zone.scale < 1.0:  # the zones slow it further (a zone stop is not held)
+            state, message = zone.state, zone.message
+        scale = rates.scale * (1.0 if zone is None else zone.scale)
+        self.report(stamp, LEVELS[state], message, scale=scale, condition=rates.condition)
 
     def report(
         self,

@@ -16,6 +16,9 @@ The recomputation is what the forward node should have published for the recorde
 * ``bucket_pose_level`` (the tip in the gravity-aligned level frame) from the latest
   ``machine_tilt`` at or before the cylinder stamp (:func:`excavator_kinematics.sensing.imu.level_rotation`).
 
+With ``zone_clearance`` recorded, each avoidance zone's smallest clearance and its transgressions
+(:func:`manipulator_kinematics.bag.zones.zone_report`).
+
 The node settings come from the evaluation context (the package's config/excavator_nodes.yaml,
 overridden by ``evaluate --params`` files).
 """
@@ -56,6 +59,7 @@ from manipulator_kinematics.bag.analysis import (
     wrap,
 )
 from manipulator_kinematics.bag.reader import TopicArrays
+from manipulator_kinematics.bag.zones import zone_report
 
 SWING = JOINTS[0]
 # Outputs the forward node publishes for every accepted input.
@@ -423,6 +427,8 @@ def analyse(
         target, achieved = data["target_bucket_twist"], data["bucket_twist"]
         report["tracking"] = _tracking(target, achieved, m, t0, plots, prefix)
     report["actuators"] = _actuators(data, exc, t0, plots, prefix)
+    if "zone_clearance" in data:
+        report["zones"] = zone_report(data["zone_clearance"], t0)
     return report, plots
 
 

@@ -406,6 +406,30 @@ def render(report: dict[str, Any]) -> str:
                 for row in pairs
                 if row[5]
             ]
+        if zones := machine.get("zones"):
+            out += [
+                "avoidance zones: zone_clearance (clearance: distance from the zone grown by its margin)",
+                _table(
+                    ["zone", "messages", "min clearance m", "point", "at s", "transgressions"],
+                    [
+                        [
+                            name,
+                            z["messages"],
+                            z.get("min_clearance_m"),
+                            z.get("point", "-"),
+                            z.get("at_s"),
+                            z.get("transgressions", 0),
+                        ]
+                        for name, z in zones.items()
+                    ],
+                ),
+            ]
+            out += [
+                f"  TRANSGRESSION {name}: {e['point']} {-e['deepest_m']:.4g} m inside, "
+                f"{e['start_s']:.3f} to {e['end_s']:.3f} s"
+                for name, z in zones.items()
+                for e in z.get("listed", [])
+            ]
         if "tracking" in machine:
             tr = machine["tracking"]
             out += [

@@ -20,6 +20,10 @@ with the newest input's stamp: cylinders for links, barrels and rods, spheres fo
 pins, namespace = the kind of solid (``link``, ``barrel``, ``rod``, ...) so a display can hide a
 kind. A state the machine cannot take (a cylinder beyond its stroke), or one whose solids are not
 finite, is logged, throttled, and not drawn: nothing publishes NaN or inf.
+
+With ``zones_file`` (docs/zones.md) every MarkerArray also holds the avoidance zones in the base
+frame and the machine's monitored points (its ``monitored`` hook), coloured by their clearance
+(:mod:`manipulator_kinematics.nodes.zone_markers`).
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from __future__ import annotations
 import math
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -44,10 +49,12 @@ from manipulator_kinematics.nodes.base import (
     input_reliability,
 )
 from manipulator_kinematics.nodes.help import help_text, wants_help
+from manipulator_kinematics.nodes.zone_markers import point_marker, stamped, zone_markers
 from manipulator_kinematics.param_files import ConfigError, given_parameters
 from manipulator_kinematics.registry import Machine, by_section, machines
 from manipulator_kinematics.scene import Solids, solids
 from manipulator_kinematics.schema import Names, Number, Text
+from manipulator_kinematics.zone_guard import ZoneGuard
 
 NODE_NAME = "machine_markers"
 DEFAULTS_FILE = "machine_markers.yaml"
@@ -66,6 +73,9 @@ SETTINGS = {
     "input_reliability": input_reliability("topics.states"),
     "warning_period": Number(
         min=0.0, max=3600.0, unit="s", doc="the same kind of rejection is logged at most this often"
+    ),
+    "zones_file": Text(
+        doc="avoidance zone file (docs/zones.md): zones and monitored points drawn; empty: none"
     ),
     "topics": {
         "states": Names(doc="inputs: sensor_msgs/JointState topics, merged by joint name"),
@@ -133,6 +143,7 @@ class MarkersNode(MachineNode):
                 JointState, topic, self.on_state, input_qos(s["qos_depth"], s["input_reliability"])
             )
         self.create_timer(1.0 / s["rate"], self.on_tick)
+        self.zones = self.zones_of(s["zones_file"])
         self.get_logger().info(
             f"{machine.name}: {s['topics']['states']} {list(self.joint_names)} -> {s['topics']['markers']} "
             f"in frame {self.frame!r}, at most {s['rate']:g} Hz"
@@ -176,7 +187,34 @@ class MarkersNode(MachineNode):
         if not all(np.all(np.isfinite(values)) for values in drawn):
             self.log("warning", f"not drawn: state {self.state.tolist()} gives non-finite markers")
             return
-        self.publisher.publish(marker_array(parts, self.stamp, self.frame))
+        markers = marker_array(parts, self.stamp, self.frame)
+        if self.zones is not None:
+            markers.markers += stamped(self.draw_zones(parts), self.stamp, self.frame)
+        self.publisher.publish(markers)
+
+    def zones_of(self, file: str) -> tuple[list, Any, list] | None:
+        """(zones, the machine's monitored points, the zones' markers) of ``zones_file``; None
+        without one (docs/zones.md)."""
+        if not file:
+            return None
+        if self.machine.monitored is None:
+            raise ConfigError(f"zones_file: machine {self.machine.name!r} has no monitored points")
+        points = self.machine.monitored(self.model)
+        zones = ZoneGuard.from_file(
+            file, points.names, [1.0], 1.0, self.machine.read_surface, site_pose=True
+        ).zones
+        skipped = [z.name for z in zones if z.frame != "base"]
+        if skipped:
+            self.get_logger().warning(f"zones in the site frame are not drawn: {', '.join(skipped)}")
+        return zones, points, zone_markers(zones)
+
+    def draw_zones(self, parts: Solids) -> list[Marker]:
+        """The zones and the monitored points at the state drawn (their size: the pins')."""
+        zones, points, drawn = self.zones
+        p = points.positions(self.state.copy())
+        base = [z for z in zones if z.frame == "base"]
+        clearance = np.min([z.clearance(p)[0] for z in base], axis=0) if base else np.full(len(p), np.inf)
+        return [*drawn, point_marker(p, clearance, 2.5 * float(np.min(parts.scale)))]
 
 
 def machine_of(argv: Sequence[str]) -> Machine:

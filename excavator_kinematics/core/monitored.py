@@ -1,0 +1,77 @@
+"""The excavator's monitored points: where they are and how fast a command moves them (numpy).
+
+The avoidance zones (:mod:`manipulator_kinematics.zones`, docs/zones.md) watch, in the base frame:
+every pin of :meth:`excavator_kinematics.core.kinematics.Excavator.pins` (the bucket tip, the tool point
+Q[:3] of eq. 3, among them), both ends of the cutting edge (tip +- w/2 along the boom-plane normal
+(-sin theta1, cos theta1, 0), as the grade outputs), the bucket's side outline on both side faces
+(``bucket.outline`` of the machine file, bucket frame) and the upper structure's tail
+(``swing.tail_radius`` at each of ``swing.tail_heights``, behind the swing axis), when the machine
+file gives them.
+
+Velocities are forward differences along the command: (p(D + h D_dot) - p(D)) / h with h =
+:data:`STEP` s. The model has a closed form for the tip's velocity only (eq. 8), not for the
+linkage pins, and the differences need no second model (errors: round-off ~1e-9 m/s, the step's
+curvature ~h |p''| / 2 < 1e-5 m/s at the CET200's speeds; test/test_zones_excavator.py checks them
+against central differences). Forward, not central: the velocity IK never commands an actuator
+outward within 1e-4 of its end (rate_command.END_ZONE), so D + h D_dot is always inside the
+strokes, where D - h D_dot may not be. Both states are one batched call of the model.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from excavator_kinematics.core.kinematics import Excavator
+
+#: Time step (s) of the differences along the command.
+STEP = 1e-6
+
+
+class MonitoredPoints:
+    """Names, positions and velocities of the points the avoidance zones watch on one excavator."""
+
+    def __init__(self, exc: Excavator) -> None:
+        self.exc = exc
+        d = exc.description
+        pins = list(exc.pins(exc.limits.reference))
+        self._outline = np.array(d.bucket_outline, dtype=float).reshape(-1, 2)
+        self._tail = np.array(d.tail, dtype=float).reshape(-1, 2)
+        self.names: list[str] = [
+            *pins,
+            "left_corner",
+            "right_corner",
+            *(f"bucket_outline_{i}_{side}" for side in ("left", "right") for i in range(len(self._outline))),
+            *(f"tail_{i}" for i in range(len(self._tail))),
+        ]
+
+    def positions(self, D: np.ndarray) -> np.ndarray:
+        """Positions (..., P, 3) in the base frame of states D (..., 4), in the order of ``names``."""
+        exc = self.exc
+        pins = exc.pins(D)
+        t1 = np.asarray(D, dtype=float)[..., 0]
+        c1, s1, zero = np.cos(t1), np.sin(t1), np.zeros_like(t1)
+        across = np.stack((-s1, c1, zero), axis=-1)  # boom-plane normal, left
+        half = 0.5 * exc.bucket_width * across
+        tip = pins["bucket_tip"]
+        points = [*pins.values(), tip + half, tip - half]
+        if len(self._outline):
+            pin = pins["bucket_pin"]
+            x = tip - pin
+            x /= np.linalg.norm(x, axis=-1, keepdims=True)
+            radial = np.stack((c1, s1, zero), axis=-1)
+            # The bucket frame's y: x turned +90 deg in the boom plane (r, z).
+            horizontal = np.sum(x * radial, axis=-1, keepdims=True)
+            y = np.concatenate((-x[..., 2:3] * radial[..., :2], horizontal), axis=-1)
+            side = [pin + u * x + v * y for u, v in self._outline]
+            points += [p + half for p in side] + [p - half for p in side]
+        for radius, height in self._tail:
+            points.append(np.stack((-radius * c1, -radius * s1, np.full_like(t1, height)), axis=-1))
+        return np.stack(points, axis=-2)
+
+    def __call__(self, D: np.ndarray, D_dot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and velocities (P, 3) at state D (4,) for the actuator rates D_dot (4,)."""
+        both = self.positions(np.stack((D, D + STEP * np.asarray(D_dot, dtype=float))))
+        return both[0], (both[1] - both[0]) / STEP
+
+
+__all__ = ["STEP", "MonitoredPoints"]
