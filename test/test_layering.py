@@ -289,3 +289,12 @@ def test_no_import_circle_in_the_excavator_package() -> None:
     }
     assert len(graph) > 30
     assert import_cycles(graph) == []
+
+
+def test_no_excavator_module_reads_another_modules_private_names() -> None:
+    offenders = {
+        str(path.relative_to(REPO)): reads
+        for path in excavator_files()
+        if (reads := private_reads(path.read_text(encoding="utf-8")))
+    }
+    assert offenders == {}
