@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from excavator_kinematics.core.layouts import FourBarConstants, TriangleConstants
 from excavator_kinematics.core.machine_file import Description
 
 
@@ -69,18 +70,17 @@ class Triangle:
     radius: float = 1.0  # scale of the cosine and sine that closes() returns
 
     @property
-    def constants(self) -> tuple[float, ...]:
-        """Eq. 1's constants, folded: cos(gamma) = (a^2 + b^2 - d^2) / (2ab) = c0 - c1 d^2, then
-        ab, the orientation o, radius (cos, sin) offset and the offset (the kernel's order)."""
+    def constants(self) -> TriangleConstants:
+        """Eq. 1's constants, folded (:class:`~excavator_kinematics.core.layouts.TriangleConstants`)."""
         ab = self.a * self.b
-        return (
-            (self.a * self.a + self.b * self.b) / (2.0 * ab),
-            0.5 / ab,
-            ab,
-            float(self.orientation),
-            self.radius * math.cos(self.offset),
-            self.radius * math.sin(self.offset),
-            self.offset,
+        return TriangleConstants(
+            c0=(self.a * self.a + self.b * self.b) / (2.0 * ab),
+            c1=0.5 / ab,
+            ab=ab,
+            o=float(self.orientation),
+            cos_offset=self.radius * math.cos(self.offset),
+            sin_offset=self.radius * math.sin(self.offset),
+            offset=self.offset,
         )
 
     @classmethod
@@ -101,12 +101,18 @@ class Triangle:
         cos/sin come from cos(gamma) and sin(gamma) = sqrt(1 - cos^2) by angle addition: the
         open chain needs no trigonometry of theta2..theta4.
         """
-        c0, c1, ab, o, cd, sd, offset = self.constants
-        c = c0 - c1 * d * d
-        s = o * closing_sine(c, self.name)  # sin(o * gamma)
-        k = d / (ab * s)  # o * dgamma/dd
-        theta = offset + o * np.arccos(c) if angle else None
-        return theta, k, k / d - k * k * c / s, cd * c - sd * s, sd * c + cd * s
+        t = self.constants
+        c = t.c0 - t.c1 * d * d
+        s = t.o * closing_sine(c, self.name)  # sin(o * gamma)
+        k = d / (t.ab * s)  # o * dgamma/dd
+        theta = t.offset + t.o * np.arccos(c) if angle else None
+        return (
+            theta,
+            k,
+            k / d - k * k * c / s,
+            t.cos_offset * c - t.sin_offset * s,
+            t.sin_offset * c + t.cos_offset * s,
+        )
 
 
 @dataclass(frozen=True)
@@ -130,11 +136,7 @@ class Linkages:
     h_orientation: int
     pins: dict[str, np.ndarray]  # every cylinder pin and the H-link pin, in its body's frame
     pivot_from_bucket_pin: tuple[float, float]  # side-link pivot - bucket pin (arm frame)
-    # The bucket four-bar's constants (eq. 2): b = h_radius, b^2, the orientation, b^2 - a^2 (a the
-    # H-link) and 2b for the H angle's cosine (e^2 + b^2 - a^2) / (2 b e) (law of cosines, e =
-    # |R - bucket pin|); cos and sin of the H phase over b, which turn (H - bucket pin) back to the
-    # bucket direction (cos, sin theta4); then the H phase (the kernel's order).
-    h_constants: tuple[float, ...]
+    h_constants: FourBarConstants  # the bucket four-bar's, folded (eq. 2)
 
     @classmethod
     def of(cls, g: Description) -> Linkages:
@@ -181,14 +183,14 @@ class Linkages:
                 "h_link_pin": h_pin,
             },
             pivot_from_bucket_pin=tuple((pivot - bucket_pin).tolist()),
-            h_constants=(
-                b,
-                b * b,
-                float(h_orientation),
-                b * b - a * a,
-                2.0 * b,
-                math.cos(h_phase) / b,
-                math.sin(h_phase) / b,
-                h_phase,
+            h_constants=FourBarConstants(
+                b=b,
+                bb=b * b,
+                o=float(h_orientation),
+                bb_aa=b * b - a * a,
+                two_b=2.0 * b,
+                cos_phase=math.cos(h_phase) / b,
+                sin_phase=math.sin(h_phase) / b,
+                phase=h_phase,
             ),
         )

@@ -45,6 +45,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from excavator_kinematics.core.geometry import cos_sin
+from excavator_kinematics.core.layouts import IK, check_compiled
 from excavator_kinematics.core.machine_file import STROKE_TOLERANCE, wrap_swing
 from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.model import (
@@ -74,7 +75,6 @@ LIMIT_TOL = 1e-10
 PLANE_TOL = 1e-9
 _SUCCESS, _SINGULAR, _UNREACHABLE = int(IKStatus.SUCCESS), int(IKStatus.SINGULAR), int(IKStatus.UNREACHABLE)
 _INVALID = int(IKStatus.INVALID)
-_SCALARS = 30  # float fields of Constants, first in Constants.packed
 _REACHABLE, _TOO_FAR, _TOO_CLOSE, _NOT_FINITE = (int(r) for r in Reach)  # in Reach's order
 # Stroke-margin search of the position mode (widest_margin_angles): golden-section steps shrink
 # the bracket of 2 grid steps to 4 pi / _GRID * _GOLDEN**_GOLDEN_STEPS = 1.8e-8 rad.
@@ -125,8 +125,8 @@ class Constants(NamedTuple):
     stroke_max: np.ndarray
     stroke_range: np.ndarray
     weights: np.ndarray  # (4,) 1 / range of each actuator: the seed distance of model.select
-    # The float fields above, the limits widened by limit_status' tolerance, the weights and the
-    # strokes in one array: the constants of the compiled kernel (ik_kernel).
+    # The constants of the compiled kernel (ik_kernel), layout ``layouts.IK``: the float fields
+    # above, the limits widened by limit_status' tolerance, the weights and the strokes.
     packed: np.ndarray
 
     @classmethod
@@ -173,11 +173,9 @@ class Constants(NamedTuple):
             np.empty(0),
         )
         lower, upper = model.joint_limits.lower - LIMIT_TOL, model.joint_limits.upper + LIMIT_TOL
-        return k._replace(
-            packed=np.concatenate(
-                (np.array(k[:_SCALARS], dtype=float), lower, upper, k.weights, k.stroke_min, k.stroke_max)
-            )
-        )
+        # By name: every other field of the layout is the Constants field of that name.
+        limits = {"lower": lower, "upper": upper}
+        return k._replace(packed=IK.pack({f: limits[f] if f in limits else getattr(k, f) for f in IK.sizes}))
 
 
 # Per candidate in BRANCHES order: the sign of the boom-plane radius (the tip in front of or
@@ -427,7 +425,9 @@ def _seed(seed: ArrayLike | None, model: Excavator) -> np.ndarray | None:
 
 
 def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
-    """Run each kernel function once (numba loads or compiles it)."""
+    """Run each kernel function once (numba loads or compiles it); a kernel compiled for another
+    layout is refused (layouts.check_compiled)."""
+    check_compiled(ik_kernel)
     D, reach, judged = np.empty((4, 4)), np.empty(4, dtype=np.int8), np.empty(4, dtype=np.int8)
     alpha = np.zeros(4)
     ik_kernel.candidates(packed, 5.0, 0.0, 0.0, alpha, 0.0, D, reach)

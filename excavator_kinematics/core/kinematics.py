@@ -53,6 +53,7 @@ import numpy as np
 
 from excavator_kinematics.core import inverse
 from excavator_kinematics.core.geometry import Linkages, StrokeError, closing_sine, cos_sin
+from excavator_kinematics.core.layouts import STATE, check_compiled
 from excavator_kinematics.core.machine_file import (
     CYLINDERS,
     SECTION,
@@ -94,8 +95,10 @@ def _warm(state_kernel: ModuleType) -> None:
     """Run each kernel function once (numba loads or compiles it; the values do not matter, zero
     limits refuse the state), then let it take only those types: arguments of other types (a
     list, a strided or read-only view, integers) raise TypeError, and the caller takes the numpy
-    path, instead of compiling for seconds in a call."""
-    packed, D, three = np.zeros(44), np.zeros(4), np.empty(3)
+    path, instead of compiling for seconds in a call. A kernel compiled for another layout is
+    refused (layouts.check_compiled)."""
+    check_compiled(state_kernel)
+    packed, D, three = np.zeros(STATE.size), np.zeros(4), np.empty(3)
     state_kernel.state(packed, D, D, D, np.empty((10, 4)))
     state_kernel.pose(packed, D, np.empty(4))
     state_kernel.jc0(packed, D, np.empty((4, 4)))
@@ -114,6 +117,7 @@ def _warm(state_kernel: ModuleType) -> None:
         state_kernel.bucket_quaternion,
         state_kernel.bucket_angular_velocity,
         state_kernel.bucket_angular_acceleration,
+        state_kernel.layout_signature,
     ):
         function.disable_compile()
 
@@ -166,24 +170,22 @@ class Excavator:
         self._check_branches()
         #: The IK's constants (:class:`excavator_kinematics.core.inverse.Constants`).
         self.ik_constants = inverse.Constants.of(self)
-        # The constants of the compiled single call (state_kernel): l0..l4, the boom, arm and
-        # side-link triangles (7 each, Triangle.constants), R's pivot from the bucket pin (2),
-        # the bucket four-bar (8, Linkages.h_constants), the limits with the tolerance (4 + 4).
-        self._packed = np.array(
-            [
-                self.l0,
-                self.l1,
-                self.l2,
-                self.l3,
-                self.l4,
-                *self.linkages.boom.constants,
-                *self.linkages.arm.constants,
-                *self.linkages.side.constants,
-                *self.linkages.pivot_from_bucket_pin,
-                *self.linkages.h_constants,
-                *self._lo,
-                *self._hi,
-            ]
+        #: The constants of the compiled single call (state_kernel), layout ``layouts.STATE``.
+        self.packed = STATE.pack(
+            {
+                "l0": self.l0,
+                "l1": self.l1,
+                "l2": self.l2,
+                "l3": self.l3,
+                "l4": self.l4,
+                "boom": self.linkages.boom.constants,
+                "arm": self.linkages.arm.constants,
+                "side": self.linkages.side.constants,
+                "pivot_from_bucket_pin": self.linkages.pivot_from_bucket_pin,
+                "four_bar": self.linkages.h_constants,
+                "lower": self._lo,
+                "upper": self._hi,
+            }
         )
 
     def _check_whole_stroke(self) -> None:
@@ -317,7 +319,7 @@ class Excavator:
         if kernel is None:
             return None
         try:
-            return out if getattr(kernel, function)(self._packed, *arguments, out) else None
+            return out if getattr(kernel, function)(self.packed, *arguments, out) else None
         except TypeError:
             return None
 
@@ -382,17 +384,18 @@ class Excavator:
         fx, fy = linkages.pivot_from_bucket_pin
         ex, ey = fx + rx, fy + ry  # R - bucket pin
         # Bucket four-bar (Fig. 7c, eq. 2): H from the triangle (bucket pin, R, H).
-        b, bb, o, b2_a2, two_b, cp, sp, h_phase = linkages.h_constants
+        h = linkages.h_constants
+        b, o, cp, sp = h.b, h.o, h.cos_phase, h.sin_phase
         e2 = ex * ex + ey * ey
         e = np.sqrt(e2)
-        ch = (e2 + b2_a2) / (two_b * e)
+        ch = (e2 + h.bb_aa) / (h.two_b * e)
         sh = o * closing_sine(ch, "bucket_cylinder (bucket four-bar)")
         # H - bucket pin = fc (R - bucket pin) + fs perp(R - bucket pin): turned by the H angle
         # and scaled to length b.
         f = b / e
         fc, fs = f * ch, f * sh
         ox, oy = fc * ex - fs * ey, fc * ey + fs * ex
-        theta4 = np.arctan2(ey, ex) + o * np.arccos(ch) - h_phase
+        theta4 = np.arctan2(ey, ex) + o * np.arccos(ch) - h.phase
         c4, s4 = ox * cp + oy * sp, oy * cp - ox * sp
         # Four-bar velocity ratio g1 = dpsi/dphi and g2 = d2psi/dphi2 from the loop constraint
         # (H - R).(vH - vR) = 0 and its time derivative; closed form, no iteration. With the
@@ -401,7 +404,7 @@ class Excavator:
         den = fs * e2
         g1 = (cy * rx - cx * ry) / den
         wx, wy = g1 * ox - rx, g1 * oy - ry
-        g2 = (g1 * g1 * (bb - fc * e2) - (cx * rx + cy * ry) - (wx * wx + wy * wy)) / den
+        g2 = (g1 * g1 * (h.bb - fc * e2) - (cx * rx + cy * ry) - (wx * wx + wy * wy)) / den
         return (
             (theta2, theta3, theta4),
             (k2, k3, g1 * phi_d),
@@ -636,7 +639,7 @@ class Excavator:
             accelerations = _NO_ACCELERATION if D_ddot is None else np.asarray(D_ddot, dtype=float)
             rows = np.empty((10, 4))  # a new table per call: the caller keeps the views
             try:
-                if kernel.state(self._packed, D, rates, accelerations, rows):
+                if kernel.state(self.packed, D, rates, accelerations, rows):
                     return BucketState(rows)
             except TypeError:  # arguments of types the kernel does not take (_warm)
                 pass
