@@ -231,6 +231,11 @@ def test_the_checks_find_what_they_look_for() -> None:
 def test_the_excavator_subpackages_are_the_documented_layers() -> None:
     assert {p.parent.name for p in EXCAVATOR.glob("*/__init__.py")} == set(LAYERS)
     assert {p.name for p in EXCAVATOR.glob("*.py")} == {"__init__.py", "machine.py"}
+    # docs/architecture.md draws the layout: every subpackage and every module of it
+    architecture = (REPO / "docs" / "architecture.md").read_text(encoding="utf-8")
+    drawn = architecture[architecture.index("## The excavator package") :]
+    assert [f"{name}/" for name in LAYERS if f"{name}/" not in drawn] == []
+    assert [p.name for p in excavator_files() if p.name not in drawn] == []
 
 
 def test_the_excavator_core_and_kernels_import_no_ros_and_nothing_above_them() -> None:
