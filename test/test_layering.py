@@ -6,6 +6,7 @@ and no module reading another's private names (docs/architecture.md, "The excava
 from __future__ import annotations
 
 import ast
+import functools
 import subprocess
 import sys
 from pathlib import Path
@@ -19,6 +20,7 @@ SHARED = REPO / "manipulator_kinematics"
 MACHINE_PACKAGES = sorted(p.parent.name for p in REPO.glob("*_kinematics/__init__.py") if p.parent != SHARED)
 
 
+@functools.cache
 def is_module(name: str) -> bool:
     path = REPO.joinpath(*name.split("."))
     return path.with_suffix(".py").is_file() or (path / "__init__.py").is_file()
