@@ -102,7 +102,7 @@ def one_round(exc: Excavator, scale: float, batches: dict[int, tuple[np.ndarray,
     D_ddot = np.array([0.1, 0.02, 0.01, -0.03])
     Q_dot = exc.state(D, D_dot).Q_dot
     kernel = compiled_kernel(exc, wait=True)
-    packed, out, table = exc._packed, np.empty(4), np.empty((10, 4))
+    packed, out, table = exc.packed, np.empty(4), np.empty((10, 4))
     n = int(2000 * scale) or 100
 
     def every_field() -> tuple[np.ndarray, ...]:

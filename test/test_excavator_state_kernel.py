@@ -50,8 +50,8 @@ def test_kernel_equals_numpy_over_random_states_in_and_out_of_the_limits(monkeyp
             pose = EXC.pose(D[i : i + 1])[0]
         except StrokeError:
             pose = None
-        assert kernel.state(EXC._packed, D[i], rates[i], accelerations[i], table) == (reference is not None)
-        assert kernel.pose(EXC._packed, D[i], Q) == kernel.jc0(EXC._packed, D[i], jc0) == (pose is not None)
+        assert kernel.state(EXC.packed, D[i], rates[i], accelerations[i], table) == (reference is not None)
+        assert kernel.pose(EXC.packed, D[i], Q) == kernel.jc0(EXC.packed, D[i], jc0) == (pose is not None)
         if pose is not None:
             assert _close(Q, pose) and _close(jc0, EXC.jc0(D[i : i + 1])[0]), D[i]
         if reference is None:
@@ -121,7 +121,7 @@ def test_the_single_call_returns_the_kernel_result_and_refuses_as_the_numpy_path
     kernel = compiled_kernel(EXC, wait=True)
     D, V, A = LIM.reference, np.array([0.2, 0.05, -0.08, 0.1]), np.array([0.1, 0.02, 0.01, -0.03])
     table = np.empty((10, 4))
-    assert kernel.state(EXC._packed, D, V, A, table)
+    assert kernel.state(EXC.packed, D, V, A, table)
     one = EXC.state(D, V, A)
     np.testing.assert_array_equal(np.concatenate(one[:6]), table[:6].ravel())
     np.testing.assert_array_equal(one.jc0, table[6:])

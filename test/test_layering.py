@@ -6,6 +6,7 @@ and no module reading another's private names (docs/architecture.md, "The excava
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 from manipulator_kinematics.registry import machines
@@ -15,6 +16,7 @@ SHARED = REPO / "manipulator_kinematics"
 MACHINE_PACKAGES = sorted(p.parent.name for p in REPO.glob("*_kinematics/__init__.py") if p.parent != SHARED)
 
 
+@functools.cache
 def is_module(name: str) -> bool:
     path = REPO.joinpath(*name.split("."))
     return path.with_suffix(".py").is_file() or (path / "__init__.py").is_file()
@@ -203,6 +205,11 @@ def test_the_checks_find_what_they_look_for() -> None:
 def test_the_excavator_subpackages_are_the_documented_layers() -> None:
     assert {p.parent.name for p in EXCAVATOR.glob("*/__init__.py")} == set(LAYERS)
     assert {p.name for p in EXCAVATOR.glob("*.py")} == {"__init__.py", "machine.py"}
+    # docs/architecture.md draws the layout: every subpackage and every module of it
+    architecture = (REPO / "docs" / "architecture.md").read_text(encoding="utf-8")
+    drawn = architecture[architecture.index("## The excavator package") :]
+    assert [f"{name}/" for name in LAYERS if f"{name}/" not in drawn] == []
+    assert [p.name for p in excavator_files() if p.name not in drawn] == []
 
 
 def test_the_excavator_core_and_kernels_import_no_ros_and_nothing_above_them() -> None:
@@ -261,3 +268,12 @@ def test_no_import_circle_in_the_excavator_package() -> None:
     }
     assert len(graph) > 30
     assert import_cycles(graph) == []
+
+
+def test_no_excavator_module_reads_another_modules_private_names() -> None:
+    offenders = {
+        str(path.relative_to(REPO)): reads
+        for path in excavator_files()
+        if (reads := private_reads(path.read_text(encoding="utf-8")))
+    }
+    assert offenders == {}

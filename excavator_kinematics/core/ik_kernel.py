@@ -18,9 +18,10 @@ Same steps as the numpy path, same equation numbers:
 5. statuses as :func:`manipulator_kinematics.model.limit_status`, SINGULAR on the swing axis,
    INVALID for a target that is not finite; the selection as :func:`manipulator_kinematics.model.select`.
 
-The machine's constants arrive as one float array, ``inverse.Constants.packed``: the 30 float
-fields in their order, the limits widened by the status tolerance (8), the seed weights (4) and
-the strokes' ends (3 + 3).
+The machine's constants arrive as one float array, ``inverse.Constants.packed``, of the layout
+:data:`excavator_kinematics.core.layouts.IK` (declared once, packed by name, read here by
+offset): Constants' float fields, the limits widened by the status tolerance, the seed weights
+and the strokes' ends.
 """
 
 from __future__ import annotations
@@ -30,10 +31,15 @@ import math
 import numpy as np
 from numba import njit
 
+from excavator_kinematics.core.layouts import IK
 from manipulator_kinematics.model import IKStatus
 from manipulator_kinematics.select_kernel import select_one
 
-# Globals are compile-time constants to numba.
+# Globals are compile-time constants to numba: the offsets into the packed constants (layouts.IK)
+# and the statuses.
+_K = IK.at
+#: The layout this module reads; :func:`layout_signature` returns the one it was compiled with.
+LAYOUT_SIGNATURE = IK.signature
 _SUCCESS, _LIMITS, _UNREACHABLE = int(IKStatus.SUCCESS), int(IKStatus.JOINT_LIMITS), int(IKStatus.UNREACHABLE)
 _SINGULAR, _INVALID = int(IKStatus.SINGULAR), int(IKStatus.INVALID)
 
@@ -61,12 +67,30 @@ def candidates(
 ) -> None:
     """D (4, 4) and reach (4,) of one target, candidate b at bucket angle alpha[b], in
     inverse.BRANCHES order (inverse.open_chain_columns, inverse.linkage_length_columns)."""
-    l0, l1, l2, l3, l4 = k[0], k[1], k[2], k[3], k[4]
-    l2l2_l3l3, two_l2l3, reach_max, reach_min, boom_o = k[5], k[6], k[7], k[8], k[9]
-    boom_offset, boom_aa_bb, boom_two_ab, arm_o, arm_offset = k[10], k[11], k[12], k[13], k[14]
-    arm_aa_bb, arm_two_ab, h_phase, h_radius, pin_x = k[15], k[16], k[17], k[18], k[19]
-    pin_y, base_x, base_y, side, side_hh = k[20], k[21], k[22], k[23], k[24]
-    two_side, side_o, h_o, stroke_lo, stroke_hi = k[25], k[26], k[27], k[28], k[29]
+    l0, l1, l2, l3, l4 = k[_K.l0], k[_K.l1], k[_K.l2], k[_K.l3], k[_K.l4]
+    l2l2_l3l3, two_l2l3, reach_max, reach_min = (
+        k[_K.l2l2_l3l3],
+        k[_K.two_l2l3],
+        k[_K.reach_max],
+        k[_K.reach_min],
+    )
+    boom_o, boom_offset, boom_aa_bb, boom_two_ab = (
+        k[_K.boom_o],
+        k[_K.boom_offset],
+        k[_K.boom_aa_bb],
+        k[_K.boom_two_ab],
+    )
+    arm_o, arm_offset, arm_aa_bb, arm_two_ab = (
+        k[_K.arm_o],
+        k[_K.arm_offset],
+        k[_K.arm_aa_bb],
+        k[_K.arm_two_ab],
+    )
+    h_phase, h_radius = k[_K.h_phase], k[_K.h_radius]
+    pin_x, pin_y = k[_K.pin_from_pivot_x], k[_K.pin_from_pivot_y]
+    base_x, base_y = k[_K.base_from_pivot_x], k[_K.base_from_pivot_y]
+    side, side_hh, two_side, side_o, h_o = k[_K.side], k[_K.side_hh], k[_K.two_side], k[_K.side_o], k[_K.h_o]
+    stroke_lo, stroke_hi = k[_K.stroke_lo], k[_K.stroke_hi]
     rho = x * math.cos(heading) + y * math.sin(heading)
     behind = heading + math.pi
     behind = (behind + math.pi) % (2.0 * math.pi) - math.pi
@@ -127,7 +151,7 @@ def judge(
     k: np.ndarray, x: float, y: float, finite: bool, swing_axis: float, D: np.ndarray, status: np.ndarray
 ) -> None:
     """Step 5's statuses (inverse.status)."""
-    lower, upper = k[30:34], k[34:38]
+    lower, upper = k[_K.lower : _K.lower + 4], k[_K.upper : _K.upper + 4]
     for b in range(4):
         exists, inside = True, True
         for j in range(4):
@@ -157,7 +181,7 @@ def pick(
     allowed = np.full(4, branch < 0)
     if branch >= 0:
         allowed[branch] = True
-    return select_one(D, status, seed, seeded, allowed, k[38:42], tie_tolerance)
+    return select_one(D, status, seed, seeded, allowed, k[_K.weights : _K.weights + 4], tie_tolerance)
 
 
 @njit(cache=True, error_model="numpy")
@@ -166,7 +190,7 @@ def _margins(k: np.ndarray, D: np.ndarray, margin: np.ndarray) -> None:
     for b in range(4):
         worst = math.inf
         for j in range(3):
-            d, lo, hi = D[b, j + 1], k[42 + j], k[45 + j]
+            d, lo, hi = D[b, j + 1], k[_K.stroke_min + j], k[_K.stroke_max + j]
             worst = min(worst, min(d - lo, hi - d) / (hi - lo))
             if math.isnan(d):
                 worst = -math.inf
@@ -251,3 +275,10 @@ def widest_margin_angles(
                     winner = p
             result[b] = best[winner, b]
     return result
+
+
+@njit(cache=True)
+def layout_signature() -> int:
+    """The :data:`LAYOUT_SIGNATURE` this module was compiled with (numba freezes globals; its cache
+    is keyed on this file alone, so a changed layouts.py shows here as another number)."""
+    return LAYOUT_SIGNATURE

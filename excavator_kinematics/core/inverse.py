@@ -44,7 +44,9 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
-from excavator_kinematics.core.machine_file import wrap_swing
+from excavator_kinematics.core.geometry import cos_sin
+from excavator_kinematics.core.layouts import IK, check_compiled
+from excavator_kinematics.core.machine_file import STROKE_TOLERANCE, wrap_swing
 from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.model import (
     TIE_TOLERANCE,
@@ -73,7 +75,6 @@ LIMIT_TOL = 1e-10
 PLANE_TOL = 1e-9
 _SUCCESS, _SINGULAR, _UNREACHABLE = int(IKStatus.SUCCESS), int(IKStatus.SINGULAR), int(IKStatus.UNREACHABLE)
 _INVALID = int(IKStatus.INVALID)
-_SCALARS = 30  # float fields of Constants, first in Constants.packed
 _REACHABLE, _TOO_FAR, _TOO_CLOSE, _NOT_FINITE = (int(r) for r in Reach)  # in Reach's order
 # Stroke-margin search of the position mode (widest_margin_angles): golden-section steps shrink
 # the bracket of 2 grid steps to 4 pi / _GRID * _GOLDEN**_GOLDEN_STEPS = 1.8e-8 rad.
@@ -124,15 +125,16 @@ class Constants(NamedTuple):
     stroke_max: np.ndarray
     stroke_range: np.ndarray
     weights: np.ndarray  # (4,) 1 / range of each actuator: the seed distance of model.select
-    # The float fields above, the limits widened by limit_status' tolerance, the weights and the
-    # strokes in one array: the constants of the compiled kernel (ik_kernel).
+    # The constants of the compiled kernel (ik_kernel), layout ``layouts.IK``: the float fields
+    # above, the limits widened by limit_status' tolerance, the weights and the strokes.
     packed: np.ndarray
 
     @classmethod
     def of(cls, model: Excavator, arm_tol: float = 1e-12) -> Constants:
-        boom, arm = model._boom, model._arm
-        pivot, pin = model._pivot, model._bucket_pin
-        base = model._pins_local["bucket_cylinder_base"]
+        linkages = model.linkages
+        boom, arm = linkages.boom, linkages.arm
+        pivot, pin, base = linkages.pivot, linkages.bucket_pin, linkages.pins["bucket_cylinder_base"]
+        side, stroke = linkages.side_link, (model.limits.stroke_min[2], model.limits.stroke_max[2])
         k = cls(
             model.l0,
             model.l1,
@@ -151,19 +153,19 @@ class Constants(NamedTuple):
             arm.offset,
             arm.a**2 + arm.b**2,
             2.0 * arm.a * arm.b,
-            model._h_phase,
-            model._h_radius,
+            linkages.h_phase,
+            linkages.h_radius,
             float(pin[0] - pivot[0]),
             float(pin[1] - pivot[1]),
             float(base[0] - pivot[0]),
             float(base[1] - pivot[1]),
-            model._side,
-            model._side**2 - model._h_link**2,
-            2.0 * model._side,
-            float(model._side_triangle.orientation),
-            float(model._h_orientation),
-            model._lo[3],
-            model._hi[3],
+            side,
+            side**2 - linkages.h_link**2,
+            2.0 * side,
+            float(linkages.side.orientation),
+            float(linkages.h_orientation),
+            stroke[0] - STROKE_TOLERANCE,
+            stroke[1] + STROKE_TOLERANCE,
             model.limits.stroke_min,
             model.limits.stroke_max,
             model.limits.stroke_max - model.limits.stroke_min,
@@ -171,26 +173,9 @@ class Constants(NamedTuple):
             np.empty(0),
         )
         lower, upper = model.joint_limits.lower - LIMIT_TOL, model.joint_limits.upper + LIMIT_TOL
-        return k._replace(
-            packed=np.concatenate(
-                (np.array(k[:_SCALARS], dtype=float), lower, upper, k.weights, k.stroke_min, k.stroke_max)
-            )
-        )
-
-
-def cos_sin(angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """cos and sin by the tangent half-angle formulas, within 2.3e-16 of np.cos and np.sin (the
-    IK's and the forward batches' swing angle; kinematics imports this module, not the reverse).
-
-    Why not np.cos and np.sin: numpy runs float64 sin and cos element by element through libm
-    but has a vectorised tan: one tan and a few products cost a quarter of the pair (measured
-    5 vs 19.5 ns per angle), a fifth of a batch pose. t * t cannot overflow: |tan| of any double
-    stays below 1e19.
-    """
-    t = np.tan(0.5 * angle)
-    t2 = t * t
-    scale = 1.0 / (1.0 + t2)
-    return (1.0 - t2) * scale, 2.0 * t * scale
+        # By name: every other field of the layout is the Constants field of that name.
+        limits = {"lower": lower, "upper": upper}
+        return k._replace(packed=IK.pack({f: limits[f] if f in limits else getattr(k, f) for f in IK.sizes}))
 
 
 # Per candidate in BRANCHES order: the sign of the boom-plane radius (the tip in front of or
@@ -297,7 +282,7 @@ def open_chain_candidates(
     flat = Q.reshape(-1, 4)
     x, y, z, alpha = (flat[:, i : i + 1] for i in range(4))
     heading = np.arctan2(y, x) if heading is None else np.reshape(heading, (-1, 1))
-    theta2, theta3, theta4, reach = open_chain_columns(model._ik, x, y, z, alpha, heading)
+    theta2, theta3, theta4, reach = open_chain_columns(model.ik_constants, x, y, z, alpha, heading)
     theta = np.stack((_swings(heading, theta2.shape), theta2, theta3, theta4), axis=-1)
     return theta.reshape(Q.shape[:-1] + (4, 4)), reach.reshape(Q.shape[:-1] + (4,))
 
@@ -315,7 +300,7 @@ def _block_candidates(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """D (N, 4, 4), reach (N, 4) and status (N, 4) of flat targets Q (N, >= 3) at bucket angles
     alpha (N, 1) or (N, 4) (one per candidate); heading (N, 1) or None."""
-    k = model._ik
+    k = model.ik_constants
     x, y, z = Q[:, 0:1], Q[:, 1:2], Q[:, 2:3]
     if heading is None:
         heading = np.arctan2(y, x)
@@ -374,7 +359,7 @@ def _solutions(
     statuses ``judged``; ``other_heading``: the last two candidates are refused for facing the
     other way (a 6-D target); ``selection``: (selected, tie) when already made (the kernel)."""
     if selection is None:
-        selection = select(D, judged, seed=seed, branch=branch, weights=model._ik.weights)
+        selection = select(D, judged, seed=seed, branch=branch, weights=model.ik_constants.weights)
     selected, tie = selection
 
     def explain(solutions: IKSolutions, index: tuple[int, ...]) -> str:
@@ -440,7 +425,9 @@ def _seed(seed: ArrayLike | None, model: Excavator) -> np.ndarray | None:
 
 
 def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
-    """Run each kernel function once (numba loads or compiles it)."""
+    """Run each kernel function once (numba loads or compiles it); a kernel compiled for another
+    layout is refused (layouts.check_compiled)."""
+    check_compiled(ik_kernel)
     D, reach, judged = np.empty((4, 4)), np.empty(4, dtype=np.int8), np.empty(4, dtype=np.int8)
     alpha = np.zeros(4)
     ik_kernel.candidates(packed, 5.0, 0.0, 0.0, alpha, 0.0, D, reach)
@@ -457,7 +444,7 @@ def compiled_kernel(model: Excavator, wait: bool = False) -> ModuleType | None:
     """The compiled kernel module if ready, else None (:class:`manipulator_kinematics.compiled.Kernel`:
     the first single-target call starts loading it, calls take the numpy path meanwhile, the same
     results within 1e-12). ``wait``: load it now (tests, benchmarks)."""
-    return KERNEL.get(model._ik.packed, wait=wait)
+    return KERNEL.get(model.ik_constants.packed, wait=wait)
 
 
 def _solve_one(
@@ -470,7 +457,7 @@ def _solve_one(
     branch: int | None,
 ) -> IKSolutions:
     """One target through the kernel: tip ``position`` (3,), candidate b at bucket angle alpha[b]."""
-    k = model._ik.packed
+    k = model.ik_constants.packed
     x, y, z = position.tolist()
     D, reach, judged = np.empty((4, 4)), np.empty(4, dtype=np.int8), np.empty(4, dtype=np.int8)
     kernel.candidates(k, x, y, z, alpha, math.atan2(y, x), D, reach)
@@ -517,7 +504,7 @@ def seed_bucket_angle(model: Excavator, seed: ArrayLike) -> np.ndarray:
 def stroke_margins(model: Excavator, D: np.ndarray) -> np.ndarray:
     """(...) min over the three cylinders of the distance to the nearer stroke end as a fraction
     of the stroke, of candidates D (..., 4); -inf where a candidate has no solution (NaN)."""
-    k = model._ik
+    k = model.ik_constants
     lengths = D[..., 1:]
     margin = np.minimum(lengths - k.stroke_min, k.stroke_max - lengths) / k.stroke_range
     margin = np.min(margin, axis=-1)
@@ -603,7 +590,9 @@ def solve_position(
     elif kernel is not None:
         finite = bool(np.isfinite(position).all())
         x, y, z = position.tolist() if finite else (0.0, 0.0, 0.0)
-        alpha = kernel.widest_margin_angles(model._ik.packed, x, y, z, _GRID, _PEAKS, _GOLDEN, _GOLDEN_STEPS)
+        alpha = kernel.widest_margin_angles(
+            model.ik_constants.packed, x, y, z, _GRID, _PEAKS, _GOLDEN, _GOLDEN_STEPS
+        )
         return _solve_one(kernel, model, position, alpha, finite, seed, index)
     else:
         finite = np.isfinite(flat).all(axis=-1, keepdims=True)
@@ -623,43 +612,6 @@ def solve_position(
         seed,
         index,
     )
-
-
-def bucket_rotation(theta1: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    """R = Rz(theta1) Ry(-alpha) (..., 3, 3): the bucket frame (docs/excavator.md, Frames)."""
-    c1, s1, ca, sa = np.cos(theta1), np.sin(theta1), np.cos(alpha), np.sin(alpha)
-    zero = np.zeros_like(c1)
-    return np.stack(
-        [
-            np.stack([c1 * ca, -s1, -c1 * sa], axis=-1),
-            np.stack([s1 * ca, c1, -s1 * sa], axis=-1),
-            np.stack([sa, zero, ca], axis=-1),
-        ],
-        axis=-2,
-    )
-
-
-def fkine(model: Excavator, D: ArrayLike) -> np.ndarray:
-    """Bucket pose (..., 4, 4) in the base frame for D (..., 4) (eqs. 1-3; StrokeError outside
-    the limits)."""
-    D = np.asarray(D, dtype=float)
-    Q = model.pose(D.reshape(-1, 4)).reshape(D.shape)
-    pose = np.zeros(D.shape[:-1] + (4, 4))
-    pose[..., :3, :3] = bucket_rotation(D[..., 0], Q[..., 3])
-    pose[..., :3, 3] = Q[..., :3]
-    pose[..., 3, 3] = 1.0
-    return pose
-
-
-def jacob0(model: Excavator, D: ArrayLike) -> np.ndarray:
-    """(..., 6, 4): bucket twist [v; omega] = jacob0 Ddot; v = JC0's first rows (eq. 8), omega =
-    theta1dot z - alphadot y' (docs/excavator.md, bucket twist)."""
-    D = np.asarray(D, dtype=float)
-    jc0 = model.jc0(D.reshape(-1, 4)).reshape(D.shape[:-1] + (4, 4))
-    c1, s1 = np.cos(D[..., 0])[..., None], np.sin(D[..., 0])[..., None]
-    swing = np.broadcast_to(np.array([1.0, 0.0, 0.0, 0.0]), jc0.shape[:-2] + (4,))
-    angular = np.stack((s1 * jc0[..., 3, :], -c1 * jc0[..., 3, :], swing), axis=-2)
-    return np.concatenate((jc0[..., :3, :], angular), axis=-2)
 
 
 def solve_ik(

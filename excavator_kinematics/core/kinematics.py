@@ -10,7 +10,7 @@ Paper equation -> where it is computed:
 ====  ===========================================  ==============================================
 eq.   relation                                     function
 ====  ===========================================  ==============================================
-1     boom/arm triangle: theta(d), d(theta),       ``_Triangle.closes`` (via ``joint_angles``,
+1     boom/arm triangle: theta(d), d(theta),       ``Triangle.closes`` (via ``joint_angles``,
       k21 = dtheta/dd, k22 = d2theta/dd2           ``k_entries``); inverse: ``cylinder_lengths``
 2     bucket six-bar = cylinder four-bar + bucket  ``Excavator._linkages`` (via
       four-bar in series: theta4(d4) and rates     ``joint_angles``); inverse: ``cylinder_lengths``
@@ -52,7 +52,16 @@ from typing import Any
 import numpy as np
 
 from excavator_kinematics.core import inverse
-from excavator_kinematics.core.machine_file import CYLINDERS, SECTION, Description, parse, wrap_swing
+from excavator_kinematics.core.geometry import Linkages, StrokeError, closing_sine, cos_sin
+from excavator_kinematics.core.layouts import STATE, check_compiled
+from excavator_kinematics.core.machine_file import (
+    CYLINDERS,
+    SECTION,
+    STROKE_TOLERANCE,
+    Description,
+    parse,
+    wrap_swing,
+)
 from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.model import IKSolutions
 from manipulator_kinematics.param_files import ConfigError, config_path, load_parameters
@@ -63,10 +72,6 @@ JOINTS = ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")
 # Names of D's components in D's order: the actuators (swing drive and the three cylinders).
 ACTUATORS = (JOINTS[0], *CYLINDERS)
 DEFAULT_CONFIG = "excavator_cet200.yaml"
-
-# Lengths this close outside a stroke end still count as inside, so that lengths computed from
-# angles at a stroke end (round-off of a few ulp) are accepted.
-STROKE_TOLERANCE = 1e-9
 
 # States per block of pose, jc0 and state: the blocks write their entries into the batch's table
 # where they stay (in_blocks' rows); numpy's fixed cost per call (60-200 calls per block) falls
@@ -86,88 +91,14 @@ _KERNEL_BATCH = 2048
 _NO_ACCELERATION = np.zeros(4)
 
 
-class StrokeError(ValueError):
-    """A state outside the machine's strokes/limits, non-finite, or geometrically impossible."""
-
-
-def _closing_sine(c: np.ndarray, name: str) -> np.ndarray:
-    """sqrt(1 - c^2), the sine for the cosine c of a linkage angle: every |c| < 1 (in floats as in
-    reals, 1 - c^2 > 0 exactly when |c| < 1) or the linkage cannot be assembled: StrokeError."""
-    radicand = 1.0 - c * c
-    if np.all(radicand > 0.0):
-        return np.sqrt(radicand)
-    raise StrokeError(f"{name}: the linkage cannot close (triangle inequality violated)")
-
-
-@dataclass(frozen=True)
-class _Triangle:
-    """A cylinder of length d closing a triangle at a pivot (paper eq. 1).
-
-    ``first`` and ``second`` are the pins at the cylinder's ends, relative to the pivot, each in
-    the frame of the body it sits on; the joint angle is the rotation of the second body that
-    makes the pin distance equal d: theta = ang(first) + orientation * gamma - ang(second).
-    """
-
-    name: str
-    a: float  # |first - pivot|
-    b: float  # |second - pivot|
-    offset: float  # ang(first) - ang(second)
-    orientation: int
-    radius: float = 1.0  # scale of the cosine and sine that closes() returns
-
-    @property
-    def constants(self) -> tuple[float, ...]:
-        """Eq. 1's constants, folded: cos(gamma) = (a^2 + b^2 - d^2) / (2ab) = c0 - c1 d^2, then
-        ab, the orientation o, radius (cos, sin) offset and the offset (the kernel's order)."""
-        ab = self.a * self.b
-        return (
-            (self.a * self.a + self.b * self.b) / (2.0 * ab),
-            0.5 / ab,
-            ab,
-            float(self.orientation),
-            self.radius * math.cos(self.offset),
-            self.radius * math.sin(self.offset),
-            self.offset,
-        )
-
-    @classmethod
-    def of(cls, name: str, first: np.ndarray, second: np.ndarray, orientation: int) -> _Triangle:
-        """The triangle of a cylinder whose pins are ``first`` and ``second`` from the pivot."""
-        return cls(
-            name,
-            float(np.hypot(*first)),
-            float(np.hypot(*second)),
-            _angle(first) - _angle(second),
-            orientation,
-        )
-
-    def closes(
-        self, d: np.ndarray, angle: bool = True
-    ) -> tuple[np.ndarray | None, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Joint angle (None unless ``angle``), its derivatives w.r.t. d (eq. 1: k21, k22) and
-        its cosine and sine times ``radius``.
-
-        cos/sin come from cos(gamma) and sin(gamma) = sqrt(1 - cos^2) by angle addition: the
-        open chain needs no trigonometry of theta2..theta4.
-        """
-        c0, c1, ab, o, cd, sd, offset = self.constants
-        c = c0 - c1 * d * d
-        s = o * _closing_sine(c, self.name)  # sin(o * gamma)
-        k = d / (ab * s)  # o * dgamma/dd
-        theta = offset + o * np.arccos(c) if angle else None
-        return theta, k, k / d - k * k * c / s, cd * c - sd * s, sd * c + cd * s
-
-
-def _angle(v: np.ndarray) -> float:
-    return math.atan2(v[1], v[0])
-
-
 def _warm(state_kernel: ModuleType) -> None:
     """Run each kernel function once (numba loads or compiles it; the values do not matter, zero
     limits refuse the state), then let it take only those types: arguments of other types (a
     list, a strided or read-only view, integers) raise TypeError, and the caller takes the numpy
-    path, instead of compiling for seconds in a call."""
-    packed, D, three = np.zeros(44), np.zeros(4), np.empty(3)
+    path, instead of compiling for seconds in a call. A kernel compiled for another layout is
+    refused (layouts.check_compiled)."""
+    check_compiled(state_kernel)
+    packed, D, three = np.zeros(STATE.size), np.zeros(4), np.empty(3)
     state_kernel.state(packed, D, D, D, np.empty((10, 4)))
     state_kernel.pose(packed, D, np.empty(4))
     state_kernel.jc0(packed, D, np.empty((4, 4)))
@@ -186,6 +117,7 @@ def _warm(state_kernel: ModuleType) -> None:
         state_kernel.bucket_quaternion,
         state_kernel.bucket_angular_velocity,
         state_kernel.bucket_angular_acceleration,
+        state_kernel.layout_signature,
     ):
         function.disable_compile()
 
@@ -219,60 +151,8 @@ class Excavator:
         self.l1, self.l0 = g.foot
         self.l2, self.l3, self.l4 = g.boom_length, g.arm_length, g.bucket_length
         self.bucket_width = g.bucket_width
-        foot = np.array(g.foot)
-        arm_pin = np.array([self.l2, 0.0])  # boom frame
-        self._bucket_pin = np.array([self.l3, 0.0])  # arm frame
-        boom_orientation, arm_orientation, bucket_orientation, h_orientation = g.orientations
-
-        boom_base, boom_rod = (np.array(p) for p in g.boom_cylinder_pins)
-        arm_base, arm_rod = (np.array(p) for p in g.arm_cylinder_pins)
-        self._pins_local = {
-            "boom_cylinder_base": boom_base,
-            "boom_cylinder_rod": boom_rod,
-            "arm_cylinder_base": arm_base,
-            "arm_cylinder_rod": arm_rod,
-        }
-        self._boom = _Triangle.of("boom_cylinder", boom_base - foot, boom_rod, boom_orientation)
-        self._arm = _Triangle.of("arm_cylinder", arm_base - arm_pin, arm_rod, arm_orientation)
-
-        bucket_base = np.array(g.bucket_cylinder_base)
-        self._pivot = np.array(g.side_link_pivot)
-        self._side = g.side_link_length
-        self._bucket_pin_xy = tuple(self._bucket_pin.tolist())
-        self._pivot_from_bucket_pin = tuple((self._pivot - self._bucket_pin).tolist())
-        self._pins_local["bucket_cylinder_base"] = bucket_base
-        to_base = bucket_base - self._pivot
-        # Side-link angle phi in the arm frame comes from the same triangle form with the rod
-        # pin at (side length, 0) of a frame turning with the side link (eq. 1 applied to Fig. 7b).
-        self._side_triangle = _Triangle(
-            "bucket_cylinder",
-            float(np.hypot(*to_base)),
-            self._side,
-            _angle(to_base),
-            bucket_orientation,
-            radius=self._side,  # closes() then gives the rod pin R relative to the pivot
-        )
-        h_pin = np.array(g.h_link_pin)
-        self._h_radius = float(np.hypot(*h_pin))  # bucket pin -> H-link pin
-        self._h_phase = _angle(h_pin)
-        self._h_link = g.h_link_length
-        self._h_orientation = h_orientation
-        b, a = self._h_radius, self._h_link
-        # cos of the H angle = (e^2 + b^2 - a^2) / (2 b e) (law of cosines, e = |R - bucket pin|);
-        # (H - bucket pin) / b turned back by the H phase is the bucket direction (cos, sin theta4);
-        # then the H phase (the kernel's order).
-        self._h_constants = (
-            b,
-            b * b,
-            float(self._h_orientation),
-            b * b - a * a,
-            2.0 * b,
-            math.cos(self._h_phase) / b,
-            math.sin(self._h_phase) / b,
-            self._h_phase,
-        )
-        self._pins_local["h_link_pin"] = h_pin
-
+        #: The cylinder linkages (eqs. 1-2), read by this model and by the pose IK.
+        self.linkages = Linkages.of(g)
         self.limits = g.limits
         # The limits of D as the shared IK pieces read them (cylinder values are lengths, m).
         # A continuous swing's angles are wrapped to (-pi, pi]: the IK answers in that range, and a
@@ -288,25 +168,24 @@ class Excavator:
             self._lo[0], self._hi[0] = np.nextafter(-math.pi, 0.0), math.pi
         self._check_whole_stroke()
         self._check_branches()
-        self._ik = inverse.Constants.of(self)
-        # The constants of the compiled single call (state_kernel): l0..l4, the boom, arm and
-        # side-link triangles (7 each, _Triangle.constants), R's pivot from the bucket pin (2),
-        # the bucket four-bar (8, _h_constants), the limits with the tolerance (4 + 4).
-        self._packed = np.array(
-            [
-                self.l0,
-                self.l1,
-                self.l2,
-                self.l3,
-                self.l4,
-                *self._boom.constants,
-                *self._arm.constants,
-                *self._side_triangle.constants,
-                *self._pivot_from_bucket_pin,
-                *self._h_constants,
-                *self._lo,
-                *self._hi,
-            ]
+        #: The IK's constants (:class:`excavator_kinematics.core.inverse.Constants`).
+        self.ik_constants = inverse.Constants.of(self)
+        #: The constants of the compiled single call (state_kernel), layout ``layouts.STATE``.
+        self.packed = STATE.pack(
+            {
+                "l0": self.l0,
+                "l1": self.l1,
+                "l2": self.l2,
+                "l3": self.l3,
+                "l4": self.l4,
+                "boom": self.linkages.boom.constants,
+                "arm": self.linkages.arm.constants,
+                "side": self.linkages.side.constants,
+                "pivot_from_bucket_pin": self.linkages.pivot_from_bucket_pin,
+                "four_bar": self.linkages.h_constants,
+                "lower": self._lo,
+                "upper": self._hi,
+            }
         )
 
     def _check_whole_stroke(self) -> None:
@@ -350,7 +229,7 @@ class Excavator:
                 )
         reference = self.limits.reference
         (ex, ey), (hx, hy) = (np.ravel(v) for v in self._linkages(*(reference[1:, None]))[4])
-        fx, fy = self._pivot_from_bucket_pin
+        fx, fy = self.linkages.pivot_from_bucket_pin
         if (ex * hy - ey * hx) * (ex * fy - ey * fx) >= 0.0:
             raise ConfigError(
                 f"{SECTION}.h_link.orientation: this branch crosses the bucket linkage (the H-link "
@@ -412,12 +291,25 @@ class Excavator:
         )
 
     def fkine(self, D: Any) -> np.ndarray:
-        """Bucket pose (..., 4, 4): the tip, yaw theta1, then -alpha about y (eq. 3)."""
-        return inverse.fkine(self, D)
+        """Bucket pose (..., 4, 4) in the base frame for D (..., 4): the tip, yaw theta1, then
+        -alpha about y (eqs. 1-3; StrokeError outside the limits)."""
+        D = np.asarray(D, dtype=float)
+        Q = self.pose(D.reshape(-1, 4)).reshape(D.shape)
+        pose = np.zeros(D.shape[:-1] + (4, 4))
+        pose[..., :3, :3] = bucket_rotation(D[..., 0], Q[..., 3])
+        pose[..., :3, 3] = Q[..., :3]
+        pose[..., 3, 3] = 1.0
+        return pose
 
     def jacob0(self, D: Any) -> np.ndarray:
-        """(..., 6, 4) bucket twist [v; omega] per Ddot (eq. 8 and the bucket frame's turn)."""
-        return inverse.jacob0(self, D)
+        """(..., 6, 4): bucket twist [v; omega] = jacob0 Ddot; v = JC0's first rows (eq. 8), omega =
+        theta1dot z - alphadot y' (docs/excavator.md, bucket twist)."""
+        D = np.asarray(D, dtype=float)
+        jc0 = self.jc0(D.reshape(-1, 4)).reshape(D.shape[:-1] + (4, 4))
+        c1, s1 = np.cos(D[..., 0])[..., None], np.sin(D[..., 0])[..., None]
+        swing = np.broadcast_to(np.array([1.0, 0.0, 0.0, 0.0]), jc0.shape[:-2] + (4,))
+        angular = np.stack((s1 * jc0[..., 3, :], -c1 * jc0[..., 3, :], swing), axis=-2)
+        return np.concatenate((jc0[..., :3, :], angular), axis=-2)
 
     def _compiled(self, function: str, out: np.ndarray, *arguments: np.ndarray) -> np.ndarray | None:
         """``out`` filled by the kernel's ``function`` (:mod:`excavator_kinematics.core.state_kernel`)
@@ -427,7 +319,7 @@ class Excavator:
         if kernel is None:
             return None
         try:
-            return out if getattr(kernel, function)(self._packed, *arguments, out) else None
+            return out if getattr(kernel, function)(self.packed, *arguments, out) else None
         except TypeError:
             return None
 
@@ -483,25 +375,27 @@ class Excavator:
         """theta2..4 (eqs. 1-2) with their first (K, eq. 7) and second (K1) derivatives w.r.t.
         d2..d4 and their cosines and sines, plus the bucket linkage's rod pin R and H-link pin H
         relative to the bucket pin (arm frame): ``(theta, k, dk, trig, (R, H))``."""
-        theta2, k2, dk2, c2, s2 = self._boom.closes(d2)
-        theta3, k3, dk3, c3, s3 = self._arm.closes(d3)
+        linkages = self.linkages
+        theta2, k2, dk2, c2, s2 = linkages.boom.closes(d2)
+        theta3, k3, dk3, c3, s3 = linkages.arm.closes(d3)
         # Cylinder four-bar (Fig. 7b): side-link angle phi's derivatives, same form; phi itself is
         # never needed, only R - pivot = side length * (cos, sin) phi.
-        _, phi_d, phi_dd, rx, ry = self._side_triangle.closes(d4, angle=False)
-        fx, fy = self._pivot_from_bucket_pin
+        _, phi_d, phi_dd, rx, ry = linkages.side.closes(d4, angle=False)
+        fx, fy = linkages.pivot_from_bucket_pin
         ex, ey = fx + rx, fy + ry  # R - bucket pin
         # Bucket four-bar (Fig. 7c, eq. 2): H from the triangle (bucket pin, R, H).
-        b, bb, o, b2_a2, two_b, cp, sp, h_phase = self._h_constants
+        h = linkages.h_constants
+        b, o, cp, sp = h.b, h.o, h.cos_phase, h.sin_phase
         e2 = ex * ex + ey * ey
         e = np.sqrt(e2)
-        ch = (e2 + b2_a2) / (two_b * e)
-        sh = o * _closing_sine(ch, "bucket_cylinder (bucket four-bar)")
+        ch = (e2 + h.bb_aa) / (h.two_b * e)
+        sh = o * closing_sine(ch, "bucket_cylinder (bucket four-bar)")
         # H - bucket pin = fc (R - bucket pin) + fs perp(R - bucket pin): turned by the H angle
         # and scaled to length b.
         f = b / e
         fc, fs = f * ch, f * sh
         ox, oy = fc * ex - fs * ey, fc * ey + fs * ex
-        theta4 = np.arctan2(ey, ex) + o * np.arccos(ch) - h_phase
+        theta4 = np.arctan2(ey, ex) + o * np.arccos(ch) - h.phase
         c4, s4 = ox * cp + oy * sp, oy * cp - ox * sp
         # Four-bar velocity ratio g1 = dpsi/dphi and g2 = d2psi/dphi2 from the loop constraint
         # (H - R).(vH - vR) = 0 and its time derivative; closed form, no iteration. With the
@@ -510,7 +404,7 @@ class Excavator:
         den = fs * e2
         g1 = (cy * rx - cx * ry) / den
         wx, wy = g1 * ox - rx, g1 * oy - ry
-        g2 = (g1 * g1 * (bb - fc * e2) - (cx * rx + cy * ry) - (wx * wx + wy * wy)) / den
+        g2 = (g1 * g1 * (h.bb - fc * e2) - (cx * rx + cy * ry) - (wx * wx + wy * wy)) / den
         return (
             (theta2, theta3, theta4),
             (k2, k3, g1 * phi_d),
@@ -547,7 +441,7 @@ class Excavator:
         if not np.all(np.isfinite(angles)):
             raise StrokeError("joint angles are not finite")
         lengths = self.linkage_lengths(angles)
-        for i, tri in enumerate((self._boom, self._arm)):
+        for i, tri in enumerate((self.linkages.boom, self.linkages.arm)):
             if np.any(np.isnan(lengths[..., i])):
                 raise StrokeError(f"{JOINTS[i + 1]} angle cannot be reached by {tri.name} on this assembly")
         if np.any(np.isnan(lengths[..., 2])):
@@ -568,7 +462,9 @@ class Excavator:
         """
         angles = np.asarray(angles, dtype=float)
         with np.errstate(invalid="ignore"):
-            columns = inverse.linkage_length_columns(self._ik, angles[..., 0], angles[..., 1], angles[..., 2])
+            columns = inverse.linkage_length_columns(
+                self.ik_constants, angles[..., 0], angles[..., 1], angles[..., 2]
+            )
         return np.stack(columns, axis=-1)
 
     # ------------------------------------------------------------------ open chain (eqs. 3-5)
@@ -606,7 +502,7 @@ class Excavator:
     def _tip(self, t1: np.ndarray, a1: np.ndarray, b1: np.ndarray, alpha: np.ndarray) -> list[np.ndarray]:
         """Eq. 3 from eq. 4's coefficients: the boom-plane radius rho = l1 + b1 turned by the
         swing, z = l0 + a1."""
-        rho, (c1, s1) = self.l1 + b1, inverse.cos_sin(t1)
+        rho, (c1, s1) = self.l1 + b1, cos_sin(t1)
         return [rho * c1, rho * s1, self.l0 + a1, alpha]
 
     def pins(self, D: Any) -> dict[str, np.ndarray]:
@@ -614,7 +510,8 @@ class Excavator:
         D = self.validate(D)
         t1, d2, d3, d4 = _columns(D)
         (t2, t3, t4), _, _, _, ((ex, ey), (ox, oy)) = self._linkages(d2, d3, d4)
-        bx, by = self._bucket_pin_xy
+        bx, by = self.linkages.bucket_pin.tolist()
+        pins = self.linkages.pins
         foot = np.array([self.l1, self.l0])
 
         def place(origin: np.ndarray, angle: Any, local: Any) -> np.ndarray:
@@ -627,21 +524,21 @@ class Excavator:
         boom = (foot + zero[..., None], t2)
         arm_pin = place(*boom, (self.l2, 0.0))
         arm = (arm_pin, t2 + t3)
-        bucket_pin = place(*arm, self._bucket_pin)
+        bucket_pin = place(*arm, self.linkages.bucket_pin)
         bucket = (bucket_pin, t2 + t3 + t4)
         side = {
             "boom_foot": foot + zero[..., None],
-            "boom_cylinder_base": self._pins_local["boom_cylinder_base"] + zero[..., None],
-            "boom_cylinder_rod": place(*boom, self._pins_local["boom_cylinder_rod"]),
+            "boom_cylinder_base": pins["boom_cylinder_base"] + zero[..., None],
+            "boom_cylinder_rod": place(*boom, pins["boom_cylinder_rod"]),
             "arm_pin": arm_pin,
-            "arm_cylinder_base": place(*boom, self._pins_local["arm_cylinder_base"]),
-            "arm_cylinder_rod": place(*arm, self._pins_local["arm_cylinder_rod"]),
+            "arm_cylinder_base": place(*boom, pins["arm_cylinder_base"]),
+            "arm_cylinder_rod": place(*arm, pins["arm_cylinder_rod"]),
             "bucket_pin": bucket_pin,
-            "bucket_cylinder_base": place(*arm, self._pins_local["bucket_cylinder_base"]),
-            "side_link_pivot": place(*arm, self._pivot),
+            "bucket_cylinder_base": place(*arm, pins["bucket_cylinder_base"]),
+            "side_link_pivot": place(*arm, self.linkages.pivot),
             "bucket_cylinder_rod": place(*arm, (bx + ex, by + ey)),
             "h_link_pin": place(*arm, (bx + ox, by + oy)),
-            "h_link_pin_on_bucket": place(*bucket, self._pins_local["h_link_pin"]),
+            "h_link_pin_on_bucket": place(*bucket, pins["h_link_pin"]),
             "bucket_tip": place(*bucket, (self.l4, 0.0)),
         }
         c1, s1 = np.cos(t1)[..., None], np.sin(t1)[..., None]
@@ -725,9 +622,7 @@ class Excavator:
         _, (k2, k3, k4), _, trig, _ = self._linkages(d2, d3, d4)
         a1, a2, a3, b1, b2, b3 = self._chain_terms(*trig)
         return tuple(
-            _jc0_entries(
-                self.l1 + b1, *inverse.cos_sin(t1), a1, a2, a3, b1, b2, b3, k2, k3, k4, np.zeros(t1.shape)
-            )
+            _jc0_entries(self.l1 + b1, *cos_sin(t1), a1, a2, a3, b1, b2, b3, k2, k3, k4, np.zeros(t1.shape))
         )
 
     # ------------------------------------------------------------------ full state (eqs. 3-11)
@@ -747,7 +642,7 @@ class Excavator:
             given = _NO_ACCELERATION if D_ddot is None else np.asarray(D_ddot, dtype=float)
             rows = np.empty((10, 4))  # a new table per call: the caller keeps the views
             try:
-                if kernel.state(self._packed, D, rates, given, rows):
+                if kernel.state(self.packed, D, rates, given, rows):
                     return BucketState(rows)
             except TypeError:  # arguments of types the kernel does not take (_warm)
                 pass
@@ -781,7 +676,7 @@ class Excavator:
         e1, f2, f3, f4 = np.zeros((4, len(D))) if D_ddot is None else _columns(D_ddot)
         (t2, t3, t4), (k2, k3, k4), (dk2, dk3, dk4), trig, _ = self._linkages(d2, d3, d4)
         a1, a2, a3, b1, b2, b3 = self._chain_terms(*trig)
-        rho, (c1, s1) = self.l1 + b1, inverse.cos_sin(t1)
+        rho, (c1, s1) = self.l1 + b1, cos_sin(t1)
         # thetadot = K Ddot (eq. 7); thetaddot = K Dddot + K1 Ddot^2 (its time derivative).
         w2, w3, w4 = k2 * v2, k3 * v3, k4 * v4
         e2, e3, e4 = k2 * f2 + dk2 * v2 * v2, k3 * f3 + dk3 * v3 * v3, k4 * f4 + dk4 * v4 * v4
@@ -1051,6 +946,20 @@ def _last_axis(*components: np.ndarray) -> np.ndarray:
 def _floats(*values: Any) -> bool:
     """All Python (or numpy) floats: one state, which the kernel computes once loaded."""
     return all(isinstance(value, float) for value in values)
+
+
+def bucket_rotation(theta1: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """R = Rz(theta1) Ry(-alpha) (..., 3, 3): the bucket frame (docs/excavator.md, Frames)."""
+    c1, s1, ca, sa = np.cos(theta1), np.sin(theta1), np.cos(alpha), np.sin(alpha)
+    zero = np.zeros_like(c1)
+    return np.stack(
+        [
+            np.stack([c1 * ca, -s1, -c1 * sa], axis=-1),
+            np.stack([s1 * ca, c1, -s1 * sa], axis=-1),
+            np.stack([sa, zero, ca], axis=-1),
+        ],
+        axis=-2,
+    )
 
 
 def bucket_quaternion(theta1: Any, alpha: Any) -> np.ndarray:

@@ -22,6 +22,9 @@ from manipulator_kinematics.schema import Number, Numbers, Schema, Text, require
 
 SECTION = "excavator"
 CYLINDERS = ("boom_cylinder", "arm_cylinder", "bucket_cylinder")
+# Lengths this close outside a stroke end still count as inside, so that lengths computed from
+# angles at a stroke end (round-off of a few ulp) are accepted.
+STROKE_TOLERANCE = 1e-9
 
 # Sanity bounds, not limits of one machine: every excavator from a mini to a 100 t mining
 # machine fits inside them, a typo of a few orders of magnitude does not.

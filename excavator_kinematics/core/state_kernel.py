@@ -17,8 +17,9 @@ Same steps and equation numbers as the numpy path (``Excavator._linkages``, ``_c
 3. eq. 4's coefficients a_i, b_i, the tip Q (eq. 3), Qdot = JC0 Ddot (eqs. 5, 7, 8) and Qddot
    (eqs. 10-11).
 
-The machine's constants arrive as one float array, ``Excavator._packed`` (its layout is
-commented where it is built). Each function returns False, writing nothing
+The machine's constants arrive as one float array, ``Excavator.packed``, of the layout
+:data:`excavator_kinematics.core.layouts.STATE` (declared once, packed by name, read here by
+offset). Each function returns False, writing nothing
 valid, for a state outside the limits (with the stroke tolerance), not finite, or whose linkage
 cannot close: the caller then takes the numpy path, which raises the error naming the cause.
 """
@@ -26,21 +27,28 @@ cannot close: the caller then takes the numpy path, which raises the error namin
 from __future__ import annotations
 
 import math
+import zlib
 
 import numpy as np
 from numba import njit
 
-# Offsets into the packed constants (Excavator._packed): the three triangles take 7 each.
-_BOOM, _ARM, _SIDE, _PIN, _H, _LO, _HI = 5, 12, 19, 26, 28, 36, 40
+from excavator_kinematics.core.layouts import FOUR_BAR, STATE, TRIANGLE
+
+# Offsets into the packed constants (Excavator.packed), the triangles' and the four-bar's within
+# theirs: compile-time constants to numba (layouts.py).
+_K, _T, _F = STATE.at, TRIANGLE.at, FOUR_BAR.at
+#: The layouts this module reads; :func:`layout_signature` returns the one it was compiled with.
+LAYOUT_SIGNATURE = zlib.crc32(repr((STATE.signature, TRIANGLE.signature, FOUR_BAR.signature)).encode())
 # What _linkages returns where a linkage cannot close: refused, the rest never read.
 _NOTHING = (False, *(0.0,) * 15)
 
 
 @njit(cache=True, error_model="numpy")
 def _closes(k: np.ndarray, at: int, d: float) -> tuple[bool, float, float, float, float, float]:
-    """Eq. 1 for the triangle at ``k[at:at + 7]`` = (c0, c1, ab, o, radius cos offset, radius sin
-    offset, offset): (closes, theta, dtheta/dd, d2theta/dd2, radius cos theta, radius sin theta)."""
-    c0, c1, ab, o, cd, sd, offset = k[at], k[at + 1], k[at + 2], k[at + 3], k[at + 4], k[at + 5], k[at + 6]
+    """Eq. 1 for the triangle at ``k[at:]`` (layouts.TriangleConstants): (closes, theta,
+    dtheta/dd, d2theta/dd2, radius cos theta, radius sin theta)."""
+    c0, c1, ab, o = k[at + _T.c0], k[at + _T.c1], k[at + _T.ab], k[at + _T.o]
+    cd, sd, offset = k[at + _T.cos_offset], k[at + _T.sin_offset], k[at + _T.offset]
     c = c0 - c1 * d * d
     if not -1.0 < c < 1.0:
         return False, 0.0, 0.0, 0.0, 0.0, 0.0
@@ -53,13 +61,15 @@ def _closes(k: np.ndarray, at: int, d: float) -> tuple[bool, float, float, float
 def _linkages(k: np.ndarray, d2: float, d3: float, d4: float) -> tuple:
     """Eqs. 1-2: (closes, theta2..4, k2..4, dk2..4, cos/sin theta2..4) as
     ``kinematics.Excavator._linkages``."""
-    ok2, t2, k2, dk2, c2, s2 = _closes(k, _BOOM, d2)
-    ok3, t3, k3, dk3, c3, s3 = _closes(k, _ARM, d3)
-    ok4, _, phi_d, phi_dd, rx, ry = _closes(k, _SIDE, d4)  # the side link (Fig. 7b)
+    ok2, t2, k2, dk2, c2, s2 = _closes(k, _K.boom, d2)
+    ok3, t3, k3, dk3, c3, s3 = _closes(k, _K.arm, d3)
+    ok4, _, phi_d, phi_dd, rx, ry = _closes(k, _K.side, d4)  # the side link (Fig. 7b)
     if not (ok2 and ok3 and ok4):
         return _NOTHING
-    ex, ey = k[_PIN] + rx, k[_PIN + 1] + ry  # R - bucket pin
-    b, bb, o, b2_a2, two_b, cp, sp = k[_H], k[_H + 1], k[_H + 2], k[_H + 3], k[_H + 4], k[_H + 5], k[_H + 6]
+    ex, ey = k[_K.pivot_from_bucket_pin] + rx, k[_K.pivot_from_bucket_pin + 1] + ry  # R - bucket pin
+    h = _K.four_bar
+    b, bb, o, b2_a2, two_b = k[h + _F.b], k[h + _F.bb], k[h + _F.o], k[h + _F.bb_aa], k[h + _F.two_b]
+    cp, sp = k[h + _F.cos_phase], k[h + _F.sin_phase]
     e2 = ex * ex + ey * ey
     e = math.sqrt(e2)
     ch = (e2 + b2_a2) / (two_b * e)
@@ -69,7 +79,7 @@ def _linkages(k: np.ndarray, d2: float, d3: float, d4: float) -> tuple:
     f = b / e
     fc, fs = f * ch, f * sh
     ox, oy = fc * ex - fs * ey, fc * ey + fs * ex  # H - bucket pin
-    t4 = math.atan2(ey, ex) + o * math.acos(ch) - k[_H + 7]
+    t4 = math.atan2(ey, ex) + o * math.acos(ch) - k[h + _F.phase]
     c4, s4 = ox * cp + oy * sp, oy * cp - ox * sp
     cx, cy = ox - ex, oy - ey  # H - R
     den = fs * e2
@@ -101,7 +111,7 @@ def _chain_terms(
     k: np.ndarray, c2: float, s2: float, c3: float, s3: float, c4: float, s4: float
 ) -> tuple[float, float, float, float, float, float]:
     """Eq. 4's a1..a3, b1..b3 (``kinematics.Excavator._chain_terms``)."""
-    l2, l3, l4 = k[2], k[3], k[4]
+    l2, l3, l4 = k[_K.l2], k[_K.l3], k[_K.l4]
     c23, s23 = c2 * c3 - s2 * s3, s2 * c3 + c2 * s3
     c234, s234 = c23 * c4 - s23 * s4, s23 * c4 + c23 * s4
     a3, b3 = l4 * s234, l4 * c234
@@ -115,7 +125,7 @@ def _inside(k: np.ndarray, D: np.ndarray) -> bool:
     if D.shape[0] != 4:
         return False
     for i in range(4):  # noqa: SIM110 (numba compiles no generator expressions)
-        if not k[_LO + i] <= D[i] <= k[_HI + i]:
+        if not k[_K.lower + i] <= D[i] <= k[_K.upper + i]:
             return False
     return True
 
@@ -135,8 +145,8 @@ def _chain(k: np.ndarray, D: np.ndarray) -> tuple:
 def pose(k: np.ndarray, D: np.ndarray, out: np.ndarray) -> bool:
     """Q = [x, y, z, alpha] (eqs. 1-3) into ``out`` (4,)."""
     ok, t2, t3, t4, _, _, _, _, _, _, a1, _, _, b1, _, _ = _chain(k, D)
-    rho = k[1] + b1
-    out[0], out[1], out[2], out[3] = rho * math.cos(D[0]), rho * math.sin(D[0]), k[0] + a1, t2 + t3 + t4
+    rho = k[_K.l1] + b1
+    out[0], out[1], out[2], out[3] = rho * math.cos(D[0]), rho * math.sin(D[0]), k[_K.l0] + a1, t2 + t3 + t4
     return ok
 
 
@@ -144,7 +154,7 @@ def pose(k: np.ndarray, D: np.ndarray, out: np.ndarray) -> bool:
 def jc0(k: np.ndarray, D: np.ndarray, out: np.ndarray) -> bool:
     """JC0 = J0 K (eq. 8) into ``out`` (4, 4)."""
     ok, _, _, _, k2, k3, k4, _, _, _, a1, a2, a3, b1, b2, b3 = _chain(k, D)
-    _jc0(k[1] + b1, math.cos(D[0]), math.sin(D[0]), a1, a2, a3, b1, b2, b3, k2, k3, k4, out, 0)
+    _jc0(k[_K.l1] + b1, math.cos(D[0]), math.sin(D[0]), a1, a2, a3, b1, b2, b3, k2, k3, k4, out, 0)
     return ok
 
 
@@ -192,7 +202,7 @@ def state(k: np.ndarray, D: np.ndarray, D_dot: np.ndarray, D_ddot: np.ndarray, o
         return False
     t1, w1, e1 = D[0], D_dot[0], D_ddot[0]
     v2, v3, v4, f2, f3, f4 = D_dot[1], D_dot[2], D_dot[3], D_ddot[1], D_ddot[2], D_ddot[3]
-    rho, c1, s1 = k[1] + b1, math.cos(t1), math.sin(t1)
+    rho, c1, s1 = k[_K.l1] + b1, math.cos(t1), math.sin(t1)
     # thetadot = K Ddot (eq. 7); thetaddot = K Dddot + K1 Ddot^2.
     w2, w3, w4 = k2 * v2, k3 * v3, k4 * v4
     e2, e3, e4 = k2 * f2 + dk2 * v2 * v2, k3 * f3 + dk3 * v3 * v3, k4 * f4 + dk4 * v4 * v4
@@ -210,7 +220,7 @@ def state(k: np.ndarray, D: np.ndarray, D_dot: np.ndarray, D_ddot: np.ndarray, o
     _put(out, 0, t1, t2, t3, t4)
     _put(out, 1, w1, w2, w3, w4)
     _put(out, 2, e1, e2, e3, e4)
-    _put(out, 3, x, y, k[0] + a1, t2 + t3 + t4)
+    _put(out, 3, x, y, k[_K.l0] + a1, t2 + t3 + t4)
     _put(out, 4, rho_dot * c1 - y * w1, rho_dot * s1 + x * w1, z_dot, alpha_dot)
     _put(out, 5, c1 * radial - s1 * tangential, s1 * radial + c1 * tangential, z_ddot, e2 + e3 + e4)
     _jc0(rho, c1, s1, a1, a2, a3, b1, b2, b3, k2, k3, k4, out, 6)
@@ -257,3 +267,10 @@ def bucket_angular_acceleration(
     """kinematics.bucket_angular_acceleration of one state into ``out`` (3,)."""
     c, s = math.cos(theta1), math.sin(theta1)
     out[0], out[1], out[2] = a_ddot * s + a_dot * w * c, -a_ddot * c + a_dot * w * s, w_dot
+
+
+@njit(cache=True)
+def layout_signature() -> int:
+    """The :data:`LAYOUT_SIGNATURE` this module was compiled with (numba freezes globals; its cache
+    is keyed on this file alone, so a changed layouts.py shows here as another number)."""
+    return LAYOUT_SIGNATURE
