@@ -211,7 +211,9 @@ def _parameters_of(section: dict, g: Geometry, T: np.ndarray) -> np.ndarray:
     return p
 
 
-@pytest.mark.parametrize("name", FILES)
+@pytest.mark.parametrize(
+    "name", ["WL20", *(pytest.param(n, marks=pytest.mark.slow) for n in ("CET200", "KC100"))]
+)
 def test_noise_free_points_on_every_pin_recover_every_parameter(name: str) -> None:
     """Noise-free tip, corners and every pin: nothing is not observable, and every parameter (pins,
     link lengths, zero offsets, the instrument's 6 DoF) comes back to 1e-6."""

@@ -167,6 +167,7 @@ def numerical_solutions(Q: np.ndarray, starts: np.ndarray) -> np.ndarray:
     return np.array(found).reshape(-1, 4)
 
 
+@pytest.mark.slow
 def test_a_numerical_solve_finds_the_same_solution_set() -> None:
     rng = np.random.default_rng(22)
     targets = np.concatenate(

@@ -369,7 +369,10 @@ def test_the_tip_keeps_the_commanded_line_past_the_stroke_ends(linear: tuple[flo
     assert np.all(tips[first + 1 :] == tips[first + 1]) and np.all(commands[-1].d_dot == 0.0)
 
 
-@pytest.mark.parametrize("linear", LINES[:4])
+# One line in the fast tier (about 2 s each on an idle machine), the other three slow.
+@pytest.mark.parametrize(
+    "linear", [LINES[1], *(pytest.param(line, marks=pytest.mark.slow) for line in (LINES[0], *LINES[2:4]))]
+)
 def test_bucket_angle_gives_way_keeps_the_tip_line_further(linear: tuple[float, ...]) -> None:
     """The secondary task: the tip's linear velocity stays a non-negative multiple of the target at
     every step (to 1e-12, checked in drive), the tip gets at least as far along the line, and the

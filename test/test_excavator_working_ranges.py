@@ -24,6 +24,7 @@ def table(ranges: WorkingRanges) -> dict:
     return ranges.table()
 
 
+@pytest.mark.slow
 def test_no_sample_of_a_dense_grid_beats_an_optimum(ranges: WorkingRanges, table: dict) -> None:
     dense = WorkingRanges(ranges.model, ranges.base_height, grid=81)  # 531 441 states, another grid
     for key in ranges.problems():

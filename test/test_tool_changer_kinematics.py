@@ -96,6 +96,7 @@ def test_joint4_stop_alone_does_not_make_the_solution_unique(arm: ToolChanger) -
     assert 0.95 < float(np.mean(in_all == 1)) < 1.0
 
 
+@pytest.mark.slow
 def test_solution_set_equals_a_numerical_solvers(arm: ToolChanger) -> None:
     """scipy least squares from 48 seeds per pose finds exactly the closed form's candidates (mod 2 pi)."""
     optimize = pytest.importorskip("scipy.optimize")
