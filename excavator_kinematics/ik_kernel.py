@@ -161,6 +161,40 @@ def pick(
 
 
 @njit(cache=True, error_model="numpy")
+def solve_batch(
+    k: np.ndarray,
+    Q: np.ndarray,
+    seeds: np.ndarray,
+    seeded: bool,
+    branch: int,
+    swing_axis: float,
+    tie_tolerance: float,
+    D: np.ndarray,
+    reach: np.ndarray,
+    status: np.ndarray,
+    selected: np.ndarray,
+    tie: np.ndarray,
+) -> None:
+    """:func:`candidates`, :func:`judge` and :func:`pick` of every target Q (N, 4) = [x, y, z,
+    alpha], seeds (N, 4) or (1, 4) for every target (read if ``seeded``): D (N, 4, 4), reach and
+    status (N, 4), selected and tie (N,) (inverse.solve_pose's batch)."""
+    alpha = np.empty(4)
+    allowed = np.full(4, branch < 0)
+    if branch >= 0:
+        allowed[branch] = True
+    last = seeds.shape[0] - 1
+    for i in range(Q.shape[0]):
+        x, y, z, angle = Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3]
+        alpha[:] = angle
+        finite = math.isfinite(x) and math.isfinite(y) and math.isfinite(z) and math.isfinite(angle)
+        candidates(k, x, y, z, alpha, math.atan2(y, x), D[i], reach[i])
+        judge(k, x, y, finite, swing_axis, D[i], status[i])
+        selected[i], tie[i] = select_one(
+            D[i], status[i], seeds[min(i, last)], seeded, allowed, k[38:42], tie_tolerance
+        )
+
+
+@njit(cache=True, error_model="numpy")
 def _margins(k: np.ndarray, D: np.ndarray, margin: np.ndarray) -> None:
     """inverse.stroke_margins of the four candidates D (4, 4)."""
     for b in range(4):

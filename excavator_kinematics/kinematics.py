@@ -82,8 +82,10 @@ _BLOCK = 2 * BLOCK
 # 1000 5.5 vs 3.4; 2048 5.7 vs 5.2; 32768 4.9 vs 6.5.
 _KERNEL_BATCH = 2048
 
-# Dddot of a state without accelerations (the kernel reads it, never writes it).
+# Dddot of a state, and of every state of a batch, without accelerations (the kernel reads them,
+# never writes them).
 _NO_ACCELERATION = np.zeros(4)
+_NO_ACCELERATIONS = np.zeros((1, 4))
 
 
 class StrokeError(ValueError):
@@ -170,7 +172,7 @@ def _warm(state_kernel: ModuleType) -> None:
     state_kernel.pose(packed, D, np.empty(4))
     state_kernel.jc0(packed, D, np.empty((4, 4)))
     batch = np.zeros((1, 4))
-    state_kernel.states(packed, batch, batch, batch, np.empty((1, 10, 4)))
+    state_kernel.states(packed, batch, batch, batch, np.empty((10, 1, 4)))
     state_kernel.poses(packed, batch, np.empty((1, 4)))
     state_kernel.bucket_quaternion(0.0, 0.0, np.empty(4))
     state_kernel.bucket_angular_velocity(0.0, 0.0, 0.0, three)
@@ -733,35 +735,34 @@ class Excavator:
         :meth:`acceleration_matrices` for the paper's JC1_0 / JC2_0 split of those terms).
         """
         D = np.asarray(D, dtype=float)
-        if D.shape == (4,) and (kernel := KERNEL.ready or KERNEL.get()) is not None:
-            # The single call (a 1 kHz node calls it per message): the kernel checks shapes and
-            # values; the numpy path below raises the error for what it refuses. _compiled written
-            # out: calling it costs 0.17 us, a fifth of the benchmark's peer (a numba pose call).
+        if (kernel := KERNEL.ready or KERNEL.get()) is not None:
+            # The single call (a 1 kHz node calls it per message) and a batch (N, 4), each one
+            # call of the kernel into a new table (the caller keeps the views): the kernel checks
+            # shapes and values; the numpy path below raises the error for what it refuses.
+            # _compiled written out: calling it costs 0.17 us, a fifth of the benchmark's peer (a
+            # numba pose call); a batch of one took 10x a single call through the numpy checks.
             rates = np.asarray(D_dot, dtype=float)
-            accelerations = _NO_ACCELERATION if D_ddot is None else np.asarray(D_ddot, dtype=float)
-            rows = np.empty((10, 4))  # a new table per call: the caller keeps the views
             try:
-                if kernel.state(self._packed, D, rates, accelerations, rows):
-                    return BucketState(rows)
+                if D.ndim == 1:
+                    accelerations = _NO_ACCELERATION if D_ddot is None else np.asarray(D_ddot, dtype=float)
+                    rows = np.empty((10, 4))
+                    if kernel.state(self._packed, D, rates, accelerations, rows):
+                        return BucketState(rows)
+                elif D.ndim == 2:
+                    # Rates (4,) for every state: one row the kernel reads for each.
+                    rates = rates if rates.ndim == 2 else rates.reshape(1, -1)
+                    accelerations = _NO_ACCELERATIONS if D_ddot is None else np.asarray(D_ddot, dtype=float)
+                    if accelerations.ndim == 1:
+                        accelerations = accelerations.reshape(1, -1)
+                    rows = np.empty((10, len(D), 4))
+                    if kernel.states(self._packed, D, rates, accelerations, rows):
+                        return BucketState(rows)
             except TypeError:  # arguments of types the kernel does not take (_warm)
                 pass
         D = self.validate(D)
         rates = _finite(D_dot, D.shape, "D_dot").reshape(-1, 4)
         accelerations = None if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot").reshape(-1, 4)
         flat = np.ascontiguousarray(D.reshape(-1, 4))
-        table = (
-            None
-            if len(flat) > _KERNEL_BATCH
-            else self._compiled(
-                "states",
-                np.empty((len(flat), 10, 4)),
-                flat,
-                np.ascontiguousarray(rates),
-                np.zeros((len(flat), 4)) if accelerations is None else np.ascontiguousarray(accelerations),
-            )
-        )
-        if table is not None:  # (N, 10, 4): each state's table
-            return BucketState(table.reshape(D.shape[:-1] + (10, 4)).swapaxes(0, -2))
         # (40, N): entry j of every state in row j.
         table = in_blocks(self._states, flat, rates, accelerations, block=_BLOCK, rows=True)
         return BucketState(table.reshape(10, 4, len(flat)).swapaxes(1, 2).reshape((10, *D.shape)))
