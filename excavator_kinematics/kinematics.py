@@ -74,13 +74,12 @@ STROKE_TOLERANCE = 1e-9
 # ms per batch (state / pose): 4096 states per block 17.2 / 9.6, 8192 15.2 / 8.3, 16384 15.7 /
 # 10.0, 32768 18.8 / 9.3, the whole batch in one 39.0 / 8.4.
 _BLOCK = 2 * BLOCK
-# Batches of full states or poses up to this many run the kernel's loop (states, poses), larger
-# ones numpy (issue #32: numpy's fixed cost made a pose batch of one 90x a single call, and a pose
-# batch of 1000 cost 0.73 us a state against the kernel's 0.30 at load 16-21, bench_peers.py):
-# the scalar kernel takes 180-210 ns per full state whatever the batch, numpy's SIMD trigonometry
-# wins from a few thousand on. Measured, M full states/s, kernel vs numpy: 100 states 3.1 vs 0.6;
-# 1000 5.5 vs 3.4; 2048 5.7 vs 5.2; 32768 4.9 vs 6.5.
-_KERNEL_BATCH = 2048
+# Once the kernel is loaded, batches of full states and poses of every size run its loop into
+# one preallocated table (issue #32): numpy's fixed cost made a batch of one 10x (state) or 90x
+# (pose) a single call, and its temporaries, above glibc's mmap threshold, cost a fresh process
+# 2-4x per state in batches of 3k-16k states until a larger batch had run once
+# (benchmarks/bench_batch.py). The numpy path (blocks of _BLOCK) is the reference and what runs
+# until the kernel has loaded.
 
 # Dddot of a state, and of every state of a batch, without accelerations (the kernel reads them,
 # never writes them).
@@ -576,8 +575,7 @@ class Excavator:
         if (
             D.ndim == 2
             and D.shape[1] == 4
-            and len(D) <= _KERNEL_BATCH
-            and (Q := self._compiled("poses", np.empty(D.shape), np.ascontiguousarray(D))) is not None
+            and (Q := self._compiled("poses", np.empty(D.shape), D)) is not None
         ):
             return Q
         D = self.validate(D)

@@ -205,23 +205,18 @@ def solve_ik_batch(
     paper_phi: float,
     plane_tol: float,
     q: np.ndarray,
-    found: np.ndarray,
     status: np.ndarray,
     selected: np.ndarray,
     tie: np.ndarray,
-    outcome: np.ndarray,
-    angles: np.ndarray,
-    refused: np.ndarray,
 ) -> int:
     """``Scara.solve_ik`` of every target pose T (N, 4, 4), mode 0 ``fixed_phi``, 1 ``phi``, 2
     ``position``, seeds (N, 3) or (1, 3) for every target (read if ``seeded``), the steps of
-    ``Scara._solve_ik_one`` and ``Scara._kernel_one``: both branches q (N, 2, 3) with their
-    statuses as ``ik`` found them (``found``) and as answered (``status``) (N, 2), selected (int8)
-    and tie (N,), ik's outcome (N,), ``angles`` (N, 2) the heading used and the preferred one,
-    ``refused`` (N,) 1 for a target off the plane, 2 for a tilted one, else 0. Returns -1, or the
-    index of the first finite target of mode ``fixed_phi`` whose heading is not ``paper_phi`` (the
-    caller refuses the request)."""
+    ``Scara._solve_ik_one`` and ``Scara._kernel_one``: both branches q (N, 2, 3) and their statuses
+    (N, 2) as answered, selected (int8) and tie (N,). Returns -1, or the index of the first finite
+    target of mode ``fixed_phi`` whose heading is not ``paper_phi`` (the caller refuses the
+    request)."""
     last = seeds.shape[0] - 1
+    found = np.empty(2, dtype=np.int8)
     for i in range(T.shape[0]):
         t = T[i]
         finite = True
@@ -235,26 +230,21 @@ def solve_ik_batch(
         seed = seeds[min(i, last)]
         if mode == 2:
             preferred = _wrap(seed[1] + seed[2]) if seeded else paper_phi
-            phi, chosen, near, best = solve_position(
-                k, x, y, preferred, seed, seeded, branch, tie_tolerance, q[i], found[i]
+            _, chosen, near, _ = solve_position(
+                k, x, y, preferred, seed, seeded, branch, tie_tolerance, q[i], found
             )
         else:
-            phi = preferred = _wrap(heading) if mode == 1 else paper_phi
-            chosen, near = solve_phi(k, x, y, phi, seed, seeded, branch, tie_tolerance, q[i], found[i])
-            best = min(found[i, 0], found[i, 1]) if branch < 0 else found[i, branch]
-        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(phi)):
-            best = _INVALID
-            found[i, 0] = found[i, 1] = _INVALID
-        off_plane = finite and abs(z) > plane_tol
-        tilted = finite and oriented and math.acos(min(max(t[2, 2], -1.0), 1.0)) > plane_tol
-        refused[i] = 1 if off_plane else 2 if tilted else 0
+            phi = _wrap(heading) if mode == 1 else paper_phi
+            chosen, near = solve_phi(k, x, y, phi, seed, seeded, branch, tie_tolerance, q[i], found)
+        # solve_ik's refusals: a target off the plane or tilted (UNREACHABLE), one not finite (INVALID).
+        refused = finite and (
+            abs(z) > plane_tol or (oriented and math.acos(min(max(t[2, 2], -1.0), 1.0)) > plane_tol)
+        )
         for b in range(2):
-            status[i, b] = _INVALID if not finite else _UNREACHABLE if off_plane or tilted else found[i, b]
+            status[i, b] = _INVALID if not finite else _UNREACHABLE if refused else found[b]
         if branch >= 0:  # the other branch is no solution of this request
             status[i, 1 - branch] = max(status[i, 1 - branch], _LIMITS)
-        answered = finite and not (off_plane or tilted)
+        answered = finite and not refused
         selected[i] = chosen if answered else -1
         tie[i] = answered and near
-        outcome[i] = best
-        angles[i, 0], angles[i, 1] = phi, preferred
     return -1

@@ -470,20 +470,12 @@ class Scara:
         requested: int | None,
     ) -> IKSolutions:
         """:meth:`solve_ik` of targets (N, 4, 4), seed (3,) or (N, 3), through the kernel's loop
-        (ik_kernel.solve_ik_batch, the steps of :meth:`_solve_ik_one`). Issue #32: on the numpy
-        path a batch of one cost 19x a single call, and a batch paid from 30 targets on."""
+        (ik_kernel.solve_ik_batch, the steps of :meth:`_solve_ik_one`); a target's text is its
+        single call's, made when asked for. Issue #32: on the numpy path a batch of one cost 19x a
+        single call, and a batch paid from 30 targets on."""
         n = len(target)
-        q, found, status = (
-            np.empty((n, 2, 3)),
-            np.empty((n, 2), dtype=np.int8),
-            np.empty((n, 2), dtype=np.int8),
-        )
-        selected, tie, outcome = (
-            np.empty(n, dtype=np.int8),
-            np.empty(n, dtype=bool),
-            np.empty(n, dtype=np.int8),
-        )
-        angles, refused = np.empty((n, 2)), np.empty(n, dtype=np.int8)
+        q, status = np.empty((n, 2, 3)), np.empty((n, 2), dtype=np.int8)
+        selected, tie = np.empty(n, dtype=np.int8), np.empty(n, dtype=bool)
         seeded = seed is not None
         off = kernel.solve_ik_batch(
             self._packed,
@@ -497,26 +489,22 @@ class Scara:
             PAPER_PHI,
             PLANE_TOL,
             q,
-            found,
             status,
             selected,
             tie,
-            outcome,
-            angles,
-            refused,
         )
         if off >= 0:
             raise _not_fixed_phi(math.atan2(target[off, 1, 0], target[off, 0, 0]))
 
         def explain(solutions: IKSolutions, index: tuple[int, ...]) -> str:
-            if refused[index] == 1:
-                return _off_plane_text(float(target[index][2, 3]))
-            if refused[index] == 2:
-                return _tilted_text(math.acos(min(max(float(target[index][2, 2]), -1.0), 1.0)))
-            # What ik answered, for its text: the selection is ik's where the target is answered.
-            solved = IKSolutions(q=q, status=found, branches=BRANCHES, selected=selected, tie=tie)
-            phi, preferred = angles[index].tolist()
-            return self._explain(solved, index, mode, phi, preferred, int(outcome[index]), seeded, requested)
+            one = self.solve_ik(
+                target[index],
+                use_orientation=use_orientation,
+                mode=mode,
+                seed=seed if seed is None or seed.ndim == 1 else seed[index],
+                branch=None if requested is None else BRANCHES[requested],
+            )
+            return one.note()
 
         return IKSolutions(q=q, status=status, branches=BRANCHES, selected=selected, tie=tie, explain=explain)
 
@@ -850,7 +838,6 @@ def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
     q, status = np.empty((2, 3)), np.empty(2, dtype=np.int8)
     ik_kernel.solve_phi(packed, 0.5, 0.3, PAPER_PHI, packed[:3], True, -1, TIE_TOLERANCE, q, status)
     ik_kernel.solve_position(packed, 0.5, 0.3, PAPER_PHI, packed[:3], True, -1, TIE_TOLERANCE, q, status)
-    one, flag = np.empty(1, dtype=np.int8), np.empty(1, dtype=bool)
     ik_kernel.solve_ik_batch(
         packed,
         np.eye(4)[None],
@@ -864,12 +851,8 @@ def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
         PLANE_TOL,
         q[None],
         status[None],
-        status[None].copy(),
-        one,
-        flag,
-        one.copy(),
-        np.empty((1, 2)),
-        one.copy(),
+        np.empty(1, dtype=np.int8),
+        np.empty(1, dtype=bool),
     )
 
 
