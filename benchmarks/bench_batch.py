@@ -51,6 +51,7 @@ def apis(largest: int) -> dict:
     from excavator_kinematics import kinematics as excavator
     from manipulator_kinematics import serial_chain
     from palletizer_kinematics import kinematics as palletizer
+    from pump_boom_kinematics import kinematics as pump_boom
     from scara_kinematics import kinematics as scara_module
     from tool_changer_kinematics.kinematics import ToolChanger
 
@@ -75,6 +76,9 @@ def apis(largest: int) -> dict:
     D_dot = rng.uniform(-1, 1, (largest, 4)) * exc.limits.max_rates
     D_ddot = rng.uniform(-1, 1, (largest, 4)) * exc.limits.max_rates
     Q = exc.pose(D)
+    boom = pump_boom.PumpBoom.default()
+    pump_boom.compiled_kernel(boom, wait=True)
+    bT = boom.fkine(rng.uniform(boom.limits.lower, boom.limits.upper, (largest, 6)))
     return {
         "tool changer fkine_jacob0": (
             lambda i: arm.chain.fkine_jacob0(q[i]),
@@ -94,6 +98,10 @@ def apis(largest: int) -> dict:
             lambda n: exc.state(D[:n], D_dot[:n], D_ddot[:n]),
         ),
         "excavator ik": (lambda i: exc.ik(Q[i]), lambda n: exc.ik(Q[:n])),
+        "pump boom solve_ik": (
+            lambda i: boom.solve_ik(bT[i], use_orientation=False),
+            lambda n: boom.solve_ik(bT[:n], use_orientation=False),
+        ),
     }
 
 

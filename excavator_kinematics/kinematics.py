@@ -572,12 +572,13 @@ class Excavator:
         D = np.asarray(D, dtype=float)
         if D.shape == (4,) and (Q := self._compiled("pose", np.empty(4), D)) is not None:
             return Q
-        if (
-            D.ndim == 2
-            and D.shape[1] == 4
-            and (Q := self._compiled("poses", np.empty(D.shape), D)) is not None
-        ):
-            return Q
+        if D.ndim == 2 and D.shape[1] == 4 and (kernel := KERNEL.ready or KERNEL.get()) is not None:
+            Q = np.empty(D.shape)  # _compiled written out, as in state
+            try:
+                if kernel.poses(self._packed, D, Q):
+                    return Q
+            except TypeError:  # arguments of types the kernel does not take (_warm)
+                pass
         D = self.validate(D)
         return in_blocks(self._poses, D.reshape(-1, 4), block=_BLOCK, rows=True).T.reshape(D.shape)
 

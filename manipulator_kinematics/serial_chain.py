@@ -260,7 +260,8 @@ class SerialChain:
                     kernel.fkine_jacob0(self._packed, q, pose, jacobian)
                     return pose, jacobian
                 if q.ndim == 2:
-                    pose, jacobian = np.empty((len(q), 4, 4)), np.empty((len(q), *self._jacobian_shape))
+                    n = len(q)
+                    pose, jacobian = np.empty((n, 4, 4)), np.empty((n, *self._jacobian_shape))
                     kernel.fkine_jacob0_batch(self._packed, q, pose, jacobian)
                     return pose, jacobian
             except (TypeError, ValueError):

@@ -127,9 +127,18 @@ _STATUS_OF = np.array([_STATUS[f] for f in Failure], dtype=np.int8)
 _FAILURES = tuple(Failure)  # by code: indexing is 10 times cheaper than Failure(code)
 
 
+#: The seeds of a batch without one (ik_kernel.region_ik_batch reads its row, never uses it).
+_NO_SEEDS = np.zeros((1, 6))
+
+
 def _warm(ik_kernel: ModuleType, *lookup: np.ndarray) -> None:
     """Run the kernel once (numba loads it from its cache or compiles it)."""
     ik_kernel.region_ik(*lookup, 10.0, 0.0, 10.0, 0.0, True, np.empty(6))
+    status, selected = np.empty((1, 1), dtype=np.int8), np.empty(1, dtype=np.intp)
+    points = np.array([[10.0, 0.0, 10.0]])
+    ik_kernel.region_ik_batch(
+        *lookup, points, _NO_SEEDS, False, _STATUS_OF, np.empty((1, 1, 6)), status, selected
+    )
 
 
 #: The single-point kernel (:mod:`pump_boom_kinematics.ik_kernel`), see manipulator_kinematics.compiled.
@@ -585,6 +594,10 @@ class PumpBoom:
             kernel = compiled_kernel(self)
             if kernel is not None:
                 return self._solve_one(kernel, target[:3, 3], seed)
+        elif target.ndim == 3 and (seed is None or seed.shape in ((6,), (len(target), 6))):
+            kernel = compiled_kernel(self)
+            if kernel is not None:
+                return self._solve_many(kernel, target[:, :3, 3], seed)
         result = self.region_ik(target[..., :3, 3], seed)
         ok = result.ok
 
@@ -597,6 +610,38 @@ class PumpBoom:
             branches=BRANCHES,
             selected=np.where(ok, 0, -1),
             tie=np.zeros(ok.shape, dtype=bool),
+            explain=explain,
+        )
+
+    def _solve_many(self, kernel: ModuleType, points: np.ndarray, seed: np.ndarray | None) -> IKSolutions:
+        """:meth:`solve_ik` of pour points (N, 3), seed (6,) or (N, 6), through the kernel's loop
+        (ik_kernel.region_ik_batch); a point's text is :meth:`region_ik`'s, made when asked for.
+        Issue #32: a batch on the numpy path cost tens of single calls up to tens of points."""
+        n = len(points)
+        q, status, selected = np.empty((n, 1, 6)), np.empty((n, 1), dtype=np.int8), np.empty(n, dtype=np.intp)
+        seeded = seed is not None
+        kernel.region_ik_batch(
+            *self._kernel_args,
+            np.ascontiguousarray(points),
+            np.ascontiguousarray(seed.reshape(-1, 6)) if seeded else _NO_SEEDS,
+            seeded,
+            _STATUS_OF,
+            q,
+            status,
+            selected,
+        )
+
+        def explain(solutions: IKSolutions, index: tuple[int, ...]) -> str:
+            return self.region_ik(
+                points[index], seed if seed is None or seed.ndim == 1 else seed[index]
+            ).reason()
+
+        return IKSolutions(
+            q=q,
+            status=status,
+            branches=BRANCHES,
+            selected=selected,
+            tie=np.zeros(n, dtype=bool),
             explain=explain,
         )
 

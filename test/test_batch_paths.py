@@ -17,6 +17,7 @@ from excavator_kinematics.kinematics import Excavator, StrokeError
 from manipulator_kinematics import serial_chain
 from palletizer_kinematics import kinematics as palletizer
 from palletizer_kinematics.kinematics import Palletizer
+from pump_boom_kinematics import kinematics as pump_boom
 from pump_boom_kinematics.kinematics import PumpBoom
 from scara_kinematics import kinematics as scara_module
 from scara_kinematics.kinematics import Scara
@@ -27,6 +28,7 @@ EXC = Excavator.default()
 ARM = ToolChanger.default()
 PAL = Palletizer.default()
 SCARA = Scara.default()
+BOOM = PumpBoom.default()
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -37,6 +39,7 @@ def kernels() -> None:
     scara_module.compiled_kernel(SCARA, wait=True)
     excavator.compiled_kernel(EXC, wait=True)
     inverse.compiled_kernel(EXC, wait=True)
+    pump_boom.compiled_kernel(BOOM, wait=True)
 
 
 @contextlib.contextmanager
@@ -54,6 +57,7 @@ def kernel_only(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
             (Scara, "ik"),
             (Excavator, "validate"),
             (inverse, "candidates"),
+            (PumpBoom, "region_ik"),
         ):
             patch.setattr(owner, name, refused)
         yield
@@ -94,7 +98,7 @@ def mixed_targets(poses: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 @pytest.mark.parametrize("n", SIZES)
 @pytest.mark.parametrize(
     "chain",
-    [ARM.chain, PAL.chain, SCARA.chain, PumpBoom.default().chain],
+    [ARM.chain, PAL.chain, SCARA.chain, BOOM.chain],
     ids=["tool_changer", "palletizer", "scara", "pump_boom"],
 )
 def test_chain_batches_equal_single_calls_and_numpy(
@@ -295,3 +299,30 @@ def test_excavator_ik_batches(
         for i in range(n)
     ]
     same_solutions(batch, singles, inverse.solve_pose(EXC, Q, seed=seed, branch=branch, compiled=False))
+
+
+# ---- the pump boom -----------------------------------------------------------------------------------
+@pytest.mark.parametrize("n", SIZES)
+@pytest.mark.parametrize("seeding", ["none", "one", "each"])
+def test_pump_boom_ik_batches(monkeypatch: pytest.MonkeyPatch, n: int, seeding: str) -> None:
+    rng = np.random.default_rng(500 + n)
+    limits = BOOM.limits
+    targets = mixed_targets(BOOM.fkine(rng.uniform(limits.lower, limits.upper, (n, 6))), rng)
+    seeds = rng.uniform(limits.lower, limits.upper, (n, 6))
+    seed = {"none": None, "one": seeds[0], "each": seeds}[seeding]
+    with kernel_only(monkeypatch):
+        batch = BOOM.solve_ik(targets, use_orientation=False, seed=seed)
+    singles = [
+        BOOM.solve_ik(
+            targets[i],
+            use_orientation=False,
+            seed=None if seed is None else np.array(np.broadcast_to(seed, (n, 6))[i]),
+        )
+        for i in range(n)
+    ]
+    with monkeypatch.context() as patch:
+        patch.setattr(pump_boom.KERNEL, "ready", None)
+        patch.setenv("MK_COMPILED", "0")
+        reference = BOOM.solve_ik(targets, use_orientation=False, seed=seed)
+    same_solutions(batch, singles, reference)
+    assert len(set(batch.status.ravel().tolist())) >= (2 if n >= 5 else 1)

@@ -400,8 +400,9 @@ class ToolChanger:
         if kernel is not None and not shape:
             q, status, selected, tie, diag = self._solve_one(kernel, target, seed_q, index)
         elif kernel is not None:
-            flat_seed = None if seeds is None else seeds.reshape(-1, 6)
-            flange = self._flange(target).reshape(-1, 4, 4)
+            flat_seed = seeds if seeds is None or seeds.ndim == 2 else seeds.reshape(-1, 6)
+            flange = self._flange(target)
+            flange = flange if flange.ndim == 3 else flange.reshape(-1, 4, 4)
             q, status, selected, tie, diag = self._solve_many(kernel, flange, flat_seed, index)
             if len(shape) != 1:  # (N,): the kernel's outputs as they are
                 q, status, selected, tie = (
