@@ -1,4 +1,5 @@
-"""The excavator's pose IK for ONE target, compiled (numba): the single-call hot path of
+"""The excavator's pose IK for ONE target, compiled (numba), and its loop over a batch
+(``solve_batch``, issue #32): the single-call hot path of
 :mod:`excavator_kinematics.inverse`, whose vectorised numpy code stays the reference (a test
 compares the two over 10^4 random targets, failing statuses included).
 

@@ -29,8 +29,9 @@ nearer stroke end as a fraction of the stroke (:func:`widest_margin_angles`: the
 maxima of a 2.5 deg grid, each refined to within 2e-8 rad; a feasible band of alpha narrower
 than the grid step can be missed).
 
-Speed: a batch runs vectorised in blocks of rows (:func:`manipulator_kinematics.row_blocks.in_blocks`),
-the machine's numbers folded once (:class:`Constants`); one target runs the same steps compiled
+Speed: the numpy path runs a batch vectorised in blocks of rows
+(:func:`manipulator_kinematics.row_blocks.in_blocks`), the machine's numbers folded once
+(:class:`Constants`); one target and a batch of :func:`solve_pose` run the same steps compiled
 (:mod:`excavator_kinematics.ik_kernel`, numba), the numpy path staying the reference
 (``compiled=False``). benchmarks/bench_excavator_ik.py measures both against scipy's least squares.
 """
@@ -513,7 +514,8 @@ def solve_pose(
     compiled: bool = True,
 ) -> IKSolutions:
     """Every candidate for targets Q = [x, y, z, alpha] (..., 4) and the selected one; one target
-    (4,) runs the compiled kernel (:func:`compiled_kernel`) unless not ``compiled``."""
+    (4,) and a batch (N, 4) run the compiled kernel (:func:`compiled_kernel`) unless not
+    ``compiled``."""
     index = _branch_index(branch)
     Q = np.asarray(Q, dtype=float)
     if Q.shape[-1:] != (4,):

@@ -31,9 +31,10 @@ Everything is closed form, written once as plain vectorised numpy on (..., n) ar
 (shape (4,)) is a batch of one through the same code (the same bits as that row of a batch); a
 batch (shape (N, 4)) runs in blocks of rows (:func:`manipulator_kinematics.row_blocks.in_blocks`).
 Rates and accelerations have D's shape or (4,), broadcast over a batch. The single call of
-:meth:`Excavator.state`, :meth:`Excavator.pose` and :meth:`Excavator.jc0` runs the same steps
-compiled (:mod:`excavator_kinematics.state_kernel`, numba) once that kernel has loaded in the
-background (:class:`manipulator_kinematics.compiled.Kernel`; the numpy path answers meanwhile and
+:meth:`Excavator.state`, :meth:`Excavator.pose` and :meth:`Excavator.jc0`, and a batch of
+``state`` and ``pose``, run the same steps compiled (:mod:`excavator_kinematics.state_kernel`,
+numba) once that kernel has loaded in the background
+(:class:`manipulator_kinematics.compiled.Kernel`; the numpy path answers meanwhile and
 stays the reference, within 1e-12). Errors: a wrong shape is a ``ValueError`` saying "shape"; a
 state the machine cannot take (outside a stroke or the swing range, not finite, a linkage that
 cannot close, a singular JC0) is a :class:`StrokeError` (also a ValueError). The machine file is

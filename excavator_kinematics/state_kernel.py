@@ -1,4 +1,5 @@
-"""The excavator's forward kinematics for ONE state, compiled (numba): the single-call hot path of
+"""The excavator's forward kinematics for ONE state, compiled (numba), and its loops over a
+batch (``states``, ``poses``, issue #32): the single-call hot path of
 :class:`excavator_kinematics.kinematics.Excavator` (``state``, ``pose``, ``jc0``), whose
 vectorised numpy code stays the reference (a test compares the two over 10^4 random states, out
 of stroke included).

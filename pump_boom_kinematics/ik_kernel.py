@@ -1,4 +1,5 @@
-"""The pump boom's region IK for ONE pour point, compiled (numba): the single-call hot path of
+"""The pump boom's region IK for ONE pour point, compiled (numba), and its loop over a batch
+(``region_ik_batch``, issue #32): the single-call hot path of
 :meth:`pump_boom_kinematics.kinematics.PumpBoom.region_ik_point` (and of ``solve_ik`` on one
 target), whose vectorised numpy code (:meth:`~pump_boom_kinematics.kinematics.PumpBoom.region_ik`)
 stays the reference (a test compares the two over the table, its bands and around it, every

@@ -1,4 +1,5 @@
-"""The SCARA's IK for ONE target, compiled (numba): the single-call hot path of
+"""The SCARA's IK for ONE target, compiled (numba), and its loop over a batch of target poses
+(``solve_ik_batch``, issue #32): the single-call hot path of
 :meth:`scara_kinematics.kinematics.Scara.ik` in every mode (``solve_phi``: modes ``phi`` and
 ``fixed_phi``; ``solve_position``: mode ``position``), whose vectorised numpy code
 (``Scara._solve_phi``, ``Scara._position_ik`` with ``Scara._candidate_headings``, and
