@@ -195,7 +195,7 @@ KERNEL = Kernel("excavator_kinematics.state_kernel", _warm)
 
 
 def compiled_kernel(model: Excavator, wait: bool = False) -> ModuleType | None:
-    """The compiled kernel module if ready, else None (the first single call starts loading it;
+    """The compiled kernel module if ready, else None (the first call starts loading it;
     calls take the numpy path meanwhile, the same results within 1e-12). ``wait``: load it now.
     One kernel serves every machine (``model``: for the call's symmetry with the IK's)."""
     return KERNEL.get(wait=wait)

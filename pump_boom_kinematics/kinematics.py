@@ -147,8 +147,9 @@ KERNEL = Kernel("pump_boom_kinematics.ik_kernel", _warm)
 
 def compiled_kernel(boom: PumpBoom, wait: bool = False) -> ModuleType | None:
     """The compiled kernel module if ready, else None (:class:`manipulator_kinematics.compiled.Kernel`:
-    the first single-point call starts loading it, calls take the numpy path meanwhile, the same
-    results within 1e-12). ``wait``: load it now (tests, benchmarks). Needs the boom's region table."""
+    the first call of solve_ik or region_ik_point starts loading it, calls take the numpy path
+    meanwhile, the same results within 1e-12). ``wait``: load it now (tests, benchmarks). Needs
+    the boom's region table."""
     return KERNEL.get(*boom._kernel_args, wait=wait)
 
 

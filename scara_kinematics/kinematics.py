@@ -476,12 +476,11 @@ class Scara:
         n = len(target)
         q, status = np.empty((n, 2, 3)), np.empty((n, 2), dtype=np.int8)
         selected, tie = np.empty(n, dtype=np.int8), np.empty(n, dtype=bool)
-        seeded = seed is not None
         off = kernel.solve_ik_batch(
             self._packed,
             np.ascontiguousarray(target),
-            np.ascontiguousarray(seed.reshape(-1, 3)) if seeded else _NO_SEEDS,
-            seeded,
+            _NO_SEEDS if seed is None else np.ascontiguousarray(seed.reshape(-1, 3)),
+            seed is not None,
             -1 if requested is None else requested,
             TIE_TOLERANCE,
             MODES.index(mode),

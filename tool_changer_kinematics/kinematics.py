@@ -389,8 +389,8 @@ class ToolChanger:
             raise ValueError(f"targets must have shape (..., 4, 4), got {target.shape}")
         shape = target.shape[:-2]
         seed_q = seeds = None if seed is None else np.asarray(seed, dtype=float)
-        if seed_q is not None and seed_q.shape != shape + (6,):
-            seed_q = np.broadcast_to(seed_q, shape + (6,))
+        if seeds is not None and seeds.shape != shape + (6,):
+            seed_q = np.broadcast_to(seeds, shape + (6,))
             # One seed for a batch: the kernel's loop reads its one row for every target.
             seeds = seeds.reshape(1, 6) if seeds.shape == (6,) else seed_q
         if not use_orientation and seed_q is not None:
