@@ -469,6 +469,9 @@ def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
         selected,
         tie,
     )
+    # The batch takes only these types: another (a read-only view, say) raises TypeError and the
+    # call takes the numpy path, instead of compiling for seconds inside the call.
+    ik_kernel.solve_batch.disable_compile()
 
 
 #: The single-target kernel (:mod:`excavator_kinematics.ik_kernel`), see manipulator_kinematics.compiled.
@@ -536,21 +539,25 @@ def solve_pose(
             np.empty((n, 4), dtype=np.int8),
         )
         selected, tie = np.empty(n, dtype=np.intp), np.empty(n, dtype=bool)
-        kernel.solve_batch(
-            model._ik.packed,
-            np.ascontiguousarray(Q),
-            _NO_SEEDS if seed is None else np.ascontiguousarray(seed.reshape(-1, 4)),
-            seed is not None,
-            -1 if index is None else index,
-            SWING_AXIS,
-            TIE_TOLERANCE,
-            D,
-            reach,
-            judged,
-            selected,
-            tie,
-        )
-        return _solutions(model, Q[:, None], D, reach, judged, seed, index, selection=(selected, tie))
+        try:
+            kernel.solve_batch(
+                model._ik.packed,
+                np.ascontiguousarray(Q),
+                _NO_SEEDS if seed is None else np.ascontiguousarray(seed.reshape(-1, 4)),
+                seed is not None,
+                -1 if index is None else index,
+                SWING_AXIS,
+                TIE_TOLERANCE,
+                D,
+                reach,
+                judged,
+                selected,
+                tie,
+            )
+        except TypeError:  # arguments of types the loop does not take (_warm)
+            pass
+        else:
+            return _solutions(model, Q[:, None], D, reach, judged, seed, index, selection=(selected, tie))
     D, reach, judged = candidates(model, Q)
     return _solutions(model, Q[..., None, :], D, reach, judged, seed, index)
 

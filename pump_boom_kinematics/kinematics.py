@@ -139,6 +139,9 @@ def _warm(ik_kernel: ModuleType, *lookup: np.ndarray) -> None:
     ik_kernel.region_ik_batch(
         *lookup, points, _NO_SEEDS, False, _STATUS_OF, np.empty((1, 1, 6)), status, selected
     )
+    # The batch takes only these types: another (a read-only view, say) raises TypeError and the
+    # call takes the numpy path, instead of compiling for seconds inside the call.
+    ik_kernel.region_ik_batch.disable_compile()
 
 
 #: The single-point kernel (:mod:`pump_boom_kinematics.ik_kernel`), see manipulator_kinematics.compiled.
@@ -597,8 +600,8 @@ class PumpBoom:
                 return self._solve_one(kernel, target[:3, 3], seed)
         elif target.ndim == 3 and (seed is None or seed.shape in ((6,), (len(target), 6))):
             kernel = compiled_kernel(self)
-            if kernel is not None:
-                return self._solve_many(kernel, target[:, :3, 3], seed)
+            if kernel is not None and (many := self._solve_many(kernel, target[:, :3, 3], seed)) is not None:
+                return many
         result = self.region_ik(target[..., :3, 3], seed)
         ok = result.ok
 
@@ -614,23 +617,29 @@ class PumpBoom:
             explain=explain,
         )
 
-    def _solve_many(self, kernel: ModuleType, points: np.ndarray, seed: np.ndarray | None) -> IKSolutions:
+    def _solve_many(
+        self, kernel: ModuleType, points: np.ndarray, seed: np.ndarray | None
+    ) -> IKSolutions | None:
         """:meth:`solve_ik` of pour points (N, 3), seed (6,) or (N, 6), through the kernel's loop
-        (ik_kernel.region_ik_batch); a point's text is :meth:`region_ik`'s, made when asked for.
+        (ik_kernel.region_ik_batch), None for arguments of types the loop does not take
+        (:func:`_warm`); a point's text is :meth:`region_ik`'s, made when asked for.
         Issue #32: a batch on the numpy path cost tens of single calls up to tens of points."""
         n = len(points)
         q, status, selected = np.empty((n, 1, 6)), np.empty((n, 1), dtype=np.int8), np.empty(n, dtype=np.intp)
         seeded = seed is not None
-        kernel.region_ik_batch(
-            *self._kernel_args,
-            np.ascontiguousarray(points),
-            np.ascontiguousarray(seed.reshape(-1, 6)) if seeded else _NO_SEEDS,
-            seeded,
-            _STATUS_OF,
-            q,
-            status,
-            selected,
-        )
+        try:
+            kernel.region_ik_batch(
+                *self._kernel_args,
+                np.ascontiguousarray(points),
+                np.ascontiguousarray(seed.reshape(-1, 6)) if seeded else _NO_SEEDS,
+                seeded,
+                _STATUS_OF,
+                q,
+                status,
+                selected,
+            )
+        except TypeError:
+            return None
 
         def explain(solutions: IKSolutions, index: tuple[int, ...]) -> str:
             return self.region_ik(

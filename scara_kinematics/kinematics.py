@@ -365,7 +365,9 @@ class Scara:
         ):
             seed = _checked_seed(seed)
             if seed is None or seed.shape in ((3,), (len(target), 3)):
-                return self._solve_ik_many(kernel, target, use_orientation, mode, seed, requested)
+                many = self._solve_ik_many(kernel, target, use_orientation, mode, seed, requested)
+                if many is not None:
+                    return many
         finite = np.all(np.isfinite(target), axis=(-2, -1))
         position = target[..., :3, 3]
         heading = np.arctan2(target[..., 1, 0], target[..., 0, 0])
@@ -468,30 +470,34 @@ class Scara:
         mode: str,
         seed: np.ndarray | None,
         requested: int | None,
-    ) -> IKSolutions:
+    ) -> IKSolutions | None:
         """:meth:`solve_ik` of targets (N, 4, 4), seed (3,) or (N, 3), through the kernel's loop
-        (ik_kernel.solve_ik_batch, the steps of :meth:`_solve_ik_one`); a target's text is its
-        single call's, made when asked for. Issue #32: on the numpy path a batch of one cost 19x a
+        (ik_kernel.solve_ik_batch, the steps of :meth:`_solve_ik_one`), None for arguments of
+        types the loop does not take (:func:`_warm`); a target's text is its single call's, made
+        when asked for. Issue #32: on the numpy path a batch of one cost 19x a
         single call, and a batch paid from 30 targets on."""
         n = len(target)
         q, status = np.empty((n, 2, 3)), np.empty((n, 2), dtype=np.int8)
         selected, tie = np.empty(n, dtype=np.int8), np.empty(n, dtype=bool)
-        off = kernel.solve_ik_batch(
-            self._packed,
-            np.ascontiguousarray(target),
-            _NO_SEEDS if seed is None else np.ascontiguousarray(seed.reshape(-1, 3)),
-            seed is not None,
-            -1 if requested is None else requested,
-            TIE_TOLERANCE,
-            MODES.index(mode),
-            bool(use_orientation),
-            PAPER_PHI,
-            PLANE_TOL,
-            q,
-            status,
-            selected,
-            tie,
-        )
+        try:
+            off = kernel.solve_ik_batch(
+                self._packed,
+                np.ascontiguousarray(target),
+                _NO_SEEDS if seed is None else np.ascontiguousarray(seed.reshape(-1, 3)),
+                seed is not None,
+                -1 if requested is None else requested,
+                TIE_TOLERANCE,
+                MODES.index(mode),
+                bool(use_orientation),
+                PAPER_PHI,
+                PLANE_TOL,
+                q,
+                status,
+                selected,
+                tie,
+            )
+        except TypeError:
+            return None
         if off >= 0:
             raise _not_fixed_phi(math.atan2(target[off, 1, 0], target[off, 0, 0]))
 
@@ -853,6 +859,9 @@ def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
         np.empty(1, dtype=np.int8),
         np.empty(1, dtype=bool),
     )
+    # The batch takes only these types: another (a read-only view, say) raises TypeError and the
+    # call takes the numpy path, instead of compiling for seconds inside the call.
+    ik_kernel.solve_ik_batch.disable_compile()
 
 
 #: The single-target kernel (:mod:`scara_kinematics.ik_kernel`), see manipulator_kinematics.compiled.

@@ -326,3 +326,23 @@ def test_pump_boom_ik_batches(monkeypatch: pytest.MonkeyPatch, n: int, seeding: 
         reference = BOOM.solve_ik(targets, use_orientation=False, seed=seed)
     same_solutions(batch, singles, reference)
     assert len(set(batch.status.ravel().tolist())) >= (2 if n >= 5 else 1)
+
+
+def test_a_read_only_batch_takes_the_numpy_path_without_compiling(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Arguments of types a batch loop was not warmed with (a read-only view) raise TypeError in
+    the loop (no compile inside the call) and the call answers from the numpy path."""
+    D, _, _ = _states(5)
+    Q = np.broadcast_to(EXC.pose(D), (5, 4))  # read-only
+    close(EXC.ik(Q).q, inverse.solve_pose(EXC, Q, compiled=False).q)
+    targets = np.broadcast_to(SCARA.fkine(np.array([[0.1, 0.3, 1.2], [0.2, 0.4, 0.3]])), (2, 4, 4))
+    close(SCARA.solve_ik(targets).q, numpy_scara(monkeypatch, targets).q)
+    points = np.broadcast_to(
+        BOOM.fkine(np.zeros((3, 6)) + BOOM.limits.lower * 0.5 + BOOM.limits.upper * 0.5), (3, 4, 4)
+    )
+    assert BOOM.solve_ik(points, use_orientation=False).q.shape == (3, 1, 6)
+    for kernel in (
+        inverse.KERNEL.ready.solve_batch,
+        scara_module.KERNEL.ready.solve_ik_batch,
+        pump_boom.KERNEL.ready.region_ik_batch,
+    ):
+        assert len(kernel.signatures) == 1
