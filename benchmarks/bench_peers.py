@@ -110,12 +110,9 @@ def worker() -> None:
 
     job = json.load(sys.stdin)
     sys.path.insert(0, str(REPO))
-    from excavator_kinematics.core.inverse import compiled_kernel as excavator_ik_kernel
-    from excavator_kinematics.core.kinematics import Excavator
-    from excavator_kinematics.core.kinematics import compiled_kernel as excavator_state_kernel
+    from bench_batch import apis as batch_apis
+
     from manipulator_kinematics import serial_chain
-    from palletizer_kinematics.kinematics import Palletizer
-    from palletizer_kinematics.kinematics import compiled_kernel as palletizer_kernel
     from scara_kinematics.kinematics import Scara
     from scara_kinematics.kinematics import compiled_kernel as scara_kernel
     from tool_changer_kinematics.kinematics import ToolChanger
@@ -260,36 +257,8 @@ def worker() -> None:
         "tool changer FK + Jacobian": f"same arm: FK and Jacobian equal to {equal:.0e}",
     }
 
-    # -- every batch API against N single calls (ours), and the peers' loops
-    exc = Excavator.default()
-    lo, hi = exc.limits.d_min, exc.limits.d_max
-    D = rng.uniform(lo + 0.01 * (hi - lo), hi - 0.01 * (hi - lo), (largest, 4))
-    D_dot = rng.uniform(-1, 1, (largest, 4)) * exc.limits.max_rates
-    D_ddot = rng.uniform(-1, 1, (largest, 4)) * exc.limits.max_rates
-    Q = exc.pose(D)
-    pal = Palletizer.default()
-    pq = rng.uniform(pal.limits.lower, pal.limits.upper, (largest, pal.limits.lower.size))
-    p_targets = pal.fkine(pq)
-    T_all = arm.fkine(q)
-    S_all = scara.fkine(sq)
-    apis = {  # name: (one call of state i, a batch of rows :n)
-        "tool changer fkine_jacob0": (
-            lambda i: chain.fkine_jacob0(q[i]),
-            lambda n: chain.fkine_jacob0(q[:n]),
-        ),
-        "tool changer solve_ik": (lambda i: arm.solve_ik(T_all[i]), lambda n: arm.solve_ik(T_all[:n])),
-        "SCARA solve_ik": (lambda i: scara.solve_ik(S_all[i]), lambda n: scara.solve_ik(S_all[:n])),
-        "palletizer solve_ik": (lambda i: pal.solve_ik(p_targets[i]), lambda n: pal.solve_ik(p_targets[:n])),
-        "excavator pose": (lambda i: exc.pose(D[i]), lambda n: exc.pose(D[:n])),
-        "excavator ik": (lambda i: exc.ik(Q[i]), lambda n: exc.ik(Q[:n])),
-        "excavator state": (
-            lambda i: exc.state(D[i], D_dot[i], D_ddot[i]),
-            lambda n: exc.state(D[:n], D_dot[:n], D_ddot[:n]),
-        ),
-    }
-    for kernel in (excavator_state_kernel, excavator_ik_kernel):
-        kernel(exc, wait=True)
-    palletizer_kernel(pal, wait=True)
+    # -- every batch API against N single calls (ours): bench_batch.py's list of them
+    apis = batch_apis(largest)
     for one, batch in apis.values():
         one(0), batch(2)
     batches = {}

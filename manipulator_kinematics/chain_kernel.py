@@ -191,6 +191,13 @@ def _check_length(k, q):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def _check_batch(k, q):
+    """q (N, n) of the chain's length (:func:`_check_length`, for the batches)."""
+    if q.shape[1] != int(k[1]):
+        raise ValueError("joint values of the wrong length")
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _scratch(k, count):
     """P for :func:`_joints`: (3, count, n_rows)."""
     return np.empty((3, count, int(k[0])))
@@ -272,7 +279,8 @@ def fkine_jacob0(k, q, pose, jacobian):
 @njit(void(_IN1, _IN2, _OUT4), cache=True, error_model="numpy")
 def frames_batch(k, q, out):
     """frames of every row of q (N, n) into out (N, n_rows + 1, 4, 4)."""
-    P, start = _scratch(k, BLOCK), 0
+    _check_batch(k, q)
+    P, start = _scratch(k, min(BLOCK, q.shape[0])), 0
     while start < q.shape[0]:
         stop = _block(k, q, start, P)
         for m in range(start, stop):
@@ -283,7 +291,8 @@ def frames_batch(k, q, out):
 @njit(void(_IN1, _IN2, _OUT3), cache=True, error_model="numpy")
 def fkine_batch(k, q, pose):
     """fkine of every row of q (N, n) into pose (N, 4, 4)."""
-    P, start = _scratch(k, BLOCK), 0
+    _check_batch(k, q)
+    P, start = _scratch(k, min(BLOCK, q.shape[0])), 0
     while start < q.shape[0]:
         stop = _block(k, q, start, P)
         for m in range(start, stop):
@@ -294,7 +303,8 @@ def fkine_batch(k, q, pose):
 @njit(void(_IN1, _IN2, _OUT3, _OUT3), cache=True, error_model="numpy")
 def fkine_jacob0_batch(k, q, pose, jacobian):
     """fkine_jacob0 of every row of q (N, n) into pose (N, 4, 4) and jacobian (N, 6, n)."""
-    P, F, start = _scratch(k, BLOCK), np.empty((int(k[0]) + 1, 4, 4)), 0
+    _check_batch(k, q)
+    P, F, start = _scratch(k, min(BLOCK, q.shape[0])), np.empty((int(k[0]) + 1, 4, 4)), 0
     while start < q.shape[0]:
         stop = _block(k, q, start, P)
         for m in range(start, stop):

@@ -8,11 +8,12 @@ numba's on-disk cache (``cache=True``: ``__pycache__`` next to the kernel module
 user-wide cache directory where that is not writable). A test per kernel compares it with the
 numpy path (to 1e-12, statuses and selections equal).
 
-:class:`Kernel` loads the kernel module in a thread started by the first call that can use it:
-the first call where the kernel's loop also serves batches faster than numpy (the serial chain,
-the tool changer's and the palletizer's IK), else the first single call (the excavator, SCARA and
-pump boom IK: a process that only runs their batches never imports numba). Until it is ready
-every call takes the numpy path, so a node's first output never waits for numba.
+:class:`Kernel` loads the kernel module in a thread started by the first call that can use it,
+a single call or a batch: once loaded, the kernel's loops serve batches of every size too, into
+preallocated outputs (issue #32: numpy's fixed cost made a batch of one cost up to 20x a single
+call, and its temporaries cost a fresh process 2-4x per state in a band of sizes;
+benchmarks/bench_batch.py). Until it is ready every call takes the numpy path, so a node's first
+output never waits for numba.
 
 Exit and signals (issue 28 item 2: a process stops within 2 s at any moment):
 

@@ -176,9 +176,10 @@ def solve_batch(
     tie: np.ndarray,
     home: np.ndarray,
 ) -> None:
-    """:func:`solve` for every row of poses (N, 16) with seeds (N, 4) (read if ``seeded``): q (N, 8,
-    4), status (N, 8), extra (N, 3), selected, tie and home (N,)."""
+    """:func:`solve` for every row of poses (N, 16) with seeds (N, 4), or (1, 4) for all (read if
+    ``seeded``): q (N, 8, 4), status (N, 8), extra (N, 3), selected, tie and home (N,)."""
+    last = seeds.shape[0] - 1
     for i in range(poses.shape[0]):
         selected[i], tie[i], home[i] = solve(
-            k, poses[i], seeds[i], seeded, allowed, oriented, axis_mode, q[i], status[i], extra[i]
+            k, poses[i], seeds[min(i, last)], seeded, allowed, oriented, axis_mode, q[i], status[i], extra[i]
         )

@@ -131,6 +131,7 @@ _HOME = np.array([b.startswith(HOME_BRANCH) for b in BRANCHES])
 #: Eq. (6)'s sign of sin theta3: elbow up, elbow down.
 _ELBOW = np.array([1.0, -1.0])
 _NO_SEED = np.zeros(4)
+_NO_SEEDS = _NO_SEED.reshape(1, 4)  # a batch's (ik_kernel.solve_batch reads its row, never uses it)
 _BOTTOM_ROW = np.array([0.0, 0.0, 0.0, 1.0])
 _ANGLE = Number(min=-2 * math.tau, max=2 * math.tau, unit="rad")
 
@@ -532,21 +533,29 @@ class Palletizer:
         if target.ndim < 2 or target.shape[-2:] != (4, 4):
             raise RequestError(f"targets must have shape (..., 4, 4), got {target.shape}", IKStatus.INVALID)
         shape = target.shape[:-2]
+        seeds: np.ndarray | None = None
         if seed is not None:
-            seed = np.asarray(seed, dtype=float)
+            seed = seeds = np.asarray(seed, dtype=float)
             if seed.ndim == 0 or seed.shape[-1] != 4 or not np.all(np.isfinite(seed)):
                 raise RequestError(f"seed must be 4 finite angles, got {seed.tolist()}", IKStatus.INVALID)
             if seed.shape != shape + (4,):
                 seed = np.broadcast_to(seed, shape + (4,))
+                # One seed for a batch: the kernel's loop reads its one row for every target.
+                seeds = seeds.reshape(1, 4) if seeds.shape == (4,) else seed
         kernel = compiled_kernel(self) if compiled else None
         if kernel is not None and shape == ():
             q, status, selected, tie, home, lean, c3 = self._solve_one(
                 kernel, target, seed, allowed, use_orientation, mode
             )
         elif kernel is not None:
-            seeds = None if seed is None else seed.reshape(-1, 4)
+            seeds = None if seeds is None else seeds.reshape(-1, 4)
             flat = self._solve_many(kernel, target.reshape(-1, 16), seeds, allowed, use_orientation, mode)
-            q, status, selected, tie, home, lean, c3 = (out.reshape(shape + out.shape[1:]) for out in flat)
+            if len(shape) == 1:  # (N,): the kernel's outputs as they are
+                q, status, selected, tie, home, lean, c3 = flat
+            else:
+                q, status, selected, tie, home, lean, c3 = (
+                    out.reshape(shape + out.shape[1:]) for out in flat
+                )
         else:
             block = functools.partial(
                 self._solve_block, allowed=allowed, use_orientation=use_orientation, mode=mode
@@ -653,7 +662,8 @@ class Palletizer:
         use_orientation: bool,
         mode: str,
     ) -> tuple[np.ndarray, ...]:
-        """:meth:`_solve_block`'s outputs for targets (N, 16) through the kernel's loop."""
+        """:meth:`_solve_block`'s outputs for targets (N, 16) through the kernel's loop, seeds (N, 4)
+        or (1, 4) for every target."""
         n = len(poses)
         q, status, extra = np.empty((n, 8, 4)), np.empty((n, 8), dtype=np.int8), np.empty((n, 3))
         selected, tie, home = np.empty(n, dtype=np.intp), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
@@ -661,7 +671,7 @@ class Palletizer:
         kernel.solve_batch(
             self._packed,
             np.ascontiguousarray(poses),
-            np.ascontiguousarray(seeds) if seeded else np.zeros((n, 4)),
+            np.ascontiguousarray(seeds) if seeded else _NO_SEEDS,
             seeded,
             allowed,
             bool(use_orientation),

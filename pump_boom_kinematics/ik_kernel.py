@@ -1,4 +1,5 @@
-"""The pump boom's region IK for ONE pour point, compiled (numba): the single-call hot path of
+"""The pump boom's region IK for ONE pour point, compiled (numba), and its loop over a batch
+(``region_ik_batch``, issue #32): the single-call hot path of
 :meth:`pump_boom_kinematics.kinematics.PumpBoom.region_ik_point` (and of ``solve_ik`` on one
 target), whose vectorised numpy code (:meth:`~pump_boom_kinematics.kinematics.PumpBoom.region_ik`)
 stays the reference (a test compares the two over the table, its bands and around it, every
@@ -187,3 +188,39 @@ def region_ik(
     if _envelope_margin(k, q) < -k[9]:
         return _ENVELOPE, blended
     return _NONE, blended
+
+
+@njit(cache=True, error_model="numpy")
+def region_ik_batch(
+    k: np.ndarray,
+    owner: np.ndarray,
+    squares: np.ndarray,
+    points: np.ndarray,
+    seeds: np.ndarray,
+    seeded: bool,
+    status_of: np.ndarray,
+    q: np.ndarray,
+    status: np.ndarray,
+    selected: np.ndarray,
+) -> None:
+    """:func:`region_ik` of every pour point (N, 3), the slew angle of seeds (N, 6) or (1, 6) for
+    every point (read if ``seeded``): ``PumpBoom.solve_ik``'s one candidate q (N, 1, 6), NaN where
+    the point fails, its status (N, 1) (``status_of`` the IKStatus of each failure code) and the
+    selection (N,), 0 or -1."""
+    last = seeds.shape[0] - 1
+    for i in range(points.shape[0]):
+        failure, _ = region_ik(
+            k,
+            owner,
+            squares,
+            points[i, 0],
+            points[i, 1],
+            points[i, 2],
+            seeds[min(i, last), 0],
+            seeded,
+            q[i, 0],
+        )
+        if failure:
+            q[i, 0, :] = math.nan
+        status[i, 0] = status_of[failure]
+        selected[i] = -1 if failure else 0

@@ -131,9 +131,21 @@ _STATUS_OF = np.array([_STATUS[f] for f in Failure], dtype=np.int8)
 _FAILURES = tuple(Failure)  # by code: indexing is 10 times cheaper than Failure(code)
 
 
+#: The seeds of a batch without one (ik_kernel.region_ik_batch reads its row, never uses it).
+_NO_SEEDS = np.zeros((1, 6))
+
+
 def _warm(ik_kernel: ModuleType, *lookup: np.ndarray) -> None:
     """Run the kernel once (numba loads it from its cache or compiles it)."""
     ik_kernel.region_ik(*lookup, 10.0, 0.0, 10.0, 0.0, True, np.empty(6))
+    status, selected = np.empty((1, 1), dtype=np.int8), np.empty(1, dtype=np.intp)
+    points = np.array([[10.0, 0.0, 10.0]])
+    ik_kernel.region_ik_batch(
+        *lookup, points, _NO_SEEDS, False, _STATUS_OF, np.empty((1, 1, 6)), status, selected
+    )
+    # The batch takes only these types: another (a read-only view, say) raises TypeError and the
+    # call takes the numpy path, instead of compiling for seconds inside the call.
+    ik_kernel.region_ik_batch.disable_compile()
 
 
 #: The single-point kernel (:mod:`pump_boom_kinematics.ik_kernel`), see manipulator_kinematics.compiled.
@@ -142,8 +154,9 @@ KERNEL = Kernel("pump_boom_kinematics.ik_kernel", _warm)
 
 def compiled_kernel(boom: PumpBoom, wait: bool = False) -> ModuleType | None:
     """The compiled kernel module if ready, else None (:class:`manipulator_kinematics.compiled.Kernel`:
-    the first single-point call starts loading it, calls take the numpy path meanwhile, the same
-    results within 1e-12). ``wait``: load it now (tests, benchmarks). Needs the boom's region table."""
+    the first call of solve_ik or region_ik_point starts loading it, calls take the numpy path
+    meanwhile, the same results within 1e-12). ``wait``: load it now (tests, benchmarks). Needs
+    the boom's region table."""
     return KERNEL.get(*boom._kernel_args, wait=wait)
 
 
@@ -594,6 +607,10 @@ class PumpBoom:
             kernel = compiled_kernel(self)
             if kernel is not None:
                 return self._solve_one(kernel, target[:3, 3], seed)
+        elif target.ndim == 3 and (seed is None or seed.shape in ((6,), (len(target), 6))):
+            kernel = compiled_kernel(self)
+            if kernel is not None and (many := self._solve_many(kernel, target[:, :3, 3], seed)) is not None:
+                return many
         result = self.region_ik(target[..., :3, 3], seed)
         ok = result.ok
 
@@ -606,6 +623,44 @@ class PumpBoom:
             branches=BRANCHES,
             selected=np.where(ok, 0, -1),
             tie=np.zeros(ok.shape, dtype=bool),
+            explain=explain,
+        )
+
+    def _solve_many(
+        self, kernel: ModuleType, points: np.ndarray, seed: np.ndarray | None
+    ) -> IKSolutions | None:
+        """:meth:`solve_ik` of pour points (N, 3), seed (6,) or (N, 6), through the kernel's loop
+        (ik_kernel.region_ik_batch), None for arguments of types the loop does not take
+        (:func:`_warm`); a point's text is :meth:`region_ik`'s, made when asked for.
+        Issue #32: a batch on the numpy path cost tens of single calls up to tens of points."""
+        n = len(points)
+        q, status, selected = np.empty((n, 1, 6)), np.empty((n, 1), dtype=np.int8), np.empty(n, dtype=np.intp)
+        seeded = seed is not None
+        try:
+            kernel.region_ik_batch(
+                *self._kernel_args,
+                np.ascontiguousarray(points),
+                _NO_SEEDS if seed is None else np.ascontiguousarray(seed.reshape(-1, 6)),
+                seeded,
+                _STATUS_OF,
+                q,
+                status,
+                selected,
+            )
+        except TypeError:
+            return None
+
+        def explain(solutions: IKSolutions, index: tuple[int, ...]) -> str:
+            return self.region_ik(
+                points[index], seed if seed is None or seed.ndim == 1 else seed[index]
+            ).reason()
+
+        return IKSolutions(
+            q=q,
+            status=status,
+            branches=BRANCHES,
+            selected=selected,
+            tie=np.zeros(n, dtype=bool),
             explain=explain,
         )
 

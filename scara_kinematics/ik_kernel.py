@@ -1,4 +1,5 @@
-"""The SCARA's IK for ONE target, compiled (numba): the single-call hot path of
+"""The SCARA's IK for ONE target, compiled (numba), and its loop over a batch of target poses
+(``solve_ik_batch``, issue #32): the single-call hot path of
 :meth:`scara_kinematics.kinematics.Scara.ik` in every mode (``solve_phi``: modes ``phi`` and
 ``fixed_phi``; ``solve_position``: mode ``position``), whose vectorised numpy code
 (``Scara._solve_phi``, ``Scara._position_ik`` with ``Scara._candidate_headings``, and
@@ -190,3 +191,61 @@ def solve_position(
         outcome = _LIMITS
     selected, tie = select_one(q, status, seed, seeded, allowed, k[16:19], tie_tolerance)
     return headings[h], selected, tie, outcome
+
+
+@njit(cache=True, error_model="numpy")
+def solve_ik_batch(
+    k: np.ndarray,
+    T: np.ndarray,
+    seeds: np.ndarray,
+    seeded: bool,
+    branch: int,
+    tie_tolerance: float,
+    mode: int,
+    oriented: bool,
+    paper_phi: float,
+    plane_tol: float,
+    q: np.ndarray,
+    status: np.ndarray,
+    selected: np.ndarray,
+    tie: np.ndarray,
+) -> int:
+    """``Scara.solve_ik`` of every target pose T (N, 4, 4), mode 0 ``fixed_phi``, 1 ``phi``, 2
+    ``position``, seeds (N, 3) or (1, 3) for every target (read if ``seeded``), the steps of
+    ``Scara._solve_ik_one`` and ``Scara._kernel_one``: both branches q (N, 2, 3) and their statuses
+    (N, 2) as answered, selected (int8) and tie (N,). Returns -1, or the index of the first finite
+    target of mode ``fixed_phi`` whose heading is not ``paper_phi`` (the caller refuses the
+    request)."""
+    last = seeds.shape[0] - 1
+    found = np.empty(2, dtype=np.int8)
+    for i in range(T.shape[0]):
+        t = T[i]
+        finite = True
+        for r in range(4):
+            for c in range(4):
+                finite = finite and math.isfinite(t[r, c])
+        x, y, z = t[0, 3], t[1, 3], t[2, 3]
+        heading = math.atan2(t[1, 0], t[0, 0])
+        if mode == 0 and oriented and finite and abs(_wrap(heading - paper_phi)) > plane_tol:
+            return i
+        seed = seeds[min(i, last)]
+        if mode == 2:
+            preferred = _wrap(seed[1] + seed[2]) if seeded else paper_phi
+            _, chosen, near, _ = solve_position(
+                k, x, y, preferred, seed, seeded, branch, tie_tolerance, q[i], found
+            )
+        else:
+            phi = _wrap(heading) if mode == 1 else paper_phi
+            chosen, near = solve_phi(k, x, y, phi, seed, seeded, branch, tie_tolerance, q[i], found)
+        # solve_ik's refusals: a target off the plane or tilted (UNREACHABLE), one not finite (INVALID).
+        refused = finite and (
+            abs(z) > plane_tol or (oriented and math.acos(min(max(t[2, 2], -1.0), 1.0)) > plane_tol)
+        )
+        for b in range(2):
+            status[i, b] = _INVALID if not finite else _UNREACHABLE if refused else found[b]
+        if branch >= 0:  # the other branch is no solution of this request
+            status[i, 1 - branch] = max(status[i, 1 - branch], _LIMITS)
+        answered = finite and not refused
+        selected[i] = chosen if answered else -1
+        tie[i] = answered and near
+    return -1

@@ -97,6 +97,8 @@ SCHEMA: Schema = {
 
 # Plain ints for array work (IntEnum members cost an attribute lookup and a conversion per use).
 _SUCCESS, _SINGULAR, _JOINT_LIMITS, _UNREACHABLE, _INVALID = (int(s) for s in IKStatus)
+#: The seeds of a batch without one (ik_kernel.solve_ik_batch reads its row, never uses it).
+_NO_SEEDS = np.zeros((1, 3))
 
 
 @dataclass(frozen=True)
@@ -358,6 +360,14 @@ class Scara:
             seed = _checked_seed(seed)
             if kernel is not None and (seed is None or seed.shape == (3,)):
                 return self._solve_ik_one(kernel, target, use_orientation, mode, seed, requested)
+        elif (
+            target.ndim == 3 and target.shape[1:] == (4, 4) and (kernel := compiled_kernel(self)) is not None
+        ):
+            seed = _checked_seed(seed)
+            if seed is None or seed.shape in ((3,), (len(target), 3)):
+                many = self._solve_ik_many(kernel, target, use_orientation, mode, seed, requested)
+                if many is not None:
+                    return many
         finite = np.all(np.isfinite(target), axis=(-2, -1))
         position = target[..., :3, 3]
         heading = np.arctan2(target[..., 1, 0], target[..., 0, 0])
@@ -366,12 +376,7 @@ class Scara:
         if mode == "fixed_phi" and use_orientation:
             off = finite & (np.abs(wrap_angle(heading - PAPER_PHI)) > PLANE_TOL)
             if np.any(off):
-                raise RequestError(
-                    f"mode 'fixed_phi' holds phi = 90 deg but the target heading is "
-                    f"{np.degrees(heading[off]).ravel()[0]:.6g} deg: use mode 'phi' or clear "
-                    "use_orientation",
-                    IKStatus.INVALID,
-                )
+                raise _not_fixed_phi(float(heading[off].ravel()[0]))
         result = self.ik(
             position[..., :2], mode=mode, phi=heading if mode == "phi" else None, seed=seed, branch=branch
         )
@@ -421,12 +426,7 @@ class Scara:
         heading = math.atan2(rows[1][0], rows[0][0])
         tilt = math.acos(min(max(rows[2][2], -1.0), 1.0))  # NaN stays NaN
         if mode == "fixed_phi" and use_orientation and finite and abs(_wrap(heading - PAPER_PHI)) > PLANE_TOL:
-            raise RequestError(
-                f"mode 'fixed_phi' holds phi = 90 deg but the target heading is "
-                f"{math.degrees(heading):.6g} deg: use mode 'phi' or clear "
-                "use_orientation",
-                IKStatus.INVALID,
-            )
+            raise _not_fixed_phi(heading)
         q, found, selected, tie, outcome, phi_used, preferred = self._kernel_one(
             kernel, mode, x, y, heading if mode == "phi" else None, seed, requested
         )
@@ -461,6 +461,57 @@ class Scara:
             tie=np.array(answered and bool(tie)),
             explain=explain,
         )
+
+    def _solve_ik_many(
+        self,
+        kernel: ModuleType,
+        target: np.ndarray,
+        use_orientation: bool,
+        mode: str,
+        seed: np.ndarray | None,
+        requested: int | None,
+    ) -> IKSolutions | None:
+        """:meth:`solve_ik` of targets (N, 4, 4), seed (3,) or (N, 3), through the kernel's loop
+        (ik_kernel.solve_ik_batch, the steps of :meth:`_solve_ik_one`), None for arguments of
+        types the loop does not take (:func:`_warm`); a target's text is its single call's, made
+        when asked for. Issue #32: on the numpy path a batch of one cost 19x a
+        single call, and a batch paid from 30 targets on."""
+        n = len(target)
+        q, status = np.empty((n, 2, 3)), np.empty((n, 2), dtype=np.int8)
+        selected, tie = np.empty(n, dtype=np.int8), np.empty(n, dtype=bool)
+        try:
+            off = kernel.solve_ik_batch(
+                self._packed,
+                np.ascontiguousarray(target),
+                _NO_SEEDS if seed is None else np.ascontiguousarray(seed.reshape(-1, 3)),
+                seed is not None,
+                -1 if requested is None else requested,
+                TIE_TOLERANCE,
+                MODES.index(mode),
+                bool(use_orientation),
+                PAPER_PHI,
+                PLANE_TOL,
+                q,
+                status,
+                selected,
+                tie,
+            )
+        except TypeError:
+            return None
+        if off >= 0:
+            raise _not_fixed_phi(math.atan2(target[off, 1, 0], target[off, 0, 0]))
+
+        def explain(solutions: IKSolutions, index: tuple[int, ...]) -> str:
+            one = self.solve_ik(
+                target[index],
+                use_orientation=use_orientation,
+                mode=mode,
+                seed=seed if seed is None or seed.ndim == 1 else seed[index],
+                branch=None if requested is None else BRANCHES[requested],
+            )
+            return one.note()
+
+        return IKSolutions(q=q, status=status, branches=BRANCHES, selected=selected, tie=tie, explain=explain)
 
     def state_note(self, q: ArrayLike) -> str:
         """A remark on one joint state for FK answers: near the singularity, or nothing."""
@@ -792,6 +843,25 @@ def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
     q, status = np.empty((2, 3)), np.empty(2, dtype=np.int8)
     ik_kernel.solve_phi(packed, 0.5, 0.3, PAPER_PHI, packed[:3], True, -1, TIE_TOLERANCE, q, status)
     ik_kernel.solve_position(packed, 0.5, 0.3, PAPER_PHI, packed[:3], True, -1, TIE_TOLERANCE, q, status)
+    ik_kernel.solve_ik_batch(
+        packed,
+        np.eye(4)[None],
+        _NO_SEEDS,
+        False,
+        -1,
+        TIE_TOLERANCE,
+        1,
+        True,
+        PAPER_PHI,
+        PLANE_TOL,
+        q[None],
+        status[None],
+        np.empty(1, dtype=np.int8),
+        np.empty(1, dtype=bool),
+    )
+    # The batch takes only these types: another (a read-only view, say) raises TypeError and the
+    # call takes the numpy path, instead of compiling for seconds inside the call.
+    ik_kernel.solve_ik_batch.disable_compile()
 
 
 #: The single-target kernel (:mod:`scara_kinematics.ik_kernel`), see manipulator_kinematics.compiled.
@@ -811,6 +881,15 @@ def _checked_seed(seed: ArrayLike | None) -> np.ndarray | None:
     if seed.ndim == 0 or seed.shape[-1] != 3 or not np.isfinite(seed).all():
         raise ValueError(f"seed must be finite joint values of shape (..., 3), got {seed!r}")
     return seed
+
+
+def _not_fixed_phi(heading: float) -> RequestError:
+    """The refusal of a target whose heading (rad) is not mode ``fixed_phi``'s 90 deg."""
+    return RequestError(
+        f"mode 'fixed_phi' holds phi = 90 deg but the target heading is {math.degrees(heading):.6g} deg: "
+        "use mode 'phi' or clear use_orientation",
+        IKStatus.INVALID,
+    )
 
 
 def _wrap(angle: float) -> float:

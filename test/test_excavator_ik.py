@@ -82,9 +82,10 @@ def test_every_open_chain_candidate_meets_eq_3_behind_the_swing_axis_too() -> No
 
 
 def test_one_target_is_a_batch_of_one() -> None:
-    """The numpy path (the reference; one target runs the compiled kernel unless compiled=False)."""
+    """The numpy path (the reference; one target and a batch run the compiled kernel unless
+    compiled=False)."""
     Q = EXC.pose(random_states(50, 5))
-    batch = EXC.ik(Q)
+    batch = solve_pose(EXC, Q, compiled=False)
     for i in range(len(Q)):
         one = solve_pose(EXC, Q[i], compiled=False)
         assert np.array_equal(one.q, batch.q[i], equal_nan=True)

@@ -64,11 +64,11 @@ def test_kernel_equals_numpy_over_random_states_in_and_out_of_the_limits(monkeyp
 
 
 def test_a_batch_through_the_kernel_equals_the_numpy_batch(monkeypatch: pytest.MonkeyPatch):
-    """Batches of valid states up to _KERNEL_BATCH run the kernel's loop (states): the numpy
-    batch's values to 1e-12, and the same refusals."""
+    """Batches of valid states run the kernel's loop (states), rates and accelerations per state
+    or one row for all: the numpy batch's values to 1e-12, and the same refusals."""
     assert compiled_kernel(EXC, wait=True) is not None
     rng = np.random.default_rng(7)
-    n = kinematics._KERNEL_BATCH
+    n = 3000
     D = rng.uniform(LIM.d_min, LIM.d_max, size=(n, 4))
     rates = rng.uniform(-1.0, 1.0, size=(n, 4)) * LIM.max_rates
     accelerations = rng.uniform(-1.0, 1.0, size=(n, 4)) * LIM.max_rates
@@ -86,13 +86,12 @@ def test_a_batch_through_the_kernel_equals_the_numpy_batch(monkeypatch: pytest.M
 
 
 def test_a_batch_of_poses_through_the_kernel_equals_the_numpy_batch(monkeypatch: pytest.MonkeyPatch):
-    """Batches of poses up to _KERNEL_BATCH run the kernel's loop (poses, issue #32): the numpy
-    batch's values to 1e-12 over 2 x 10^4 states in batches of sizes to it and past it, and the same
-    refusal."""
+    """Batches of poses of every size run the kernel's loop (poses, issue #32): the numpy batch's
+    values to 1e-12 over 2 x 10^4 states in batches of sizes 1 to 10^4, and the same refusal."""
     assert compiled_kernel(EXC, wait=True) is not None
     rng = np.random.default_rng(32)
     D = rng.uniform(LIM.d_min, LIM.d_max, size=(20_000, 4))
-    sizes = [1, 2, 7, 100, 1000, kinematics._KERNEL_BATCH, kinematics._KERNEL_BATCH + 1]
+    sizes = [1, 2, 7, 100, 1000, 2049, 10_000]
     batches = np.split(D, np.cumsum(sizes * (len(D) // sum(sizes)))[:-1])
     calls = 0
     real = kinematics.KERNEL.ready.poses
@@ -105,7 +104,7 @@ def test_a_batch_of_poses_through_the_kernel_equals_the_numpy_batch(monkeypatch:
     with monkeypatch.context() as spy:
         spy.setattr(kinematics.KERNEL.ready, "poses", counted)
         compiled = [EXC.pose(batch) for batch in batches]
-    assert calls == sum(len(batch) <= kinematics._KERNEL_BATCH for batch in batches) >= 12
+    assert calls == len(batches) == len(sizes)
     with monkeypatch.context() as numpy_only:
         numpy_only.setattr(kinematics.KERNEL, "ready", None)
         reference = [EXC.pose(batch) for batch in batches]
@@ -158,7 +157,7 @@ def test_the_record_reads_like_a_named_tuple_from_a_new_table_per_call(
     else:
         monkeypatch.setattr(kinematics.KERNEL, "ready", None)
     rng = np.random.default_rng(5)
-    for shape in ((4,), (3, 4), (kinematics._KERNEL_BATCH + 1, 4)):
+    for shape in ((4,), (3, 4), (kinematics._BLOCK + 1, 4)):
         D = rng.uniform(LIM.d_min, LIM.d_max, size=shape)
         V, A = rng.uniform(-1.0, 1.0, size=(2, *shape)) * LIM.max_rates
         state = EXC.state(D, V, A)

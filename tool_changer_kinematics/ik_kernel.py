@@ -180,9 +180,10 @@ def solve_batch(
     invalid: np.ndarray,
     rho: np.ndarray,
 ) -> None:
-    """:func:`solve` for every flange pose T (N, 4, 4) with seeds (N, 6) (read if ``seeded``): q
-    (N, 8, 6), status, s5_out and reach (N, 8), selected, tie, invalid and rho (N,)."""
+    """:func:`solve` for every flange pose T (N, 4, 4) with seeds (N, 6), or (1, 6) for all (read
+    if ``seeded``): q (N, 8, 6), status, s5_out and reach (N, 8), selected, tie, invalid and rho (N,)."""
+    last = seeds.shape[0] - 1
     for i in range(T.shape[0]):
         selected[i], tie[i], invalid[i], rho[i] = solve(
-            k, T[i], seeds[i], seeded, branch, q[i], status[i], s5_out[i], reach[i]
+            k, T[i], seeds[min(i, last)], seeded, branch, q[i], status[i], s5_out[i], reach[i]
         )

@@ -128,6 +128,8 @@ ELBOW_UP = np.flatnonzero(ELBOW < 0.0)
 ELBOW_UP_ROW = np.array([0, 1, 0, 1, 2, 3, 2, 3])
 
 _SUCCESS, _SINGULAR, _JOINT_LIMITS, _UNREACHABLE, _INVALID = (int(s) for s in IKStatus)
+#: The seeds of a batch without one (ik_kernel.solve_batch reads its row, never uses it).
+_NO_SEEDS = np.zeros((1, 6))
 _SIX = Numbers(6)
 
 #: The ``tool_changer:`` section of a parameters file (manipulator_kinematics.schema).
@@ -386,9 +388,11 @@ class ToolChanger:
         if target.shape[-2:] != (4, 4):
             raise ValueError(f"targets must have shape (..., 4, 4), got {target.shape}")
         shape = target.shape[:-2]
-        seed_q = None if seed is None else np.asarray(seed, dtype=float)
-        if seed_q is not None and seed_q.shape != shape + (6,):
-            seed_q = np.broadcast_to(seed_q, shape + (6,))
+        seed_q = seeds = None if seed is None else np.asarray(seed, dtype=float)
+        if seeds is not None and seeds.shape != shape + (6,):
+            seed_q = np.broadcast_to(seeds, shape + (6,))
+            # One seed for a batch: the kernel's loop reads its one row for every target.
+            seeds = seeds.reshape(1, 6) if seeds.shape == (6,) else seed_q
         if not use_orientation and seed_q is not None:
             target[..., :3, :3] = self.fkine(seed_q)[..., :3, :3]
         index = None if branch is None else BRANCHES.index(branch)
@@ -396,13 +400,15 @@ class ToolChanger:
         if kernel is not None and not shape:
             q, status, selected, tie, diag = self._solve_one(kernel, target, seed_q, index)
         elif kernel is not None:
-            flat_seed = None if seed_q is None else seed_q.reshape(-1, 6)
-            flange = self._flange(target).reshape(-1, 4, 4)
+            flat_seed = seeds if seeds is None or seeds.ndim == 2 else seeds.reshape(-1, 6)
+            flange = self._flange(target)
+            flange = flange if flange.ndim == 3 else flange.reshape(-1, 4, 4)
             q, status, selected, tie, diag = self._solve_many(kernel, flange, flat_seed, index)
-            q, status, selected, tie = (
-                value.reshape(shape + value.shape[1:]) for value in (q, status, selected, tie)
-            )
-            diag = {key: value.reshape(shape + value.shape[1:]) for key, value in diag.items()}
+            if len(shape) != 1:  # (N,): the kernel's outputs as they are
+                q, status, selected, tie = (
+                    value.reshape(shape + value.shape[1:]) for value in (q, status, selected, tie)
+                )
+                diag = {key: value.reshape(shape + value.shape[1:]) for key, value in diag.items()}
         else:
             flange = self._flange(target)
             flat_seed = None if seed_q is None else seed_q.reshape(-1, 6)
@@ -554,7 +560,8 @@ class ToolChanger:
     def _solve_many(
         self, kernel: ModuleType, flange: np.ndarray, seeds: np.ndarray | None, branch: int | None
     ) -> tuple:
-        """Flange poses (N, 4, 4) through the kernel's loop (ik_kernel.solve_batch)."""
+        """Flange poses (N, 4, 4) through the kernel's loop (ik_kernel.solve_batch), seeds (N, 6) or
+        (1, 6) for every target."""
         n = len(flange)
         q, status = np.empty((n, 8, 6)), np.empty((n, 8), dtype=np.int8)
         s5, reach, rho = np.empty((n, 8)), np.empty((n, 8)), np.empty(n)
@@ -563,7 +570,7 @@ class ToolChanger:
         kernel.solve_batch(
             self._packed,
             np.ascontiguousarray(flange),
-            np.ascontiguousarray(seeds) if seeded else np.zeros((n, 6)),
+            np.ascontiguousarray(seeds) if seeded else _NO_SEEDS,
             seeded,
             -1 if branch is None else branch,
             q,

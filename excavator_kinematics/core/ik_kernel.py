@@ -1,4 +1,5 @@
-"""The excavator's pose IK for ONE target, compiled (numba): the single-call hot path of
+"""The excavator's pose IK for ONE target, compiled (numba), and its loop over a batch
+(``solve_batch``, issue #32): the single-call hot path of
 :mod:`excavator_kinematics.core.inverse`, whose vectorised numpy code stays the reference (a test
 compares the two over 10^4 random targets, failing statuses included).
 
@@ -182,6 +183,46 @@ def pick(
     if branch >= 0:
         allowed[branch] = True
     return select_one(D, status, seed, seeded, allowed, k[_K.weights : _K.weights + 4], tie_tolerance)
+
+
+@njit(cache=True, error_model="numpy")
+def solve_batch(
+    k: np.ndarray,
+    Q: np.ndarray,
+    seeds: np.ndarray,
+    seeded: bool,
+    branch: int,
+    swing_axis: float,
+    tie_tolerance: float,
+    D: np.ndarray,
+    reach: np.ndarray,
+    status: np.ndarray,
+    selected: np.ndarray,
+    tie: np.ndarray,
+) -> None:
+    """:func:`candidates`, :func:`judge` and :func:`pick` of every target Q (N, 4) = [x, y, z,
+    alpha], seeds (N, 4) or (1, 4) for every target (read if ``seeded``): D (N, 4, 4), reach and
+    status (N, 4), selected and tie (N,) (inverse.solve_pose's batch)."""
+    alpha = np.empty(4)
+    allowed = np.full(4, branch < 0)
+    if branch >= 0:
+        allowed[branch] = True
+    last = seeds.shape[0] - 1
+    for i in range(Q.shape[0]):
+        x, y, z, angle = Q[i, 0], Q[i, 1], Q[i, 2], Q[i, 3]
+        alpha[:] = angle
+        finite = math.isfinite(x) and math.isfinite(y) and math.isfinite(z) and math.isfinite(angle)
+        candidates(k, x, y, z, alpha, math.atan2(y, x), D[i], reach[i])
+        judge(k, x, y, finite, swing_axis, D[i], status[i])
+        selected[i], tie[i] = select_one(
+            D[i],
+            status[i],
+            seeds[min(i, last)],
+            seeded,
+            allowed,
+            k[_K.weights : _K.weights + 4],
+            tie_tolerance,
+        )
 
 
 @njit(cache=True, error_model="numpy")

@@ -29,8 +29,9 @@ nearer stroke end as a fraction of the stroke (:func:`widest_margin_angles`: the
 maxima of a 2.5 deg grid, each refined to within 2e-8 rad; a feasible band of alpha narrower
 than the grid step can be missed).
 
-Speed: a batch runs vectorised in blocks of rows (:func:`manipulator_kinematics.row_blocks.in_blocks`),
-the machine's numbers folded once (:class:`Constants`); one target runs the same steps compiled
+Speed: the numpy path runs a batch vectorised in blocks of rows
+(:func:`manipulator_kinematics.row_blocks.in_blocks`), the machine's numbers folded once
+(:class:`Constants`); one target and a batch of :func:`solve_pose` run the same steps compiled
 (:mod:`excavator_kinematics.core.ik_kernel`, numba), the numpy path staying the reference
 (``compiled=False``). benchmarks/bench_excavator_ik.py measures both against scipy's least squares.
 """
@@ -75,6 +76,7 @@ LIMIT_TOL = 1e-10
 PLANE_TOL = 1e-9
 _SUCCESS, _SINGULAR, _UNREACHABLE = int(IKStatus.SUCCESS), int(IKStatus.SINGULAR), int(IKStatus.UNREACHABLE)
 _INVALID = int(IKStatus.INVALID)
+_NO_SEEDS = np.zeros((1, 4))  # a batch's without one (ik_kernel.solve_batch reads its row, never uses it)
 _REACHABLE, _TOO_FAR, _TOO_CLOSE, _NOT_FINITE = (int(r) for r in Reach)  # in Reach's order
 # Stroke-margin search of the position mode (widest_margin_angles): golden-section steps shrink
 # the bracket of 2 grid steps to 4 pi / _GRID * _GOLDEN**_GOLDEN_STEPS = 1.8e-8 rad.
@@ -355,9 +357,10 @@ def _solutions(
     other_heading: bool = False,
     selection: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> IKSolutions:
-    """IKSolutions of candidates D (..., 4, 4) of targets Q (..., 4, 4) (one per candidate) with
-    statuses ``judged``; ``other_heading``: the last two candidates are refused for facing the
-    other way (a 6-D target); ``selection``: (selected, tie) when already made (the kernel)."""
+    """IKSolutions of candidates D (..., 4, 4) of targets Q (..., 4, 4) (one per candidate) or
+    (..., 1, 4) (one for every candidate) with statuses ``judged``; ``other_heading``: the last
+    two candidates are refused for facing the other way (a 6-D target); ``selection``: (selected,
+    tie) when already made (the kernel)."""
     if selection is None:
         selection = select(D, judged, seed=seed, branch=branch, weights=model.ik_constants.weights)
     selected, tie = selection
@@ -382,7 +385,11 @@ def _solutions(
                 note = "the swing of the other heading turns the bucket frame half a turn from the target's"
             else:
                 note = _candidate_note(
-                    model, Q[index][i], D[index][i], int(reach[index][i]), int(judged[index][i])
+                    model,
+                    Q[index][min(i, len(Q[index]) - 1)],
+                    D[index][i],
+                    int(reach[index][i]),
+                    int(judged[index][i]),
                 )
             parts.append(f"{name}: {note}")
         return "no valid solution: " + "; ".join(parts)
@@ -434,6 +441,24 @@ def _warm(ik_kernel: ModuleType, packed: np.ndarray) -> None:
     ik_kernel.judge(packed, 5.0, 0.0, True, SWING_AXIS, D, judged)
     ik_kernel.pick(packed, D, judged, alpha, False, -1, TIE_TOLERANCE)
     ik_kernel.widest_margin_angles(packed, 5.0, 0.0, 0.0, _GRID, _PEAKS, _GOLDEN, _GOLDEN_STEPS)
+    selected, tie = np.empty(1, dtype=np.intp), np.empty(1, dtype=bool)
+    ik_kernel.solve_batch(
+        packed,
+        alpha[None],
+        _NO_SEEDS,
+        False,
+        -1,
+        SWING_AXIS,
+        TIE_TOLERANCE,
+        D[None],
+        reach[None],
+        judged[None],
+        selected,
+        tie,
+    )
+    # The batch takes only these types: another (a read-only view, say) raises TypeError and the
+    # call takes the numpy path, instead of compiling for seconds inside the call.
+    ik_kernel.solve_batch.disable_compile()
 
 
 #: The single-target kernel (:mod:`excavator_kinematics.core.ik_kernel`), see manipulator_kinematics.compiled.
@@ -479,20 +504,49 @@ def solve_pose(
     compiled: bool = True,
 ) -> IKSolutions:
     """Every candidate for targets Q = [x, y, z, alpha] (..., 4) and the selected one; one target
-    (4,) runs the compiled kernel (:func:`compiled_kernel`) unless not ``compiled``."""
+    (4,) and a batch (N, 4) run the compiled kernel (:func:`compiled_kernel`) unless not
+    ``compiled``."""
     index = _branch_index(branch)
     Q = np.asarray(Q, dtype=float)
     if Q.shape[-1:] != (4,):
         raise ValueError(f"expected Q = [x, y, z, alpha] of shape (..., 4), got shape {Q.shape}")
-    kernel = compiled_kernel(model) if Q.shape == (4,) and compiled else None
-    if kernel is not None:
+    kernel = compiled_kernel(model) if compiled and Q.ndim <= 2 else None
+    if kernel is not None and Q.ndim == 1:
         return _solve_one(
             kernel, model, Q[:3], np.full(4, Q[3]), bool(np.isfinite(Q).all()), _seed(seed, model), index
         )
+    seed = _seed(seed, model)
+    if kernel is not None and (seed is None or seed.shape in ((4,), Q.shape)):
+        # A batch (N, 4) through the kernel's loop: the numpy path's fixed cost made a batch of
+        # one 20x a single call and a batch paid from about 30 targets on (issue #32).
+        n = len(Q)
+        D, reach, judged = (
+            np.empty((n, 4, 4)),
+            np.empty((n, 4), dtype=np.int8),
+            np.empty((n, 4), dtype=np.int8),
+        )
+        selected, tie = np.empty(n, dtype=np.intp), np.empty(n, dtype=bool)
+        try:
+            kernel.solve_batch(
+                model.ik_constants.packed,
+                np.ascontiguousarray(Q),
+                _NO_SEEDS if seed is None else np.ascontiguousarray(seed.reshape(-1, 4)),
+                seed is not None,
+                -1 if index is None else index,
+                SWING_AXIS,
+                TIE_TOLERANCE,
+                D,
+                reach,
+                judged,
+                selected,
+                tie,
+            )
+        except TypeError:  # arguments of types the loop does not take (_warm)
+            pass
+        else:
+            return _solutions(model, Q[:, None], D, reach, judged, seed, index, selection=(selected, tie))
     D, reach, judged = candidates(model, Q)
-    return _solutions(
-        model, np.broadcast_to(Q[..., None, :], D.shape), D, reach, judged, _seed(seed, model), index
-    )
+    return _solutions(model, Q[..., None, :], D, reach, judged, seed, index)
 
 
 def seed_bucket_angle(model: Excavator, seed: ArrayLike) -> np.ndarray:
@@ -663,7 +717,7 @@ def solve_ik(
     judged[~finite] = _INVALID
     solutions = _solutions(
         model,
-        np.broadcast_to(Q[..., None, :], D.shape),
+        Q[..., None, :],
         D,
         reach,
         judged,

@@ -31,9 +31,10 @@ Everything is closed form, written once as plain vectorised numpy on (..., n) ar
 (shape (4,)) is a batch of one through the same code (the same bits as that row of a batch); a
 batch (shape (N, 4)) runs in blocks of rows (:func:`manipulator_kinematics.row_blocks.in_blocks`).
 Rates and accelerations have D's shape or (4,), broadcast over a batch. The single call of
-:meth:`Excavator.state`, :meth:`Excavator.pose` and :meth:`Excavator.jc0` runs the same steps
-compiled (:mod:`excavator_kinematics.core.state_kernel`, numba) once that kernel has loaded in the
-background (:class:`manipulator_kinematics.compiled.Kernel`; the numpy path answers meanwhile and
+:meth:`Excavator.state`, :meth:`Excavator.pose` and :meth:`Excavator.jc0`, and a batch of
+``state`` and ``pose``, run the same steps compiled (:mod:`excavator_kinematics.core.state_kernel`,
+numba) once that kernel has loaded in the background
+(:class:`manipulator_kinematics.compiled.Kernel`; the numpy path answers meanwhile and
 stays the reference, within 1e-12). Errors: a wrong shape is a ``ValueError`` saying "shape"; a
 state the machine cannot take (outside a stroke or the swing range, not finite, a linkage that
 cannot close, a singular JC0) is a :class:`StrokeError` (also a ValueError). The machine file is
@@ -79,16 +80,17 @@ DEFAULT_CONFIG = "excavator_cet200.yaml"
 # ms per batch (state / pose): 4096 states per block 17.2 / 9.6, 8192 15.2 / 8.3, 16384 15.7 /
 # 10.0, 32768 18.8 / 9.3, the whole batch in one 39.0 / 8.4.
 _BLOCK = 2 * BLOCK
-# Batches of full states or poses up to this many run the kernel's loop (states, poses), larger
-# ones numpy (issue #32: numpy's fixed cost made a pose batch of one 90x a single call, and a pose
-# batch of 1000 cost 0.73 us a state against the kernel's 0.30 at load 16-21, bench_peers.py):
-# the scalar kernel takes 180-210 ns per full state whatever the batch, numpy's SIMD trigonometry
-# wins from a few thousand on. Measured, M full states/s, kernel vs numpy: 100 states 3.1 vs 0.6;
-# 1000 5.5 vs 3.4; 2048 5.7 vs 5.2; 32768 4.9 vs 6.5.
-_KERNEL_BATCH = 2048
+# Once the kernel is loaded, batches of full states and poses of every size run its loop into
+# one preallocated table (issue #32): numpy's fixed cost made a batch of one 10x (state) or 90x
+# (pose) a single call, and its temporaries, above glibc's mmap threshold, cost a fresh process
+# 2-4x per state in batches of 3k-16k states until a larger batch had run once
+# (benchmarks/bench_batch.py). The numpy path (blocks of _BLOCK) is the reference and what runs
+# until the kernel has loaded.
 
-# Dddot of a state without accelerations (the kernel reads it, never writes it).
+# Dddot of a state, and of every state of a batch, without accelerations (the kernel reads them,
+# never writes them).
 _NO_ACCELERATION = np.zeros(4)
+_NO_ACCELERATIONS = np.zeros((1, 4))
 
 
 def _warm(state_kernel: ModuleType) -> None:
@@ -103,7 +105,7 @@ def _warm(state_kernel: ModuleType) -> None:
     state_kernel.pose(packed, D, np.empty(4))
     state_kernel.jc0(packed, D, np.empty((4, 4)))
     batch = np.zeros((1, 4))
-    state_kernel.states(packed, batch, batch, batch, np.empty((1, 10, 4)))
+    state_kernel.states(packed, batch, batch, batch, np.empty((10, 1, 4)))
     state_kernel.poses(packed, batch, np.empty((1, 4)))
     state_kernel.bucket_quaternion(0.0, 0.0, np.empty(4))
     state_kernel.bucket_angular_velocity(0.0, 0.0, 0.0, three)
@@ -128,7 +130,7 @@ KERNEL = Kernel("excavator_kinematics.core.state_kernel", _warm)
 
 
 def compiled_kernel(model: Excavator, wait: bool = False) -> ModuleType | None:
-    """The compiled kernel module if ready, else None (the first single call starts loading it;
+    """The compiled kernel module if ready, else None (the first call starts loading it;
     calls take the numpy path meanwhile, the same results within 1e-12). ``wait``: load it now.
     One kernel serves every machine (``model``: for the call's symmetry with the IK's)."""
     return KERNEL.get(wait=wait)
@@ -473,13 +475,13 @@ class Excavator:
         D = np.asarray(D, dtype=float)
         if D.shape == (4,) and (Q := self._compiled("pose", np.empty(4), D)) is not None:
             return Q
-        if (
-            D.ndim == 2
-            and D.shape[1] == 4
-            and len(D) <= _KERNEL_BATCH
-            and (Q := self._compiled("poses", np.empty(D.shape), np.ascontiguousarray(D))) is not None
-        ):
-            return Q
+        if D.ndim == 2 and D.shape[1] == 4 and (kernel := KERNEL.ready or KERNEL.get()) is not None:
+            Q = np.empty(D.shape)  # _compiled written out, as in state
+            try:
+                if kernel.poses(self.packed, D, Q):
+                    return Q
+            except TypeError:  # arguments of types the kernel does not take (_warm)
+                pass
         D = self.validate(D)
         return in_blocks(self._poses, D.reshape(-1, 4), block=_BLOCK, rows=True).T.reshape(D.shape)
 
@@ -634,35 +636,34 @@ class Excavator:
         :meth:`acceleration_matrices` for the paper's JC1_0 / JC2_0 split of those terms).
         """
         D = np.asarray(D, dtype=float)
-        if D.shape == (4,) and (kernel := KERNEL.ready or KERNEL.get()) is not None:
-            # The single call (a 1 kHz node calls it per message): the kernel checks shapes and
-            # values; the numpy path below raises the error for what it refuses. _compiled written
-            # out: calling it costs 0.17 us, a fifth of the benchmark's peer (a numba pose call).
+        if (kernel := KERNEL.ready or KERNEL.get()) is not None:
+            # The single call (a 1 kHz node calls it per message) and a batch (N, 4), each one
+            # call of the kernel into a new table (the caller keeps the views): the kernel checks
+            # shapes and values; the numpy path below raises the error for what it refuses.
+            # _compiled written out: calling it costs 0.17 us, a fifth of the benchmark's peer (a
+            # numba pose call); a batch of one took 10x a single call through the numpy checks.
             rates = np.asarray(D_dot, dtype=float)
-            given = _NO_ACCELERATION if D_ddot is None else np.asarray(D_ddot, dtype=float)
-            rows = np.empty((10, 4))  # a new table per call: the caller keeps the views
             try:
-                if kernel.state(self.packed, D, rates, given, rows):
-                    return BucketState(rows)
+                if D.ndim == 1:
+                    given = _NO_ACCELERATION if D_ddot is None else np.asarray(D_ddot, dtype=float)
+                    rows = np.empty((10, 4))
+                    if kernel.state(self.packed, D, rates, given, rows):
+                        return BucketState(rows)
+                elif D.ndim == 2:
+                    # Rates (4,) for every state: one row the kernel reads for each.
+                    rates = rates if rates.ndim == 2 else rates.reshape(1, -1)
+                    given = _NO_ACCELERATIONS if D_ddot is None else np.asarray(D_ddot, dtype=float)
+                    if given.ndim == 1:
+                        given = given.reshape(1, -1)
+                    rows = np.empty((10, len(D), 4))
+                    if kernel.states(self.packed, D, rates, given, rows):
+                        return BucketState(rows)
             except TypeError:  # arguments of types the kernel does not take (_warm)
                 pass
         D = self.validate(D)
         rates = _finite(D_dot, D.shape, "D_dot").reshape(-1, 4)
         accelerations = None if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot").reshape(-1, 4)
         flat = np.ascontiguousarray(D.reshape(-1, 4))
-        table = (
-            None
-            if len(flat) > _KERNEL_BATCH
-            else self._compiled(
-                "states",
-                np.empty((len(flat), 10, 4)),
-                flat,
-                np.ascontiguousarray(rates),
-                np.zeros((len(flat), 4)) if accelerations is None else np.ascontiguousarray(accelerations),
-            )
-        )
-        if table is not None:  # (N, 10, 4): each state's table
-            return BucketState(table.reshape(D.shape[:-1] + (10, 4)).swapaxes(0, -2))
         # (40, N): entry j of every state in row j.
         table = in_blocks(self._states, flat, rates, accelerations, block=_BLOCK, rows=True)
         return BucketState(table.reshape(10, 4, len(flat)).swapaxes(1, 2).reshape((10, *D.shape)))

@@ -1,4 +1,5 @@
-"""The excavator's forward kinematics for ONE state, compiled (numba): the single-call hot path of
+"""The excavator's forward kinematics for ONE state, compiled (numba), and its loops over a
+batch (``states``, ``poses``, issue #32): the single-call hot path of
 :class:`excavator_kinematics.core.kinematics.Excavator` (``state``, ``pose``, ``jc0``), whose
 vectorised numpy code stays the reference (a test compares the two over 10^4 random states, out
 of stroke included).
@@ -229,11 +230,18 @@ def state(k: np.ndarray, D: np.ndarray, D_dot: np.ndarray, D_ddot: np.ndarray, o
 
 @njit(cache=True, error_model="numpy")
 def states(k: np.ndarray, D: np.ndarray, D_dot: np.ndarray, D_ddot: np.ndarray, out: np.ndarray) -> bool:
-    """:func:`state` of every row of a batch D, D_dot, D_ddot (N, 4) into ``out`` (N, 10, 4)."""
-    ok = True
-    for i in range(D.shape[0]):
-        ok = ok and state(k, D[i], D_dot[i], D_ddot[i], out[i])
-    return ok
+    """:func:`state` of every row of a batch D (N, 4) with rates and accelerations (N, 4), or (1,
+    4) for all rows, into ``out`` (10, N, 4): BucketState's rows, so nothing is copied or
+    transposed after; False (from the first state refused on) for rates of another shape or a
+    state refused (the caller's numpy path then says why)."""
+    n = D.shape[0]
+    if D.shape[1] != 4 or D_dot.shape[0] not in (1, n) or D_ddot.shape[0] not in (1, n):
+        return False
+    last_rate, last_acceleration = D_dot.shape[0] - 1, D_ddot.shape[0] - 1
+    for i in range(n):
+        if not state(k, D[i], D_dot[min(i, last_rate)], D_ddot[min(i, last_acceleration)], out[:, i]):
+            return False
+    return True
 
 
 @njit(cache=True, error_model="numpy")
