@@ -1,0 +1,150 @@
+"""A site-frame zone across processes: excavator_sim -> excavator_velocity_ik, the site pose
+published on ``site_pose`` by the test. The tip driven straight up stops below a ceiling given in
+the site frame (the machine's base_link 50 m up in it); when the site pose stops coming the
+velocity IK stops the machine with the reason, and moves again once it comes back."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseStamped, TwistStamped
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe
+from sensor_msgs.msg import JointState
+
+from excavator_kinematics.core.kinematics import CYLINDERS, JOINTS, Excavator
+from excavator_kinematics.core.monitored import MonitoredPoints
+from excavator_kinematics.nodes import message_codec
+from manipulator_kinematics.param_files import config_path
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+EXC = Excavator.default()
+POINTS = MonitoredPoints(EXC)
+QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+NS = "/site_zones"
+#: base_link in the site frame: 250 m east, 4 km north, 50 m up, heading 1 rad.
+POSITION, YAW = (250.0, 4000.0, 50.0), 1.0
+#: The ceiling (site frame, m) and its margin: 6.5 m above base_link less the margin.
+HEIGHT, MARGIN = 56.5, 0.3
+LIMIT = HEIGHT - POSITION[2] - MARGIN
+#: As test_zones_ros.py: a point's path within a command is curved, the check linear in it.
+TOLERANCE = 0.005
+MAX_AGE = 0.3
+
+
+def start(exe: str, **settings: object) -> NodeProcess:
+    params = {f"{NS}/{exe}": {"ros__parameters": settings}} if settings else None
+    return NodeProcess(
+        exe,
+        "--params-file",
+        str(config_path("excavator_cet200.yaml")),
+        "--params-file",
+        str(config_path("excavator_nodes.yaml")),
+        *RELIABLE_INPUTS,
+        "-r",
+        f"__ns:={NS}",
+        params=params,
+    )
+
+
+def test_a_site_ceiling_stops_the_bucket_and_a_stale_site_pose_stops_the_machine(
+    probe: Probe, tmp_path
+) -> None:
+    zones = tmp_path / "site_zones.yaml"
+    zones.write_text(f"zones:\n  line: {{kind: ceiling, frame: site, height: {HEIGHT}, margin: {MARGIN}}}\n")
+    processes = [
+        start("excavator_sim"),
+        start(
+            "excavator_velocity_ik",
+            zones_file=str(zones),
+            zones_period=0.05,
+            zones_stop_time=0.3,
+            site={"site_pose_source": "topic", "site_pose_max_age": MAX_AGE},
+        ),
+    ]
+    try:
+        n = probe.node
+        states: dict[int, dict[str, float]] = {}
+        statuses: list[str] = []
+        clearance: list[DiagnosticStatus] = []
+
+        def on_state(msg: JointState) -> None:
+            entry = states.setdefault(message_codec.stamp_ns(msg.header.stamp), {})
+            entry.update(zip(msg.name, msg.position, strict=False))
+
+        def machine() -> np.ndarray:
+            """Every complete simulated state so far, in stamp order (N, 4)."""
+            names = (JOINTS[0], *CYLINDERS)
+            return np.array(
+                [[s[k] for k in names] for _, s in sorted(states.items()) if all(k in s for k in names)]
+            )
+
+        n.create_subscription(JointState, f"{NS}/cylinder_lengths", on_state, QOS)
+        n.create_subscription(JointState, f"{NS}/joint_states", on_state, QOS)
+        n.create_subscription(
+            DiagnosticArray, f"{NS}/velocity_ik_status", lambda m: statuses.append(m.status[0].message), QOS
+        )
+        n.create_subscription(
+            DiagnosticArray, f"{NS}/zone_clearance", lambda m: clearance.append(m.status[0]), QOS
+        )
+        target = n.create_publisher(TwistStamped, f"{NS}/target_bucket_twist", QOS)
+        site = n.create_publisher(PoseStamped, f"{NS}/site_pose", QOS)
+        drive = {"linear": np.array([0.0, 0.0, 0.6]), "site": True}
+
+        def send() -> None:
+            now = n.get_clock().now().to_msg()
+            target.publish(message_codec.bucket_twist(now, "", drive["linear"], np.zeros(3)))
+            if drive["site"]:
+                pose = PoseStamped()
+                pose.header.stamp, pose.header.frame_id = now, "site"
+                pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = POSITION
+                pose.pose.orientation.z, pose.pose.orientation.w = math.sin(YAW / 2), math.cos(YAW / 2)
+                site.publish(pose)
+
+        n.create_timer(0.02, send)
+        # Straight up: slowed and stopped by the ceiling, its margin not crossed.
+        probe.wait_until(
+            lambda: any(s.startswith("stopped: ") and "at zone line" in s for s in statuses),
+            60.0,
+            "the ceiling",
+        )
+        top = POINTS.positions(machine())[..., 2].max(axis=-1)
+        probe.wait_until(lambda: len(machine()) > len(top) + 30, 10.0, "states at the stop")
+        top = POINTS.positions(machine())[..., 2].max(axis=-1)
+        print(f"highest point {top.max():.4f} m, the ceiling's margin at {LIMIT:.4f} m (base_link)")
+        assert top.max() <= LIMIT + TOLERANCE
+        assert top.max() > LIMIT - 0.03  # it got there: stopped at the ceiling, not before it
+        assert clearance[-1].level == DiagnosticStatus.WARN
+        assert float(next(v.value for v in clearance[-1].values if v.key == "clearance")) < 0.03
+
+        # The site pose stops coming: the machine, now told to go down, stops with the reason.
+        drive["site"], drive["linear"] = False, np.array([0.0, 0.0, -0.3])
+        probe.wait_until(
+            lambda: any("site-frame zones cannot be checked" in s for s in statuses), 10.0, "the stale stop"
+        )
+        stale = next(s for s in statuses if "site-frame zones cannot be checked" in s)
+        assert stale.startswith("stopped: ") and "site_pose_max_age" in stale, stale
+        probe.wait_until(
+            lambda: clearance[-1].level == DiagnosticStatus.STALE, 5.0, "the clearance reported STALE"
+        )
+        assert clearance[-1].message == "no site pose"
+        # Stopped: the actuators come to rest and stay there while the targets keep coming.
+        count = len(machine())
+        probe.wait_until(lambda: len(machine()) > count + 60, 10.0, "states while stale")
+        held = machine()[-30:]
+        np.testing.assert_allclose(held, held[-1], atol=1e-9)
+
+        # The site pose comes back: the machine moves down again (the stop is not held).
+        drive["site"] = True
+        stopped_at = EXC.pose(held[-1])[2]
+        probe.wait_until(lambda: EXC.pose(machine()[-1])[2] < stopped_at - 0.05, 20.0, "moving again")
+        assert all(p.alive() for p in processes), [p.log() for p in processes]
+    finally:
+        logs = [p.stop() for p in processes]
+    ik_log = logs[1]
+    assert "site pose from" in ik_log and "at zone line" in ik_log, ik_log[-3000:]
+    assert "site-frame zones cannot be checked" in ik_log, ik_log[-3000:]
