@@ -136,7 +136,7 @@ def test_a_site_ceiling_stops_the_bucket_and_a_stale_site_pose_stops_the_machine
         count = len(machine())
         probe.wait_until(lambda: len(machine()) > count + 60, 10.0, "states while stale")
         held = machine()[-30:]
-        np.testing.assert_allclose(held, held[-1], atol=1e-9)
+        np.testing.assert_allclose(held, np.broadcast_to(held[-1], held.shape), atol=1e-9)
 
         # The site pose comes back: the machine moves down again (the stop is not held).
         drive["site"] = True
