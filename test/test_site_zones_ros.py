@@ -1,7 +1,9 @@
 """A site-frame zone across processes: excavator_sim -> excavator_velocity_ik, the site pose
 published on ``site_pose`` by the test. The tip driven straight up stops below a ceiling given in
 the site frame (the machine's base_link 50 m up in it); when the site pose stops coming the
-velocity IK stops the machine with the reason, and moves again once it comes back."""
+velocity IK stops the machine with the reason, and moves again once it comes back. The IK
+server's plan_path refuses a plan under a site-frame zone without a fresh site pose, and ends
+one before the zone with it."""
 
 from __future__ import annotations
 
@@ -10,15 +12,20 @@ import math
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import PoseStamped, TwistStamped
+from geometry_msgs.msg import Point, PoseStamped, TwistStamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe
+from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe, start_with_services
 from sensor_msgs.msg import JointState
 
 from excavator_kinematics.core.kinematics import CYLINDERS, JOINTS, Excavator
 from excavator_kinematics.core.monitored import MonitoredPoints
+from excavator_kinematics.core.path_zones import plan_clear
+from excavator_kinematics.grade.design_surface import SitePose
 from excavator_kinematics.nodes import message_codec
 from manipulator_kinematics.param_files import config_path
+from manipulator_kinematics.zones import Zone
+from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes
+from manipulator_kinematics_interfaces.srv import PlanPath
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -51,16 +58,29 @@ def start(exe: str, **settings: object) -> NodeProcess:
     )
 
 
+def site_pose(stamp: object) -> PoseStamped:
+    pose = PoseStamped()
+    pose.header.stamp, pose.header.frame_id = stamp, "site"
+    pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = POSITION
+    pose.pose.orientation.z, pose.pose.orientation.w = math.sin(YAW / 2), math.cos(YAW / 2)
+    return pose
+
+
+def zone_file(tmp_path) -> str:
+    path = tmp_path / "site_zones.yaml"
+    path.write_text(f"zones:\n  line: {{kind: ceiling, frame: site, height: {HEIGHT}, margin: {MARGIN}}}\n")
+    return str(path)
+
+
 def test_a_site_ceiling_stops_the_bucket_and_a_stale_site_pose_stops_the_machine(
     probe: Probe, tmp_path
 ) -> None:
-    zones = tmp_path / "site_zones.yaml"
-    zones.write_text(f"zones:\n  line: {{kind: ceiling, frame: site, height: {HEIGHT}, margin: {MARGIN}}}\n")
+    zones = zone_file(tmp_path)
     processes = [
         start("excavator_sim"),
         start(
             "excavator_velocity_ik",
-            zones_file=str(zones),
+            zones_file=zones,
             zones_period=0.05,
             zones_stop_time=0.3,
             site={"site_pose_source": "topic", "site_pose_max_age": MAX_AGE},
@@ -99,11 +119,7 @@ def test_a_site_ceiling_stops_the_bucket_and_a_stale_site_pose_stops_the_machine
             now = n.get_clock().now().to_msg()
             target.publish(message_codec.bucket_twist(now, "", drive["linear"], np.zeros(3)))
             if drive["site"]:
-                pose = PoseStamped()
-                pose.header.stamp, pose.header.frame_id = now, "site"
-                pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = POSITION
-                pose.pose.orientation.z, pose.pose.orientation.w = math.sin(YAW / 2), math.cos(YAW / 2)
-                site.publish(pose)
+                site.publish(site_pose(now))
 
         n.create_timer(0.02, send)
         # Straight up: slowed and stopped by the ceiling, its margin not crossed.
@@ -148,3 +164,73 @@ def test_a_site_ceiling_stops_the_bucket_and_a_stale_site_pose_stops_the_machine
     ik_log = logs[1]
     assert "site pose from" in ik_log and "at zone line" in ik_log, ik_log[-3000:]
     assert "site-frame zones cannot be checked" in ik_log, ik_log[-3000:]
+
+
+def test_plan_path_needs_a_fresh_site_pose_for_a_site_zone(probe: Probe, tmp_path) -> None:
+    ns = "/site_plan"
+    process, (plan,) = start_with_services(
+        probe,
+        "excavator_ik_server",
+        "--params-file",
+        str(config_path("excavator_cet200.yaml")),
+        "--params-file",
+        str(config_path("excavator_nodes.yaml")),
+        "-r",
+        f"__ns:={ns}",
+        "-p",
+        f"zones_file:={zone_file(tmp_path)}",
+        "-p",
+        "site.site_pose_source:=topic",
+        "-p",
+        f"site.site_pose_max_age:={MAX_AGE}",
+        services=((PlanPath, "plan_path"),),
+        timeout=30.0,
+        namespace=ns,
+    )
+    tip = EXC.pose(EXC.limits.reference)[:3]
+    waypoints = [tip, tip + [0.5, 0.0, 0.0], tip + [0.5, 0.0, 5.0]]  # then straight up at the ceiling
+    request = PlanPath.Request()
+    request.waypoints = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in waypoints]
+    site = probe.node.create_publisher(PoseStamped, f"{ns}/site_pose", QOS)
+    try:
+        refused = probe.call(plan, request, 30.0)
+        assert not refused.success and refused.error_code.val == KinematicsErrorCodes.FAILURE
+        assert "site-frame zone(s) line cannot be checked: no site pose received" in refused.message
+        assert not refused.trajectory.points
+
+        # With the pose on its topic the path ends before the ceiling, as the library's does.
+        timer = probe.node.create_timer(
+            0.05, lambda: site.publish(site_pose(probe.node.get_clock().now().to_msg()))
+        )
+        answers: list = []
+
+        def planned() -> bool:
+            answers.append(probe.call(plan, request, 30.0))
+            return "enters zone line" in answers[-1].message
+
+        probe.wait_until(planned, 30.0, "a plan with the site pose")
+        ended = answers[-1]
+        pose = SitePose.from_rpy(POSITION, [0.0, 0.0, YAW])
+        ceiling = [Zone("line", "ceiling", "site", MARGIN, {"height": HEIGHT})]
+        expected = plan_clear(
+            EXC, POINTS, ceiling, waypoints, 0.05, 0.5, 0.5, site=(pose.rotation, pose.translation)
+        )
+        assert not ended.success and ended.error_code.val == KinematicsErrorCodes.NO_IK_SOLUTION
+        assert ended.last_reachable_waypoint == expected.last_waypoint == 1
+        assert len(ended.trajectory.points) == len(expected.timing.q)
+        np.testing.assert_allclose(ended.trajectory.points[-1].positions, expected.timing.q[-1], atol=1e-6)
+
+        # The pose stops coming: refused again once it is older than site_pose_max_age.
+        probe.node.destroy_timer(timer)
+
+        def stale() -> bool:
+            answers.append(probe.call(plan, request, 30.0))
+            return "site_pose_max_age" in answers[-1].message
+
+        probe.wait_until(stale, 10.0, "a refusal with a stale site pose")
+        assert not answers[-1].success and not answers[-1].trajectory.points
+        assert process.alive()
+    finally:
+        probe.node.destroy_publisher(site)
+        log = process.stop()
+    assert "Traceback" not in log, log
