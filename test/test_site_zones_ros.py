@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import Point, PoseStamped, TwistStamped
+from geometry_msgs.msg import Point, PoseStamped, TwistStamped, Vector3Stamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe, start_with_services
 from sensor_msgs.msg import JointState
@@ -234,3 +234,54 @@ def test_plan_path_needs_a_fresh_site_pose_for_a_site_zone(probe: Probe, tmp_pat
         probe.node.destroy_publisher(site)
         log = process.stop()
     assert "Traceback" not in log, log
+
+
+def test_the_cab_tilt_places_a_site_ceiling(probe: Probe, tmp_path) -> None:
+    """site.tilt: the standing machine's clearance under a site ceiling follows the measured
+    pitch (closed form: a point x ahead at height z is x sin(beta) + z cos(beta) above base_link's
+    origin), and is STALE while no tilt has come."""
+    process = start(
+        "excavator_velocity_ik",
+        zones_file=zone_file(tmp_path),
+        site={
+            "site_pose_source": "fixed",
+            "site_position": list(POSITION),
+            "site_rpy": [0.0, 0.0, YAW],
+            "tilt": True,
+            "tilt_max_age": 0.1,
+        },
+    )
+    sim = start("excavator_sim")
+    try:
+        n = probe.node
+        clearance: list[DiagnosticStatus] = []
+        n.create_subscription(
+            DiagnosticArray, f"{NS}/zone_clearance", lambda m: clearance.append(m.status[0]), QOS
+        )
+        probe.wait_until(lambda: bool(clearance), 30.0, "zone_clearance")
+        assert clearance[-1].level == DiagnosticStatus.STALE and clearance[-1].message == "no site pose"
+
+        beta = math.radians(5.0)
+        tilt = n.create_publisher(Vector3Stamped, f"{NS}/machine_tilt", QOS)
+
+        def send() -> None:
+            msg = Vector3Stamped()
+            msg.header.stamp = n.get_clock().now().to_msg()
+            msg.vector.x, msg.vector.z = math.sin(beta), math.cos(beta)  # nose up, swing 0
+            tilt.publish(msg)
+
+        n.create_timer(0.02, send)
+        probe.wait_until(lambda: clearance[-1].level != DiagnosticStatus.STALE, 10.0, "a tilted clearance")
+        value = float(next(v.value for v in clearance[-1].values if v.key == "clearance"))
+        p = POINTS.positions(EXC.limits.reference)  # the sim's start: swing 0, reference lengths
+        up = p[:, 0] * math.sin(beta) + p[:, 2] * math.cos(beta)
+        expected = HEIGHT - POSITION[2] - MARGIN - up.max()
+        level = HEIGHT - POSITION[2] - MARGIN - p[:, 2].max()
+        print(f"clearance {value:.6f} m tilted (expected {expected:.6f} m), {level:.6f} m level")
+        assert value == pytest.approx(expected, abs=1e-5)
+        assert abs(expected - level) > 0.1  # the tilt matters here
+        assert process.alive() and sim.alive()
+    finally:
+        log = process.stop()
+        sim.stop()
+    assert "roll and pitch from" in log, log[-2000:]
