@@ -110,14 +110,24 @@ class ZoneGuard:
 
 
 def first_entry(
-    zones: Sequence[Zone], names: Sequence[str], positions: np.ndarray
+    zones: Sequence[Zone],
+    names: Sequence[str],
+    positions: np.ndarray,
+    site: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[int, str, str] | None:
     """(sample, zone, point) of the first of the samples ``positions`` (M, P, 3) (a planned path's
     monitored points, base frame) at which a point is inside a zone (clearance < 0), None if
-    none is: where a path must end before a zone."""
+    none is: where a path must end before a zone. Site-frame zones need ``site`` = (R, t),
+    p_site = R p + t (ValueError without it)."""
+    positions = np.asarray(positions, dtype=float)
     first: tuple[int, str, str] | None = None
     for zone in zones:
-        c = zone.clearance(positions)[0]  # (M, P)
+        if zone.frame == "site":
+            if site is None:
+                raise ValueError(f"zone {zone.name} is in the site frame: no site pose given")
+            c = zone.clearance(positions @ np.asarray(site[0], float).T + site[1])[0]
+        else:
+            c = zone.clearance(positions)[0]  # (M, P)
         inside = np.flatnonzero(np.any(c < 0.0, axis=1))
         if len(inside) and (first is None or inside[0] < first[0]):
             k = int(inside[0])

@@ -525,7 +525,7 @@ def test_registered_topics_are_the_nodes_topics():
     topics = {
         name: TYPE_OF_TOPIC_KEY[key]
         for section in document.values()
-        for key, name in section["ros__parameters"].get("topics", {}).items()  # the IK server: services only
+        for key, name in section["ros__parameters"].get("topics", {}).items()
     }
     assert MACHINE.topics == topics
 

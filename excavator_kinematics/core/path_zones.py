@@ -37,14 +37,16 @@ def plan_clear(
     tip_speed: float,
     acceleration: float,
     seed: ArrayLike | None = None,
+    site: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> BucketPlan:
     """:func:`plan_path` ended before the first zone a monitored point would enter (module
-    docstring); the plan as it is when none would."""
+    docstring); the plan as it is when none would. ``site`` = (R, t), base_link in the site frame
+    (p_site = R p + t), places site-frame zones (ValueError when one is given without it)."""
     waypoints = np.asarray(waypoints, dtype=float).reshape(-1, 3)
     plan = plan_path(exc, waypoints, step, tip_speed, acceleration, seed)
     if plan.timing is None or not zones:
         return plan
-    hit = first_entry(zones, points.names, points.positions(plan.timing.q))
+    hit = first_entry(zones, points.names, points.positions(plan.timing.q), site)
     if hit is None:
         return plan
     k, zone, point = hit

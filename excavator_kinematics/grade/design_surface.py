@@ -37,6 +37,7 @@ from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from manipulator_kinematics.landxml import write_tin
+from manipulator_kinematics.model import level_rotation
 from manipulator_kinematics.param_files import ConfigError, open_input, shown
 
 #: LandXML linearUnit values -> metres (LandXML 1.2 schema, enumerations metLinear and impLinear).
@@ -400,3 +401,16 @@ class SitePose:
         """Points (..., 3) of the base frame in the site frame; with one rotation per state
         (N, 3, 3) (a tilt measured at each), points (N, k, 3)."""
         return np.asarray(points, dtype=float) @ np.swapaxes(self.rotation, -1, -2) + self.translation
+
+    def levelled(self, up: ArrayLike) -> SitePose:
+        """This pose with its roll and pitch from a measured tilt: ``up`` (3,) world up in base_link
+        (the machine's IMU, :func:`excavator_kinematics.sensing.imu.base_up`). Position and heading
+        (of base x projected onto the horizontal) are kept: R = Rz(psi) L(up), L the rotation into
+        the level frame (:func:`manipulator_kinematics.model.level_rotation`: base_link's origin
+        and heading, z up), which the heading psi turns into the site frame. Equal to this pose
+        when ``up`` is its own up, R^T e_z."""
+        x = self.rotation[:, 0]
+        psi = np.arctan2(x[1], x[0])
+        c, s = np.cos(psi), np.sin(psi)
+        heading = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        return SitePose(heading @ level_rotation(up), self.translation)

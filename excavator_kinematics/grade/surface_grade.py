@@ -8,7 +8,8 @@ Settings ``design_surface.*`` of excavator_forward (docs/excavator_nodes.md):
 * where the machine is: ``site_pose_source: fixed`` (``site_position`` m, ``site_rpy`` rad of
   base_link in the site frame) or ``topic``: geometry_msgs/PoseStamped on ``topics.site_pose``
   (GNSS localisation; frame_id must be ``site_frame``), at most ``site_pose_max_age`` s from the
-  cylinder stamp.
+  cylinder stamp (:class:`~excavator_kinematics.grade.site_pose.SitePoseInput`, which the
+  velocity IK's site-frame zones read too).
 
 On each forward result it publishes, with the cylinder message's stamp, three
 geometry_msgs/PointStamped in ``site_frame``: ``topics.grade_tip``, ``grade_left``,
@@ -22,16 +23,16 @@ pose), and is published whenever it changes.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import PointStamped, PoseStamped
+from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Header
 
-from excavator_kinematics.grade.design_surface import SitePose, Tin, cutting_edge, read_landxml
+from excavator_kinematics.grade.design_surface import Tin, cutting_edge, read_landxml
+from excavator_kinematics.grade.site_pose import SitePoseInput
 from manipulator_kinematics.codec.packed import PackedMessage
 from manipulator_kinematics.node_util import ThrottledLog
 
@@ -57,12 +58,7 @@ class SurfaceGrade:
         self.frame = settings["site_frame"]
         self.width = width
         self.log = log
-        self.max_age_ns = int(settings["site_pose_max_age"] * 1e9)
-        self.from_topic = settings["site_pose_source"] == "topic"
-        self.pose: SitePose | None = (
-            None if self.from_topic else SitePose.from_rpy(settings["site_position"], settings["site_rpy"])
-        )
-        self.pose_stamp_ns = 0
+        self.site = SitePoseInput(node, settings, topics["site_pose"], qos, log)
         header = Header(frame_id=self.frame)
         self.messages = [PackedMessage(PointStamped(header=header), _FIELDS) for _ in POINTS]
         self.publishers = [node.create_publisher(PointStamped, topics[f"grade_{p}"], qos) for p in POINTS]
@@ -72,40 +68,18 @@ class SurfaceGrade:
         self.status_pub = node.create_publisher(DiagnosticArray, topics["grade_status"], latched)
         self.status: tuple[int, ...] | None = None
         self.clock = node.get_clock()
-        if self.from_topic:
-            node.create_subscription(PoseStamped, topics["site_pose"], self.on_pose, qos)
         node.get_logger().info(
             f"design surface {self.surface.name!r}: {len(self.surface.faces)} triangles from "
-            f"{settings['file']} in frame {self.frame!r}; site pose "
-            + (f"from {topics['site_pose']}" if self.from_topic else "fixed")
+            f"{settings['file']} in frame {self.frame!r}; site pose {self.site.describe()}"
         )
-
-    def on_pose(self, msg: PoseStamped) -> None:
-        p, q = msg.pose.position, msg.pose.orientation
-        values = (p.x, p.y, p.z, q.x, q.y, q.z, q.w)
-        norm = math.sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w)
-        if msg.header.frame_id != self.frame or not all(map(math.isfinite, values)) or abs(norm - 1.0) > 1e-3:
-            self.log(
-                "error",
-                f"rejected site pose: needs frame_id {self.frame!r} (got "
-                f"{msg.header.frame_id!r}), finite values and a unit quaternion (|q| = {norm:.6g})",
-            )
-            return
-        self.pose = SitePose.from_quaternion(values[:3], values[3:])
-        self.pose_stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
 
     def values(self, stamp_ns: int, theta1: float, tip: list[float]) -> list[list[float] | None]:
         """[x, y, height] (site frame) of tip, left and right end of the cutting edge, None where
         outside the surface or without a site pose (the status says which)."""
-        pose = self.pose
-        if pose is not None and self.from_topic and abs(stamp_ns - self.pose_stamp_ns) > self.max_age_ns:
-            self.log(
-                "warning",
-                f"no grade: the site pose is {(stamp_ns - self.pose_stamp_ns) * 1e-9:+.3f} s "
-                f"from the cylinder stamp (max age {self.max_age_ns * 1e-9:g} s)",
-            )
-            pose = None
+        pose, why = self.site.at(stamp_ns)
         if pose is None:
+            if self.site.pose is not None:  # stale (none yet: the status says so, once)
+                self.log("warning", f"no grade: {why}")
             self.report((_NO_POSE,) * 3)
             return [None] * 3
         points = pose.apply(cutting_edge(tip, theta1, self.width))

@@ -18,7 +18,12 @@ for the excavator, in the actuator coordinates D = [theta1, d2, d3, d4], plus ``
   of every machine's plan (:mod:`manipulator_kinematics.plan_bounds`: waypoints, points, duration,
   the ranges of step, speed and acceleration) is refused before any work, INVALID_GOAL_CONSTRAINTS.
   With ``zones_file`` set, a path on which a monitored point would enter an avoidance zone ends
-  before it, with the reason (:mod:`excavator_kinematics.core.path_zones`).
+  before it, with the reason (:mod:`excavator_kinematics.core.path_zones`). Site-frame zones are
+  placed by the ``site`` settings (:class:`excavator_kinematics.grade.site_pose.SitePoseInput`):
+  the fixed pose, or the latest on ``topics.site_pose`` if its stamp is at most
+  ``site_pose_max_age`` from now; without a fresh one a plan is refused (FAILURE, the reason):
+  a path the zones cannot be checked on is not planned. The planned path's swing changes the
+  cab's tilt but not base_link's, so the site pose (its own roll and pitch) is used as it is.
 
 Settings in config/excavator_nodes.yaml (``/**/excavator_ik_server``).
 """
@@ -29,18 +34,22 @@ from collections.abc import Sequence
 from typing import ClassVar
 
 import numpy as np
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from excavator_kinematics.core.monitored import MonitoredPoints
 from excavator_kinematics.core.path import BucketPlan
 from excavator_kinematics.core.path_zones import plan_clear
 from excavator_kinematics.grade.design_surface import read_landxml
-from excavator_kinematics.nodes.node_schemas import NODES_CONFIG
+from excavator_kinematics.grade.site_pose import SitePoseInput
+from excavator_kinematics.nodes.node_schemas import NODES_CONFIG, SITE_POSE
+from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes import run_node
-from manipulator_kinematics.nodes.ik_server import SETTINGS, PlanPathServer
+from manipulator_kinematics.nodes.ik_server import SETTINGS, PlanPathServer, Rejected
 from manipulator_kinematics.plan_bounds import ACCELERATION_RANGE, STEP_RANGE, TIP_SPEED_RANGE
 from manipulator_kinematics.registry import Machine
 from manipulator_kinematics.schema import Number, Schema, Text
 from manipulator_kinematics.zone_guard import ZoneGuard
+from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes
 from manipulator_kinematics_interfaces.srv import PlanPath
 
 NODE = "excavator_ik_server"
@@ -76,6 +85,15 @@ class ExcavatorIKServer(PlanPathServer):
         "zones_file": Text(
             doc="avoidance zone file (docs/zones.md): plan_path ends before a zone; empty: none"
         ),
+        "site": SITE_POSE,
+        "warning_period": Number(
+            min=0.0, max=3600.0, unit="s", doc="the same kind of rejection is logged at most this often"
+        ),
+        "topics": {
+            "site_pose": Text(
+                empty=False, doc="input: geometry_msgs/PoseStamped, base_link in the site frame (GNSS)"
+            )
+        },
     }
     #: IK mode of every path sample: the bucket angle is held, so the pose IK.
     PLAN_MODES = ("pose",)
@@ -87,16 +105,41 @@ class ExcavatorIKServer(PlanPathServer):
         self.points = MonitoredPoints(self.model)
         file = self.settings["zones_file"]
         self.zones = (
-            ZoneGuard.from_file(file, self.points.names, self.model.limits.max_rates, 1.0, read_landxml).zones
+            ZoneGuard.from_file(
+                file, self.points.names, self.model.limits.max_rates, 1.0, read_landxml, site_pose=True
+            ).zones
             if file
             else []
         )
+        site = [z.name for z in self.zones if z.frame == "site"]
+        # Only a node with site-frame zones listens for the site pose.
+        self.site = (
+            SitePoseInput(
+                self,
+                self.settings["site"],
+                self.settings["topics"]["site_pose"],
+                QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE),
+                ThrottledLog(self, self.settings["warning_period"]),
+            )
+            if site
+            else None
+        )
+        self.site_zones = ", ".join(site)
         self.get_logger().info(
             f"serving plan_path (defaults: step {path['step']:g} m, tip speed "
             f"{path['tip_speed']:g} m/s, acceleration {path['acceleration']:g} m/s^2)"
         )
 
     def plan(self, request: PlanPath.Request, waypoints: np.ndarray, seed: np.ndarray | None) -> BucketPlan:
+        site = None
+        if self.site is not None:
+            pose, why = self.site.at(self.get_clock().now().nanoseconds)
+            if pose is None:
+                raise Rejected(
+                    KinematicsErrorCodes.FAILURE,
+                    f"no plan: site-frame zone(s) {self.site_zones} cannot be checked: {why}",
+                )
+            site = (pose.rotation, pose.translation)
         # 0 = the default; anything else (negative, NaN, tiny, huge) the shared bounds check.
         return plan_clear(
             self.model,
@@ -107,6 +150,7 @@ class ExcavatorIKServer(PlanPathServer):
             request.tip_speed or self.path["tip_speed"],
             self.path["acceleration"],
             seed,
+            site,
         )
 
 

@@ -28,6 +28,29 @@ _INPUT_DEPTH = Number(
 )
 _SWING_MAX_AGE = _seconds("max |stamp(cylinder_lengths) - stamp(joint_states)|")
 
+#: Where base_link is in the site frame (excavator_kinematics.grade.site_pose): the forward node's
+#: grade outputs and the velocity IK's and IK server's site-frame zones, same names and meanings.
+SITE_POSE: Schema = {
+    "site_frame": Text(empty=False, doc="frame_id of the site (x easting, y northing, z up)"),
+    "site_pose_source": Text(
+        choices=("fixed", "topic"),
+        doc="base_link in the site frame: fixed (site_position, site_rpy) or from topics.site_pose",
+    ),
+    "site_position": Numbers(
+        3, Number(min=-1e8, max=1e8, unit="m"), doc="fixed position of base_link in the site frame (m)"
+    ),
+    "site_rpy": Numbers(
+        3,
+        Number(min=-7.0, max=7.0, unit="rad"),
+        doc="fixed roll, pitch, yaw of base_link in the site frame (rad, fixed axes)",
+    ),
+    "site_pose_max_age": _seconds("max |stamp(cylinder_lengths) - stamp(site pose)|"),
+}
+#: The machine's tilt from topics.machine_tilt (excavator_kinematics.sensing.machine_tilt).
+_TILT_MAX_AGE = _seconds("max |stamp(cylinder_lengths) - stamp(machine_tilt)|")
+_SITE_POSE_TOPIC = _topic("input: geometry_msgs/PoseStamped, base_link in the site frame (GNSS)")
+_MACHINE_TILT_TOPIC = _topic("input: geometry_msgs/Vector3Stamped, up in the upper structure's frame")
+
 FORWARD: Schema = {
     "base_frame": Text(empty=False, doc="frame_id of bucket_pose, bucket_twist and bucket_accel"),
     "frame_prefix": FRAME_PREFIX,
@@ -80,25 +103,12 @@ FORWARD: Schema = {
     "level": {
         "enabled": Flag(doc="publish bucket_pose_level from the machine tilt (topics.machine_tilt)"),
         "frame": Text(empty=False, doc="frame_id of bucket_pose_level: base_link levelled by gravity"),
-        "tilt_max_age": _seconds("max |stamp(cylinder_lengths) - stamp(machine_tilt)|"),
+        "tilt_max_age": _TILT_MAX_AGE,
     },
     "design_surface": {
         "file": Text(doc="LandXML 1.2 file of the design TIN (read at start-up); empty: none"),
         "surface": Text(doc="name of the Surface in the file; empty: the file's only surface"),
-        "site_frame": Text(empty=False, doc="frame_id of the site (x easting, y northing, z up)"),
-        "site_pose_source": Text(
-            choices=("fixed", "topic"),
-            doc="base_link in the site frame: fixed (site_position, site_rpy) or from topics.site_pose",
-        ),
-        "site_position": Numbers(
-            3, Number(min=-1e8, max=1e8, unit="m"), doc="fixed position of base_link in the site frame (m)"
-        ),
-        "site_rpy": Numbers(
-            3,
-            Number(min=-7.0, max=7.0, unit="rad"),
-            doc="fixed roll, pitch, yaw of base_link in the site frame (rad, fixed axes)",
-        ),
-        "site_pose_max_age": _seconds("max |stamp(cylinder_lengths) - stamp(site pose)|"),
+        **SITE_POSE,
     },
     "topics": {
         "cylinder_lengths": _topic("input: sensor_msgs/JointState, boom/arm/bucket cylinder length and rate"),
@@ -109,8 +119,8 @@ FORWARD: Schema = {
         "open_chain_joint_states": _topic("output: sensor_msgs/JointState of the open chain"),
         "urdf_joint_states": _topic("output: sensor_msgs/JointState of every joint of urdf/excavator.urdf"),
         "grade_height": _topic("output: geometry_msgs/PointStamped, the tip in the design surface's frame"),
-        "site_pose": _topic("input: geometry_msgs/PoseStamped, base_link in the site frame (GNSS)"),
-        "machine_tilt": _topic("input: geometry_msgs/Vector3Stamped, up in the upper structure's frame"),
+        "site_pose": _SITE_POSE_TOPIC,
+        "machine_tilt": _MACHINE_TILT_TOPIC,
         "bucket_pose_level": _topic("output: geometry_msgs/PoseStamped in the level frame"),
         "grade_tip": _topic("output: geometry_msgs/PointStamped, tip x, y and height above the TIN"),
         "grade_left": _topic("output: geometry_msgs/PointStamped, left end of the cutting edge"),
@@ -157,6 +167,14 @@ VELOCITY_IK: Schema = {
         exclusive_min=True,
         doc="the actuators stop from full speed within this (deceleration limits: max speed / this)",
     ),
+    "site": {
+        **SITE_POSE,
+        "tilt": Flag(
+            doc="roll and pitch of the site pose from topics.machine_tilt (heading and position "
+            "from the site pose); used by site-frame zones only"
+        ),
+        "tilt_max_age": _TILT_MAX_AGE,
+    },
     "topics": {
         "target_bucket_twist": _topic("input: geometry_msgs/TwistStamped in base_frame"),
         "cylinder_lengths": _topic("input: sensor_msgs/JointState, cylinder lengths"),
@@ -165,6 +183,8 @@ VELOCITY_IK: Schema = {
         "rate_command_array": _topic("output: std_msgs/Float64MultiArray in that order (publish_array)"),
         "status": _topic("output: diagnostic_msgs/DiagnosticArray: tracking / slowed (by what) / stopped"),
         "zone_clearance": _topic("output: diagnostic_msgs/DiagnosticArray, per zone its smallest clearance"),
+        "site_pose": _SITE_POSE_TOPIC,
+        "machine_tilt": _MACHINE_TILT_TOPIC,
     },
 }
 

@@ -26,7 +26,14 @@ Avoidance zones (``zones_file``, docs/zones.md): the command is scaled once more
 :class:`manipulator_kinematics.zone_guard.ZoneGuard`'s factor for the monitored points
 (:class:`excavator_kinematics.core.monitored.MonitoredPoints`), so it slows approaching a zone and stops
 at it in its own direction; the status names the zone and the point, and ``zone_clearance``
-carries each zone's smallest clearance.
+carries each zone's smallest clearance. Site-frame zones are placed by the machine's pose in the
+site frame, read as the forward node's grade outputs read it (settings ``site``, topics
+``site_pose`` and ``machine_tilt``): :class:`excavator_kinematics.grade.site_pose.SitePoseInput`
+(fixed, or the latest PoseStamped within ``site_pose_max_age`` of the cylinder stamp), with
+``site.tilt`` its roll and pitch from the cab IMU's tilt
+(:class:`excavator_kinematics.sensing.machine_tilt.TiltInput`, the nearest within
+``tilt_max_age``; :meth:`SitePose.levelled`). Without a fresh pose the command is stopped with the
+reason (the zones cannot be checked), and the clearances of site-frame zones are reported STALE.
 
 Inputs are checked where they enter, finite values included: a swing rate beyond 1000 x its speed
 limit (:class:`excavator_kinematics.nodes.state_input.Plausible`) and a target twist beyond 1000 x the
@@ -59,6 +66,7 @@ from excavator_kinematics.core.rate_command import (
 )
 from excavator_kinematics.core.twist import split_twist
 from excavator_kinematics.grade.design_surface import read_landxml
+from excavator_kinematics.grade.site_pose import SitePoseInput
 from excavator_kinematics.nodes import message_codec
 from excavator_kinematics.nodes.node_schemas import NODES_CONFIG, VELOCITY_IK
 from excavator_kinematics.nodes.state_input import (
@@ -68,6 +76,8 @@ from excavator_kinematics.nodes.state_input import (
     StaleInput,
     SwingHold,
 )
+from excavator_kinematics.sensing.imu import base_up
+from excavator_kinematics.sensing.machine_tilt import TiltInput
 from manipulator_kinematics.joint_state import joint_values
 from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes import MachineNode, run_node
@@ -157,7 +167,22 @@ class VelocityIk(MachineNode):
             s["qos_depth"],
             self.exc.name,
             read_landxml,
+            site_pose=True,
         )
+        # The machine's pose in the site frame, read only when a site-frame zone needs it.
+        site = s["site"]
+        self.site: SitePoseInput | None = None
+        self.tilt: TiltInput | None = None
+        if self.zones is not None and any(z.frame == "site" for z in self.zones.guard.zones):
+            self.site = SitePoseInput(self, site, s["topics"]["site_pose"], latest, self.log)
+            if site["tilt"]:
+                self.tilt = TiltInput(
+                    self, s["topics"]["machine_tilt"], site["tilt_max_age"], latest, self.log
+                )
+            self.get_logger().info(
+                f"site-frame zones: site pose {self.site.describe()}"
+                + (f", roll and pitch from {s['topics']['machine_tilt']}" if self.tilt else "")
+            )
         self.get_logger().info(
             f"{self.exc.name}: {s['topics']['target_bucket_twist']} (frame {self.frame!r}) -> "
             f"{s['topics']['rate_commands']}"
@@ -189,7 +214,8 @@ class VelocityIk(MachineNode):
             self.command(msg.header.stamp)
         elif self.zones is not None and self.target is None:  # standing: the clearances still go out
             with contextlib.suppress(ValueError):
-                self.zones.watch(msg.header.stamp, self.points.positions(self.exc.validate(self.state())))
+                D = self.exc.validate(self.state())
+                self.zones.watch(msg.header.stamp, self.points.positions(D), self.site_pose(D[0])[0])
         self.target_since_state = False
 
     def on_target(self, msg: TwistStamped) -> None:
@@ -230,6 +256,21 @@ class VelocityIk(MachineNode):
         theta1, _, _ = self.swing.at(stamp_ns)
         return np.concatenate(([theta1], lengths))
 
+    def site_pose(self, theta1: float) -> tuple[tuple[np.ndarray, np.ndarray] | None, str]:
+        """(R, t) of base_link in the site frame (p_site = R p + t) at the current state's stamp
+        and "", or None and why there is none (fresh enough) while a site-frame zone needs it;
+        (None, "") without site-frame zones."""
+        if self.site is None:
+            return None, ""
+        stamp_ns = self.cylinders[0]
+        pose, why = self.site.at(stamp_ns)
+        if pose is not None and self.tilt is not None:
+            up, why = self.tilt.at(stamp_ns)
+            pose = None if up is None else pose.levelled(base_up(up, theta1))
+        if pose is None:
+            return None, f"site-frame zones cannot be checked: {why}"
+        return (pose.rotation, pose.translation), ""
+
     def command(self, stamp: Time) -> None:
         """Publish the rates for the current target at the current state (or stop, saying why)."""
         _, linear, angular = self.target
@@ -266,11 +307,14 @@ class VelocityIk(MachineNode):
                 self.stroke_horizon,
                 self.bucket_angle_gives_way,
             )
+            site, blind = self.site_pose(D[0])
             zone = (
                 None
                 if self.zones is None
-                else self.zones(stamp, *self.points(D, rates.d_dot), rates.d_dot, self.cylinders[0])
+                else self.zones(stamp, *self.points(D, rates.d_dot), rates.d_dot, self.cylinders[0], site)
             )
+            if blind:  # the clearances went out (site-frame zones STALE); the machine stops
+                raise StaleInput(blind)
         except ValueError as error:  # InputError, StrokeError, an overflowing target
             # A late state (StaleInput: start-up, a loaded machine) stops the motion as any other
             # reason does, but it is transient: a warning, not an error that needs a person.

@@ -19,21 +19,18 @@ any sensor rate, and a tilt source with other stamps still gets the nearest one.
 from __future__ import annotations
 
 import math
-from collections import deque
 from typing import Any
 
-from geometry_msgs.msg import PoseStamped, Vector3Stamped
+from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from scipy.spatial.transform import Rotation
 from std_msgs.msg import Header
 
 from excavator_kinematics.sensing.imu import base_up, level_rotation
+from excavator_kinematics.sensing.machine_tilt import TiltInput
 from manipulator_kinematics.codec.packed import PackedMessage
 from manipulator_kinematics.node_util import ThrottledLog
-
-#: Tilts kept for pairing: a few sets of any rate (a pose waits for one tilt at most).
-KEPT_TILTS = 8
 
 
 class LevelPose:
@@ -43,29 +40,15 @@ class LevelPose:
         self, node: Node, settings: dict[str, Any], topics: dict[str, str], qos: QoSProfile, log: ThrottledLog
     ) -> None:
         self.log = log
-        self.max_age_ns = int(settings["tilt_max_age"] * 1e9)
-        #: (stamp ns, up) of the latest tilts, oldest first.
-        self.tilts: deque[tuple[int, list[float]]] = deque(maxlen=KEPT_TILTS)
+        self.tilt = TiltInput(node, topics["machine_tilt"], settings["tilt_max_age"], qos, log, self.on_tilt)
         #: A bucket pose waiting for the tilt of its stamp: (stamp ns, (sec, nanosec), theta1, pose).
         self.waiting: tuple[int, tuple[int, int], float, list[float]] | None = None
         self.message = PackedMessage(
             PoseStamped(header=Header(frame_id=settings["frame"])), ("header.stamp", "pose")
         )
         self.publisher = node.create_publisher(PoseStamped, topics["bucket_pose_level"], qos)
-        node.create_subscription(Vector3Stamped, topics["machine_tilt"], self.on_tilt, qos)
 
-    def on_tilt(self, msg: Vector3Stamped) -> None:
-        v = msg.vector
-        up = [v.x, v.y, v.z]
-        norm = math.sqrt(sum(c * c for c in up))
-        if not all(map(math.isfinite, up)) or abs(norm - 1.0) > 1e-3 or v.z <= 0.0:
-            self.log("error", f"rejected machine_tilt {up}: needs a finite unit vector pointing up")
-            return
-        stamp = msg.header.stamp
-        if stamp.sec < 0:
-            self.log("error", f"rejected machine_tilt: negative stamp (sec {stamp.sec})")
-            return
-        self.tilts.append((stamp.sec * 1_000_000_000 + stamp.nanosec, up))
+    def on_tilt(self) -> None:
         if self.waiting is not None:
             self.publish_waiting()
 
@@ -76,24 +59,21 @@ class LevelPose:
         if self.waiting is not None:
             self.publish_waiting()
         self.waiting = (stamp_ns, sec_nanosec, theta1, pose)
-        if any(stamp >= stamp_ns for stamp, _ in self.tilts):
+        if self.tilt.came_since(stamp_ns):
             self.publish_waiting()
 
     def publish_waiting(self) -> None:
         stamp_ns, sec_nanosec, theta1, pose = self.waiting
         self.waiting = None
-        nearest = min(self.tilts, key=lambda tilt: abs(tilt[0] - stamp_ns), default=None)
-        if nearest is None or abs(stamp_ns - nearest[0]) > self.max_age_ns:
-            age = "none received" if nearest is None else f"{(stamp_ns - nearest[0]) * 1e-9:+.3f} s away"
-            self.log(
-                "warning", f"no bucket_pose_level: machine tilt {age} (max age {self.max_age_ns * 1e-9:g} s)"
-            )
+        up, why = self.tilt.at(stamp_ns)
+        if up is None:
+            self.log("warning", f"no bucket_pose_level: {why}")
             return
-        rotation = level_rotation(base_up(nearest[1], theta1))
+        rotation = level_rotation(base_up(up, theta1))
         position = rotation @ pose[:3]
         orientation = (Rotation.from_matrix(rotation) * Rotation.from_quat(pose[3:])).as_quat()
         values = [*position.tolist(), *orientation.tolist()]
         if not all(map(math.isfinite, values)):
-            self.log("error", f"no bucket_pose_level: not finite for tilt {nearest[1]}")
+            self.log("error", f"no bucket_pose_level: not finite for tilt {up}")
             return
         self.publisher.publish(self.message.pack((*sec_nanosec, *values)))

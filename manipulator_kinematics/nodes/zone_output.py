@@ -6,10 +6,11 @@ The topic is a ``diagnostic_msgs/DiagnosticArray``: one DiagnosticStatus per zon
 (this zone slows or stops the command) or ERROR (a point inside: a transgression), and the values
 ``clearance`` (m, the point's clearance: distance from the zone grown by its margin, < 0 inside),
 ``point``, ``kind``, ``margin`` and ``scale`` (the command's zone factor, the same in every
-status). Chosen because it carries a name per number (the zone and its point), every ROS 2 tool
-reads it (``ros2 topic echo``, rqt_runtime_monitor, the recorder and ``mk_evaluate``), and the
-package's status outputs are already DiagnosticArrays; a Float64MultiArray would need its labels
-in a layout no tool shows.
+status). A site-frame zone while the node has no site pose is STALE, ``message`` "no site pose",
+``clearance`` "n/a" (not a transgression: it is not known). Chosen because it carries a name
+per number (the zone and its point), every ROS 2 tool reads it (``ros2 topic echo``,
+rqt_runtime_monitor, the recorder and ``mk_evaluate``), and the package's status outputs are
+already DiagnosticArrays; a Float64MultiArray would need its labels in a layout no tool shows.
 
 The time a command may act (the guard's period) is at least the set one (``zones_period``) and
 at least what the loop shows: twice the age of the state the command is computed from (its way
@@ -20,6 +21,7 @@ not count). On a loaded machine, whose commands come late, the approach is slowe
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Callable, Sequence
 
@@ -45,8 +47,12 @@ def clearance_message(stamp: Time, hardware_id: str, guard: ZoneGuard, check: Ch
     statuses = []
     for zone in guard.zones:
         clearance, point = check.clearance[zone.name]
+        # -inf only for a site-frame zone checked without a site pose (Monitor.check).
+        blind = clearance == -math.inf
         level = (
-            DiagnosticStatus.ERROR
+            DiagnosticStatus.STALE
+            if blind
+            else DiagnosticStatus.ERROR
             if clearance < 0.0
             else DiagnosticStatus.WARN
             if zone.name == check.zone and check.scale < 1.0
@@ -54,7 +60,7 @@ def clearance_message(stamp: Time, hardware_id: str, guard: ZoneGuard, check: Ch
         )
         # Never a NaN or an inf as a number: a zone no point is over (a TIN's footprint) is "inf".
         values = {
-            "clearance": f"{clearance:.6g}",
+            "clearance": "n/a" if blind else f"{clearance:.6g}",
             "point": point,
             "kind": zone.kind,
             "margin": f"{zone.margin:.6g}",
@@ -64,7 +70,7 @@ def clearance_message(stamp: Time, hardware_id: str, guard: ZoneGuard, check: Ch
             DiagnosticStatus(
                 level=level,
                 name=zone.name,
-                message=point,
+                message="no site pose" if blind else point,
                 hardware_id=hardware_id,
                 values=[KeyValue(key=k, value=v) for k, v in values.items()],
             )
@@ -95,12 +101,14 @@ class ZoneOutput:
         qos_depth: int,
         hardware_id: str,
         read_surface: Callable[[str, str], Surface] | None = None,
+        site_pose: bool = False,
     ) -> ZoneOutput | None:
         """The zones of the node's ``zones_file`` setting (None when it is ""); ConfigError naming
-        the setting and the zone file's key when the file is malformed."""
+        the setting and the zone file's key when the file is malformed, or has a site-frame zone
+        where the node has no site pose (``site_pose`` false)."""
         if not file:
             return None
-        guard = ZoneGuard.from_file(file, points, decelerations, period, read_surface)
+        guard = ZoneGuard.from_file(file, points, decelerations, period, read_surface, site_pose=site_pose)
         node.get_logger().info(
             f"{len(guard.zones)} avoidance zones from {file} ({', '.join(z.name for z in guard.zones)}), "
             f"{len(points)} monitored points; clearances on {topic}"
@@ -114,10 +122,12 @@ class ZoneOutput:
         velocities: np.ndarray,
         rates: np.ndarray,
         sampled_ns: int | None = None,
+        site: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> Verdict:
         """The verdict on a command (:meth:`ZoneGuard.check`) computed from the state sampled at
         ``sampled_ns`` (its stamp, ns; default ``stamp``'s), for the time it may act (module
-        docstring); its clearances published with ``stamp``."""
+        docstring); its clearances published with ``stamp``. ``site``: the site pose (R, t) of
+        site-frame zones (p_site = R p + t)."""
         now = self.node.get_clock().now().nanoseconds
         if self.last_ns is not None and (now - self.last_ns) * 1e-9 <= MAX_GAP:
             self.gaps.append((now - self.last_ns) * 1e-9)
@@ -125,15 +135,17 @@ class ZoneOutput:
         sampled = stamp.sec * 1_000_000_000 + stamp.nanosec if sampled_ns is None else sampled_ns
         age = min(max((now - sampled) * 1e-9, 0.0), MAX_AGE)
         verdict = self.guard.check(
-            positions, velocities, rates, period=2.0 * age + max(self.gaps, default=0.0)
+            positions, velocities, rates, site, period=2.0 * age + max(self.gaps, default=0.0)
         )
         self.publisher.publish(clearance_message(stamp, self.hardware_id, self.guard, verdict.check))
         return verdict
 
-    def watch(self, stamp: Time, positions: np.ndarray) -> None:
+    def watch(
+        self, stamp: Time, positions: np.ndarray, site: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> None:
         """Publish the clearances of the machine standing (no command in force)."""
         self.publisher.publish(
-            clearance_message(stamp, self.hardware_id, self.guard, self.guard.watch(positions))
+            clearance_message(stamp, self.hardware_id, self.guard, self.guard.watch(positions, site))
         )
 
 
