@@ -28,8 +28,9 @@ from numba import njit
 
 from manipulator_kinematics.hydraulic.layout import FLOAT, INT, OP, SIGNATURE
 
-# Rows of one slot of the work array: value, rate, acceleration, then d/dD_j at _J + j.
-_P, _V, _A, _J = 0, 1, 2, 3
+# Rows of one slot of the work array: value, rate, acceleration, (cos, sin) of an angle (each
+# body's, made once where it is placed: its points and slides turn by it), then d/dD_j at _J + j.
+_P, _V, _A, _T, _J = 0, 1, 2, 3, 4
 # How much a call computes: positions; with the Jacobians; with rates and accelerations too.
 POSITION, JACOBIAN, MOTION = 0, 1, 2
 
@@ -64,9 +65,10 @@ def _finite(x: np.ndarray, m: int) -> bool:
 
 @njit(cache=True, error_model="numpy")
 def _fixed(w: np.ndarray, out: int, x: float, z: float) -> None:
-    """A constant: value (x, z), every derivative zero."""
+    """A constant: value (x, z), every derivative zero; as an angle (the ground's), zero."""
     w[out] = 0.0
     w[out, _P, 0], w[out, _P, 1] = x, z
+    w[out, _T, 0] = 1.0
 
 
 @njit(cache=True, error_model="numpy")
@@ -167,6 +169,7 @@ def _place(
     w[angle] = 0.0
     w[out] = 0.0
     w[angle, _P, 0] = phi
+    w[angle, _T, 0], w[angle, _T, 1] = c, s
     w[out, _P, 0], w[out, _P, 1] = w[one, _P, 0] - w0, w[one, _P, 1] - w1
     if order < JACOBIAN:
         return
@@ -191,7 +194,7 @@ def _place(
 @njit(cache=True, error_model="numpy")
 def _point(w: np.ndarray, out: int, o: int, f: int, lx: float, lz: float, m: int, order: int) -> None:
     """The jet of the point (lx, lz) of the body with origin ``o`` and angle ``f`` (``_Body.point``)."""
-    c, s = math.cos(w[f, _P, 0]), math.sin(w[f, _P, 0])
+    c, s = w[f, _T, 0], w[f, _T, 1]
     w0, w1 = c * lx - s * lz, s * lx + c * lz
     w[out] = 0.0
     w[out, _P, 0], w[out, _P, 1] = w[o, _P, 0] + w0, w[o, _P, 1] + w1
@@ -225,7 +228,7 @@ def _slide(
 ) -> None:
     """The prismatic child's origin: O_p + R(phi_p) (axis point + (s, 0)), s = D[act] + offset
     (``HydraulicModel._slide``)."""
-    c, s = math.cos(w[f, _P, 0]), math.sin(w[f, _P, 0])
+    c, s = w[f, _T, 0], w[f, _T, 1]
     lx = px + (D[act] + offset)
     w0, w1 = c * lx - s * pz, s * lx + c * pz
     w[out] = 0.0
@@ -250,7 +253,10 @@ def _angle(w: np.ndarray, out: int, child: int, parent: int) -> None:
     """theta = wrap(phi_child - phi_parent) to (-pi, pi], its derivatives the plain differences."""
     w[out] = 0.0
     w[out, :, 0] = w[child, :, 0] - w[parent, :, 0]
-    w[out, _P, 0] = math.pi - (math.pi - w[out, _P, 0]) % (2.0 * math.pi)
+    turned = math.pi - w[out, _P, 0]
+    if not 0.0 <= turned < 2.0 * math.pi:  # inside, the remainder is itself (and fmod costs)
+        turned %= 2.0 * math.pi
+    w[out, _P, 0] = math.pi - turned
 
 
 @njit(cache=True, error_model="numpy")
@@ -329,15 +335,16 @@ def state(
     m = D.shape[0]
     if not (_inside(code, values, D) and _finite(D_dot, m) and _finite(D_ddot, m)):
         return False
-    if out.shape[0] != code[0, INT.act] + code[0, INT.q] or out.shape[1] != _J + m:
+    if out.shape[0] != code[0, INT.act] + code[0, INT.q] or out.shape[1] != 3 + m:
         return False
     ok, w = _run(code, values, D, D_dot, D_ddot, MOTION)
     if not ok:
         return False
     first = code[0, INT.p]
     for i in range(out.shape[0]):
-        for k in range(_J + m):
-            out[i, k] = w[first + i, k, 0]
+        out[i, 0], out[i, 1], out[i, 2] = w[first + i, _P, 0], w[first + i, _V, 0], w[first + i, _A, 0]
+        for j in range(m):
+            out[i, 3 + j] = w[first + i, _J + j, 0]
     return True
 
 

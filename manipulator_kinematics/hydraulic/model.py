@@ -522,10 +522,37 @@ class HydraulicModel:
         except TypeError:
             return None
 
+    def _batch(self, function: str, shape: tuple[int, ...], D: np.ndarray, *motion: Any) -> np.ndarray | None:
+        """The kernel's loop ``function`` over a batch D (..., m) (and D_dot, D_ddot, broadcast to
+        D; D_ddot None: zero): a table (..., *shape), or None where the kernel is not loaded or
+        refuses a state or the arguments (the numpy path then says why). Any batch: the scalar
+        kernel (about a microsecond a state) beats numpy's vectorised core (8-9 us a state from
+        10^3 states on) at every size (benchmarks/bench_family.py)."""
+        kernel = KERNEL.ready or KERNEL.get()
+        if kernel is None or D.shape[-1] != self.m or D.size == 0:
+            return None
+        try:
+            flat = np.ascontiguousarray(D.reshape(-1, self.m))
+            given = [
+                np.zeros(flat.shape)
+                if x is None
+                else np.ascontiguousarray(
+                    np.broadcast_to(np.asarray(x, dtype=float), D.shape).reshape(flat.shape)
+                )
+                for x in motion
+            ]
+            table = np.empty((len(flat), *shape))
+            done = getattr(kernel, function)(self._code, self._constants, flat, *given, table)
+        except (TypeError, ValueError):  # types the kernel does not take, shapes that do not broadcast
+            return None
+        return table.reshape(D.shape[:-1] + shape) if done else None
+
     def pose(self, D: Any) -> np.ndarray:
         """Q (..., nq) for D (eq. 3 through the linkages, eqs. 1-2)."""
         D = np.asarray(D, dtype=float)
         if D.shape == self._one and (Q := self._compiled("pose", np.empty(self._nq), D)) is not None:
+            return Q
+        if D.ndim > 1 and (Q := self._batch("poses", (self._nq,), D)) is not None:
             return Q
         return self._solve(self.validate(D), every_pin=False).Q.p
 
@@ -614,6 +641,8 @@ class HydraulicModel:
                     return HydraulicState.of_table(table, self._n)
             except TypeError:  # arguments of types the kernel does not take (_warm)
                 pass
+        elif D.ndim > 1 and (table := self._batch("states", self._table_shape, D, D_dot, D_ddot)) is not None:
+            return HydraulicState.of_table(table, self._n)
         D = self.validate(D)
         D_dot = _finite(D_dot, D.shape, "D_dot")
         D_ddot = None if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot")
