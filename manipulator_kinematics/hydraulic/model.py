@@ -25,8 +25,9 @@ from typing import Any
 import numpy as np
 
 from manipulator_kinematics.compiled import Kernel
-from manipulator_kinematics.hydraulic import dyads, layout, program
+from manipulator_kinematics.hydraulic import dyads, layout
 from manipulator_kinematics.hydraulic.description import SECTION, Description, Dyad, Place, Slide, read
+from manipulator_kinematics.hydraulic.program import Program, pack
 from manipulator_kinematics.param_files import ConfigError
 
 __all__ = ["HydraulicModel", "HydraulicState", "IKResult", "RateSolution", "StrokeError", "compiled_kernel"]
@@ -234,11 +235,12 @@ class HydraulicModel:
         self._read = {p for s in self._dyads for p in (s.pivot, s.first)} | {
             p for s in d.steps if isinstance(s, Place) for p in (s.one, s.two)
         }
-        # The compiled single call's program (manipulator_kinematics.hydraulic.program) and result.
-        packed = program.pack(d, self.lower, self.upper)
-        self._code, self._constants = packed.code, packed.values
-        self._n, self._nq = packed.n, packed.nq
-        self._one, self._table_shape = (self.m,), (packed.n + packed.nq, 3 + self.m)
+        #: The compiled kernel's program of this machine (manipulator_kinematics.hydraulic.program).
+        self.program: Program = pack(d, self.lower, self.upper)
+        # ... and what the single call reads of it and makes (one attribute lookup each).
+        self._code, self._constants = self.program.code, self.program.values
+        self._n, self._nq = self.program.n, self.program.nq
+        self._one, self._table_shape = (self.m,), (self._n + self._nq, 3 + self.m)
         self._no_acceleration = np.zeros(self.m)  # D_ddot of a state without (the kernel only reads it)
         self._check_box()
         self._inverse = self._inverse_plan()
@@ -532,15 +534,8 @@ class HydraulicModel:
         if kernel is None or D.shape[-1] != self.m or D.size == 0:
             return None
         try:
-            flat = np.ascontiguousarray(D.reshape(-1, self.m))
-            given = [
-                np.zeros(flat.shape)
-                if x is None
-                else np.ascontiguousarray(
-                    np.broadcast_to(np.asarray(x, dtype=float), D.shape).reshape(flat.shape)
-                )
-                for x in motion
-            ]
+            flat = _rows(D, D.shape, self.m)
+            given = [np.zeros(flat.shape) if x is None else _rows(x, D.shape, self.m) for x in motion]
             table = np.empty((len(flat), *shape))
             done = getattr(kernel, function)(self._code, self._constants, flat, *given, table)
         except (TypeError, ValueError):  # types the kernel does not take, shapes that do not broadcast
@@ -739,8 +734,17 @@ class HydraulicModel:
         (docs/hydraulic_family.md: what eq. 9 solves for a non-square JC0)."""
         rows = list(self.description.velocity_rows)
         A = jc0[..., rows, :] * self.max_speed
-        u = np.linalg.pinv(A) @ rhs[..., rows, None]
-        return u[..., 0] * self.max_speed, np.linalg.cond(A)
+        # One SVD for both: the pseudo-inverse (numpy's pinv: singular values below 1e-15 of the
+        # largest dropped) and the 2-norm condition number (numpy's cond: inf where singular);
+        # pinv and cond made one each, 4-5x the rest of a single call.
+        left, sigma, right = np.linalg.svd(A, full_matrices=False)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            condition = sigma[..., 0] / sigma[..., -1]
+        condition = np.where(np.isnan(condition), np.inf, condition)
+        kept = sigma > 1e-15 * sigma[..., :1]
+        inverse = np.divide(1.0, sigma, where=kept, out=np.zeros_like(sigma))
+        u = right.swapaxes(-1, -2) @ (inverse[..., None] * (left.swapaxes(-1, -2) @ rhs[..., rows, None]))
+        return u[..., 0] * self.max_speed, condition
 
     def cylinder_rates(self, D: Any, Q_dot: Any) -> RateSolution:
         """Ddot from a target task rate (eq. 9): JC0^-1 Qdot on the rows the machine commands
@@ -951,6 +955,15 @@ class HydraulicModel:
             better = cost < best_cost
             best_D[...] = np.where(better[..., None], D, best_D)
             best_cost[...] = np.where(better, cost, best_cost)
+
+
+def _rows(values: Any, shape: tuple[int, ...], m: int) -> np.ndarray:
+    """``values`` broadcast to ``shape`` as a C-contiguous, writeable float array (N, m): what the
+    kernel's loops take (a view where it is one already, else a copy)."""
+    array = np.asarray(values, dtype=float)
+    if array.shape != shape or not (array.flags.c_contiguous and array.flags.writeable):
+        array = np.array(np.broadcast_to(array, shape), order="C")
+    return array.reshape(-1, m)
 
 
 def _finite(values: Any, shape: tuple[int, ...], name: str) -> np.ndarray:
