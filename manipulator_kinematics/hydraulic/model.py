@@ -540,7 +540,9 @@ class HydraulicModel:
             done = getattr(kernel, function)(self._code, self._constants, flat, *given, table)
         except (TypeError, ValueError):  # types the kernel does not take, shapes that do not broadcast
             return None
-        return table.reshape(D.shape[:-1] + shape) if done else None
+        if not done:
+            return None
+        return table if D.ndim == 2 else table.reshape(D.shape[:-1] + shape)
 
     def pose(self, D: Any) -> np.ndarray:
         """Q (..., nq) for D (eq. 3 through the linkages, eqs. 1-2)."""
@@ -961,9 +963,9 @@ def _rows(values: Any, shape: tuple[int, ...], m: int) -> np.ndarray:
     """``values`` broadcast to ``shape`` as a C-contiguous, writeable float array (N, m): what the
     kernel's loops take (a view where it is one already, else a copy)."""
     array = np.asarray(values, dtype=float)
-    if array.shape != shape or not (array.flags.c_contiguous and array.flags.writeable):
+    if array.shape != shape or not array.flags.carray:  # carray: C-contiguous, aligned, writeable
         array = np.array(np.broadcast_to(array, shape), order="C")
-    return array.reshape(-1, m)
+    return array if array.ndim == 2 else array.reshape(-1, m)
 
 
 def _finite(values: Any, shape: tuple[int, ...], name: str) -> np.ndarray:
