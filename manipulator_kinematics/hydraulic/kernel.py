@@ -251,8 +251,8 @@ def _slide(
 @njit(cache=True, error_model="numpy")
 def _angle(w: np.ndarray, out: int, child: int, parent: int) -> None:
     """theta = wrap(phi_child - phi_parent) to (-pi, pi], its derivatives the plain differences."""
-    w[out] = 0.0
-    w[out, :, 0] = w[child, :, 0] - w[parent, :, 0]
+    for row in range(w.shape[1]):  # loops, not slices: numba makes a slice expression a new array
+        w[out, row, 0], w[out, row, 1] = w[child, row, 0] - w[parent, row, 0], 0.0
     turned = math.pi - w[out, _P, 0]
     if not 0.0 <= turned < 2.0 * math.pi:  # inside, the remainder is itself (and fmod costs)
         turned %= 2.0 * math.pi
@@ -267,9 +267,11 @@ def _task(
     swing D[act] (``HydraulicModel._task``); no swing (act < 0): x = r, y = 0."""
     for k in range(3):
         w[out + k] = 0.0
-    w[out + 2, :, 0] = w[tool, :, 1]
+    for row in range(w.shape[1]):
+        w[out + 2, row, 0] = w[tool, row, 1]
     if act < 0:
-        w[out, :, 0] = w[tool, :, 0]
+        for row in range(w.shape[1]):
+            w[out, row, 0] = w[tool, row, 0]
         return
     r = w[tool, _P, 0]
     c, s = math.cos(D[act]), math.sin(D[act])
@@ -317,7 +319,8 @@ def _run(
         elif op == OP.task:
             _task(w, out, p, act, D, Dd, Ddd, order)
         elif op == OP.add:
-            w[out, :, 0] += w[p, :, 0]
+            for k in range(w.shape[1]):
+                w[out, k, 0] += w[p, k, 0]
     return True, w
 
 

@@ -546,7 +546,8 @@ class HydraulicModel:
 
     def pose(self, D: Any) -> np.ndarray:
         """Q (..., nq) for D (eq. 3 through the linkages, eqs. 1-2)."""
-        D = np.asarray(D, dtype=float)
+        if type(D) is not np.ndarray:  # (another dtype: the kernel refuses it, validate converts)
+            D = np.asarray(D, dtype=float)
         if D.shape == self._one and (Q := self._compiled("pose", np.empty(self._nq), D)) is not None:
             return Q
         if D.ndim > 1 and (Q := self._batch("poses", (self._nq,), D)) is not None:
@@ -612,7 +613,8 @@ class HydraulicModel:
 
     def jc0(self, D: Any) -> np.ndarray:
         """JC0 = dQ/dD (..., nq, m) (eq. 8), rows in Q's order."""
-        D = np.asarray(D, dtype=float)
+        if type(D) is not np.ndarray:
+            D = np.asarray(D, dtype=float)
         if D.shape == self._one and (J := self._compiled("jc0", np.empty((self._nq, self.m)), D)) is not None:
             return J
         return self._solve(self.validate(D), every_pin=False).Q.J
@@ -620,22 +622,30 @@ class HydraulicModel:
     def state(self, D: Any, D_dot: Any, D_ddot: Any = None) -> HydraulicState:
         """theta, Q and their rates and accelerations for cylinder states (eqs. 3, 7, 8, 10-11):
         Qddot = JC0 Dddot + (d/dt JC0) Ddot (the dyads' second derivatives along the motion)."""
-        D = np.asarray(D, dtype=float)
+        if type(D) is not np.ndarray:
+            D = np.asarray(D, dtype=float)
         if D.shape == self._one and (kernel := KERNEL.ready or KERNEL.get()) is not None:
-            # The single call (a 1 kHz node calls it per message): the kernel checks shapes and
-            # values; the numpy path below raises the error for what it refuses. _compiled
-            # written out: the call costs a tenth of the whole.
+            # The single call (a 1 kHz node calls it per message): the kernel checks shapes, types
+            # and values; the numpy path below converts and raises the error for what it refuses.
+            # Written out (no _compiled, no asarray of an array, no of_table): each Python call
+            # costs 0.1-0.2 us, a tenth of the kernel's.
             table = np.empty(self._table_shape)
             try:
                 if kernel.state(
                     self._code,
                     self._constants,
                     D,
-                    np.asarray(D_dot, dtype=float),
-                    self._no_acceleration if D_ddot is None else np.asarray(D_ddot, dtype=float),
+                    D_dot if type(D_dot) is np.ndarray else np.asarray(D_dot, dtype=float),
+                    self._no_acceleration
+                    if D_ddot is None
+                    else D_ddot
+                    if type(D_ddot) is np.ndarray
+                    else np.asarray(D_ddot, dtype=float),
                     table,
                 ):
-                    return HydraulicState.of_table(table, self._n)
+                    state = _NEW(HydraulicState)
+                    state._values, state._table, state._n = None, table, self._n
+                    return state
             except TypeError:  # arguments of types the kernel does not take (_warm)
                 pass
         elif D.ndim > 1 and (table := self._batch("states", self._table_shape, D, D_dot, D_ddot)) is not None:
@@ -957,6 +967,9 @@ class HydraulicModel:
             better = cost < best_cost
             best_D[...] = np.where(better[..., None], D, best_D)
             best_cost[...] = np.where(better, cost, best_cost)
+
+
+_NEW = object.__new__
 
 
 def _rows(values: Any, shape: tuple[int, ...], m: int) -> np.ndarray:
