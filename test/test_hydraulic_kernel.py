@@ -90,10 +90,13 @@ def test_batches_equal_the_numpy_core(
     model = MODELS[name]
     D, rates, accelerations = _states(model, np.random.default_rng(32), 300)
     grid = D.reshape(20, 15, model.m)
+    read_only = rates.copy()
+    read_only.flags.writeable = False
     calls = [
         lambda: model.state(D, rates, accelerations),
         lambda: model.state(grid, rates.reshape(grid.shape)),
         lambda: model.state(D[:1], rates[0]),  # a batch of one, the rates broadcast
+        lambda: model.state(np.asfortranarray(D), read_only, accelerations.tolist()),  # copied
     ]
     with monkeypatch.context() as kernel_only:  # batches must not touch the numpy core either
         kernel_only.setattr(model, "_solve", lambda *_a, **_k: pytest.fail("numpy path taken"))

@@ -533,11 +533,23 @@ class HydraulicModel:
         kernel = KERNEL.ready or KERNEL.get()
         if kernel is None or D.shape[-1] != self.m or D.size == 0:
             return None
+        rows = (D.size // self.m, self.m)
+        table = np.empty((rows[0], *shape))
+        # First as given where each array has D's shape (a 2-D one passes without a Python call:
+        # a batch of one costs little more than a single call); the kernel refuses any other
+        # dtype or layout (TypeError), then C-contiguous float copies, broadcast to D's shape.
+        given = [np.zeros(D.shape) if x is None else x for x in motion]
+        if all(type(x) is np.ndarray and x.shape == D.shape for x in given):
+            try:
+                arrays = [D, *given] if D.ndim == 2 else [x.reshape(rows) for x in (D, *given)]
+                if getattr(kernel, function)(self._code, self._constants, *arrays, table):
+                    return table if D.ndim == 2 else table.reshape(D.shape[:-1] + shape)
+                return None  # a state refused: the numpy path says why
+            except TypeError:
+                pass
         try:
-            flat = _rows(D, D.shape, self.m)
-            given = [np.zeros(flat.shape) if x is None else _rows(x, D.shape, self.m) for x in motion]
-            table = np.empty((len(flat), *shape))
-            done = getattr(kernel, function)(self._code, self._constants, flat, *given, table)
+            arrays = [_rows(x, D.shape, self.m) for x in (D, *given)]
+            done = getattr(kernel, function)(self._code, self._constants, *arrays, table)
         except (TypeError, ValueError):  # types the kernel does not take, shapes that do not broadcast
             return None
         if not done:
