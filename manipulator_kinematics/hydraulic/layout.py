@@ -40,28 +40,58 @@ older version of this layout would keep its old constants: the kernel compiles
 from __future__ import annotations
 
 import zlib
-from collections import namedtuple
 from types import ModuleType
-from typing import Any
+from typing import NamedTuple
 
 __all__ = ["FLOAT", "INT", "OP", "SIGNATURE", "check_compiled"]
 
-_OPS = ("head", "limit", "fixed", "actuator", "dyad", "place", "point", "slide", "angle", "task", "add")
-_INTS = ("op", "out", "p", "q", "angle", "act", "act2")
-_FLOATS = ("x", "z", "length", "length2", "sign")
 
-_Ops: Any = namedtuple("_Ops", _OPS)
-_Ints: Any = namedtuple("_Ints", _INTS)
-_Floats: Any = namedtuple("_Floats", _FLOATS)
+class _Ops(NamedTuple):
+    """The instruction codes (module docstring)."""
+
+    head: int
+    limit: int
+    fixed: int
+    actuator: int
+    dyad: int
+    place: int
+    point: int
+    slide: int
+    angle: int
+    task: int
+    add: int
+
+
+class _Ints(NamedTuple):
+    """The fields of ``code``, one column each."""
+
+    op: int
+    out: int
+    p: int
+    q: int
+    angle: int
+    act: int
+    act2: int
+
+
+class _Floats(NamedTuple):
+    """The fields of ``values``, one column each."""
+
+    x: int
+    z: int
+    length: int
+    length2: int
+    sign: int
+
 
 #: Instruction codes (ints; a namedtuple: a compile-time constant to numba).
-OP = _Ops(*range(len(_OPS)))
+OP = _Ops(*range(len(_Ops._fields)))
 #: Column of each field in ``code`` (int64).
-INT = _Ints(*range(len(_INTS)))
+INT = _Ints(*range(len(_Ints._fields)))
 #: Column of each field in ``values`` (float64).
-FLOAT = _Floats(*range(len(_FLOATS)))
+FLOAT = _Floats(*range(len(_Floats._fields)))
 #: Changes with any name or order above (the compiled kernel's staleness check).
-SIGNATURE = zlib.crc32(repr((_OPS, _INTS, _FLOATS)).encode())
+SIGNATURE = zlib.crc32(repr((_Ops._fields, _Ints._fields, _Floats._fields)).encode())
 
 
 def check_compiled(kernel: ModuleType) -> None:

@@ -168,7 +168,7 @@ class HydraulicState:
         k: np.ndarray,
     ) -> None:
         self._values: tuple[np.ndarray, ...] | None = (theta, theta_dot, theta_ddot, Q, Q_dot, Q_ddot, jc0, k)
-        self._table = np.empty(0)
+        self._table: np.ndarray = np.empty(0)
         self._n = 0
 
     @classmethod
@@ -660,8 +660,10 @@ class HydraulicModel:
                     return state
             except TypeError:  # arguments of types the kernel does not take (_warm)
                 pass
-        elif D.ndim > 1 and (table := self._batch("states", self._table_shape, D, D_dot, D_ddot)) is not None:
-            return HydraulicState.of_table(table, self._n)
+        elif (
+            D.ndim > 1 and (tables := self._batch("states", self._table_shape, D, D_dot, D_ddot)) is not None
+        ):
+            return HydraulicState.of_table(tables, self._n)
         D = self.validate(D)
         D_dot = _finite(D_dot, D.shape, "D_dot")
         D_ddot = None if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot")

@@ -153,8 +153,8 @@ def pack(d: Description, lower: np.ndarray, upper: np.ndarray) -> Program:
     code = np.full((1 + len(w.rows), len(INT)), -1, dtype=np.int64)
     values = np.zeros((1 + len(w.rows), len(FLOAT)))
     for row, (ints, floats) in enumerate([(head, {}), *w.rows]):
-        for field, value in ints.items():
-            code[row, getattr(INT, field)] = value
+        for field, number in ints.items():
+            code[row, getattr(INT, field)] = number
         for field, value in floats.items():
             values[row, getattr(FLOAT, field)] = value
     return Program(code, values, n, nq, m)
