@@ -10,6 +10,7 @@ import time
 from excavator_kinematics.core import inverse
 from excavator_kinematics.core import kinematics as excavator
 from manipulator_kinematics import serial_chain, zones
+from manipulator_kinematics.hydraulic import model as hydraulic
 from palletizer_kinematics import kinematics as palletizer
 from pump_boom_kinematics import kinematics as pump_boom
 from scara_kinematics import kinematics as scara
@@ -21,6 +22,7 @@ def main() -> None:
     model = excavator.Excavator.default()
     loaded = [
         serial_chain.compiled_kernel(wait=True),
+        hydraulic.compiled_kernel(wait=True),
         excavator.compiled_kernel(model, wait=True),
         inverse.compiled_kernel(model, wait=True),
         scara.compiled_kernel(scara.Scara.default(), wait=True),

@@ -1,0 +1,403 @@
+"""The hydraulic family's forward kinematics for ONE state, compiled (numba): the single-call hot
+path of :class:`manipulator_kinematics.hydraulic.model.HydraulicModel` (``state``, ``pose``,
+``jc0``, ``cylinder_rates``) for any machine file, whose vectorised numpy code stays the reference
+(a test compares the two for every shipped machine; ``MK_COMPILED=0`` keeps the numpy path).
+
+Why compiled: the numpy core runs some 300-600 small array operations per state whatever the
+batch (a microsecond each); a node at 1 kHz calls it once per message. This module runs the same
+steps as scalar loops: the machine's plan, packed once into a program
+(:mod:`manipulator_kinematics.hydraulic.program`, layout :mod:`manipulator_kinematics.hydraulic.layout`),
+is interpreted instruction by instruction on jets held in one work array: per slot its position,
+velocity, acceleration and Jacobian d/dD (rows :data:`_P`, :data:`_V`, :data:`_A`, then
+:data:`_J` + j), each a point (two components) or a scalar (the first). The formulas and their
+order of operations are those of the numpy path: dyads (eqs. 1-2, implicit differentiation of the
+loop closures, :mod:`manipulator_kinematics.hydraulic.dyads`), ``HydraulicModel._place``,
+``_slide``, ``_Body.point``, ``_joints`` and ``_task`` (eq. 3; eqs. 7-8 and 10-11 through the jets).
+
+Each function returns False, writing nothing valid, for a state outside the stroke box (faces
+included), not finite, of the wrong length, or where a dyad does not close: the caller then takes
+the numpy path, which raises the error naming the actuator (or gives NaN where it always did).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from manipulator_kinematics.hydraulic.layout import FLOAT, INT, OP, SIGNATURE
+
+# Rows of one slot of the work array: value, rate, acceleration, (cos, sin) of an angle (each
+# body's, made once where it is placed: its points and slides turn by it), then d/dD_j at _J + j.
+_P, _V, _A, _T, _J = 0, 1, 2, 3, 4
+# How much a call computes: positions; with the Jacobians; with rates and accelerations too.
+POSITION, JACOBIAN, MOTION = 0, 1, 2
+
+
+@njit(cache=True)
+def layout_signature() -> int:
+    """The layout this module was compiled with (:func:`layout.check_compiled`)."""
+    return SIGNATURE
+
+
+@njit(cache=True, error_model="numpy")
+def _inside(code: np.ndarray, values: np.ndarray, D: np.ndarray) -> bool:
+    """D of m values, each within its stroke box (the ``limit`` rows; NaN fails)."""
+    if D.shape[0] != code[0, INT.act2]:
+        return False
+    for i in range(D.shape[0]):  # noqa: SIM110 (numba compiles no generator expressions)
+        if not values[1 + i, FLOAT.x] <= D[i] <= values[1 + i, FLOAT.z]:
+            return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _finite(x: np.ndarray, m: int) -> bool:
+    """x of m finite values."""
+    if x.shape[0] != m:
+        return False
+    for i in range(m):  # noqa: SIM110
+        if not math.isfinite(x[i]):
+            return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _fixed(w: np.ndarray, out: int, x: float, z: float) -> None:
+    """A constant: value (x, z), every derivative zero; as an angle (the ground's), zero."""
+    w[out] = 0.0
+    w[out, _P, 0], w[out, _P, 1] = x, z
+    w[out, _T, 0] = 1.0
+
+
+@njit(cache=True, error_model="numpy")
+def _actuator(
+    w: np.ndarray,
+    out: int,
+    act: int,
+    offset: float,
+    D: np.ndarray,
+    Dd: np.ndarray,
+    Ddd: np.ndarray,
+    order: int,
+) -> None:
+    """The scalar jet of D[act] + offset (``HydraulicModel._solve``'s ``actuator``)."""
+    w[out] = 0.0
+    w[out, _P, 0] = D[act] + offset
+    if order >= JACOBIAN:
+        w[out, _J + act, 0] = 1.0
+    if order >= MOTION:
+        w[out, _V, 0], w[out, _A, 0] = Dd[act], Ddd[act]
+
+
+@njit(cache=True, error_model="numpy")
+def _dyad(
+    w: np.ndarray,
+    out: int,
+    a: int,
+    b: int,
+    act_a: int,
+    act_b: int,
+    fixed_a: float,
+    fixed_b: float,
+    sign: float,
+    D: np.ndarray,
+    Dd: np.ndarray,
+    Ddd: np.ndarray,
+    order: int,
+) -> bool:
+    """X = circle(A, r_a) with circle(B, r_b) on the side ``sign`` (dyads.intersect), its Jacobian
+    and rate (dyads.rates) and acceleration (dyads.second_rates); False where it does not close."""
+    ax, az, bx, bz = w[a, _P, 0], w[a, _P, 1], w[b, _P, 0], w[b, _P, 1]
+    ra = D[act_a] if act_a >= 0 else fixed_a
+    rb = D[act_b] if act_b >= 0 else fixed_b
+    dx, dz = bx - ax, bz - az
+    dist2 = dx * dx + dz * dz
+    along = (ra * ra - rb * rb + dist2) / (2.0 * dist2)
+    h2 = ra * ra / dist2 - along * along
+    if not h2 > 0.0:
+        return False
+    height = sign * math.sqrt(h2)
+    x, z = ax + along * dx + height * -dz, az + along * dz + height * dx
+    w[out] = 0.0
+    w[out, _P, 0], w[out, _P, 1] = x, z
+    if order < JACOBIAN:
+        return True
+    u0, u1, v0, v1 = x - ax, z - az, x - bx, z - bz
+    det = u0 * v1 - u1 * v0
+    for j in range(D.shape[0]):
+        rhs_a = u0 * w[a, _J + j, 0] + u1 * w[a, _J + j, 1] + ra * (1.0 if j == act_a else 0.0)
+        rhs_b = v0 * w[b, _J + j, 0] + v1 * w[b, _J + j, 1] + rb * (1.0 if j == act_b else 0.0)
+        w[out, _J + j, 0] = (v1 * rhs_a - u1 * rhs_b) / det
+        w[out, _J + j, 1] = (u0 * rhs_b - v0 * rhs_a) / det
+    if order < MOTION:
+        return True
+    ra_v, ra_a = (Dd[act_a], Ddd[act_a]) if act_a >= 0 else (0.0, 0.0)
+    rb_v, rb_a = (Dd[act_b], Ddd[act_b]) if act_b >= 0 else (0.0, 0.0)
+    rhs_a = u0 * w[a, _V, 0] + u1 * w[a, _V, 1] + ra * ra_v
+    rhs_b = v0 * w[b, _V, 0] + v1 * w[b, _V, 1] + rb * rb_v
+    xv, zv = (v1 * rhs_a - u1 * rhs_b) / det, (u0 * rhs_b - v0 * rhs_a) / det
+    w[out, _V, 0], w[out, _V, 1] = xv, zv
+    e0, e1, f0, f1 = xv - w[a, _V, 0], zv - w[a, _V, 1], xv - w[b, _V, 0], zv - w[b, _V, 1]
+    rhs_a = u0 * w[a, _A, 0] + u1 * w[a, _A, 1] + ra_v * ra_v + ra * ra_a - (e0 * e0 + e1 * e1)
+    rhs_b = v0 * w[b, _A, 0] + v1 * w[b, _A, 1] + rb_v * rb_v + rb * rb_a - (f0 * f0 + f1 * f1)
+    w[out, _A, 0], w[out, _A, 1] = (v1 * rhs_a - u1 * rhs_b) / det, (u0 * rhs_b - v0 * rhs_a) / det
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _place(
+    w: np.ndarray,
+    out: int,
+    angle: int,
+    one: int,
+    two: int,
+    lx: float,
+    lz: float,
+    phase: float,
+    m: int,
+    order: int,
+) -> None:
+    """The body through two known pins (``HydraulicModel._place``): its angle jet into ``angle``,
+    its origin's into ``out``."""
+    e0, e1 = w[two, _P, 0] - w[one, _P, 0], w[two, _P, 1] - w[one, _P, 1]
+    n2 = e0 * e0 + e1 * e1
+    phi = math.atan2(e1, e0) - phase
+    c, s = math.cos(phi), math.sin(phi)
+    w0, w1 = c * lx - s * lz, s * lx + c * lz
+    w[angle] = 0.0
+    w[out] = 0.0
+    w[angle, _P, 0] = phi
+    w[angle, _T, 0], w[angle, _T, 1] = c, s
+    w[out, _P, 0], w[out, _P, 1] = w[one, _P, 0] - w0, w[one, _P, 1] - w1
+    if order < JACOBIAN:
+        return
+    for j in range(m):
+        g = (e0 * (w[two, _J + j, 1] - w[one, _J + j, 1]) - e1 * (w[two, _J + j, 0] - w[one, _J + j, 0])) / n2
+        w[angle, _J + j, 0] = g
+        w[out, _J + j, 0] = w[one, _J + j, 0] - g * -w1
+        w[out, _J + j, 1] = w[one, _J + j, 1] - g * w0
+    if order < MOTION:
+        return
+    v0, v1 = w[two, _V, 0] - w[one, _V, 0], w[two, _V, 1] - w[one, _V, 1]
+    a0, a1 = w[two, _A, 0] - w[one, _A, 0], w[two, _A, 1] - w[one, _A, 1]
+    cross_v = e0 * v1 - e1 * v0
+    fv = cross_v / n2
+    fa = (e0 * a1 - e1 * a0) / n2 - 2.0 * (e0 * v0 + e1 * v1) * cross_v / (n2 * n2)
+    w[angle, _V, 0], w[angle, _A, 0] = fv, fa
+    w[out, _V, 0], w[out, _V, 1] = w[one, _V, 0] - fv * -w1, w[one, _V, 1] - fv * w0
+    w[out, _A, 0] = w[one, _A, 0] - fa * -w1 + fv * fv * w0
+    w[out, _A, 1] = w[one, _A, 1] - fa * w0 + fv * fv * w1
+
+
+@njit(cache=True, error_model="numpy")
+def _point(w: np.ndarray, out: int, o: int, f: int, lx: float, lz: float, m: int, order: int) -> None:
+    """The jet of the point (lx, lz) of the body with origin ``o`` and angle ``f`` (``_Body.point``)."""
+    c, s = w[f, _T, 0], w[f, _T, 1]
+    w0, w1 = c * lx - s * lz, s * lx + c * lz
+    w[out] = 0.0
+    w[out, _P, 0], w[out, _P, 1] = w[o, _P, 0] + w0, w[o, _P, 1] + w1
+    if order < JACOBIAN:
+        return
+    for j in range(m):
+        w[out, _J + j, 0] = w[o, _J + j, 0] + w[f, _J + j, 0] * -w1
+        w[out, _J + j, 1] = w[o, _J + j, 1] + w[f, _J + j, 0] * w0
+    if order < MOTION:
+        return
+    fv, fa = w[f, _V, 0], w[f, _A, 0]
+    w[out, _V, 0], w[out, _V, 1] = w[o, _V, 0] + fv * -w1, w[o, _V, 1] + fv * w0
+    w[out, _A, 0] = w[o, _A, 0] + fa * -w1 - fv * fv * w0
+    w[out, _A, 1] = w[o, _A, 1] + fa * w0 - fv * fv * w1
+
+
+@njit(cache=True, error_model="numpy")
+def _slide(
+    w: np.ndarray,
+    out: int,
+    o: int,
+    f: int,
+    act: int,
+    px: float,
+    pz: float,
+    offset: float,
+    D: np.ndarray,
+    Dd: np.ndarray,
+    Ddd: np.ndarray,
+    order: int,
+) -> None:
+    """The prismatic child's origin: O_p + R(phi_p) (axis point + (s, 0)), s = D[act] + offset
+    (``HydraulicModel._slide``)."""
+    c, s = w[f, _T, 0], w[f, _T, 1]
+    lx = px + (D[act] + offset)
+    w0, w1 = c * lx - s * pz, s * lx + c * pz
+    w[out] = 0.0
+    w[out, _P, 0], w[out, _P, 1] = w[o, _P, 0] + w0, w[o, _P, 1] + w1
+    if order < JACOBIAN:
+        return
+    for j in range(D.shape[0]):
+        sj = 1.0 if j == act else 0.0
+        w[out, _J + j, 0] = w[o, _J + j, 0] + w[f, _J + j, 0] * -w1 + sj * c
+        w[out, _J + j, 1] = w[o, _J + j, 1] + w[f, _J + j, 0] * w0 + sj * s
+    if order < MOTION:
+        return
+    fv, fa, sv, sa = w[f, _V, 0], w[f, _A, 0], Dd[act], Ddd[act]
+    w[out, _V, 0] = w[o, _V, 0] + fv * -w1 + sv * c
+    w[out, _V, 1] = w[o, _V, 1] + fv * w0 + sv * s
+    w[out, _A, 0] = w[o, _A, 0] + fa * -w1 - fv * fv * w0 + 2.0 * fv * sv * -s + sa * c
+    w[out, _A, 1] = w[o, _A, 1] + fa * w0 - fv * fv * w1 + 2.0 * fv * sv * c + sa * s
+
+
+@njit(cache=True, error_model="numpy")
+def _angle(w: np.ndarray, out: int, child: int, parent: int) -> None:
+    """theta = wrap(phi_child - phi_parent) to (-pi, pi], its derivatives the plain differences."""
+    for row in range(w.shape[1]):  # loops, not slices: numba makes a slice expression a new array
+        w[out, row, 0], w[out, row, 1] = w[child, row, 0] - w[parent, row, 0], 0.0
+    turned = math.pi - w[out, _P, 0]
+    if not 0.0 <= turned < 2.0 * math.pi:  # inside, the remainder is itself (and fmod costs)
+        turned %= 2.0 * math.pi
+    w[out, _P, 0] = math.pi - turned
+
+
+@njit(cache=True, error_model="numpy")
+def _task(
+    w: np.ndarray, out: int, tool: int, act: int, D: np.ndarray, Dd: np.ndarray, Ddd: np.ndarray, order: int
+) -> None:
+    """x, y, z of Q (eq. 3) into slots out..out + 2: the boom-plane tool point (r, z) turned by the
+    swing D[act] (``HydraulicModel._task``); no swing (act < 0): x = r, y = 0."""
+    for k in range(3):
+        w[out + k] = 0.0
+    for row in range(w.shape[1]):
+        w[out + 2, row, 0] = w[tool, row, 1]
+    if act < 0:
+        for row in range(w.shape[1]):
+            w[out, row, 0] = w[tool, row, 0]
+        return
+    r = w[tool, _P, 0]
+    c, s = math.cos(D[act]), math.sin(D[act])
+    w[out, _P, 0], w[out + 1, _P, 0] = r * c, r * s
+    if order >= JACOBIAN:
+        for j in range(D.shape[0]):
+            sj = 1.0 if j == act else 0.0
+            w[out, _J + j, 0] = w[tool, _J + j, 0] * c - r * s * sj
+            w[out + 1, _J + j, 0] = w[tool, _J + j, 0] * s + r * c * sj
+    if order >= MOTION:
+        rv, ra, sv, sa = w[tool, _V, 0], w[tool, _A, 0], Dd[act], Ddd[act]
+        w[out, _V, 0] = rv * c - r * s * sv
+        w[out + 1, _V, 0] = rv * s + r * c * sv
+        w[out, _A, 0] = ra * c - 2.0 * rv * s * sv - r * (c * sv * sv + s * sa)
+        w[out + 1, _A, 0] = ra * s + 2.0 * rv * c * sv + r * (c * sa - s * sv * sv)
+
+
+@njit(cache=True, error_model="numpy")
+def _run(
+    code: np.ndarray, values: np.ndarray, D: np.ndarray, Dd: np.ndarray, Ddd: np.ndarray, order: int
+) -> tuple[bool, np.ndarray]:
+    """The program on one state: (every dyad closed, the work array)."""
+    m = D.shape[0]
+    w = np.empty((code[0, INT.out], _J + m, 2))
+    for row in range(1 + m, code.shape[0]):
+        op, out = code[row, INT.op], code[row, INT.out]
+        p, q, f, act = code[row, INT.p], code[row, INT.q], code[row, INT.angle], code[row, INT.act]
+        x, z, length = values[row, FLOAT.x], values[row, FLOAT.z], values[row, FLOAT.length]
+        if op == OP.dyad:
+            act2, length2, sign = code[row, INT.act2], values[row, FLOAT.length2], values[row, FLOAT.sign]
+            if not _dyad(w, out, p, q, act, act2, length, length2, sign, D, Dd, Ddd, order):
+                return False, w
+        elif op == OP.point:
+            _point(w, out, p, f, x, z, m, order)
+        elif op == OP.place:
+            _place(w, out, f, p, q, x, z, length, m, order)
+        elif op == OP.fixed:
+            _fixed(w, out, x, z)
+        elif op == OP.slide:
+            _slide(w, out, p, f, act, x, z, length, D, Dd, Ddd, order)
+        elif op == OP.actuator:
+            _actuator(w, out, act, length, D, Dd, Ddd, order)
+        elif op == OP.angle:
+            _angle(w, out, p, q)
+        elif op == OP.task:
+            _task(w, out, p, act, D, Dd, Ddd, order)
+        elif op == OP.add:
+            for k in range(w.shape[1]):
+                w[out, k, 0] += w[p, k, 0]
+    return True, w
+
+
+@njit(cache=True, error_model="numpy")
+def state(
+    code: np.ndarray,
+    values: np.ndarray,
+    D: np.ndarray,
+    D_dot: np.ndarray,
+    D_ddot: np.ndarray,
+    out: np.ndarray,
+) -> bool:
+    """theta then Q, one row each: value, rate, acceleration, d/dD (eqs. 3, 7-8, 10-11), into
+    ``out`` (n + nq, 3 + m) (``HydraulicState``'s table)."""
+    m = D.shape[0]
+    if not (_inside(code, values, D) and _finite(D_dot, m) and _finite(D_ddot, m)):
+        return False
+    if out.shape[0] != code[0, INT.act] + code[0, INT.q] or out.shape[1] != 3 + m:
+        return False
+    ok, w = _run(code, values, D, D_dot, D_ddot, MOTION)
+    if not ok:
+        return False
+    first = code[0, INT.p]
+    for i in range(out.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2] = w[first + i, _P, 0], w[first + i, _V, 0], w[first + i, _A, 0]
+        for j in range(m):
+            out[i, 3 + j] = w[first + i, _J + j, 0]
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def pose(code: np.ndarray, values: np.ndarray, D: np.ndarray, out: np.ndarray) -> bool:
+    """Q (eq. 3) into ``out`` (nq,)."""
+    if not _inside(code, values, D) or out.shape[0] != code[0, INT.q]:
+        return False
+    ok, w = _run(code, values, D, D, D, POSITION)
+    first = code[0, INT.p] + code[0, INT.act]
+    for i in range(out.shape[0]):
+        out[i] = w[first + i, _P, 0]
+    return ok
+
+
+@njit(cache=True, error_model="numpy")
+def jc0(code: np.ndarray, values: np.ndarray, D: np.ndarray, out: np.ndarray) -> bool:
+    """JC0 = dQ/dD (eq. 8) into ``out`` (nq, m), rows in Q's order."""
+    m = D.shape[0]
+    if not _inside(code, values, D) or out.shape[0] != code[0, INT.q] or out.shape[1] != m:
+        return False
+    ok, w = _run(code, values, D, D, D, JACOBIAN)
+    first = code[0, INT.p] + code[0, INT.act]
+    for i in range(out.shape[0]):
+        for j in range(m):
+            out[i, j] = w[first + i, _J + j, 0]
+    return ok
+
+
+@njit(cache=True, error_model="numpy")
+def states(
+    code: np.ndarray,
+    values: np.ndarray,
+    D: np.ndarray,
+    D_dot: np.ndarray,
+    D_ddot: np.ndarray,
+    out: np.ndarray,
+) -> bool:
+    """:func:`state` of every row of D, D_dot, D_ddot (N, m) into ``out`` (N, n + nq, 3 + m); False
+    as soon as one state is refused (the caller's numpy path then says why)."""
+    i = 0
+    while i < D.shape[0] and state(code, values, D[i], D_dot[i], D_ddot[i], out[i]):
+        i += 1
+    return i == D.shape[0]
+
+
+@njit(cache=True, error_model="numpy")
+def poses(code: np.ndarray, values: np.ndarray, D: np.ndarray, out: np.ndarray) -> bool:
+    """:func:`pose` of every row of D (N, m) into ``out`` (N, nq); False as soon as one is refused."""
+    i = 0
+    while i < D.shape[0] and pose(code, values, D[i], out[i]):
+        i += 1
+    return i == D.shape[0]
