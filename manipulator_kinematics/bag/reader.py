@@ -625,6 +625,10 @@ class BagStream:
         if self._whole is not None:
             yield from self._cut(self._whole, step, pad)
             return
+        if step is None:  # read in batches, not message by message into one window
+            self._close()
+            yield BagReader(self.path).window(-(2**63), 2**63 - 1, None, None)
+            return
         messages = heapq.merge(*(s.messages() for s in self._sources), key=itemgetter(1))
         try:
             yield from self._stream(messages, step, pad)
@@ -649,9 +653,9 @@ class BagStream:
             start, end = first + k * step, first + (k + 1) * step
             yield whole.window(start - pad, end + pad, start if k else None, end if k < count - 1 else None)
 
-    def _stream(
-        self, messages: Iterator[tuple[int, int, bytes]], step: int | None, pad: int
-    ) -> Iterator[BagWindow]:
+    def _stream(self, messages: Iterator[tuple[int, int, bytes]], step: int, pad: int) -> Iterator[BagWindow]:
+        """Windows of ``messages`` (in record-time order): a deque holds the messages from
+        ``pad`` before the current window to ``pad`` after it."""
         pending = next(messages, None)
         if pending is None:
             yield self._window([], None, None)
@@ -660,15 +664,13 @@ class BagStream:
         buffer: deque[tuple[int, int, bytes]] = deque()
         k = 0
         while True:
-            start = first + k * step if step else None
-            end = start + step if step else None
-            while pending is not None and (end is None or pending[1] < end + pad):
+            start, end = first + k * step, first + (k + 1) * step
+            while pending is not None and pending[1] < end + pad:
                 buffer.append(pending)
                 pending = next(messages, None)
-            if start is not None:
-                while buffer and buffer[0][1] < start - pad:
-                    buffer.popleft()
-            last = pending is None and (end is None or not buffer or buffer[-1][1] < end)
+            while buffer and buffer[0][1] < start - pad:
+                buffer.popleft()
+            last = pending is None and (not buffer or buffer[-1][1] < end)
             yield self._window(list(buffer), start if k else None, None if last else end)
             if last:
                 return
