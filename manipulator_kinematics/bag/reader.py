@@ -629,7 +629,8 @@ class BagStream:
             self._close()
             yield BagReader(self.path).window(-(2**63), 2**63 - 1, None, None)
             return
-        messages = heapq.merge(*(s.messages() for s in self._sources), key=itemgetter(1))
+        streams = [source.messages() for source in self._sources]
+        messages = streams[0] if len(streams) == 1 else heapq.merge(*streams, key=itemgetter(1))
         try:
             yield from self._stream(messages, step, pad)
         except _Corrupt as error:
