@@ -12,6 +12,10 @@ it writes the as-built surface, the lowest elevation the edge reached per cell o
 ``asbuilt.xml`` (LandXML 1.2 TIN), ``asbuilt.csv`` (x, y, z per cell) and ``asbuilt.png`` (the
 elevation and, where a design surface is set, the lowest height above it reached: cut/fill).
 
+A bag is read in windows of ``--chunk-seconds`` of record time (default 60 s), the table written a
+row group a window and the as-built grid merged window by window, so a bag of any length takes the
+memory of one window; the result is the whole bag's (:func:`process_bag`).
+
 ``--fleet`` evaluates every bag under a folder (or matching a glob) in parallel with Dask: local
 processes by default (``--workers``), a running Dask cluster with ``--scheduler``. It writes the
 per-bag outputs, one merged table ``fleet.parquet`` (columns ``bag``, ``namespace`` and
@@ -51,7 +55,7 @@ from manipulator_kinematics.bag.types import BagError
 NAME = "mk_asbuilt"
 EDGE = ("left_site_x", "left_site_y", "left_site_z", "right_site_x", "right_site_y", "right_site_z")
 GRADE = ("grade_left", "grade_right")
-#: A bag is read in windows of this much record time (s): about 60 MB of memory at 100 Hz.
+#: A bag is read in windows of this much record time (s); docs/asbuilt.md has the memory it takes.
 CHUNK_SECONDS = 60.0
 #: Messages this far (s) around a window are read with it: what a row depends on (process_bag).
 CHUNK_MARGIN = 2.0

@@ -1,9 +1,9 @@
 """rosbag2 bags (mcap or sqlite3) read: messages indexed on open, decoded topic by topic.
 
 A finished mcap file (its summary and chunk indexes in place) is read by rosbags' MCAP reader
-(``rosbags.rosbag2.Reader``: about 4 times faster than the ``mcap`` library's record parsing),
-its message counts checked against the file's statistics. Any other mcap file, or one that
-reader refuses, is read front to back by the ``mcap`` library's StreamReader, so a file the
+(``rosbags.rosbag2.Reader``: 2 to 4 times faster than the ``mcap`` library's StreamReader,
+benchmarks/bench_asbuilt_fleet.py), its message counts checked against the file's statistics.
+Any other mcap file, or one that reader refuses, is read front to back by the ``mcap`` library's StreamReader, so a file the
 recorder did not finish (no summary, no footer) reads up to its last complete record: that is an
 error unless ``recover=True``. sqlite3 files are read with the standard library. Messages are not
 deserialised one by one (rosbags takes about 35 us per message): the messages of a topic are
