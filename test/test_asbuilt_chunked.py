@@ -13,7 +13,7 @@ import pytest
 from excavator_kinematics.kinematics import Excavator
 from excavator_kinematics.synthetic import excavator_bag
 from manipulator_kinematics.asbuilt import AsBuilt, LowestElevation, lowest_elevation
-from manipulator_kinematics.bag.asbuilt import process_bag
+from manipulator_kinematics.bag.asbuilt import merge_tables, process_bag
 from manipulator_kinematics.bag.reader import BagReader, BagStream
 from manipulator_kinematics.bag.synthetic import write_bag
 
@@ -118,6 +118,10 @@ def test_a_bag_read_in_windows_gives_the_whole_bags_table_and_surface(
             np.testing.assert_array_equal(y, x, err_msg=name)
     assert b["published"].to_numpy().all()  # the pose output, recorded after its input, was found
     assert whole.tables[0]["days"] == parts.tables[0]["days"]
+    # The fleet's merged table, written row group by row group: the same rows with the key columns.
+    assert merge_tables([parts], tmp_path / "fleet.parquet") == SAMPLES
+    merged = pq.read_table(tmp_path / "fleet.parquet")
+    assert set(merged["bag"].to_pylist()) == {str(bag)} and merged.select(a.column_names).equals(b)
     assert_same_grid(parts.grids["excavator"], whole.grids["excavator"])
 
 

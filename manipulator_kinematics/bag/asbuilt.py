@@ -375,7 +375,7 @@ def run_fleet(
 
 def merge_tables(results: Sequence[BagResult], path: Path) -> int:
     """One Parquet file of every table, with ``bag``, ``namespace`` and ``machine`` columns;
-    written table by table (one in memory at a time). Returns the rows."""
+    written row group by row group (one window of one bag in memory at a time). Returns the rows."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -388,20 +388,26 @@ def merge_tables(results: Sequence[BagResult], path: Path) -> int:
     rows = 0
     with pq.ParquetWriter(path, schema) as writer:
         for bag, entry in entries:
-            table = pq.read_table(entry["file"])
-            n = table.num_rows
-            columns = {
-                "bag": pa.array([bag] * n, pa.string()),
-                "namespace": pa.array([entry["namespace"]] * n, pa.string()),
-                "machine": pa.array([entry["machine"]] * n, pa.string()),
-            }
-            for name in schema.names[3:]:
-                columns[name] = (
-                    table[name] if name in table.column_names else pa.nulls(n, schema.field(name).type)
-                )
-            writer.write_table(pa.table(columns, schema=schema))
-            rows += n
+            source = pq.ParquetFile(entry["file"])
+            for group in range(source.num_row_groups):
+                rows += _merge_group(writer, schema, source.read_row_group(group), bag, entry)
     return rows
+
+
+def _merge_group(writer: Any, schema: Any, table: Any, bag: str, entry: dict[str, Any]) -> int:
+    """``table`` (a row group of one bag's table) written with the fleet's key columns."""
+    import pyarrow as pa
+
+    n = table.num_rows
+    columns = {
+        "bag": pa.array([bag] * n, pa.string()),
+        "namespace": pa.array([entry["namespace"]] * n, pa.string()),
+        "machine": pa.array([entry["machine"]] * n, pa.string()),
+    }
+    for name in schema.names[3:]:
+        columns[name] = table[name] if name in table.column_names else pa.nulls(n, schema.field(name).type)
+    writer.write_table(pa.table(columns, schema=schema))
+    return n
 
 
 def fleet_report(results: Sequence[BagResult]) -> dict[str, Any]:
