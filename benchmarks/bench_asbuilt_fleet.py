@@ -11,14 +11,17 @@ and reused while the size matches). First times the ways to read one bag's messa
 ``Reader.messages()`` (``BagReader``'s and ``BagStream``'s path for finished files). Then per
 round: every bag through the single-bag step (``process_bag``, in this process, one after
 another), and ``run_fleet`` (Dask's local process scheduler) with each worker count. Prints wall
-seconds, seconds per bag and the speed-up over one worker; the issue's benchmark is the default
-(20 bags of 10 min at 100 Hz).
+seconds, seconds per bag, the speed-up over one worker and the CPU seconds per bag (user + system
+of this process and of the worker processes, which Dask's pool has ended and the OS has reaped by
+then): on a machine shared with other jobs the wall time says how many cores were free, the CPU
+time what each bag cost. The issue's benchmark is the default (20 bags of 10 min at 100 Hz).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import shutil
 import tempfile
 import time
@@ -78,6 +81,12 @@ def readers(bag: Path) -> None:
         print(f"| {name} | {time.perf_counter() - t:.1f} | {count} |", flush=True)
 
 
+def cpu_seconds() -> float:
+    """User + system CPU seconds of this process and its ended children so far."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--bags", type=int, default=20)
@@ -102,33 +111,33 @@ def main() -> int:
         print(
             "\nDask local process scheduler (dask.compute(scheduler='processes', num_workers=N)); wall time"
         )
-        print("| round | what | wall s | s per bag | speed-up vs 1 worker |")
-        print("| ---: | --- | ---: | ---: | ---: |")
+        print("| round | what | wall s | s per bag | speed-up vs 1 worker | CPU s per bag | load |")
+        print("| ---: | --- | ---: | ---: | ---: | ---: | ---: |")
         for r in range(1, args.rounds + 1):
             out = data / "out"
             shutil.rmtree(out, ignore_errors=True)
-            t = time.perf_counter()
+            t, cpu = time.perf_counter(), cpu_seconds()
             for path in paths:
                 assert process_bag(path, out, [], 0.25).error is None
-            single = time.perf_counter() - t
-            per_bag = single / len(paths)
+            single, cpu = time.perf_counter() - t, cpu_seconds() - cpu
             print(
-                f"| {r} | single-bag step, one after another | {single:.1f} | {per_bag:.2f} | - |", flush=True
+                f"| {r} | single-bag step, one after another | {single:.1f} | {single / len(paths):.2f} | - "
+                f"| {cpu / len(paths):.2f} | {os.getloadavg()[0]:.1f} |",
+                flush=True,
             )
             base = None
             for n in args.workers:
                 shutil.rmtree(out, ignore_errors=True)
-                t = time.perf_counter()
+                t, cpu = time.perf_counter(), cpu_seconds()
                 results = run_fleet(paths, out, [], 0.25, workers=n)
-                wall = time.perf_counter() - t
+                wall, cpu = time.perf_counter() - t, cpu_seconds() - cpu
                 assert not any(x.error for x in results)
                 base = wall if base is None else base
                 print(
                     f"| {r} | fleet, {n} worker{'s' if n > 1 else ''} | {wall:.1f} | {wall / len(paths):.2f} "
-                    f"| {base / wall:.2f} |",
+                    f"| {base / wall:.2f} | {cpu / len(paths):.2f} | {os.getloadavg()[0]:.1f} |",
                     flush=True,
                 )
-            print(f"(load after round {r}: {os.getloadavg()[0]:.1f})", flush=True)
     return 0
 
 
