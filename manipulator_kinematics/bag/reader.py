@@ -3,12 +3,13 @@
 A finished mcap file (its summary and chunk indexes in place) is read by rosbags' MCAP reader
 (``rosbags.rosbag2.Reader``: 2 to 4 times faster than the ``mcap`` library's StreamReader,
 benchmarks/bench_asbuilt_fleet.py), its message counts checked against the file's statistics.
-Any other mcap file, or one that reader refuses, is read front to back by the ``mcap`` library's StreamReader, so a file the
-recorder did not finish (no summary, no footer) reads up to its last complete record: that is an
-error unless ``recover=True``. sqlite3 files are read with the standard library. Messages are not
-deserialised one by one (rosbags takes about 35 us per message): the messages of a topic are
-decoded together by :mod:`manipulator_kinematics.codec.cdr`. Types come from the bag's own
-definitions, else from ROS 2 Jazzy.
+Any other mcap file, or one that reader refuses, is read front to back by the ``mcap`` library's
+StreamReader, so a file the recorder did not finish (no summary, no footer) reads up to its last
+complete record: that is an error unless ``recover=True``. sqlite3 files are read with the
+standard library. Messages are not deserialised one by one (rosbags takes about 35 us per
+message): the messages of a topic are decoded together by
+:mod:`manipulator_kinematics.codec.cdr`. Types come from the bag's own definitions, else from
+ROS 2 Jazzy.
 
 :class:`BagReader` holds a whole bag; :class:`BagStream` hands one out in windows of record time
 (:meth:`BagStream.windows`), each decoded alone, for bags too long to hold at once.
@@ -225,18 +226,19 @@ _FORMATS = {MessageDefinitionFormat.MSG: "ros2msg", MessageDefinitionFormat.IDL:
 
 class _Indexed:
     """A finished mcap file read by rosbags' reader, which finds its chunks through the summary
-    and hands out the messages in record-time order, a chunk in memory at a time. Raises what
-    rosbags raises on a file without a usable summary (then :func:`_scan_mcap` reads it), and
-    :class:`_Corrupt` where the messages do not add up to the file's statistics (a damaged index
-    would otherwise leave messages out unnoticed)."""
+    and hands out the messages in record-time order, a chunk in memory at a time. Opening reads
+    the summary only (and closes the file); raises what rosbags raises on a file without a usable
+    summary (then :func:`_scan_mcap` reads it). :meth:`messages` raises :class:`_Corrupt` where
+    the messages do not add up to the file's statistics (a damaged index would otherwise leave
+    messages out unnoticed)."""
 
     def __init__(self, path: Path) -> None:
         if path.suffix != ".mcap":
             raise _Corrupt("rosbags' reader takes .mcap files by their name")
-        self.reader = RosbagsReader(path)
-        self.reader.open()
-        # Copied: rosbags empties its list on close.
-        self.connections, self.count = list(self.reader.connections), self.reader.message_count
+        self.path = path
+        with RosbagsReader(path) as reader:
+            # Copied: rosbags empties its list on close.
+            self.connections, self.count = list(reader.connections), reader.message_count
 
     def declare(self, index: _Index) -> None:
         """The file's channels and definitions into ``index``."""
@@ -253,16 +255,13 @@ class _Indexed:
     def messages(self) -> Iterator[tuple[int, int, bytes]]:
         """(channel id, record time ns, CDR bytes) in record-time order."""
         counts: Counter[int] = Counter()
-        try:
-            for connection, log_time, data in self.reader.messages():
+        with RosbagsReader(self.path) as reader:
+            for connection, log_time, data in reader.messages():
                 # rosbags reads the uint64 as int64: a time beyond int64 nanoseconds comes out negative.
                 if log_time < 0:
                     raise _Corrupt(f"a message's record time {log_time + 2**64} ns is beyond int64 ns")
                 counts[connection.id] += 1
                 yield connection.id, log_time, data
-        finally:
-            if self.reader.is_open:
-                self.reader.close()
         expected = {c.id: c.msgcount for c in self.connections if c.msgcount}
         if counts != expected or sum(counts.values()) != self.count:
             raise _Corrupt(f"{sum(counts.values())} messages read where its statistics count {self.count}")
@@ -584,7 +583,7 @@ class BagStream:
                 try:
                     self._sources = [_Indexed(file) for file in files]
                 except Exception:  # as BagReader: the careful scan judges a file rosbags refuses
-                    self._close()
+                    self._sources = []
         except OSError as error:
             raise BagError(f"{self.path}: cannot read it ({error})") from None
         if not self._sources:
@@ -600,7 +599,6 @@ class BagStream:
         for topic, ids in _topic_channels(index.connections).items():
             kinds = sorted({(index.connections[cid].msgtype, index.connections[cid].encoding) for cid in ids})
             if len(kinds) > 1:
-                self._close()
                 raise BagError(f"{self.path}: topic {topic} is recorded with several types {kinds}")
             count = sum(c.msgcount for s in self._sources for c in s.connections if c.id in ids)
             qos = next((index.connections[cid].qos for cid in ids if index.connections[cid].qos), None)
@@ -626,7 +624,6 @@ class BagStream:
             yield from self._cut(self._whole, step, pad)
             return
         if step is None:  # read in batches, not message by message into one window
-            self._close()
             yield BagReader(self.path).window(-(2**63), 2**63 - 1, None, None)
             return
         streams = [source.messages() for source in self._sources]
@@ -639,8 +636,6 @@ class BagStream:
             raise
         except Exception as error:  # whatever rosbags' reader raises on a damaged chunk
             raise BagError(f"{self.path}: corrupt: {_describe(error)}") from None
-        finally:
-            self._close()
 
     def _cut(self, whole: BagReader, step: int | None, pad: int) -> Iterator[BagWindow]:
         times = [whole.log_times(t) for t, info in whole.topics.items() if info.count]
@@ -687,12 +682,6 @@ class BagStream:
         window = BagWindow(self.path, self.storage, start, end)
         window._load(index, self._types)
         return window
-
-    def _close(self) -> None:
-        for source in self._sources:
-            if source.reader.is_open:
-                source.reader.close()
-        self._sources = []
 
 
 def _inside(bag: Path, meta: Path, name: object) -> Path:
