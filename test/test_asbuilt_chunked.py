@@ -96,6 +96,7 @@ def test_the_windows_hold_every_message_with_its_margin(long_bag: Path) -> None:
             np.testing.assert_array_equal(window.log_times(topic), times[(times >= lo) & (times < hi)])
 
 
+@pytest.mark.slow  # two runs of the step per storage, maps included: 3-11 s on the shared machine
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
 def test_a_bag_read_in_windows_gives_the_whole_bags_table_and_surface(
     long_bag: Path, tmp_path: Path, storage: str
