@@ -15,7 +15,7 @@ from excavator_kinematics.synthetic import excavator_bag
 from manipulator_kinematics.asbuilt import AsBuilt, LowestElevation, lowest_elevation
 from manipulator_kinematics.bag.asbuilt import merge_tables, process_bag
 from manipulator_kinematics.bag.reader import BagReader, BagStream
-from manipulator_kinematics.bag.synthetic import write_bag
+from manipulator_kinematics.bag.synthetic import Topic, write_bag
 
 RATE_HZ = 50.0
 SAMPLES = 1000  # 20 s: five windows of 4 s
@@ -96,21 +96,35 @@ def test_the_windows_hold_every_message_with_its_margin(long_bag: Path) -> None:
             np.testing.assert_array_equal(window.log_times(topic), times[(times >= lo) & (times < hi)])
 
 
-@pytest.mark.slow  # two runs of the step per storage, maps included: 3-11 s on the shared machine
-@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def with_a_gap(topics: dict[str, Topic], start_s: float, end_s: float) -> dict[str, Topic]:
+    """``topics`` without the messages recorded from ``start_s`` to ``end_s`` after the first."""
+    first = min(int(t.log_time[0]) for t in topics.values())
+    out = {}
+    for name, topic in topics.items():
+        keep = ~((topic.log_time >= first + start_s * 1e9) & (topic.log_time < first + end_s * 1e9))
+        out[name] = Topic(topic.msgtype, topic.log_time[keep], [r for r, k in zip(topic.raw, keep) if k])
+    return out
+
+
+@pytest.mark.slow  # two runs of the step per case, maps included: 3-11 s on the shared machine
+@pytest.mark.parametrize("case", ["mcap", "sqlite3", "a gap of 7 s"])
 def test_a_bag_read_in_windows_gives_the_whole_bags_table_and_surface(
-    long_bag: Path, tmp_path: Path, storage: str
+    long_bag: Path, tmp_path: Path, case: str
 ) -> None:
-    bag = long_bag
-    if storage == "sqlite3":  # not streamed: read whole, then cut into the same windows
+    bag, samples, groups = long_bag, SAMPLES, 5
+    if case == "sqlite3":  # not streamed: read whole, then cut into the same windows
         bag = tmp_path / "run"
         write_bag(bag, excavator_bag(Excavator.default(), SAMPLES, RATE_HZ), storage="sqlite3")
+    if case == "a gap of 7 s":  # nothing recorded from 6 to 13 s: the window of 8 to 12 s is empty
+        bag = tmp_path / "run"
+        write_bag(bag, with_a_gap(excavator_bag(Excavator.default(), SAMPLES, RATE_HZ), 6.0, 13.0))
+        samples, groups = SAMPLES - round(7 * RATE_HZ), 4
     whole = process_bag(bag, tmp_path / "whole", [], 0.25, chunk_seconds=None)
     parts = process_bag(bag, tmp_path / "parts", [], 0.25, chunk_seconds=4.0, chunk_margin=1.0)
     assert whole.error is None and parts.error is None
     a, b = (pq.read_table(r.tables[0]["file"]) for r in (whole, parts))
-    assert pq.ParquetFile(parts.tables[0]["file"]).num_row_groups == 5  # written window by window
-    assert a.num_rows == b.num_rows == SAMPLES and a.schema == b.schema
+    assert pq.ParquetFile(parts.tables[0]["file"]).num_row_groups == groups  # window by window
+    assert a.num_rows == b.num_rows == samples and a.schema == b.schema
     assert a.schema.metadata == b.schema.metadata
     for name in a.column_names:
         x, y = a[name].to_numpy(), b[name].to_numpy()
@@ -121,7 +135,7 @@ def test_a_bag_read_in_windows_gives_the_whole_bags_table_and_surface(
     assert b["published"].to_numpy().all()  # the pose output, recorded after its input, was found
     assert whole.tables[0]["days"] == parts.tables[0]["days"]
     # The fleet's merged table, written row group by row group: the same rows with the key columns.
-    assert merge_tables([parts], tmp_path / "fleet.parquet") == SAMPLES
+    assert merge_tables([parts], tmp_path / "fleet.parquet") == samples
     merged = pq.read_table(tmp_path / "fleet.parquet")
     assert set(merged["bag"].to_pylist()) == {str(bag)} and merged.select(a.column_names).equals(b)
     assert_same_grid(parts.grids["excavator"], whole.grids["excavator"])

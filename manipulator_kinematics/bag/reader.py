@@ -86,6 +86,8 @@ class TopicArrays:
         NaN where a message lacks the name or the value."""
         labels, values = self[name_path], self[path]
         out = np.full((len(self), len(names)), np.nan)
+        if not labels.size:  # no message (a window of a gap), or none names anything
+            return out
         rows = np.arange(len(self))
         for j, name in enumerate(names):
             match = labels == name
