@@ -168,14 +168,14 @@ def process_bag(
         grouped = group_topics(bag)
         recorded = recorded_settings(bag)
         topics = [topic for names in grouped.values() for topic in names.values()]
+        # As mk_evaluate: the settings recorded in the bag, --params over them.
+        settings_in = {namespace: setup.settings_in(namespace, recorded)[0] for namespace in grouped}
         for part in bag.windows(chunk_seconds, chunk_margin):
             arrays = part.arrays(topics)
             for namespace, names in sorted(grouped.items()):
                 data = {name: arrays[topic] for name, topic in names.items()}
                 prefix = "" if namespace == "/" else namespace.strip("/").replace("/", "_") + "_"
-                settings, _ = setup.settings_in(
-                    namespace, recorded
-                )  # as mk_evaluate: the bag's, --params over
+                settings = settings_in[namespace]
                 for machine in machines_in(data, setup):
                     if machine.samples is None:
                         continue
