@@ -1,7 +1,7 @@
 """rosbag2 bags (mcap or sqlite3) read: messages indexed on open, decoded topic by topic.
 
 A finished mcap file (its summary and chunk indexes in place) is read by rosbags' MCAP reader
-(``rosbags.rosbag2.Reader``: 2 to 4 times faster than the ``mcap`` library's StreamReader,
+(``rosbags.rosbag2.Reader``: 1.3 to 2.2 times faster than the ``mcap`` library's StreamReader,
 benchmarks/bench_asbuilt_fleet.py), its message counts checked against the file's statistics.
 Any other mcap file, or one that reader refuses, is read front to back by the ``mcap`` library's
 StreamReader, so a file the recorder did not finish (no summary, no footer) reads up to its last
