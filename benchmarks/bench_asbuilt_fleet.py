@@ -1,26 +1,39 @@
-"""mk_asbuilt --fleet on Dask against the single-bag step, in the same run.
+"""mk_asbuilt --fleet on Dask against the single-bag step, in the same run; and the bag readers.
 
     python benchmarks/bench_asbuilt_fleet.py [--bags 20] [--minutes 10] [--rate 100]
-        [--workers 1 2 4] [--rounds 1] [--data out/bench_fleet]
+        [--workers 1 2 4] [--rounds 2] [--data DIR]
 
-Writes ``--bags`` synthetic excavator bags (the golden-bag motion, ``--minutes`` at ``--rate`` Hz;
-kept in ``--data`` and reused while their size matches), then per round: every bag through the
-single-bag step (``process_bag``, in this process, one after another), and ``run_fleet`` (Dask's
-local process scheduler) with each worker count. Prints wall seconds, seconds per bag and the
-speed-up over one worker; the issue's benchmark is the default (20 bags of 10 min at 100 Hz).
+Writes one synthetic excavator bag (the golden-bag motion, ``--minutes`` at ``--rate`` Hz) and
+copies it to ``--bags`` folders (in a temporary folder removed at the end, or kept in ``--data``
+and reused while the size matches). First times the ways to read one bag's messages: the
+``mcap`` library's StreamReader scan (``BagReader``'s path for unfinished files), its
+``make_reader().iter_messages()`` in record-time order and in file order, and rosbags'
+``Reader.messages()`` (``BagReader``'s and ``BagStream``'s path for finished files). Then per
+round: every bag through the single-bag step (``process_bag``, in this process, one after
+another), and ``run_fleet`` (Dask's local process scheduler) with each worker count. Prints wall
+seconds, seconds per bag, the speed-up over one worker and the CPU seconds per bag (user + system
+of this process and of the worker processes, which Dask's pool has ended and the OS has reaped by
+then): on a machine shared with other jobs the wall time says how many cores were free, the CPU
+time what each bag cost. The issue's benchmark is the default (20 bags of 10 min at 100 Hz).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import shutil
+import tempfile
 import time
 from pathlib import Path
+
+from mcap.reader import make_reader
+from rosbags.rosbag2 import Reader
 
 from excavator_kinematics.core.kinematics import Excavator
 from excavator_kinematics.tools.synthetic import excavator_bag
 from manipulator_kinematics.bag.asbuilt import process_bag, run_fleet
+from manipulator_kinematics.bag.reader import _Index, _scan_mcap
 from manipulator_kinematics.bag.synthetic import write_bag
 
 
@@ -30,11 +43,48 @@ def make_bags(folder: Path, count: int, samples: int, rate: float) -> list[Path]
     if not marker.exists():
         shutil.rmtree(folder, ignore_errors=True)
         folder.mkdir(parents=True)
-        topics = excavator_bag(Excavator.default(), samples, rate)
-        for path in paths:
-            write_bag(path, topics)
+        write_bag(paths[0], excavator_bag(Excavator.default(), samples, rate))
+        for path in paths[1:]:
+            shutil.copytree(paths[0], path)
         marker.touch()
     return paths
+
+
+def readers(bag: Path) -> None:
+    """Seconds to read every message of one bag, by each way."""
+    (file,) = bag.glob("*.mcap")
+
+    def mcap(order: bool) -> int:
+        with file.open("rb") as stream:
+            return sum(1 for _ in make_reader(stream).iter_messages(log_time_order=order))
+
+    def scan() -> int:
+        index = _Index()
+        _scan_mcap(file, index)
+        return index.count
+
+    def rosbags() -> int:
+        with Reader(file) as reader:
+            return sum(1 for _ in reader.messages())
+
+    ways = {
+        "mcap StreamReader scan, CRCs checked (BagReader before; now unfinished files)": scan,
+        "mcap make_reader().iter_messages(), record-time order": lambda: mcap(True),
+        "mcap make_reader().iter_messages(), file order": lambda: mcap(False),
+        "rosbags Reader.messages(), record-time order (BagReader, BagStream)": rosbags,
+    }
+    print("| reading one bag's messages | s | messages |")
+    print("| --- | ---: | ---: |")
+    for name, way in ways.items():
+        t = time.perf_counter()
+        count = way()
+        print(f"| {name} | {time.perf_counter() - t:.1f} | {count} |", flush=True)
+
+
+def cpu_seconds() -> float:
+    """User + system CPU seconds of this process and its ended children so far."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
 def main() -> int:
@@ -43,39 +93,51 @@ def main() -> int:
     parser.add_argument("--minutes", type=float, default=10.0)
     parser.add_argument("--rate", type=float, default=100.0)
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2, 4])
-    parser.add_argument("--rounds", type=int, default=1)
-    parser.add_argument("--data", type=Path, default=Path("out/bench_fleet"))
+    parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--data", type=Path, default=None, help="keep the bags here (default: a temp folder)")
     args = parser.parse_args()
     samples = int(args.minutes * 60 * args.rate)
-    t = time.perf_counter()
-    paths = make_bags(args.data / "bags", args.bags, samples, args.rate)
-    print(
-        f"{args.bags} bags of {args.minutes:g} min at {args.rate:g} Hz ({samples} samples each), "
-        f"ready in {time.perf_counter() - t:.1f} s; {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}"
-    )
-    print("Dask local process scheduler (dask.compute(scheduler='processes', num_workers=N)); wall time")
-    print("| round | what | wall s | s per bag | speed-up vs 1 worker |")
-    print("| ---: | --- | ---: | ---: | ---: |")
-    for r in range(1, args.rounds + 1):
-        out = args.data / "out"
-        shutil.rmtree(out, ignore_errors=True)
+    with tempfile.TemporaryDirectory(prefix="bench_fleet_") as temporary:
+        data = args.data or Path(temporary)
         t = time.perf_counter()
-        for path in paths:
-            process_bag(path, out, [], 0.25)
-        single = time.perf_counter() - t
-        print(f"| {r} | single-bag step, one after another | {single:.1f} | {single / len(paths):.2f} | - |")
-        base = None
-        for n in args.workers:
+        paths = make_bags(data / "bags", args.bags, samples, args.rate)
+        print(
+            f"{args.bags} bags of {args.minutes:g} min at {args.rate:g} Hz ({samples} samples a topic, "
+            f"6 topics), ready in {time.perf_counter() - t:.1f} s; {os.cpu_count()} cores, "
+            f"load {os.getloadavg()[0]:.1f}",
+            flush=True,
+        )
+        readers(paths[0])
+        print(
+            "\nDask local process scheduler (dask.compute(scheduler='processes', num_workers=N)); wall time"
+        )
+        print("| round | what | wall s | s per bag | speed-up vs 1 worker | CPU s per bag | load |")
+        print("| ---: | --- | ---: | ---: | ---: | ---: | ---: |")
+        for r in range(1, args.rounds + 1):
+            out = data / "out"
             shutil.rmtree(out, ignore_errors=True)
-            t = time.perf_counter()
-            results = run_fleet(paths, out, [], 0.25, workers=n)
-            wall = time.perf_counter() - t
-            assert not any(x.error for x in results)
-            base = wall if base is None else base
+            t, cpu = time.perf_counter(), cpu_seconds()
+            for path in paths:
+                assert process_bag(path, out, [], 0.25).error is None
+            single, cpu = time.perf_counter() - t, cpu_seconds() - cpu
             print(
-                f"| {r} | fleet, {n} worker{'s' if n > 1 else ''} | {wall:.1f} | {wall / len(paths):.2f} "
-                f"| {base / wall:.2f} |"
+                f"| {r} | single-bag step, one after another | {single:.1f} | {single / len(paths):.2f} | - "
+                f"| {cpu / len(paths):.2f} | {os.getloadavg()[0]:.1f} |",
+                flush=True,
             )
+            base = None
+            for n in args.workers:
+                shutil.rmtree(out, ignore_errors=True)
+                t, cpu = time.perf_counter(), cpu_seconds()
+                results = run_fleet(paths, out, [], 0.25, workers=n)
+                wall, cpu = time.perf_counter() - t, cpu_seconds() - cpu
+                assert not any(x.error for x in results)
+                base = wall if base is None else base
+                print(
+                    f"| {r} | fleet, {n} worker{'s' if n > 1 else ''} | {wall:.1f} | {wall / len(paths):.2f} "
+                    f"| {base / wall:.2f} | {cpu / len(paths):.2f} | {os.getloadavg()[0]:.1f} |",
+                    flush=True,
+                )
     return 0
 
 

@@ -18,7 +18,8 @@ each sample: its two corners ``left`` and ``right`` (N, 3), in time order.
   bucket's edge moves about 1 cm a sample: little or nothing is filled in.
 * Grids are aligned to multiples of the cell size from the site origin, so grids of several runs
   (a fleet, several bags of one site) combine cell by cell: :meth:`AsBuilt.merge` keeps the lower
-  value.
+  value. A long run is mapped part by part (:class:`LowestElevation`) to the same grid: cells are
+  counted from the site origin and each piece depends on its own segment only.
 
 Cells the edge never reached are NaN. The result is checked against a brute-force reference
 (every sample's segment rasterised at a fine step) in ``test/test_asbuilt.py``.
@@ -43,7 +44,8 @@ _CHUNK = 8192
 @dataclass(frozen=True)
 class AsBuilt:
     """Lowest elevation per cell: ``z[j, i]`` over the cell ``[x0 + i c, x0 + (i+1) c) x
-    [y0 + j c, y0 + (j+1) c)``, NaN where the edge never was; ``hits`` counts the pieces."""
+    [y0 + j c, y0 + (j+1) c)``, NaN where the edge never was; ``hits`` counts the pieces (of
+    positive length) of edges in the cell."""
 
     x0: float
     y0: float
@@ -135,11 +137,12 @@ def densify(left: ArrayLike, right: ArrayLike, max_step: float) -> tuple[np.ndar
     return fill(left), fill(right)
 
 
-def _pieces(a: np.ndarray, b: np.ndarray, x0: float, y0: float, cell: float) -> tuple[np.ndarray, ...]:
-    """Segments a -> b (n, 3) cut at the grid lines: cell i, j and the lower end height of each
-    piece (flattened; pieces of zero length repeat an end and change nothing)."""
-    ga = (a[:, :2] - (x0, y0)) / cell  # grid units
-    gb = (b[:, :2] - (x0, y0)) / cell
+def _pieces(a: np.ndarray, b: np.ndarray, cell: float) -> tuple[np.ndarray, ...]:
+    """Segments a -> b (n, 3) cut at the grid lines: global cell i, j (counted from the site
+    origin) and the lower end height of each piece of positive length (flattened). Every number
+    depends on its own segment only, so a run cut into pieces gives the same cells and heights."""
+    ga = a[:, :2] / cell  # grid units from the site origin, whichever part of a run this is
+    gb = b[:, :2] / cell
     d = gb - ga
     lo, hi = np.floor(np.minimum(ga, gb)), np.floor(np.maximum(ga, gb))
     count = (hi - lo).astype(np.int64)  # grid lines crossed, per axis
@@ -152,12 +155,75 @@ def _pieces(a: np.ndarray, b: np.ndarray, x0: float, y0: float, cell: float) -> 
         valid = np.arange(k)[None, :, None] < count[:, None, :]
         t.append(np.where(valid, tc, 1.0).reshape(len(a), 2 * k))
     t = np.sort(np.clip(np.hstack(t), 0.0, 1.0), axis=1)
+    # Padding and a crossing of a grid corner give pieces of zero length: left out, so the pieces
+    # of a segment do not depend on the segments it is cut with.
+    real = t[:, 1:] > t[:, :-1]
     mid = 0.5 * (t[:, 1:] + t[:, :-1])
     cell_i = np.floor(ga[:, None, 0] + mid * d[:, None, 0]).astype(np.int64)
     cell_j = np.floor(ga[:, None, 1] + mid * d[:, None, 1]).astype(np.int64)
     z = a[:, None, 2] + t * (b[:, None, 2] - a[:, None, 2])
     z_low = np.minimum(z[:, 1:], z[:, :-1])
-    return cell_i.ravel(), cell_j.ravel(), z_low.ravel()
+    return cell_i[real], cell_j[real], z_low[real]
+
+
+def _rasterise(left: np.ndarray, right: np.ndarray, cell: float) -> AsBuilt:
+    """The grid of the edges ``left[k] -> right[k]`` as they are (no densification)."""
+    if not len(left):
+        return AsBuilt(0.0, 0.0, cell, np.full((0, 0), np.nan), np.zeros((0, 0), np.int64))
+    xy = np.vstack([left[:, :2], right[:, :2]])
+    i0, j0 = np.floor(xy.min(axis=0) / cell).astype(np.int64).tolist()
+    nx, ny = (np.floor(xy.max(axis=0) / cell).astype(np.int64) - (i0, j0) + 1).tolist()
+    flat = np.full(ny * nx, np.inf)
+    hits = np.zeros(ny * nx, np.int64)
+    for start in range(0, len(left), _CHUNK):
+        i, j, z = _pieces(left[start : start + _CHUNK], right[start : start + _CHUNK], cell)
+        # A piece ending exactly on the far grid line of the last cell rounds into it.
+        index = np.clip(j - j0, 0, ny - 1) * nx + np.clip(i - i0, 0, nx - 1)
+        np.minimum.at(flat, index, z)
+        hits += np.bincount(index, minlength=ny * nx)
+    z = np.where(hits > 0, flat, np.nan).reshape(ny, nx)
+    return AsBuilt(i0 * cell, j0 * cell, cell, z, hits.reshape(ny, nx))
+
+
+class LowestElevation:
+    """:func:`lowest_elevation` of a run given in parts, in time order (:meth:`add`), for a run
+    too long to hold at once: :meth:`result` is the grid of the whole run. The last sample of a
+    part is kept, so the sweep from it to the first sample of the next part (densified as any
+    other) is not lost; each edge is rasterised once, the parts' grids merged by
+    :meth:`AsBuilt.merge` (the lowest value per cell, the hits added)."""
+
+    def __init__(self, cell: float, max_step: float | None = None) -> None:
+        if not (math.isfinite(cell) and cell > 0.0):
+            raise ValueError(f"cell size must be a positive number of metres, got {cell}")
+        step = min(0.5 * cell, 0.01) if max_step is None else max_step
+        if not (math.isfinite(step) and step > 0.0):
+            raise ValueError(f"max_step must be a positive number of metres, got {max_step}")
+        self.cell, self.max_step = cell, step
+        self._last: tuple[np.ndarray, np.ndarray] | None = None
+        self._grid: AsBuilt | None = None
+
+    def add(self, left: ArrayLike, right: ArrayLike) -> None:
+        """The next samples of the run: corners (n, 3) in the site frame, in time order."""
+        left, right = np.asarray(left, float).reshape(-1, 3), np.asarray(right, float).reshape(-1, 3)
+        keep = np.all(np.isfinite(left), axis=1) & np.all(np.isfinite(right), axis=1)
+        left, right = left[keep], right[keep]
+        if not len(left):
+            return
+        carried = self._last is not None
+        if carried:
+            left, right = np.vstack([self._last[0], left]), np.vstack([self._last[1], right])
+        self._last = (left[-1:], right[-1:])
+        edges_left, edges_right = densify(left, right, self.max_step)
+        if carried:  # the carried sample's own edge is in the grid already
+            edges_left, edges_right = edges_left[1:], edges_right[1:]
+        grid = _rasterise(edges_left, edges_right, self.cell)
+        self._grid = grid if self._grid is None else AsBuilt.merge([self._grid, grid])
+
+    def result(self) -> AsBuilt:
+        """The grid of everything added; an empty grid (0 x 0) if no finite sample was."""
+        if self._grid is None:
+            return _rasterise(np.empty((0, 3)), np.empty((0, 3)), self.cell)
+        return self._grid
 
 
 def lowest_elevation(
@@ -167,26 +233,6 @@ def lowest_elevation(
     corners in the site frame in time order, ``cell`` the cell size (m), ``max_step`` the largest
     corner move between two edges used (default 1 cm or ``cell / 2``). Rows with a non-finite value are
     left out (a gap in the record, not a point)."""
-    if not (math.isfinite(cell) and cell > 0.0):
-        raise ValueError(f"cell size must be a positive number of metres, got {cell}")
-    step = min(0.5 * cell, 0.01) if max_step is None else max_step
-    if not (math.isfinite(step) and step > 0.0):
-        raise ValueError(f"max_step must be a positive number of metres, got {max_step}")
-    left, right = np.asarray(left, float), np.asarray(right, float)
-    keep = np.all(np.isfinite(left), axis=1) & np.all(np.isfinite(right), axis=1)
-    left, right = densify(left[keep], right[keep], step)
-    if not len(left):
-        return AsBuilt(0.0, 0.0, cell, np.full((0, 0), np.nan), np.zeros((0, 0), np.int64))
-    xy = np.vstack([left[:, :2], right[:, :2]])
-    x0, y0 = (np.floor(xy.min(axis=0) / cell) * cell).tolist()
-    nx, ny = (np.floor((xy.max(axis=0) - (x0, y0)) / cell).astype(np.int64) + 1).tolist()
-    flat = np.full(ny * nx, np.inf)
-    hits = np.zeros(ny * nx, np.int64)
-    for start in range(0, len(left), _CHUNK):
-        i, j, z = _pieces(left[start : start + _CHUNK], right[start : start + _CHUNK], x0, y0, cell)
-        # A piece ending exactly on the far grid line of the last cell rounds into it.
-        index = np.clip(j, 0, ny - 1) * nx + np.clip(i, 0, nx - 1)
-        np.minimum.at(flat, index, z)
-        hits += np.bincount(index, minlength=ny * nx)
-    z = np.where(hits > 0, flat, np.nan).reshape(ny, nx)
-    return AsBuilt(x0, y0, cell, z, hits.reshape(ny, nx))
+    run = LowestElevation(cell, max_step)
+    run.add(left, right)
+    return run.result()

@@ -235,8 +235,11 @@ def test_compressed_chunks_with_checksums_read_and_damage_is_caught(tmp_path: Pa
     arrays = BagReader(path).arrays()["/cylinder_lengths"]
     np.testing.assert_array_equal(arrays["position"], position)
     np.testing.assert_array_equal(arrays.log_time, 1000 + np.arange(500))
+    with path.open("rb") as stream:
+        chunk = make_reader(stream).get_summary().chunk_indexes[1]
     damaged = bytearray(path.read_bytes())
-    damaged[len(damaged) // 3] ^= 0x10  # inside a compressed chunk
+    # Inside a compressed chunk's records (a damaged message index, which readers may skip, is not).
+    damaged[chunk.chunk_start_offset + chunk.chunk_length // 2] ^= 0x10
     path.write_bytes(bytes(damaged))
     with pytest.raises(BagError, match=r"ros2\.mcap: corrupt: "):
         BagReader(path)

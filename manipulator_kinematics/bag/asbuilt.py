@@ -1,6 +1,6 @@
 """mk_asbuilt: what the machines dug, from recorded bags: per-sample Parquet tables, as-built surfaces.
 
-    mk_asbuilt BAG [BAG ...] -o DIR [--cell M] [--params FILE ...] [--recover]
+    mk_asbuilt BAG [BAG ...] -o DIR [--cell M] [--params FILE ...] [--recover] [--chunk-seconds S]
     mk_asbuilt --fleet DIR_OR_GLOB -o DIR [--workers N | --scheduler ADDRESS] [...]
 
 For every machine found in a bag (as ``mk_evaluate`` finds them) whose package has a ``samples``
@@ -11,6 +11,10 @@ metadata (docs/asbuilt.md). From the cutting edge's sweeps (:mod:`manipulator_ki
 it writes the as-built surface, the lowest elevation the edge reached per cell of the site frame:
 ``asbuilt.xml`` (LandXML 1.2 TIN), ``asbuilt.csv`` (x, y, z per cell) and ``asbuilt.png`` (the
 elevation and, where a design surface is set, the lowest height above it reached: cut/fill).
+
+A bag is read in windows of ``--chunk-seconds`` of record time (default 60 s), the table written a
+row group a window and the as-built grid merged window by window, so a bag of any length takes the
+memory of one window; the result is the whole bag's (:func:`process_bag`).
 
 ``--fleet`` evaluates every bag under a folder (or matching a glob) in parallel with Dask: local
 processes by default (``--workers``), a running Dask cluster with ``--scheduler``. It writes the
@@ -26,6 +30,7 @@ import datetime
 import glob
 import json
 import sys
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cache
@@ -34,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from manipulator_kinematics.asbuilt import AsBuilt, lowest_elevation
+from manipulator_kinematics.asbuilt import AsBuilt, LowestElevation
 from manipulator_kinematics.bag.analysis import AnalysisContext
 from manipulator_kinematics.bag.cli import guarded
 from manipulator_kinematics.bag.evaluate import (
@@ -44,12 +49,16 @@ from manipulator_kinematics.bag.evaluate import (
     machines_in,
     recorded_settings,
 )
-from manipulator_kinematics.bag.reader import BagReader
+from manipulator_kinematics.bag.reader import BagStream
 from manipulator_kinematics.bag.types import BagError
 
 NAME = "mk_asbuilt"
 EDGE = ("left_site_x", "left_site_y", "left_site_z", "right_site_x", "right_site_y", "right_site_z")
 GRADE = ("grade_left", "grade_right")
+#: A bag is read in windows of this much record time (s); docs/asbuilt.md has the memory it takes.
+CHUNK_SECONDS = 60.0
+#: Messages this far (s) around a window are read with it: what a row depends on (process_bag).
+CHUNK_MARGIN = 2.0
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
@@ -79,6 +88,20 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
         help="--fleet: a running Dask scheduler (tcp://host:8786) instead of local processes",
     )
     parser.add_argument("--recover", action="store_true", help="read mcap bags whose recorder was killed")
+    parser.add_argument(
+        "--chunk-seconds",
+        type=float,
+        default=CHUNK_SECONDS,
+        metavar="S",
+        help=f"read each bag in windows of this much record time; 0: whole (default {CHUNK_SECONDS:g})",
+    )
+    parser.add_argument(
+        "--chunk-margin",
+        type=float,
+        default=CHUNK_MARGIN,
+        metavar="S",
+        help=f"messages this far around a window are read with it (default {CHUNK_MARGIN:g})",
+    )
     args = parser.parse_args(argv)
     if bool(args.bags) == bool(args.fleet):
         parser.error("give bags or --fleet, not both and not neither")
@@ -86,6 +109,11 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
         parser.error(f"--cell must be between 0.01 and 100 m, got {args.cell}")
     if args.workers is not None and not 1 <= args.workers <= 256:
         parser.error(f"--workers must be between 1 and 256, got {args.workers}")
+    if not (np.isfinite(args.chunk_seconds) and args.chunk_seconds >= 0.0):
+        parser.error(f"--chunk-seconds must be 0 (whole bag) or positive, got {args.chunk_seconds}")
+    if not (np.isfinite(args.chunk_margin) and args.chunk_margin >= 0.0):
+        parser.error(f"--chunk-margin must be 0 or positive, got {args.chunk_margin}")
+    args.chunk_seconds = args.chunk_seconds or None
     return args
 
 
@@ -109,81 +137,139 @@ def _setup(params: tuple[Path, ...]) -> Setup:
 
 
 def process_bag(
-    path: Path, output: Path, params: Sequence[Path], cell: float, recover: bool = False
+    path: Path,
+    output: Path,
+    params: Sequence[Path],
+    cell: float,
+    recover: bool = False,
+    chunk_seconds: float | None = CHUNK_SECONDS,
+    chunk_margin: float = CHUNK_MARGIN,
 ) -> BagResult:
     """One bag's tables and as-built surfaces into ``output/<bag name>``, with the machines and
     node settings of ``params`` (as mk_evaluate --params); a bag that cannot be read gives a
-    result with ``error`` set and writes nothing."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    result with ``error`` set and leaves no table behind.
 
+    The bag is read in windows of ``chunk_seconds`` of record time (None: whole), each with the
+    messages ``chunk_margin`` seconds around it (:meth:`BagStream.windows`): the table is written
+    window by window (a Parquet row group each) and the as-built grids merged as they come, so
+    memory stays that of one window whatever the bag's length. A row depends on messages at most
+    ``chunk_margin`` away in record time (the excavator's: its swing state, site pose and previous
+    input within their max ages, its output pose recorded after it), so the result is the whole
+    bag's. A machine that ``mk_evaluate``'s rule finds only by its joint names counts from the
+    first window where they are all there."""
     setup = _setup(tuple(params))
-
     result = BagResult(str(path))
+    folder = output / path.name
+    tables: dict[str, _Table] = {}
     try:
-        bag = BagReader(path, recover=recover)
+        bag = BagStream(path, recover=recover)
         if bag.message_count == 0:
             raise BagError(f"{path}: the bag holds no messages")
         grouped = group_topics(bag)
         recorded = recorded_settings(bag)
-        arrays = bag.arrays([topic for names in grouped.values() for topic in names.values()])
+        topics = [topic for names in grouped.values() for topic in names.values()]
+        # As mk_evaluate: the settings recorded in the bag, --params over them.
+        settings_in = {namespace: setup.settings_in(namespace, recorded)[0] for namespace in grouped}
+        for part in bag.windows(chunk_seconds, chunk_margin):
+            arrays = part.arrays(topics)
+            for namespace, names in sorted(grouped.items()):
+                data = {name: arrays[topic] for name, topic in names.items()}
+                prefix = "" if namespace == "/" else namespace.strip("/").replace("/", "_") + "_"
+                settings = settings_in[namespace]
+                for machine in machines_in(data, setup):
+                    if machine.samples is None:
+                        continue
+                    key = f"{prefix}{machine.name}"
+                    context = AnalysisContext(0, f"{key}_", settings)
+                    own = {topic: data[topic] for topic in machine.topics if topic in data}
+                    with np.errstate(all="ignore"):  # a damaged record's 1e300 is a value, not a warning
+                        columns, units = machine.samples(own, setup.model(machine), context)
+                    if key not in tables:
+                        tables[key] = _Table(folder / f"{key}.parquet", machine.name, namespace, cell)
+                    tables[key].add(columns, units, part.owns(columns["stamp_ns"]), str(path))
     except BagError as error:
+        for table in tables.values():
+            table.discard()
         result.error = " ".join(str(error).split())
         return result
-    folder = output / path.name
-    for namespace, names in sorted(grouped.items()):
-        data = {name: arrays[topic] for name, topic in names.items()}
-        prefix = "" if namespace == "/" else namespace.strip("/").replace("/", "_") + "_"
-        settings, _ = setup.settings_in(namespace, recorded)  # as mk_evaluate: the bag's, --params over
-        for machine in machines_in(data, setup):
-            if machine.samples is None:
-                continue
-            context = AnalysisContext(0, f"{prefix}{machine.name}_", settings)
-            own = {topic: data[topic] for topic in machine.topics if topic in data}
-            with np.errstate(all="ignore"):  # a damaged record's 1e300 is a value, not a warning
-                columns, units = machine.samples(own, setup.model(machine), context)
-            key = f"{prefix}{machine.name}"
-            table = pa.table(columns)
+    for key, table in tables.items():
+        table.close()
+        result.tables.append(
+            {
+                "file": str(table.file),
+                "machine": table.machine,
+                "namespace": table.namespace,
+                "rows": table.rows,
+                "days": dict(sorted(table.days.items())),
+            }
+        )
+        if table.edge is None or not table.rows:
+            continue
+        grid = table.edge.result()
+        result.grids[key] = grid
+        _write_surface(grid, folder / f"{key}_asbuilt", f"{path.name} {key}")
+        if table.grade is not None:
+            result.grade_grids[key] = table.grade.result()
+        _write_map(
+            grid, result.grade_grids.get(key), folder / f"{key}_asbuilt.png", f"as-built: {path.name} {key}"
+        )
+    return result
+
+
+class _Table:
+    """One machine's per-sample table, written a window at a time (a row group each), and its
+    as-built runs (cutting edge; edge on the design) fed with the same rows."""
+
+    def __init__(self, file: Path, machine: str, namespace: str, cell: float) -> None:
+        self.file, self.machine, self.namespace, self.cell = file, machine, namespace, cell
+        self.writer: Any = None
+        self.rows = 0
+        self.days: Counter[str] = Counter()
+        self.edge: LowestElevation | None = None
+        self.grade: LowestElevation | None = None
+
+    def add(self, columns: dict[str, np.ndarray], units: dict[str, str], keep: np.ndarray, bag: str) -> None:
+        """The rows ``keep`` of a window's ``columns`` (the samples hook's, in stamp order)."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        columns = {name: np.asarray(values)[keep] for name, values in columns.items()}
+        table = pa.table(columns)
+        if self.writer is None:
             metadata = {
                 "units": json.dumps(_units(list(columns), units)),
-                "machine": machine.name,
-                "namespace": namespace,
-                "bag": str(path),
+                "machine": self.machine,
+                "namespace": self.namespace,
+                "bag": bag,
             }
-            table = table.replace_schema_metadata(metadata)
-            folder.mkdir(parents=True, exist_ok=True)
-            file = folder / f"{key}.parquet"
-            pq.write_table(table, file)
-            stamps = np.asarray(columns["stamp_ns"])
-            result.tables.append(
-                {
-                    "file": str(file),
-                    "machine": machine.name,
-                    "namespace": namespace,
-                    "rows": len(stamps),
-                    "days": _days(stamps),
-                }
-            )
-            if all(c in columns for c in EDGE) and len(stamps):
-                left = np.column_stack([columns[c] for c in EDGE[:3]])
-                right = np.column_stack([columns[c] for c in EDGE[3:]])
-                grid = lowest_elevation(left, right, cell)
-                result.grids[key] = grid
-                _write_surface(grid, folder / f"{key}_asbuilt", f"{path.name} {key}")
+            self.file.parent.mkdir(parents=True, exist_ok=True)
+            self.writer = pq.ParquetWriter(self.file, table.schema.with_metadata(metadata))
+            if all(c in columns for c in EDGE):
+                self.edge = LowestElevation(self.cell)
                 if all(c in columns for c in GRADE):
-                    grade = lowest_elevation(
-                        np.column_stack([left[:, :2], columns[GRADE[0]]]),
-                        np.column_stack([right[:, :2], columns[GRADE[1]]]),
-                        cell,
-                    )
-                    result.grade_grids[key] = grade
-                _write_map(
-                    grid,
-                    result.grade_grids.get(key),
-                    folder / f"{key}_asbuilt.png",
-                    f"as-built: {path.name} {key}",
+                    self.grade = LowestElevation(self.cell)
+        if table.num_rows:  # a window without rows (a gap in the record) adds no row group
+            self.writer.write_table(table.cast(self.writer.schema))
+        stamps = columns["stamp_ns"]
+        self.rows += len(stamps)
+        self.days.update(_days(stamps))
+        if self.edge is not None:
+            left = np.column_stack([columns[c] for c in EDGE[:3]])
+            right = np.column_stack([columns[c] for c in EDGE[3:]])
+            self.edge.add(left, right)
+            if self.grade is not None:
+                self.grade.add(
+                    np.column_stack([left[:, :2], columns[GRADE[0]]]),
+                    np.column_stack([right[:, :2], columns[GRADE[1]]]),
                 )
-    return result
+
+    def close(self) -> None:
+        self.writer.close()
+
+    def discard(self) -> None:
+        """The bag turned out unreadable: no partial table is left."""
+        self.writer.close()
+        self.file.unlink(missing_ok=True)
 
 
 def _units(names: list[str], units: dict[str, str]) -> dict[str, str]:
@@ -262,13 +348,18 @@ def run_fleet(
     workers: int | None = None,
     scheduler: str | None = None,
     recover: bool = False,
+    chunk_seconds: float | None = CHUNK_SECONDS,
+    chunk_margin: float = CHUNK_MARGIN,
 ) -> list[BagResult]:
     """Every bag processed by Dask (local processes, or the cluster at ``scheduler``), with a
     progress bar on stderr; the results in the order of ``paths``."""
     import dask
     from dask import delayed
 
-    tasks = [delayed(process_bag)(p, output, tuple(params), cell, recover) for p in paths]
+    tasks = [
+        delayed(process_bag)(p, output, tuple(params), cell, recover, chunk_seconds, chunk_margin)
+        for p in paths
+    ]
     if scheduler:
         from distributed import Client, progress
 
@@ -284,7 +375,7 @@ def run_fleet(
 
 def merge_tables(results: Sequence[BagResult], path: Path) -> int:
     """One Parquet file of every table, with ``bag``, ``namespace`` and ``machine`` columns;
-    written table by table (one in memory at a time). Returns the rows."""
+    written row group by row group (one window of one bag in memory at a time). Returns the rows."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -297,20 +388,26 @@ def merge_tables(results: Sequence[BagResult], path: Path) -> int:
     rows = 0
     with pq.ParquetWriter(path, schema) as writer:
         for bag, entry in entries:
-            table = pq.read_table(entry["file"])
-            n = table.num_rows
-            columns = {
-                "bag": pa.array([bag] * n, pa.string()),
-                "namespace": pa.array([entry["namespace"]] * n, pa.string()),
-                "machine": pa.array([entry["machine"]] * n, pa.string()),
-            }
-            for name in schema.names[3:]:
-                columns[name] = (
-                    table[name] if name in table.column_names else pa.nulls(n, schema.field(name).type)
-                )
-            writer.write_table(pa.table(columns, schema=schema))
-            rows += n
+            source = pq.ParquetFile(entry["file"])
+            for group in range(source.num_row_groups):
+                rows += _merge_group(writer, schema, source.read_row_group(group), bag, entry)
     return rows
+
+
+def _merge_group(writer: Any, schema: Any, table: Any, bag: str, entry: dict[str, Any]) -> int:
+    """``table`` (a row group of one bag's table) written with the fleet's key columns."""
+    import pyarrow as pa
+
+    n = table.num_rows
+    columns = {
+        "bag": pa.array([bag] * n, pa.string()),
+        "namespace": pa.array([entry["namespace"]] * n, pa.string()),
+        "machine": pa.array([entry["machine"]] * n, pa.string()),
+    }
+    for name in schema.names[3:]:
+        columns[name] = table[name] if name in table.column_names else pa.nulls(n, schema.field(name).type)
+    writer.write_table(pa.table(columns, schema=schema))
+    return n
 
 
 def fleet_report(results: Sequence[BagResult]) -> dict[str, Any]:
@@ -356,10 +453,23 @@ def run_asbuilt(argv: Sequence[str]) -> int:
         paths = fleet_bags(args.fleet)
         print(f"{NAME}: {len(paths)} bags", file=sys.stderr)
         results = run_fleet(
-            paths, args.output, args.params, args.cell, args.workers, args.scheduler, args.recover
+            paths,
+            args.output,
+            args.params,
+            args.cell,
+            args.workers,
+            args.scheduler,
+            args.recover,
+            args.chunk_seconds,
+            args.chunk_margin,
         )
     else:
-        results = [process_bag(p, args.output, args.params, args.cell, args.recover) for p in args.bags]
+        results = [
+            process_bag(
+                p, args.output, args.params, args.cell, args.recover, args.chunk_seconds, args.chunk_margin
+            )
+            for p in args.bags
+        ]
     for r in results:
         if r.error:
             print(f"{NAME}: skipped {r.bag}: {r.error}", file=sys.stderr)

@@ -32,7 +32,7 @@ import yaml
 from manipulator_kinematics.bag import analysis
 from manipulator_kinematics.bag.analysis import AnalysisContext, Panel, Plot
 from manipulator_kinematics.bag.cli import guarded
-from manipulator_kinematics.bag.reader import BagReader, TopicArrays
+from manipulator_kinematics.bag.reader import BagReader, BagStream, TopicArrays
 from manipulator_kinematics.bag.topics import (
     JOINT_STATE,
     SETTINGS_KEY,
@@ -200,7 +200,7 @@ def machines_in(data: Mapping[str, TopicArrays], setup: Setup) -> list[Machine]:
     return found
 
 
-def group_topics(bag: BagReader) -> dict[str, dict[str, str]]:
+def group_topics(bag: BagReader | BagStream) -> dict[str, dict[str, str]]:
     """The package's topics with messages in ``bag``: namespace -> package topic name -> recorded
     topic; BagError when a topic has another type than the package's or none has messages."""
     ours = package_topics()
@@ -223,7 +223,7 @@ def group_topics(bag: BagReader) -> dict[str, dict[str, str]]:
     return grouped
 
 
-def recorded_settings(bag: BagReader) -> dict[str, dict[str, Any]]:
+def recorded_settings(bag: BagReader | BagStream) -> dict[str, dict[str, Any]]:
     """Full node name -> settings that ``mk_record`` stored in the bag's metadata (none: {})."""
     try:
         text = bag.custom_data.get(SETTINGS_KEY)

@@ -64,6 +64,11 @@ class TopicQos:
             profiles = parse_qos(text)
         except Exception:  # rosbags' parser raises whatever the YAML inside makes it raise
             return None
+        return TopicQos.of(profiles)
+
+    @staticmethod
+    def of(profiles: Sequence[Qos]) -> TopicQos | None:
+        """The same of rosbags' parsed profiles (a connection's ``offered_qos_profiles``)."""
         if not profiles:
             return None
         return TopicQos(
