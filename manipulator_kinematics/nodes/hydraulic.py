@@ -52,6 +52,7 @@ from manipulator_kinematics.hydraulic.control import (
     Plant,
     describe,
     rate_command,
+    task_rates,
     toward_line,
 )
 from manipulator_kinematics.hydraulic.description import SECTION
@@ -320,15 +321,6 @@ class HydraulicVelocityIK(MachineNode):
         if self.target is not None and self.now_ns() - self.target[0] > self.command_timeout_ns:
             self.stop(f"no target_twist for {self.command_timeout_ns * 1e-9:g} s", "info", idle=True)
 
-    def task_rates(self, D: np.ndarray, twist: np.ndarray) -> np.ndarray:
-        """Q_dot (nq,) of a tool twist: the linear velocity and, with a tool angle, alpha_dot =
-        omega . (sin theta1, -cos theta1, 0) (machine.py: omega of Rz(theta1) Ry(-alpha))."""
-        rows = list(twist[:3])
-        if self.h.description.has_angle:
-            t1 = D[0] if self.h.swing else 0.0
-            rows.append(twist[3] * np.sin(t1) - twist[4] * np.cos(t1))
-        return np.array(rows)
-
     def command(self, stamp: Any) -> None:
         """Publish the rates for the current target at the current state (or stop, saying why)."""
         try:
@@ -340,7 +332,7 @@ class HydraulicVelocityIK(MachineNode):
             if not (np.all(np.isfinite(jc0)) and np.all(np.isfinite(Q))):
                 raise InputError(f"the linkage does not close at D = {D.tolist()}")
             twist = self.target[1]
-            q_dot = self.task_rates(D, twist)
+            q_dot = task_rates(D, twist, self.h.swing, self.h.description.has_angle)
             if self.line is None or not np.array_equal(self.line[0], twist):
                 self.line, self.stopped_on_line = (twist, Q, q_dot), None
             gain = self.settings["line_gain"]
