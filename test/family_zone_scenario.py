@@ -17,7 +17,8 @@ from zone_scenario import DATA, Targets
 class Scenario:
     """One machine's zones: the boundaries plus margins (nothing above ``ceiling``, ahead of
     ``wall`` in x, below ``floor``), the TIN's plane z = c + a x + b y and its margin, the zones
-    it must come near, and its targets' directions at the zones and turn rate (rad/s)."""
+    it must come near, its targets' directions at the zones and turn rate (rad/s), and the
+    opening (seconds, tool velocity or twist) that takes it straight at them first."""
 
     machine: str
     config: str
@@ -30,6 +31,7 @@ class Scenario:
     reached: tuple[str, ...]
     at_zones: tuple[np.ndarray, ...]
     turn: float
+    opening: tuple[tuple[float, np.ndarray], ...]
 
     @property
     def zones(self):
@@ -47,13 +49,17 @@ class Scenario:
             surface: (points[..., 2] - ground).min(axis=-1) - self.surface_margin,
         }
 
-    def targets(self, seed: int, home: np.ndarray, opening: tuple = ()) -> FamilyTargets:
-        return FamilyTargets(seed, home, self.at_zones, self.turn, opening)
+    def targets(self, seed: int, home: np.ndarray, opening: tuple | None = None) -> FamilyTargets:
+        """Random targets after ``opening`` (default: the scenario's)."""
+        return FamilyTargets(
+            seed, home, self.at_zones, self.turn, self.opening if opening is None else opening
+        )
 
 
 class FamilyTargets(Targets):
     """:class:`zone_scenario.Targets` with this machine's directions at the zones and, with each
-    new target, a random turn about the boom-plane normal (y) up to ``turn`` rad/s."""
+    new target, a random turn about the boom-plane normal (y) up to ``turn`` rad/s; an opening's
+    entries may be whole twists [v, omega] (6,)."""
 
     def __init__(
         self, seed: int, home: np.ndarray, at_zones: tuple[np.ndarray, ...], turn: float, opening: tuple = ()
@@ -64,6 +70,8 @@ class FamilyTargets(Targets):
 
     def __call__(self, t: float, tip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         linear, _ = super().__call__(t, tip)
+        if len(linear) == 6:  # an opening's twist [v, omega]
+            return linear[:3], linear[3:]
         if self.until != self.held:  # a new random target began
             self.held = self.until
             self.angular = np.array([0.0, self.rng.uniform(-self.turn, self.turn), 0.0])
@@ -74,7 +82,7 @@ SCENARIOS = {
     "wheel_loader": Scenario(
         "wheel_loader",
         "wheel_loader_wl20.yaml",
-        ceiling=4.2 - 0.3,
+        ceiling=3.4 - 0.3,
         wall=3.9 - 0.3,
         floor=-0.6 + 0.1,
         plane=(-1.2, 0.25, 0.0),
@@ -84,6 +92,12 @@ SCENARIOS = {
         # Up, down, and the bucket curled and dumped (its tip goes ahead and back with alpha).
         at_zones=(np.array([0.0, 0.0, 0.4]), np.array([0.0, 0.0, -0.4]), np.array([0.0, 0.0, 0.1])),
         turn=0.5,
+        # The bucket curled back (its tip up and in), lifted to the roof, lowered to the ground.
+        opening=(
+            (3.0, np.array([0.0, 0.0, 0.0, 0.0, 0.3, 0.0])),
+            (8.0, np.array([0.0, 0.0, 0.4])),
+            (8.0, np.array([0.0, 0.0, -0.6])),
+        ),
     ),
     "knuckle_crane": Scenario(
         "knuckle_crane",
@@ -97,5 +111,10 @@ SCENARIOS = {
         reached=("power_line", "road_edge", "gas_main"),
         at_zones=Targets.AT_ZONES,
         turn=0.0,
+        opening=(
+            (8.0, np.array([0.0, 0.0, 0.6])),
+            (6.0, np.array([0.6, 0.0, 0.0])),
+            (8.0, np.array([0.0, 0.0, -0.6])),
+        ),
     ),
 }

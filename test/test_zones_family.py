@@ -110,11 +110,12 @@ def guard(scenario: Scenario, h: HydraulicModel) -> ZoneGuard:
 
 
 def run(
-    scenario: Scenario, seconds: float, seed: int, rate: float, opening: tuple = ()
+    scenario: Scenario, seconds: float, seed: int, rate: float, opening: tuple | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """hydraulic_velocity_ik's steps at ``rate`` Hz (each command from the state one step old, as
     across processes; its default condition threshold and stroke horizon) on ideal actuators
-    (hydraulic_sim's default); the states, their monitored points and the zone factors."""
+    (hydraulic_sim's default) after ``opening`` (default: the scenario's); the states, their
+    monitored points and the zone factors."""
     h = model(scenario)
     zones, plant = guard(scenario, h), Plant(h.lower, h.upper, h.max_speed, h.reference, 0.0)
     rows = list(h.description.velocity_rows)
@@ -158,6 +159,7 @@ def test_straight_at_a_zone_stops_at_it(name: str, velocity: np.ndarray, zone: s
 @pytest.mark.parametrize("name", list(SCENARIOS))
 def test_minutes_of_random_targets_never_cross_a_zone_and_reach_them(name: str) -> None:
     scenario = SCENARIOS[name]
+    # The scenario's opening (straight at the zones: about 20 s), then random targets.
     states, points, scales = run(scenario, 120.0, seed=34, rate=50.0)
     clear = scenario.clearances(points)
     for zone, c in clear.items():

@@ -15,7 +15,7 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from family_zone_scenario import SCENARIOS
 from geometry_msgs.msg import PoseStamped, TwistStamped
-from ros_harness import NodeProcess, Probe
+from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe
 from sensor_msgs.msg import JointState
 from test_zones_ros import QOS, TOLERANCE, start, vec
 from zone_scenario import PERIOD, STOP_TIME
@@ -27,15 +27,6 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 #: Wall-clock seconds of driving each machine (the sim runs in real time).
 DRIVE = 60.0
-#: Straight at the zones first (tool velocity, s), then random targets.
-OPENINGS = {
-    "wheel_loader": ((5.0, np.array([0.0, 0.0, 0.6])), (6.0, np.array([0.0, 0.0, -0.6]))),
-    "knuckle_crane": (
-        (8.0, np.array([0.0, 0.0, 0.6])),
-        (6.0, np.array([0.6, 0.0, 0.0])),
-        (8.0, np.array([0.0, 0.0, -0.6])),
-    ),
-}
 
 
 def family(exe: str, name: str, **settings: object) -> NodeProcess:
@@ -78,7 +69,7 @@ def test_random_targets_never_cross_a_zone_and_the_machine_reaches_them(probe: P
             n.create_subscription(DiagnosticArray, f"{ns}/zone_clearance", reported.append, QOS),
         ]
         target = n.create_publisher(TwistStamped, f"{ns}/target_twist", QOS)
-        targets = scenario.targets(34, h.pose(h.reference)[:3], OPENINGS[name])
+        targets = scenario.targets(34, h.pose(h.reference)[:3])
         began: list[float] = []
 
         def send() -> None:
@@ -142,3 +133,53 @@ def test_a_bad_zone_file_is_refused_at_start_naming_the_key(tmp_path) -> None:
     log = process.stop()
     assert code == 2, log
     assert f"configuration error: zones_file: {path}: zones.roof.height: expected a finite number" in log, log
+
+
+def test_the_markers_draw_the_zones_and_the_crane_s_monitored_points(probe: Probe) -> None:
+    """machine_markers with zones_file for a family machine (the registry's monitored and
+    read_surface hooks): every zone, and the KC100's 13 points at the state drawn."""
+    from visualization_msgs.msg import MarkerArray
+
+    from manipulator_kinematics.registry import machine
+
+    scenario = SCENARIOS["knuckle_crane"]
+    record = machine("knuckle_crane")
+    arm = record.model()
+    reading = arm.hydraulic.reference - arm.hydraulic.zero_offset
+    received: list[MarkerArray] = []
+    sub = probe.node.create_subscription(MarkerArray, "/fzm/machine_markers", received.append, QOS)
+    pub = probe.node.create_publisher(JointState, "/fzm/joint_states", QOS)
+    state = JointState(name=list(arm.joint_names), position=reading.tolist())
+    state.header.stamp = probe.node.get_clock().now().to_msg()
+    process = NodeProcess(
+        "machine_markers",
+        "--params-file",
+        str(config_path(scenario.config)),
+        *RELIABLE_INPUTS,
+        "-r",
+        "__ns:=/fzm",
+        "-p",
+        f"zones_file:={scenario.zones}",
+    )
+
+    def arrived() -> bool:
+        assert process.alive(), process.log()
+        if pub.get_subscription_count():
+            pub.publish(state)
+        return bool(received)
+
+    try:
+        probe.wait_until(arrived, 30.0, "machine_markers")
+    finally:
+        log = process.stop()
+        probe.node.destroy_publisher(pub)
+        probe.node.destroy_subscription(sub)
+    assert "Traceback" not in log, log
+    by_ns: dict[str, list] = {}
+    for m in received[-1].markers:
+        by_ns.setdefault(m.ns, []).append(m)
+    assert len(by_ns["zone"]) == len(by_ns["zone_margin"]) == 4
+    (points,) = by_ns["monitored_point"]
+    _, expected, _ = arm.hydraulic.monitored(arm.hydraulic.reference, np.zeros(arm.hydraulic.m))
+    np.testing.assert_allclose([[p.x, p.y, p.z] for p in points.points], expected, atol=1e-9)
+    assert len(expected) == 13 and all(c.g > 0.5 for c in points.colors)  # all clear at the reference
