@@ -102,7 +102,7 @@ SCENARIOS = {
     "knuckle_crane": Scenario(
         "knuckle_crane",
         "knuckle_crane_kc100.yaml",
-        ceiling=8.0 - 0.5,
+        ceiling=7.0 - 0.5,
         wall=9.0 - 0.3,
         floor=-2.0 + 0.3,
         plane=(-1.0, 0.05, 0.15),
@@ -112,7 +112,7 @@ SCENARIOS = {
         at_zones=Targets.AT_ZONES,
         turn=0.0,
         opening=(
-            (8.0, np.array([0.0, 0.0, 0.6])),
+            (10.0, np.array([0.0, 0.0, 0.6])),
             (6.0, np.array([0.6, 0.0, 0.0])),
             (8.0, np.array([0.0, 0.0, -0.6])),
         ),
