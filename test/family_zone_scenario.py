@@ -95,7 +95,7 @@ SCENARIOS = {
         # The bucket curled back (its tip up and in), lifted to the roof, lowered to the ground.
         opening=(
             (3.0, np.array([0.0, 0.0, 0.0, 0.0, 0.3, 0.0])),
-            (8.0, np.array([0.0, 0.0, 0.4])),
+            (12.0, np.array([0.0, 0.0, 0.4])),
             (8.0, np.array([0.0, 0.0, -0.6])),
         ),
     ),
@@ -112,7 +112,7 @@ SCENARIOS = {
         at_zones=Targets.AT_ZONES,
         turn=0.0,
         opening=(
-            (10.0, np.array([0.0, 0.0, 0.6])),
+            (14.0, np.array([0.0, 0.0, 0.6])),
             (6.0, np.array([0.6, 0.0, 0.0])),
             (8.0, np.array([0.0, 0.0, -0.6])),
         ),
