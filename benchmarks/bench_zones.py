@@ -12,7 +12,10 @@ TIN surface):
   array operation), and zone by zone (a loop over ``Zone.clearance`` and ``scale_for``: the
   baseline);
 * the excavator's 23 monitored points with their velocities (``MonitoredPoints``: one batched
-  ``Excavator.pins`` of two states), the machine-specific part of the command's cost.
+  ``Excavator.pins`` of two states), the machine-specific part of the command's cost;
+* the same for the hydraulic family's wheel loader (WL20) and knuckle crane (KC100):
+  ``HydraulicModel.monitored`` (every pin and both corners, velocities in closed form), alone and
+  with ``ZoneGuard.check``: what hydraulic_velocity_ik adds per command.
 
 Run: python benchmarks/bench_zones.py [--quick]
 """
@@ -31,6 +34,8 @@ from tables import print_table
 from excavator_kinematics.core.kinematics import Excavator
 from excavator_kinematics.core.monitored import MonitoredPoints
 from excavator_kinematics.grade.design_surface import Tin
+from manipulator_kinematics.hydraulic import HydraulicModel
+from manipulator_kinematics.param_files import config_path
 from manipulator_kinematics.zone_guard import ZoneGuard
 from manipulator_kinematics.zones import KERNEL, Monitor, Zone, scale_for, stop_time
 
@@ -138,6 +143,28 @@ def main() -> None:
             per_call_us(lambda: excavator_guard.check(*points(D, D_dot), D_dot), repeat, rounds),
         ),
     ]
+    for label, file in (
+        ("wheel loader", "wheel_loader_wl20.yaml"),
+        ("knuckle crane", "knuckle_crane_kc100.yaml"),
+    ):
+        h = HydraulicModel.from_file(config_path(file))
+        rate = 0.5 * h.max_speed
+        names = h.monitored(h.reference, rate)[0]
+        family_guard = ZoneGuard(all_zones, names, h.max_speed / STOP, PERIOD)
+        rows += [
+            (
+                f"{label}: {len(names)} points + velocities",
+                per_call_us(lambda h=h, rate=rate: h.monitored(h.reference, rate), repeat, rounds),
+            ),
+            (
+                f"{label}: points + ZoneGuard.check ({len(names)} x 10)",
+                per_call_us(
+                    lambda h=h, rate=rate, g=family_guard: g.check(*h.monitored(h.reference, rate)[1:], rate),
+                    repeat,
+                    rounds,
+                ),
+            ),
+        ]
     assert q.shape == qv.shape == (len(points.names), 3)
     print_table(
         ["per command", f"us, median of {rounds} rounds", "rounds (us)"],

@@ -78,7 +78,7 @@ SCHEMAS: dict[str, Schema] = {
 
 
 class Surface(Protocol):
-    """A TIN (:class:`excavator_kinematics.grade.design_surface.Tin`): ``locate(xy (..., 2))`` gives the
+    """A TIN (:class:`manipulator_kinematics.landxml.Tin`): ``locate(xy (..., 2))`` gives the
     index of the triangle below each point (-1 outside), ``planes`` (T, 3) each triangle's
     [a, b, c] of z - origin_z = a (x - origin_x) + b (y - origin_y) + c."""
 

@@ -42,17 +42,25 @@ OPENING = (
 )
 
 
-def start(exe: str, **settings: object) -> NodeProcess:
-    params = {f"{NS}/{exe}": {"ros__parameters": settings}} if settings else None
+def start(
+    exe: str,
+    machine: str = "excavator_cet200.yaml",
+    nodes: str = "excavator_nodes.yaml",
+    ns: str = NS,
+    **settings: object,
+) -> NodeProcess:
+    """Node ``exe`` of the machine file ``machine`` with its node defaults ``nodes`` and
+    ``settings``, in namespace ``ns``, its inputs reliable."""
+    params = {f"{ns}/{exe}": {"ros__parameters": settings}} if settings else None
     return NodeProcess(
         exe,
         "--params-file",
-        str(config_path("excavator_cet200.yaml")),
+        str(config_path(machine)),
         "--params-file",
-        str(config_path("excavator_nodes.yaml")),
+        str(config_path(nodes)),
         *RELIABLE_INPUTS,
         "-r",
-        f"__ns:={NS}",
+        f"__ns:={ns}",
         params=params,
     )
 

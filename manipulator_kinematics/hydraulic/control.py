@@ -24,7 +24,16 @@ import numpy as np
 
 from manipulator_kinematics.param_files import ConfigError
 
-__all__ = ["END_ZONE", "LINE_RESTART", "Plant", "RateCommand", "describe", "rate_command", "toward_line"]
+__all__ = [
+    "END_ZONE",
+    "LINE_RESTART",
+    "Plant",
+    "RateCommand",
+    "describe",
+    "rate_command",
+    "task_rates",
+    "toward_line",
+]
 
 #: Within this distance of an end (m, rad) an actuator is at it (the stroke horizon's exponential
 #: approach would never get there).
@@ -98,6 +107,17 @@ def rate_command(
     # The clip moves a rate by an ulp at most: the speed limits hold exactly, the direction to round-off.
     d_dot = np.clip(x * scale, -max_speed, max_speed)
     return RateCommand(d_dot, condition, damping, scale, limit, actuator)
+
+
+def task_rates(D: np.ndarray, twist: np.ndarray, swing: bool, has_angle: bool) -> np.ndarray:
+    """Q_dot (nq,) of a tool twist [v, omega] (6,) at state D: the linear velocity and, with a tool
+    angle, alpha_dot = omega . (sin theta1, -cos theta1, 0) (machine.py: omega of Rz(theta1)
+    Ry(-alpha))."""
+    rows = list(twist[:3])
+    if has_angle:
+        t1 = D[0] if swing else 0.0
+        rows.append(twist[3] * np.sin(t1) - twist[4] * np.cos(t1))
+    return np.array(rows)
 
 
 #: Farther than this from its line (m, or rad for the tool angle) the tool did not drift: it was

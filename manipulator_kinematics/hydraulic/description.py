@@ -59,6 +59,20 @@ _SWING: Schema = {
     "zero_offset": Number(
         -math.pi, math.pi, "rad", default=0.0, doc="true angle = encoder reading + zero_offset"
     ),
+    "tail_radius": Number(
+        0.0,
+        30.0,
+        "m",
+        exclusive_min=True,
+        default=None,
+        doc="optional: the upper structure's tail swing radius, watched by the avoidance zones at "
+        "tail_heights (docs/zones.md)",
+    ),
+    "tail_heights": Numbers(
+        item=Number(-30.0, 30.0, "m"),
+        default=None,
+        doc="optional: heights (base frame) of the watched points at tail_radius behind the swing axis",
+    ),
 }
 _PRISMATIC: Schema = {
     "parent": _NAME,
@@ -75,6 +89,12 @@ _TOOL: Schema = {
     "width": Number(0.0, 20.0, "m"),
     "angle": Flag(doc="true: Q has the tool angle alpha"),
     "velocity_rows": Names(doc="rows of Q the velocity IK solves (eq. 9)"),
+    "outline": Numbers(
+        item=Number(-30.0, 30.0, "m"),
+        default=None,
+        doc="optional: points [x1, z1, x2, z2, ...] of the tool body's outline (its frame), watched "
+        "by the avoidance zones on both side faces (docs/zones.md)",
+    ),
 }
 _SECTIONS = ("bodies", "links", "cylinders", "swing", "prismatic", "dyads", "chain", "tool")
 _OPTIONAL = ("links", "swing", "prismatic")
@@ -172,6 +192,10 @@ class Description:
     width: float
     has_angle: bool
     velocity_rows: tuple[int, ...]
+    #: Avoidance-zone points (docs/zones.md): the tool body's outline, (x, z) in its frame, and
+    #: the upper structure's tail, (radius behind the swing axis, height); empty where not given.
+    outline: tuple[tuple[float, float], ...] = ()
+    tail: tuple[tuple[float, float], ...] = ()
 
     @property
     def actuator_names(self) -> tuple[str, ...]:
@@ -264,6 +288,12 @@ def parse(section: Any, prefix: str = SECTION) -> Description:
             f"{prefix}.swing.reference_angle",
             "outside [min_angle, max_angle]",
         )
+        radius, heights = swing["tail_radius"], swing["tail_heights"]
+        require(
+            (radius is None) == (heights is None),
+            f"{prefix}.swing.{'tail_heights' if heights is None else 'tail_radius'}",
+            "tail_radius and tail_heights go together",
+        )
     offset = 1 if swing else 0
     raw_cylinders = _named(section["cylinders"], f"{prefix}.cylinders")
     cylinders = []
@@ -325,6 +355,9 @@ def parse(section: Any, prefix: str = SECTION) -> Description:
     tasks = ("x", "y", "z", "alpha") if has_angle else ("x", "y", "z")
     for row in tool["velocity_rows"]:
         require(row in tasks, f"{prefix}.tool.velocity_rows", f"{row!r} is not one of {', '.join(tasks)}")
+    outline = tool["outline"] or []
+    require(len(outline) % 2 == 0, f"{prefix}.tool.outline", "expected [x, z] pairs: an even count")
+    tail = [(swing["tail_radius"], h) for h in swing["tail_heights"] or []] if swing else []
     return Description(
         name=top["name"],
         ground=top["ground"],
@@ -338,6 +371,8 @@ def parse(section: Any, prefix: str = SECTION) -> Description:
         width=tool["width"],
         has_angle=has_angle,
         velocity_rows=tuple(tasks.index(r) for r in tool["velocity_rows"]),
+        outline=tuple(zip(outline[::2], outline[1::2], strict=True)),
+        tail=tuple(tail),
     )
 
 

@@ -34,7 +34,7 @@ from manipulator_kinematics.registry import Hook, Machine
 from manipulator_kinematics.schema import Names, Text, Tree
 from manipulator_kinematics.serial_chain import JointLimits
 
-__all__ = ["FAMILY_TOPICS", "SCHEMA", "FamilyArm", "family_machine"]
+__all__ = ["FAMILY_TOPICS", "SCHEMA", "FamilyArm", "FamilyPoints", "family_machine"]
 
 #: The section's keys; the named parts are checked by the family's parser (description.parse),
 #: which names the key of anything wrong.
@@ -47,11 +47,13 @@ SCHEMA = {
     "bodies": Tree(doc="body -> pins: pin -> [x, z] in the body's frame (m)"),
     "links": Tree(default=None, doc="rigid two-pin links: from, to, length"),
     "cylinders": Tree(doc="cylinder -> base_pin, rod_pin, min/max/reference_length, max_speed"),
-    "swing": Tree(default=None, doc="actuator, min/max/reference_angle, max_speed"),
+    "swing": Tree(
+        default=None, doc="actuator, min/max/reference_angle, max_speed, tail_radius, tail_heights"
+    ),
     "prismatic": Tree(default=None, doc="parent, child, cylinder, axis_point, offset"),
     "dyads": Tree(doc="pin -> pivot, first, orientation (+1/-1)"),
     "chain": Tree(doc="joint -> parent, child, limits"),
-    "tool": Tree(doc="body, pin, width, angle, velocity_rows"),
+    "tool": Tree(doc="body, pin, width, angle, velocity_rows, outline"),
 }
 
 #: The topics of the family's nodes (manipulator_kinematics.nodes.hydraulic, default names).
@@ -63,6 +65,7 @@ FAMILY_TOPICS = {
     "target_twist": "geometry_msgs/msg/TwistStamped",
     "rate_commands": "sensor_msgs/msg/JointState",
     "velocity_ik_status": "diagnostic_msgs/msg/DiagnosticArray",
+    "zone_clearance": "diagnostic_msgs/msg/DiagnosticArray",
 }
 
 #: The one branch of the family's IK: the solution nearest the seed (HydraulicModel.ik).
@@ -240,6 +243,21 @@ class FamilyArm:
         )
 
 
+class FamilyPoints:
+    """The registry's ``monitored`` hook of a family machine: the points its avoidance zones
+    watch (:meth:`HydraulicModel.monitored`, docs/zones.md) for sensor readings."""
+
+    def __init__(self, arm: FamilyArm) -> None:
+        self.arm = arm
+        h = arm.hydraulic
+        self.names: list[str] = h.monitored(h.reference, np.zeros(h.m))[0]
+
+    def positions(self, q: ArrayLike) -> np.ndarray:
+        """Positions (..., P, 3) in the base frame for sensor readings q (..., m)."""
+        D = self.arm.true_state(q)
+        return self.arm.hydraulic.monitored(D, np.zeros_like(D))[1]
+
+
 @cache
 def _file_name(config_file: str) -> str | None:
     """The ``name`` of a shipped machine file (what tells the family's machines apart)."""
@@ -264,6 +282,8 @@ def family_machine(name: str, config_file: str, summary: str) -> Machine:
         scene=Hook("manipulator_kinematics.hydraulic.drawing:family_scene"),
         describes=lambda values: values.get("name") == _file_name(config_file),
         node_arguments=("--params-file", str(config_path(config_file))),
+        monitored=FamilyPoints,
+        read_surface=Hook("manipulator_kinematics.landxml:read_landxml"),
     )
 
 

@@ -596,30 +596,55 @@ class HydraulicModel:
         return Q[..., :3] + half, Q[..., :3] - half
 
     def monitored(self, D: Any, D_dot: Any) -> tuple[list[str], np.ndarray, np.ndarray]:
-        """Every pin and both tool corners in the base frame with their velocities for actuator
-        rates ``D_dot``: names, positions (..., P, 3), velocities (..., P, 3) (the points an
-        avoidance zone watches, :mod:`manipulator_kinematics.zones`)."""
+        """The points an avoidance zone watches (:mod:`manipulator_kinematics.zones`,
+        docs/zones.md) in the base frame with their velocities for actuator rates ``D_dot``:
+        names, positions (..., P, 3), velocities (..., P, 3). Every pin, both tool corners (tool
+        point +- w/2 across the boom plane), the tool body's ``tool.outline`` points on both side
+        faces (one where the width is 0) and the tail (``swing.tail_radius`` behind the swing
+        axis at each of ``swing.tail_heights``); velocities in closed form from the jets."""
         D = self.validate(D)
         D_dot = _finite(D_dot, D.shape, "D_dot")
         solved = self._solve(D, D_dot)
-        names = [*solved.pins, "left_corner", "right_corner"]
-        r = np.stack([jet.p[..., 0] for jet in solved.pins.values()], axis=-1)
-        z = np.stack([jet.p[..., 1] for jet in solved.pins.values()], axis=-1)
-        r_dot = np.stack([jet.v[..., 0] for jet in solved.pins.values()], axis=-1)
-        z_dot = np.stack([jet.v[..., 1] for jet in solved.pins.values()], axis=-1)
+        d = self.description
+        tool = solved.bodies[d.tool_body]
+        jets = [*solved.pins.values(), *(tool.point(np.array(xz, dtype=float)) for xz in d.outline)]
+        r = np.stack([jet.p[..., 0] for jet in jets], axis=-1)
+        z = np.stack([jet.p[..., 1] for jet in jets], axis=-1)
+        r_dot = np.stack([jet.v[..., 0] for jet in jets], axis=-1)
+        z_dot = np.stack([jet.v[..., 1] for jet in jets], axis=-1)
         t1 = D[..., 0:1] if self.swing else np.zeros(D.shape[:-1] + (1,))
         w = D_dot[..., 0:1] if self.swing else np.zeros(D.shape[:-1] + (1,))
         c, s = np.cos(t1), np.sin(t1)
         p = np.stack((r * c, r * s, z), axis=-1)
         v = np.stack((r_dot * c - r * s * w, r_dot * s + r * c * w, z_dot), axis=-1)
+        n_pins = len(solved.pins)
+        half = 0.5 * d.width
+        across = half * np.concatenate((-s, c, np.zeros_like(c)), axis=-1)[..., None, :]
+        turning = half * np.concatenate((-c * w, -s * w, np.zeros_like(c)), axis=-1)[..., None, :]
         Q = solved.Q
-        half = 0.5 * self.description.width
-        across = half * np.concatenate((-s, c, np.zeros_like(c)), axis=-1)
-        turning = half * np.concatenate((-c * w, -s * w, np.zeros_like(c)), axis=-1)
-        tool, tool_v = Q.p[..., :3], Q.v[..., :3]
-        p = np.concatenate((p, (tool + across)[..., None, :], (tool - across)[..., None, :]), axis=-2)
-        v = np.concatenate((v, (tool_v + turning)[..., None, :], (tool_v - turning)[..., None, :]), axis=-2)
-        return names, p, v
+        tool_p, tool_v = Q.p[..., None, :3], Q.v[..., None, :3]
+        parts_p = [p[..., :n_pins, :], tool_p + across, tool_p - across]
+        parts_v = [v[..., :n_pins, :], tool_v + turning, tool_v - turning]
+        names = [*solved.pins, "left_corner", "right_corner"]
+        if d.outline:
+            outline_p, outline_v = p[..., n_pins:, :], v[..., n_pins:, :]
+            if half > 0.0:
+                parts_p += [outline_p + across, outline_p - across]
+                parts_v += [outline_v + turning, outline_v - turning]
+                names += [
+                    f"tool_outline_{i}_{side}" for side in ("left", "right") for i in range(len(d.outline))
+                ]
+            else:
+                parts_p.append(outline_p)
+                parts_v.append(outline_v)
+                names += [f"tool_outline_{i}" for i in range(len(d.outline))]
+        if d.tail:
+            radius, height = np.array(d.tail, dtype=float).T
+            level = height * np.ones_like(c)
+            parts_p.append(np.stack((-radius * c, -radius * s, level), axis=-1))
+            parts_v.append(np.stack((radius * s * w, -radius * c * w, np.zeros_like(level)), axis=-1))
+            names += [f"tail_{i}" for i in range(len(d.tail))]
+        return names, np.concatenate(parts_p, axis=-2), np.concatenate(parts_v, axis=-2)
 
     def measured(self, D: Any, D_dot: Any = None) -> HydraulicState:
         """:meth:`state` of a measurement: D (..., m) checked finite, not against the stroke box (a

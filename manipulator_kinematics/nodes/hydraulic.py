@@ -19,7 +19,12 @@ defaults are config/hydraulic_nodes.yaml. The actuators are joints named as in t
   z); a status (DiagnosticArray: tracking, slowed, stopped and why); a constant target's drift
   off its line corrected at ``line_gain`` (a stop there holds until the target changes). No
   accepted target for ``command_timeout`` s, or a state that cannot be used: zero rates once,
-  then nothing.
+  then nothing. With ``zones_file`` (docs/zones.md) each command is scaled once more by the
+  avoidance zones' factor for the machine's monitored points
+  (:meth:`~manipulator_kinematics.hydraulic.model.HydraulicModel.monitored`), as the excavator's
+  velocity IK does (:class:`~manipulator_kinematics.nodes.zone_output.ZoneOutput`): it slows
+  approaching a zone and stops at it in its own direction, the status names zone and point, and
+  ``zone_clearance`` carries each zone's smallest clearance.
 * ``hydraulic_sim``: rate_commands -> joint_states at ``rate`` Hz
   (:class:`manipulator_kinematics.hydraulic.control.Plant`).
 * ``hydraulic_ik_server``: solve_ik, solve_fk (the generic server; one branch, ``nearest``).
@@ -27,6 +32,7 @@ defaults are config/hydraulic_nodes.yaml. The actuators are joints named as in t
 
 from __future__ import annotations
 
+import contextlib
 import sys
 from collections.abc import Sequence
 from typing import Any
@@ -46,16 +52,19 @@ from manipulator_kinematics.hydraulic.control import (
     Plant,
     describe,
     rate_command,
+    task_rates,
     toward_line,
 )
 from manipulator_kinematics.hydraulic.description import SECTION
 from manipulator_kinematics.hydraulic.drawing import urdf_joint_values
+from manipulator_kinematics.hydraulic.model import HydraulicModel
 from manipulator_kinematics.joint_state import (
     PLAUSIBILITY_FACTOR,
     InputError,
     decode_joint_state,
     joint_values,
 )
+from manipulator_kinematics.landxml import read_landxml
 from manipulator_kinematics.node_util import ThrottledLog
 from manipulator_kinematics.nodes import run_node
 from manipulator_kinematics.nodes.base import FRAME_PREFIX, MachineNode, input_qos, input_reliability
@@ -63,6 +72,7 @@ from manipulator_kinematics.nodes.forward import SETTINGS as FORWARD_SETTINGS
 from manipulator_kinematics.nodes.forward import ForwardNode
 from manipulator_kinematics.nodes.help import help_text, wants_help
 from manipulator_kinematics.nodes.ik_server import IKServerNode
+from manipulator_kinematics.nodes.zone_output import ZoneOutput
 from manipulator_kinematics.param_files import ConfigError, given_parameters
 from manipulator_kinematics.registry import Machine, by_section, machines
 from manipulator_kinematics.schema import Number, Numbers, Text
@@ -173,13 +183,41 @@ VELOCITY_IK = {
     "status_period": Number(0.0, 3600.0, "s", exclusive_min=True, doc="an unchanged status is resent after"),
     "input_queue_depth": Number(1, 1000, integer=True, doc="subscriptions: act on the latest input"),
     "input_reliability": input_reliability("target_twist and joint_states"),
+    "zones_file": Text(doc="avoidance zone file (YAML, docs/zones.md) read at start; empty: no zones"),
+    "zones_period": Number(
+        0.0,
+        60.0,
+        "s",
+        exclusive_min=True,
+        doc="longest a command acts before the next one can slow it (state period plus latency)",
+    ),
+    "zones_stop_time": Number(
+        0.0,
+        60.0,
+        "s",
+        exclusive_min=True,
+        doc="the actuators stop from full speed within this (deceleration limits: max speed / this)",
+    ),
     "topics": {
         "target_twist": Text(empty=False, doc="input: geometry_msgs/TwistStamped of the tool"),
         "joint_states": Text(empty=False, doc="input: sensor_msgs/JointState of the actuators"),
         "rate_commands": Text(empty=False, doc="output: sensor_msgs/JointState velocities"),
         "status": Text(empty=False, doc="output: diagnostic_msgs/DiagnosticArray"),
+        "zone_clearance": Text(
+            empty=False, doc="output: diagnostic_msgs/DiagnosticArray, per zone its smallest clearance"
+        ),
     },
 }
+
+
+def monitored(h: HydraulicModel, D: np.ndarray, D_dot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions and velocities of the monitored points at a measured state D; a state a
+    round-off beyond a stroke end (reading + zero_offset of a state at the end) is taken at the
+    end, one farther out is refused (StrokeError)."""
+    at_end = np.clip(D, h.lower, h.upper)
+    D = at_end if np.all(np.abs(at_end - D) <= 1e-9) else D
+    _, p, v = h.monitored(D, D_dot)
+    return p, v
 
 
 class HydraulicVelocityIK(MachineNode):
@@ -208,7 +246,7 @@ class HydraulicVelocityIK(MachineNode):
         # the target changes (the correction must not creep the machine on and off at an end).
         self.line: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.stopped_on_line: str | None = None
-        self.state: tuple[int, np.ndarray] | None = None  # (receipt ns, D)
+        self.state: tuple[int, np.ndarray, int] | None = None  # (receipt ns, D, stamp ns)
         self.target: tuple[int, np.ndarray] | None = None  # (receipt ns, [linear, angular])
         self.moving = False
         self.status_sent: tuple[int, str] | None = None
@@ -223,6 +261,18 @@ class HydraulicVelocityIK(MachineNode):
         self.create_subscription(TwistStamped, topics["target_twist"], self.on_target, latest)
         self.create_subscription(JointState, topics["joint_states"], self.on_state, latest)
         self.create_timer(s["command_timeout"] / 5.0, self.on_timer)
+        # Avoidance zones (docs/zones.md): every command scaled so no monitored point enters one.
+        self.zones = ZoneOutput.of(
+            self,
+            s["zones_file"],
+            self.h.monitored(self.h.reference, np.zeros(self.h.m))[0],
+            self.h.max_speed / s["zones_stop_time"],
+            s["zones_period"],
+            topics["zone_clearance"],
+            s["qos_depth"],
+            self.h.description.name,
+            read_landxml,
+        )
         commanded = [self.h.task_names[r] for r in self.rows]
         self.get_logger().info(
             f"{machine.name}: {topics['target_twist']} (rows {commanded} of {list(self.h.task_names)}) "
@@ -238,9 +288,17 @@ class HydraulicVelocityIK(MachineNode):
         except InputError as error:
             self.log("error", f"rejected joint_states: {error}")
             return
-        self.state = (self.now_ns(), self.model.true_state(readings))
+        stamp = msg.header.stamp
+        self.state = (
+            self.now_ns(),
+            self.model.true_state(readings),
+            stamp.sec * 1_000_000_000 + stamp.nanosec,
+        )
         if self.target is not None:
-            self.command(msg.header.stamp)
+            self.command(stamp)
+        elif self.zones is not None:  # standing: the clearances still go out
+            with contextlib.suppress(ValueError):
+                self.zones.watch(stamp, monitored(self.h, self.state[1], np.zeros(self.h.m))[0])
 
     def on_target(self, msg: TwistStamped) -> None:
         t = msg.twist
@@ -263,15 +321,6 @@ class HydraulicVelocityIK(MachineNode):
         if self.target is not None and self.now_ns() - self.target[0] > self.command_timeout_ns:
             self.stop(f"no target_twist for {self.command_timeout_ns * 1e-9:g} s", "info", idle=True)
 
-    def task_rates(self, D: np.ndarray, twist: np.ndarray) -> np.ndarray:
-        """Q_dot (nq,) of a tool twist: the linear velocity and, with a tool angle, alpha_dot =
-        omega . (sin theta1, -cos theta1, 0) (machine.py: omega of Rz(theta1) Ry(-alpha))."""
-        rows = list(twist[:3])
-        if self.h.description.has_angle:
-            t1 = D[0] if self.h.swing else 0.0
-            rows.append(twist[3] * np.sin(t1) - twist[4] * np.cos(t1))
-        return np.array(rows)
-
     def command(self, stamp: Any) -> None:
         """Publish the rates for the current target at the current state (or stop, saying why)."""
         try:
@@ -283,7 +332,7 @@ class HydraulicVelocityIK(MachineNode):
             if not (np.all(np.isfinite(jc0)) and np.all(np.isfinite(Q))):
                 raise InputError(f"the linkage does not close at D = {D.tolist()}")
             twist = self.target[1]
-            q_dot = self.task_rates(D, twist)
+            q_dot = task_rates(D, twist, self.h.swing, self.h.description.has_angle)
             if self.line is None or not np.array_equal(self.line[0], twist):
                 self.line, self.stopped_on_line = (twist, Q, q_dot), None
             gain = self.settings["line_gain"]
@@ -305,15 +354,23 @@ class HydraulicVelocityIK(MachineNode):
                 self.settings["condition_threshold"],
                 self.settings["stroke_horizon"],
             )
+            zone = (
+                None
+                if self.zones is None
+                else self.zones(stamp, *monitored(self.h, D, rates.d_dot), rates.d_dot, self.state[2])
+            )
         except ValueError as error:  # InputError, StrokeError, an overflowing target
             self.stop(f"cannot command: {error}", "warning")
             return
-        self.publish(stamp, rates.d_dot)
+        self.publish(stamp, rates.d_dot if zone is None else zone.scale * rates.d_dot)
         self.moving = True
         state, message = describe(rates, self.names)
         if state == STOPPED:
             self.stopped_on_line = message
-        self.report(stamp, LEVELS[state], message, rates.scale, rates.condition)
+        elif zone is not None and zone.scale < 1.0:  # the zones slow it further (a zone stop is not held)
+            state, message = zone.state, zone.message
+        scale = rates.scale * (1.0 if zone is None else zone.scale)
+        self.report(stamp, LEVELS[state], message, scale, rates.condition)
 
     def report(
         self, stamp: Any, level: bytes, message: str, scale: float = 0.0, condition: float = np.nan
