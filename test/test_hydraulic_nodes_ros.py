@@ -127,6 +127,15 @@ def test_sim_velocity_ik_forward_loop_follows_the_target(
             )
 
         probe.wait_until(moved, TIMEOUT, f"the {name}'s tool to move {TRAVEL} m")
+        # The markers (at most 30 Hz) and urdf_joint_states of a state the probe heard: on a fast
+        # run the tool travels before the first of them arrives.
+        probe.wait_until(
+            lambda: (
+                (set(markers) & set(states) and set(urdf) & set(states)) or not all(n.alive() for n in nodes)
+            ),
+            TIMEOUT,
+            "markers and urdf_joint_states of a heard state",
+        )
         assert all(n.alive() for n in nodes), [n.log() for n in nodes]
     finally:
         logs = [n.stop() for n in nodes]
