@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The whole test suite: set up (or refresh) the venv, lint, format check, mypy, then pytest
 # over test/. `--fast` (first argument) runs only the fast tier: -m "not ros and not slow"
-# (no processes, no DDS, nothing over about 5 s; see CONTRIBUTING.md).
+# (no processes, no DDS, nothing over about 5 s; see CONTRIBUTING.md) on two workers (-n 2).
 # Extra arguments go to pytest, e.g. `bash scripts/test.sh -k excavator -x`.
 # Exit status: non-zero if set-up, ruff, mypy or any test fails (pytest's 5, "no tests ran",
 # included). Every check runs even if another failed, so one run shows every problem.
@@ -10,7 +10,8 @@ REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 tier=()
 if [ "${1:-}" = "--fast" ]; then
     shift
-    tier=(-m "not ros and not slow")
+    # In-process tests only: two workers (pytest-xdist) use both cores of the reference machine.
+    tier=(-m "not ros and not slow" -n 2)
 fi
 bash "$REPO/scripts/bootstrap.sh"
 # shellcheck source=scripts/env.sh
