@@ -17,7 +17,7 @@ from family_zone_scenario import SCENARIOS
 from geometry_msgs.msg import PoseStamped, TwistStamped
 from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe
 from sensor_msgs.msg import JointState
-from test_zones_ros import QOS, TOLERANCE, start, vec
+from test_zones_ros import QOS, TOLERANCE, smallest_reported, start, vec
 from zone_scenario import PERIOD, STOP_TIME
 
 from manipulator_kinematics.hydraulic import HydraulicModel
@@ -111,17 +111,7 @@ def test_random_targets_never_cross_a_zone_and_the_machine_reaches_them(probe: P
     cylinders = slice(1 if h.swing else 0, None)  # it moved about, not just stopped
     assert np.all(np.ptp(D, axis=0)[cylinders] > 0.3 * (h.upper - h.lower)[cylinders])
     # The monitor topic says the same: every zone's smallest clearance, never below the tolerance.
-    smallest = {
-        s.name: min(
-            float(v.value)
-            for m in reported
-            for t in m.status
-            if t.name == s.name
-            for v in t.values
-            if v.key == "clearance"
-        )
-        for s in reported[-1].status
-    }
+    smallest = smallest_reported(reported)
     assert set(smallest) == set(clear) and min(smallest.values()) >= -TOLERANCE, smallest
     assert "approaching zone" in logs[2] or "at zone" in logs[2], logs[2][-2000:]
 

@@ -42,6 +42,21 @@ OPENING = (
 )
 
 
+def smallest_reported(reported: list[DiagnosticArray]) -> dict[str, float]:
+    """Each zone's smallest clearance over every zone_clearance message (the monitor topic)."""
+    return {
+        s.name: min(
+            float(v.value)
+            for m in reported
+            for t in m.status
+            if t.name == s.name
+            for v in t.values
+            if v.key == "clearance"
+        )
+        for s in reported[-1].status
+    }
+
+
 def start(
     exe: str,
     machine: str = "excavator_cet200.yaml",
@@ -128,17 +143,7 @@ def test_random_targets_never_cross_a_zone_and_the_machine_reaches_them(probe: P
     )
     assert np.ptp(tip[:, 2]) > 3.0 and np.ptp(tip[:, 0]) > 1.0  # it moved about, not just stopped
     # The monitor topic says the same: every zone's smallest clearance, never below the tolerance.
-    smallest = {
-        s.name: min(
-            float(v.value)
-            for m in reported
-            for t in m.status
-            if t.name == s.name
-            for v in t.values
-            if v.key == "clearance"
-        )
-        for s in reported[-1].status
-    }
+    smallest = smallest_reported(reported)
     assert set(smallest) == set(clear) and min(smallest.values()) >= -TOLERANCE, smallest
     ik_log = logs[2]
     assert "approaching zone" in ik_log or "at zone" in ik_log, ik_log[-2000:]
