@@ -35,12 +35,13 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Protocol
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 _holding = False
+_starting = False
 _received: int | None = None
 _callbacks: list[Callable[[], None]] = []
 #: Seconds a child gets to end on SIGTERM before SIGKILL: the whole stop stays under 2 s.
@@ -97,9 +98,25 @@ def on_request(callback: Callable[[], None]) -> None:
 
 def adopt(child: Child) -> Child:
     """``child`` is ended with this process when a signal ends it in the start-up phase (a tool
-    that starts nodes: nothing of it may outlive it). Returns ``child``."""
+    that starts nodes: nothing of it may outlive it). Returns ``child``. Start and adopt it in a
+    :func:`starting` block."""
     _children.append(child)
     return child
+
+
+@contextlib.contextmanager
+def starting() -> Iterator[None]:
+    """A block that starts children and adopts them: a signal arriving inside it (after the
+    fork, before :func:`adopt`) ends this process only when the block ends, so the child it
+    started is ended too instead of outliving it."""
+    global _starting
+    _starting = True
+    try:
+        yield
+    finally:
+        _starting = False
+        if _received is not None and not _holding:
+            _end(_received)
 
 
 def _end_children() -> None:
@@ -125,17 +142,24 @@ def _on_signal(signum: int, frame: object) -> None:
     global _received
     _received = signum
     if not _holding:
-        # A second signal (Ctrl-C twice, launch's escalation) may run this handler again while
-        # the first waits for the children: one line, one ending.
-        _ignore_signals()
-        # Nothing to clean up but the children; os.write bypasses Python's buffers, which the
-        # interrupted main thread may be holding.
-        name = os.path.basename(getattr(sys.modules.get("__main__"), "__file__", None) or sys.argv[0])
-        os.write(2, f"{name}: stopped by {signal.Signals(signum).name}\n".encode())
-        _end_children()
-        os._exit(0)
+        if not _starting:  # else the end of the starting() block ends the process
+            _end(signum)
+        return
     for callback in _callbacks:
         callback()
+
+
+def _end(signum: int) -> None:
+    """The start-up phase's ending: one line, the children ended, exit 0."""
+    # A second signal (Ctrl-C twice, launch's escalation) may run the handler again while the
+    # first waits for the children: one line, one ending.
+    _ignore_signals()
+    # Nothing to clean up but the children; os.write bypasses Python's buffers, which the
+    # interrupted main thread may be holding.
+    name = os.path.basename(getattr(sys.modules.get("__main__"), "__file__", None) or sys.argv[0])
+    os.write(2, f"{name}: stopped by {signal.Signals(signum).name}\n".encode())
+    _end_children()
+    os._exit(0)
 
 
 def _ignore_signals() -> None:

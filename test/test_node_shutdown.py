@@ -563,3 +563,33 @@ def test_a_node_compiling_its_kernel_on_a_cold_cache_stops_within_2_s_of_sigint(
         assert not [pid for pid in compiling if running(pid)], compiling
     finally:
         process.stop()
+
+
+# A tool that starts a child and is signalled between the fork and adopt (the signal is sent from
+# inside the starting() block, right after Popen returns).
+STARTING_TOOL = """
+import os, signal, subprocess, sys
+from manipulator_kinematics import stopping
+
+stopping.install()
+with stopping.starting():
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    print(child.pid, flush=True)
+    os.kill(os.getpid(), signal.SIGTERM)
+    stopping.adopt(child)
+print("not reached", flush=True)
+"""
+
+
+def test_a_signal_while_a_child_is_being_started_ends_the_child_too() -> None:
+    done = subprocess.run(
+        [sys.executable, "-c", STARTING_TOOL], capture_output=True, text=True, timeout=TIMEOUT
+    )
+    assert done.returncode == 0, done.stderr
+    assert "stopped by SIGTERM" in done.stderr and "not reached" not in done.stdout
+    pid = int(done.stdout.split()[0])
+    deadline = time.monotonic() + TIMEOUT
+    # Reaped by the tool before it ended (SIGTERM, then SIGKILL after its grace).
+    while Path(f"/proc/{pid}").exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not Path(f"/proc/{pid}").exists(), "the child outlived the tool"

@@ -391,8 +391,9 @@ def start_processes(output: Path) -> list[tuple[str, subprocess.Popen]]:
     processes = []
     for name, command in commands.items():
         log = open(output / f"{name}.log", "w", encoding="utf-8")  # noqa: SIM115 - the child writes it
-        process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
-        processes.append((name, stopping.adopt(process)))  # a signal to the demo ends them too
+        with stopping.starting():  # a signal to the demo ends them too, even one during Popen
+            process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
+            processes.append((name, stopping.adopt(process)))
     return processes
 
 
