@@ -79,8 +79,10 @@ from manipulator_kinematics import param_files
 from pump_boom_kinematics.kinematics import PumpBoom
 from pump_boom_kinematics.regions import RegionTable
 boom = PumpBoom.default()
-path, key = boom._table_path(), boom.table_key()
-clear = getattr(getattr(params, "_parse", None), "cache_clear", lambda: None)  # the parse cache, if any
+# The code of older commits (baseline rows) named these privately, and cached no parse.
+path, key = getattr(boom, "table_path", getattr(boom, "_table_path", None))(), boom.table_key()
+old_cache = getattr(getattr(param_files, "_parse", None), "cache_clear", lambda: None)
+clear = getattr(param_files, "clear_cache", old_cache)
 RegionTable.load(path, key)  # the process's first load is the fresh-process column's
 times = []
 for _ in range(int(sys.argv[1])):
@@ -100,7 +102,7 @@ from manipulator_kinematics.schema import validate
 from pump_boom_kinematics import regions
 from pump_boom_kinematics.kinematics import PumpBoom
 boom = PumpBoom.default()
-path, key = boom._table_path(), boom.table_key()
+path, key = boom.table_path(), boom.table_key()
 regions.RegionTable.load(path, key)
 times = {}
 def timed(name, call):
@@ -109,18 +111,18 @@ def timed(name, call):
     times.setdefault(name, []).append(time.perf_counter() - start)
     return result
 for _ in range(int(sys.argv[1])):
-    param_files._parse.cache_clear()
+    param_files.clear_cache()
     document = timed("YAML parse (libyaml) of the file", lambda: param_files.load_parameters(path))
     section = timed("schema check", lambda: validate(document[regions.TABLE_SECTION], regions.TABLE_SCHEMA,
                                                      regions.TABLE_SECTION))
     squares = timed("squares (base64, zlib) -> arrays",
-                    lambda: regions._squares(section["squares"], "squares"))
+                    lambda: regions.decode_squares(section["squares"], "squares"))
     index = np.stack([squares["column"], squares["row"], squares["level"]], axis=-1)
     table = timed("cell owners (RegionTable())", lambda: regions.RegionTable(
         boom.grid, index, squares["triple"], squares["margin"], section["built_for"], {}, {}))
-    param_files._parse.cache_clear()
+    param_files.clear_cache()
     timed("whole load (RegionTable.load)", lambda: regions.RegionTable.load(path, key))
-    timed("first use: square extents (nearest)", lambda: table._extent)
+    timed("first use: square extents (nearest)", lambda: table.extent)
 print(json.dumps(times))
 """
 

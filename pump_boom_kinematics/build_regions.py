@@ -448,7 +448,7 @@ def _repair(
         bad = np.concatenate([lattice[steep | failed], edges[~solved[0] | (step > limit)]])
         if not len(bad):
             break
-        low, high = table._extent[None, :, :2], table._extent[None, :, 2:]
+        low, high = table.extent[None, :, :2], table.extent[None, :, 2:]
         under = ((low < bad[:, None] + half) & (high > bad[:, None] - half)).all(axis=-1)
         level = np.where(under, table.index[None, :, 2], -1)
         gap = np.linalg.norm(np.clip(bad[:, None], low, high) - bad[:, None], axis=-1)
@@ -638,7 +638,7 @@ def _plane_ik(boom: PumpBoom, plane: np.ndarray, table: RegionTable) -> tuple[np
 
 def _lattice_over(table: RegionTable, spacing: float) -> np.ndarray:
     """The check lattice (n_r, n_z, 2) over the bounding box of the table's squares."""
-    extent = table._extent
+    extent = table.extent
     origin = table.grid.origin
     axes = []
     for k in (0, 1):

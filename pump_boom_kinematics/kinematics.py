@@ -305,7 +305,7 @@ class PumpBoom:
         if self._table is None:
             if self._table_error is None:
                 try:
-                    self._table = RegionTable.load(self._table_path(), self.table_key())
+                    self._table = RegionTable.load(self.table_path(), self.table_key())
                 except ConfigError as error:
                     # Remembered: a node asked again and again does not re-read the file.
                     self._table_error = RegionTableError(
@@ -326,7 +326,8 @@ class PumpBoom:
             return str(error)
         return None if len(table) else "the region table has no square: region IK solves no point"
 
-    def _table_path(self) -> Path:
+    def table_path(self) -> Path:
+        """The region table file this machine file names (config/ relative, or absolute)."""
         if self.table_file is None:
             raise ConfigError(f"{SECTION}.regions.table_file: no region table given")
         if self.table_file.is_absolute():

@@ -224,7 +224,7 @@ class RegionTable:
     # functools.cached_property: Python 3.11's holds a lock while it builds; from 3.12 two threads
     # (a node's executor) may both build one, and both get the same array.
     @cached_property
-    def _extent(self) -> np.ndarray:
+    def extent(self) -> np.ndarray:
         """Per square its extent (m, 4) (r low, z low, r high, z high) m, for :meth:`nearest`."""
         side = self.grid.side(self.index[:, 2])
         corner = np.stack(
@@ -381,7 +381,7 @@ class RegionTable:
 
     def nearest(self, r: float, z: float) -> tuple[float, float]:
         """The point of the covered area nearest to the finite plane point (r, z) (m)."""
-        extent = self._extent
+        extent = self.extent
         closest = np.clip([r, z], extent[:, :2], extent[:, 2:])
         k = int(np.argmin(np.hypot(closest[:, 0] - r, closest[:, 1] - z)))
         return float(closest[k, 0]), float(closest[k, 1])
@@ -395,7 +395,7 @@ class RegionTable:
         if TABLE_SECTION not in params:
             raise ConfigError(f"{path}: no {TABLE_SECTION!r} section under /**: ros__parameters")
         p = validate(params[TABLE_SECTION], TABLE_SCHEMA, TABLE_SECTION)
-        squares = _squares(p["squares"], f"{TABLE_SECTION}.squares")
+        squares = decode_squares(p["squares"], f"{TABLE_SECTION}.squares")
         built = p["built_for"]
         if expected is not None:
             for key, value in expected.items():
@@ -484,7 +484,7 @@ def _overlap(low: np.ndarray, scale: np.ndarray, shape: tuple[int, int]) -> tupl
     return int(first), int(other)
 
 
-def _squares(text: str, key: str) -> np.ndarray:
+def decode_squares(text: str, key: str) -> np.ndarray:
     """The squares (m,) (SQUARE_DTYPE) of a table file's ``squares``; ConfigError names the key and
     the first bad square."""
     inflate = zlib.decompressobj()

@@ -705,7 +705,8 @@ def _squares_block(document: str) -> str:
 def _shipped_squares() -> tuple[str, np.ndarray]:
     """The shipped table file's text before its squares, and its squares (a copy)."""
     text = Path(config_path("pump_boom_regions.yaml")).read_text(encoding="utf-8")
-    return text[: text.index("      squares: |")], regions._squares(_squares_block(text), "squares").copy()
+    squares = regions.decode_squares(_squares_block(text), "squares")
+    return text[: text.index("      squares: |")], squares.copy()
 
 
 def _table_file(tmp_path: Path, head: str, stream: bytes) -> Path:
