@@ -166,7 +166,12 @@ def test_machine_parameters_are_described_with_their_range(probe: Probe) -> None
     with NodeProcess("excavator_forward") as process:
         client = probe.node.create_client(DescribeParameters, "/excavator_forward/describe_parameters")
         probe.wait_until(client.service_is_ready, TIMEOUT, "describe_parameters")
-        names = ["excavator.arm.length", "excavator.boom.foot_pin", "input_reliability", "frame_prefix"]
+        names = [
+            "hydraulic_machine.links.h_link.length",
+            "hydraulic_machine.bodies.boom.pins.arm_pin",
+            "input_reliability",
+            "frame_prefix",
+        ]
         length, pin, reliability, prefix = probe.call(
             client, DescribeParameters.Request(names=names), TIMEOUT
         ).descriptors

@@ -158,7 +158,7 @@ def test_a_malformed_zone_file_is_refused_naming_the_key(tmp_path: Path, text: s
 
 
 @pytest.mark.parametrize(
-    "name", ["excavator_cet200_family.yaml", "wheel_loader_wl20.yaml", "knuckle_crane_kc100.yaml"]
+    "name", ["excavator_cet200.yaml", "wheel_loader_wl20.yaml", "knuckle_crane_kc100.yaml"]
 )
 def test_monitored_points_move_as_their_positions_differentiate(name: str) -> None:
     from manipulator_kinematics.hydraulic import HydraulicModel
@@ -214,7 +214,7 @@ def drive(
 
 
 @pytest.mark.parametrize(
-    "name", ["excavator_cet200_family.yaml", "wheel_loader_wl20.yaml", "knuckle_crane_kc100.yaml"]
+    "name", ["excavator_cet200.yaml", "wheel_loader_wl20.yaml", "knuckle_crane_kc100.yaml"]
 )
 @pytest.mark.slow
 def test_random_commands_never_cross_a_ceiling_and_still_reach_it(name: str) -> None:
