@@ -94,7 +94,8 @@ def machine_section(node: Node, machine: Machine, argv: Sequence[str]) -> dict[s
     given = {key: unflatten(_values(node, key)) for key in keys}
     files = given_parameters(argv, node.get_fully_qualified_name())
     if any(key in files for key in keys):
-        return machine.values({key: v for key, v in given.items() if key in files or v})
+        source = ", ".join(str(path) for path in params_files(argv)) or "parameters"
+        return machine.values({key: v for key, v in given.items() if key in files or v}, source)
     default = load_parameters(config_path(machine.config_file))
     return machine.values({key: merge(default.get(key, {}), given[key]) for key in keys})
 
