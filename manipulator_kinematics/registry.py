@@ -181,8 +181,11 @@ class Machine:
         return self.factory(self.values(params))
 
     def model_from(self, section: Mapping[str, Any]) -> Any:
-        """The model of a nested parameter section alone (validated here)."""
-        return self.model_of({self.section: section})
+        """The model of a nested parameter section (validated here), laid out as :meth:`values`
+        returns it: each ``also`` section under its name (``model_from(parameters())`` is the
+        file's model)."""
+        own = {k: v for k, v in section.items() if k not in self.also}
+        return self.model_of({self.section: own, **{k: section[k] for k in self.also if k in section}})
 
 
 @cache
