@@ -384,13 +384,12 @@ def geometry(section: Any) -> dict[str, Any]:
     try:
         return validate(section, GEOMETRY, FAMILY)
     except ConfigError as error:
-        key = str(error).split(":", 1)[0].split(" ", 1)[0].split("[", 1)[0]
+        text = str(error)
+        key = text.split(":", 1)[0].split(" ", 1)[0].split("[", 1)[0]
         # A wrong value or a misspelt key is the user's typo, not another machine; a missing pin
         # is another linkage.
-        number = isinstance(_field(key), (Number, Numbers))
-        if (number and not (".pins." in key and str(error).endswith("missing"))) or "did you mean" in str(
-            error
-        ):
+        missing_pin = ".pins." in key and text.endswith("missing")
+        if "did you mean" in text or (isinstance(_field(key), (Number, Numbers)) and not missing_pin):
             raise
         raise ConfigError(f"{error}: {_HINT}") from None
 
