@@ -106,7 +106,7 @@ _TAIL_HEIGHTS = Numbers(
     doc="optional: heights (m, base frame) of the watched points at the tail swing radius, e.g. the "
     "counterweight's bottom and top",
 )
-_IMU = {
+_IMU: Schema = {
     "cab": {"rotation_rpy": _RPY},
     "boom": {"rotation_rpy": _RPY},
     "arm": {"rotation_rpy": _RPY},
@@ -514,7 +514,7 @@ def describe(params: Mapping[str, Any]) -> Description:
         side_link_length=links["side_link"]["length"],
         h_link_pin=bucket["hlink_pin_on_bucket"],
         h_link_length=links["h_link"]["length"],
-        orientations=tuple(g["dyads"][pin]["orientation"] for pin in DYADS),  # type: ignore[arg-type]
+        orientations=tuple(g["dyads"][pin]["orientation"] for pin in DYADS),
         imu=params["imu"],
         limits=Limits(
             stroke_min=np.array([c["min_length"] for c in cylinders]),
