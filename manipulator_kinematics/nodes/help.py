@@ -66,8 +66,8 @@ def help_text(node_class: type, machine: Machine | None, node_name: str, default
             textwrap.fill(
                 f"Machine ({machine.name}: {machine.summary}): the section{'s' if machine.also else ''} "
                 f"{sections} of a params file (default: config/{machine.config_file}). A file that is "
-                f"given must be complete; without one, -p {machine.section}.<key>:=<value> changes "
-                "single values of the default machine.",
+                f"given must be complete; without one, -p {'<section>' if machine.also else machine.section}"
+                ".<key>:=<value> changes single values of the default machine.",
                 WIDTH,
             ),
             *machine_rows,
