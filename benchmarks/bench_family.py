@@ -5,7 +5,7 @@ what a call costs, not what other processes on a shared machine take; read the r
 compare numbers of the same round):
 
 * one call (one state): the full state (Q, Q_dot, Q_ddot, JC0, theta, K) through the generic
-  core :class:`manipulator_kinematics.hydraulic.HydraulicModel` for the CET200 family file, the
+  core :class:`manipulator_kinematics.hydraulic.HydraulicModel` for the CET200's family section, the
   WL20 and the KC100, through its compiled kernel and through the numpy path (the code before
   the kernel: ``KERNEL.ready`` set aside); ``pose``, ``jc0``, ``cylinder_rates`` (eq. 9);
   beside the excavator's dedicated ``Excavator.state`` and the peers of the issue's target: a
@@ -38,7 +38,7 @@ from manipulator_kinematics.hydraulic import model as core
 from manipulator_kinematics.param_files import config_path
 
 MACHINES = {
-    "CET200 (family file)": "excavator_cet200_family.yaml",
+    "CET200 (family core)": "excavator_cet200.yaml",
     "WL20": "wheel_loader_wl20.yaml",
     "KC100": "knuckle_crane_kc100.yaml",
 }
@@ -208,7 +208,7 @@ def main() -> None:
         rows.append(cells)
     print_table(["machine", *(f"{size}" for size in BATCHES)], rows)
     print()
-    cet = "CET200 (family file)"
+    cet = "CET200 (family core)"
     target = ratio(f"{cet}: state", peer)
     excavator_ratio = ratio("excavator: Excavator.state", peer)
     print(f"CET200 family state / the excavator's plain numba pose: {target:.2f}")

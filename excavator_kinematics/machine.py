@@ -2,7 +2,9 @@
 ``manipulator_kinematics.machines``, see :mod:`manipulator_kinematics.registry`).
 
 Its joints are the actuators, in the order of D = [theta1, d2, d3, d4]: the swing drive and the
-boom, arm and bucket cylinders; its limits are the swing range and the strokes.
+boom, arm and bucket cylinders; its limits are the swing range and the strokes. Its machine file
+has two sections: the linkage in the family's ``hydraulic_machine`` section (read onto the
+excavator's topology) and the ``excavator`` section (:mod:`excavator_kinematics.core.machine_file`).
 """
 
 from __future__ import annotations
@@ -10,7 +12,7 @@ from __future__ import annotations
 from typing import Any
 
 from excavator_kinematics.core.kinematics import ACTUATORS, Excavator
-from excavator_kinematics.core.machine_file import SCHEMA, SECTION, describe
+from excavator_kinematics.core.machine_file import FAMILY, GEOMETRY, SCHEMA, SECTION, describe, read
 from manipulator_kinematics.registry import Hook, Machine
 from manipulator_kinematics.serial_chain import JointLimits
 
@@ -19,7 +21,7 @@ _TWIST = "geometry_msgs/msg/TwistStamped"
 
 
 def _model(params: dict[str, Any]) -> Excavator:
-    return Excavator(describe(params, SECTION))
+    return Excavator(describe(params))
 
 
 def _limits(model: Excavator) -> JointLimits:
@@ -34,6 +36,8 @@ MACHINE = Machine(
     config_file="excavator_cet200.yaml",
     schema=SCHEMA,
     factory=_model,
+    also={FAMILY: GEOMETRY},
+    read=read,
     # Every topic of the excavator nodes (config/excavator_nodes.yaml, default names).
     topics={
         "cylinder_lengths": _JOINT_STATE,

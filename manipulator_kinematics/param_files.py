@@ -1,7 +1,7 @@
 """ROS 2 parameter files as plain nested dicts (no rclpy), so cores and nodes share one loader.
 
 A parameters file looks like ``{node_or_/**: {ros__parameters: {...}}}``; nested keys become
-dotted parameter names in ROS (``excavator.boom.length``). Cores take the nested dict.
+dotted parameter names in ROS (``hydraulic_machine.links.h_link.length``). Cores take the nested dict.
 
 Each file is parsed once per process (:func:`read_document`, kept while the file is unchanged): the
 start-up check of the command line (:func:`check_ros_arguments`), the node's values

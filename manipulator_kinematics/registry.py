@@ -64,6 +64,13 @@ The avoidance-zone hooks (docs/zones.md), for the markers' zones and monitored p
 * ``read_surface(file, name)``: a LandXML TIN for ``kind: surface`` zones
   (:class:`manipulator_kinematics.zones.Surface`).
 
+A machine may read more than its own section: ``also`` names the other top-level sections of its
+files and their schemas (the excavator's files carry its linkage in the family's
+``hydraulic_machine`` section beside the ``excavator`` section), and ``read`` turns a file's
+top-level sections into the values its factory takes (its own section's, each ``also`` section's
+under its name). Such a file describes that one machine (:func:`machines_described`); the nodes of a
+machine whose section another machine reads (the family's) skip that machine's own section.
+
 Hooks are usually given as :class:`Hook` ("module:function", imported on the first call), so that
 loading the registry, which every node does at start-up, imports no bag, URDF or drawing code.
 """
@@ -126,7 +133,8 @@ class Machine:
     ``scene`` draws it, ``monitored`` and ``read_surface`` serve its avoidance zones (module
     docstring). ``describes(values)``: whether a section's values are
     this machine (None: every value of its section is; needed where machines share a section);
-    ``node_arguments``: the ROS arguments its nodes need to run it (``forward_node`` included).
+    ``node_arguments``: the ROS arguments its nodes need to run it (``forward_node`` included);
+    ``also`` and ``read``: the other sections it reads (module docstring).
     """
 
     name: str
@@ -148,22 +156,36 @@ class Machine:
     node_arguments: tuple[str, ...] = ()
     monitored: Callable[[Any], Any] | None = None  # model -> names + positions(state) (module docstring)
     read_surface: Callable[[str, str], Any] | None = None  # (file, surface name) -> zones.Surface
+    also: Mapping[str, Schema] = field(default_factory=dict)  # other sections it reads: schemas
+    read: Callable[[Mapping[str, Any], str], dict[str, Any]] | None = None  # (sections, source) -> values
+
+    def values(self, params: Mapping[str, Any], source: str = "parameters") -> dict[str, Any]:
+        """What the factory takes from a file's top-level sections ``params``, validated."""
+        if self.read is not None:
+            return self.read(params, source)
+        if self.section not in params:
+            raise ConfigError(f"{source}: no {self.section!r} section under /**: ros__parameters")
+        return validate(params[self.section], self.schema, self.section)
 
     def parameters(self, path: str | Path | None = None, node_name: str = "/**") -> dict[str, Any]:
-        """The machine's section of ``path`` (default: its shipped config file), validated."""
+        """The machine's values in ``path`` (default: its shipped config file), validated."""
         path = config_path(self.config_file) if path is None else Path(path)
-        params = load_parameters(path, node_name)
-        if self.section not in params:
-            raise ConfigError(f"{path}: no {self.section!r} section under /**: ros__parameters")
-        return validate(params[self.section], self.schema, self.section)
+        return self.values(load_parameters(path, node_name), str(path))
 
     def model(self, path: str | Path | None = None) -> Any:
         """The model described by ``path`` (default: the shipped machine)."""
         return self.factory(self.parameters(path))
 
+    def model_of(self, params: Mapping[str, Any]) -> Any:
+        """The model of a file's nested top-level sections (validated here)."""
+        return self.factory(self.values(params))
+
     def model_from(self, section: Mapping[str, Any]) -> Any:
-        """The model of a nested parameter section (validated here)."""
-        return self.factory(validate(section, self.schema, self.section))
+        """The model of a nested parameter section (validated here), laid out as :meth:`values`
+        returns it: each ``also`` section under its name (``model_from(parameters())`` is the
+        file's model)."""
+        own = {k: v for k, v in section.items() if k not in self.also}
+        return self.model_of({self.section: own, **{k: section[k] for k in self.also if k in section}})
 
 
 @cache
@@ -186,6 +208,14 @@ def machine(name: str) -> Machine:
     close = difflib.get_close_matches(name, list(known), n=1)
     hint = f" (did you mean {close[0]!r}?)" if close else ""
     raise KeyError(f"no machine {name!r}{hint}; installed: {', '.join(known) or 'none'}")
+
+
+def machines_described(params: Mapping[str, Any]) -> dict[str, Machine]:
+    """The machines a file's top-level sections ``params`` describe, by their section: a section
+    that another machine of the file also reads (``also``) is that machine's, not one of its own."""
+    found = {key: m for key, values in params.items() if (m := by_section(key, values)) is not None}
+    taken = {key for m in found.values() for key in m.also}
+    return {key: m for key, m in found.items() if key not in taken}
 
 
 def by_section(section: str, values: Any = None) -> Machine | None:

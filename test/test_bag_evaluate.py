@@ -243,7 +243,8 @@ def test_planted_serial_errors_are_reported_exactly(tmp_path: Path) -> None:
 def test_params_files_set_the_machine_and_the_node_settings(tmp_path: Path) -> None:
     params = tmp_path / "params.yaml"
     params.write_text(
-        "/**:\n  ros__parameters:\n    excavator:\n      boom:\n        length: 5.75\n"
+        "/**:\n  ros__parameters:\n    hydraulic_machine:\n      bodies:\n        bucket:\n          pins:\n"
+        "            tip: [1.36, 0.0]\n"
         "/**/excavator_forward:\n  ros__parameters:\n    acceleration_time_constant: 0.03\n"
     )
     base = yaml.safe_load(config_path("excavator_cet200.yaml").read_text())["/**"]["ros__parameters"]
@@ -254,7 +255,7 @@ def test_params_files_set_the_machine_and_the_node_settings(tmp_path: Path) -> N
     assert setup.node_settings["excavator_forward"]["swing_max_age"] == 0.1  # from the package's config
     report, _ = evaluate_bag(BagReader(DATA / "excavator_forward_golden"), setup)
     consistency = only(report, "excavator")["consistency"]
-    # The golden outputs are for the 5.694 m boom: 56 mm longer moves the tip by centimetres.
+    # The golden outputs are for the 1.309 m bucket: 51 mm longer moves the tip by centimetres.
     assert consistency["bucket_pose"]["position_m"]["max"] > 0.01
     assert "acceleration_time_constant 0.03" in consistency["bucket_accel"]["not_compared"]
 

@@ -199,7 +199,9 @@ def changed_value(machine: Machine) -> tuple[str, dict[str, float]]:
         if max(differences.values()) > 1e-3:
             text = f"[{', '.join(map(repr, new))}]" if isinstance(new, list) else repr(new)
             outputs = {t: d for t, d in differences.items() if t not in inputs}
-            return f"{machine.section}.{key}:={text}", outputs
+            # a key of another section the machine reads (the excavator's hydraulic_machine) is its own
+            name = key if key.split(".", 1)[0] in machine.also else f"{machine.section}.{key}"
+            return f"{name}:={text}", outputs
     raise AssertionError(f"{machine.name}: no number of its section changes its outputs")
 
 

@@ -24,7 +24,7 @@ from manipulator_kinematics.hydraulic.measure_up import main, read_points
 from manipulator_kinematics.param_files import ConfigError, config_path, load_parameters
 
 FILES = {
-    "CET200": "excavator_cet200_family.yaml",
+    "CET200": "excavator_cet200.yaml",
     "WL20": "wheel_loader_wl20.yaml",
     "KC100": "knuckle_crane_kc100.yaml",
 }

@@ -54,7 +54,8 @@ def test_a_node_help_lists_its_parameters_with_defaults_and_topics(monkeypatch: 
     entries = {e.name: e for e in ENTRY_POINTS}
     text = in_process(entries["excavator_forward"], "--help", monkeypatch)[1]
     for line in (
-        "excavator.boom.length = ",
+        "hydraulic_machine.links.h_link.length = 0.58",
+        "excavator.base_height = 0.0",
         "swing_max_age = 0.1",
         "topics.bucket_pose = 'bucket_pose'",
         "qos_depth = 400",
@@ -63,7 +64,7 @@ def test_a_node_help_lists_its_parameters_with_defaults_and_topics(monkeypatch: 
     server = in_process(entries["tool_changer_ik_server"], "-h", monkeypatch)[1]
     assert "solve_ik" in server and "solve_fk" in server and "base_frame = 'base_link'" in server
     excavator = in_process(entries["excavator_ik_server"], "--help", monkeypatch)[1]
-    assert "solve_ik" in excavator and "excavator.boom.length = " in excavator
+    assert "solve_ik" in excavator and "hydraulic_machine.bodies.boom.pins.arm_pin = " in excavator
 
 
 @pytest.mark.parametrize("entry", ENTRY_POINTS, ids=lambda e: e.name)

@@ -34,10 +34,17 @@ PARAMS = (
     "--params-file",
     str(config_path("excavator_nodes.yaml")),
 )
-OPEN = {"excavator": {"swing": {"min_angle": -math.inf, "max_angle": math.inf}}}
-SECTION = load_parameters(config_path("excavator_cet200.yaml"))["excavator"]
+OPEN = {"hydraulic_machine": {"swing": {"min_angle": -math.inf, "max_angle": math.inf}}}
+SECTIONS = load_parameters(config_path("excavator_cet200.yaml"))
+GEOMETRY = SECTIONS["hydraulic_machine"]
 CONTINUOUS = Excavator.from_parameters(
-    {**SECTION, "swing": {**SECTION["swing"], "min_angle": -math.inf, "max_angle": math.inf}}
+    {
+        **SECTIONS,
+        "hydraulic_machine": {
+            **GEOMETRY,
+            "swing": {**GEOMETRY["swing"], "min_angle": -math.inf, "max_angle": math.inf},
+        },
+    }
 )
 LIMITED = Excavator.default()
 START_SWING = 2.9  # rad, 0.24 rad before the +-pi heading
@@ -144,9 +151,9 @@ def test_the_forward_node_and_ik_server_take_a_wound_up_swing(probe: Probe) -> N
         "-r",
         "__ns:=/ikopen",
         "-p",
-        "excavator.swing.min_angle:=-.inf",
+        "hydraulic_machine.swing.min_angle:=-.inf",
         "-p",
-        "excavator.swing.max_angle:=.inf",
+        "hydraulic_machine.swing.max_angle:=.inf",
         services=[(SolveIK, "/ikopen/solve_ik")],
         timeout=60.0,
     )

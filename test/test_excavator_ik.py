@@ -216,11 +216,14 @@ def test_a_bucket_length_maps_back_to_its_angle_over_the_whole_turn() -> None:
 
 
 def test_the_stroke_box_boundary() -> None:
-    section = copy.deepcopy(load_parameters(config_path("excavator_cet200.yaml"))["excavator"])
+    sections = copy.deepcopy(load_parameters(config_path("excavator_cet200.yaml")))
+    machine = sections["hydraulic_machine"]
     for name in ("boom_cylinder", "arm_cylinder", "bucket_cylinder"):
-        section[name]["min_length"] -= 0.05
-        section[name]["max_length"] += 0.05
-    wide = Excavator.from_parameters(section)
+        machine["cylinders"][name]["min_length"] -= 0.05
+        machine["cylinders"][name]["max_length"] += 0.05
+    for joint in machine["chain"].values():  # the wider strokes turn the joints further
+        joint["limits"] = [-np.pi, np.pi]
+    wide = Excavator.from_parameters(sections)
     for i, name in enumerate(("boom_cylinder", "arm_cylinder", "bucket_cylinder"), start=1):
         for end, outward in ((UPPER[i], 1.0), (LOWER[i], -1.0)):
             D = EXC.limits.reference.copy()

@@ -115,11 +115,12 @@ def test_ik_and_fk_round_trip_with_the_library(probe: Probe, server) -> None:
 
 def outside_stroke_pose() -> np.ndarray:
     """A pose the boom cylinder reaches only 2 cm beyond its maximum (a wider machine's FK)."""
-    section = copy.deepcopy(load_parameters(config_path("excavator_cet200.yaml"))["excavator"])
-    section["boom_cylinder"]["max_length"] += 0.05
+    sections = copy.deepcopy(load_parameters(config_path("excavator_cet200.yaml")))
+    sections["hydraulic_machine"]["cylinders"]["boom_cylinder"]["max_length"] += 0.05
+    sections["hydraulic_machine"]["chain"]["theta2"]["limits"][1] += 0.1  # the boom turns further
     D = REFERENCE.copy()
     D[1] = EXC.limits.stroke_max[0] + 0.02
-    return Excavator.from_parameters(section).fkine(D)
+    return Excavator.from_parameters(sections).fkine(D)
 
 
 def test_bad_requests_fail_with_a_code_and_a_reason(probe: Probe, server) -> None:

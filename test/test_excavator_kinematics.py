@@ -20,7 +20,7 @@ from excavator_kinematics.core.kinematics import (
     bucket_angular_velocity,
     bucket_quaternion,
 )
-from excavator_kinematics.core.machine_file import SCHEMA
+from excavator_kinematics.core.machine_file import GEOMETRY, SCHEMA
 from excavator_kinematics.machine import MACHINE
 from manipulator_kinematics.bag.topics import ACCEL, JOINT_STATE, POSE, TWIST
 from manipulator_kinematics.param_files import ConfigError, config_path, load_parameters
@@ -394,66 +394,142 @@ def test_unreachable_angles_raise():
 
 
 def _description() -> dict:
-    return copy.deepcopy(load_parameters(config_path("excavator_cet200.yaml"))["excavator"])
+    """The shipped file's top-level sections (hydraulic_machine, excavator), a copy."""
+    return copy.deepcopy(load_parameters(config_path("excavator_cet200.yaml")))
 
 
-def _set(section: str, key: str, value):
-    return lambda d: d[section].__setitem__(key, value)
+def _parent(d: dict, path: str) -> tuple[dict, str]:
+    *parents, key = path.split(".")
+    for part in parents:
+        d = d[part]
+    return d, key
 
 
-def _pop(section: str, key: str):
-    return lambda d: d[section].pop(key)
+def _set(path: str, value):
+    return lambda d: _parent(d, path)[0].__setitem__(_parent(d, path)[1], value)
 
 
-def _rename(section: str, key: str, new: str):
-    return lambda d: d[section].__setitem__(new, d[section].pop(key))
+def _pop(path: str):
+    return lambda d: _parent(d, path)[0].pop(_parent(d, path)[1])
 
 
-# (change to the shipped CET200 section, the key under excavator. the error must name, more of its message)
+def _rename(path: str, new: str):
+    def rename(d: dict) -> None:
+        parent, key = _parent(d, path)
+        parent[new] = parent.pop(key)
+
+    return rename
+
+
+G = "hydraulic_machine"
+# (change to the shipped CET200 sections, the dotted key the error must name, more of its message)
 INVALID = {
-    "misspelt key": (_rename("boom", "length", "lenght"), "boom.lenght", "did you mean 'length'"),
-    "unknown section": (lambda d: d.__setitem__("stick", {}), "stick", "unknown key"),
-    "missing key": (_pop("boom", "length"), "boom.length", "missing"),
-    "missing reference angle": (_pop("swing", "reference_angle"), "swing.reference_angle", "missing"),
+    "misspelt key": (
+        _rename(f"{G}.links.h_link.length", "lenght"),
+        f"{G}.links.h_link.lenght",
+        "did you mean 'length'",
+    ),
+    "unknown section": (_set(f"{G}.stick", {}), f"{G}.stick", "unknown key"),
+    "unknown excavator key": (_set("excavator.stick", 1.0), "excavator.stick", "unknown key"),
+    "missing key": (_pop(f"{G}.bodies.boom.pins.arm_pin"), f"{G}.bodies.boom.pins.arm_pin", "missing"),
+    "missing base height": (_pop("excavator.base_height"), "excavator.base_height", "missing"),
+    "missing reference angle": (_pop(f"{G}.swing.reference_angle"), f"{G}.swing.reference_angle", "missing"),
     "missing reference length": (
-        _pop("arm_cylinder", "reference_length"),
-        "arm_cylinder.reference_length",
+        _pop(f"{G}.cylinders.arm_cylinder.reference_length"),
+        f"{G}.cylinders.arm_cylinder.reference_length",
         "missing",
     ),
-    "missing section": (lambda d: d.pop("side_link"), "side_link", "missing"),
-    "missing name": (lambda d: d.pop("name"), "name", "missing"),
-    "empty name": (lambda d: d.__setitem__("name", ""), "name", "empty"),
-    "string in a point": (_set("boom", "foot_pin", [0.18, "x"]), "boom.foot_pin[1]", "number"),
-    "short point": (_set("boom_cylinder", "rod_pin", [1.0]), "boom_cylinder.rod_pin", "2 numbers"),
-    "point not a list": (_set("side_link", "pivot", "2.47, 0"), "side_link.pivot", "list"),
-    "true for a number": (_set("arm", "length", True), "arm.length", "number"),
-    "true for an orientation": (_set("h_link", "orientation", True), "h_link.orientation", "number"),
-    "string for a number": (_set("swing", "max_speed", "fast"), "swing.max_speed", "number"),
-    "negative length": (_set("arm", "length", -2.9), "arm.length", "outside"),
-    "zero length": (_set("h_link", "length", 0.0), "h_link.length", "outside"),
-    "absurd length": (_set("bucket", "length", 1e300), "bucket.length", "outside"),
-    "absurd swing limit": (_set("swing", "max_angle", 1e12), "swing.max_angle", "outside"),
-    "absurd stroke": (_set("boom_cylinder", "max_length", 1e6), "boom_cylinder.max_length", "outside"),
-    "absurd speed": (_set("arm_cylinder", "max_speed", 50.0), "arm_cylinder.max_speed", "outside"),
-    "not finite": (_set("swing", "max_speed", float("nan")), "swing.max_speed", "finite"),
-    "orientation 0": (_set("h_link", "orientation", 0), "h_link.orientation", "1 or -1"),
-    "orientation 2": (_set("boom_cylinder", "orientation", 2), "boom_cylinder.orientation", "outside"),
-    "fractional orientation": (_set("arm_cylinder", "orientation", 0.5), "arm_cylinder.orientation", "whole"),
+    "missing section": (_pop(f"{G}.links.side_link"), f"{G}.links.side_link", "missing"),
+    "missing name": (_pop(f"{G}.name"), f"{G}.name", "missing"),
+    "empty name": (_set(f"{G}.name", ""), f"{G}.name", "empty"),
+    "string in a point": (
+        _set(f"{G}.bodies.upper_structure.pins.boom_foot", [0.18, "x"]),
+        f"{G}.bodies.upper_structure.pins.boom_foot[1]",
+        "number",
+    ),
+    "short point": (
+        _set(f"{G}.bodies.boom.pins.boom_cyl_rod", [1.0]),
+        f"{G}.bodies.boom.pins.boom_cyl_rod",
+        "2 numbers",
+    ),
+    "point not a list": (
+        _set(f"{G}.bodies.arm.pins.ilink_pin_on_arm", "2.47, 0"),
+        f"{G}.bodies.arm.pins.ilink_pin_on_arm",
+        "list",
+    ),
+    "true for a number": (_set(f"{G}.links.side_link.length", True), f"{G}.links.side_link.length", "number"),
+    "true for an orientation": (
+        _set(f"{G}.dyads.hlink_pin_on_bucket.orientation", True),
+        f"{G}.dyads.hlink_pin_on_bucket.orientation",
+        "number",
+    ),
+    "string for a number": (_set(f"{G}.swing.max_speed", "fast"), f"{G}.swing.max_speed", "number"),
+    "negative length": (_set(f"{G}.links.h_link.length", -0.58), f"{G}.links.h_link.length", "outside"),
+    "zero length": (_set(f"{G}.links.h_link.length", 0.0), f"{G}.links.h_link.length", "outside"),
+    "absurd length": (
+        _set(f"{G}.bodies.bucket.pins.tip", [1e300, 0.0]),
+        f"{G}.bodies.bucket.pins.tip[0]",
+        "outside",
+    ),
+    "absurd swing limit": (_set(f"{G}.swing.max_angle", 1e12), f"{G}.swing.max_angle", "outside"),
+    "absurd stroke": (
+        _set(f"{G}.cylinders.boom_cylinder.max_length", 1e6),
+        f"{G}.cylinders.boom_cylinder.max_length",
+        "outside",
+    ),
+    "absurd speed": (
+        _set(f"{G}.cylinders.arm_cylinder.max_speed", 50.0),
+        f"{G}.cylinders.arm_cylinder.max_speed",
+        "outside",
+    ),
+    "not finite": (_set(f"{G}.swing.max_speed", float("nan")), f"{G}.swing.max_speed", "finite"),
+    "orientation 0": (
+        _set(f"{G}.dyads.hlink_pin_on_bucket.orientation", 0),
+        f"{G}.dyads.hlink_pin_on_bucket.orientation",
+        "1 or -1",
+    ),
+    "orientation 2": (
+        _set(f"{G}.dyads.boom_cyl_rod.orientation", 2),
+        f"{G}.dyads.boom_cyl_rod.orientation",
+        "outside",
+    ),
+    "fractional orientation": (
+        _set(f"{G}.dyads.arm_cyl_rod.orientation", 0.5),
+        f"{G}.dyads.arm_cyl_rod.orientation",
+        "whole",
+    ),
     "reference angle outside the swing limits": (
-        _set("swing", "reference_angle", 3.5),
-        "swing.reference_angle",
+        _set(f"{G}.swing.reference_angle", 3.5),
+        f"{G}.swing.reference_angle",
         "outside [min_angle, max_angle]",
     ),
-    "swing limits reversed": (_set("swing", "min_angle", 3.2), "swing.max_angle", "above min_angle"),
+    "swing limits reversed": (_set(f"{G}.swing.min_angle", 3.2), f"{G}.swing.max_angle", "above min_angle"),
     "reference length outside the stroke": (
-        _set("boom_cylinder", "reference_length", 3.5),
-        "boom_cylinder.reference_length",
+        _set(f"{G}.cylinders.boom_cylinder.reference_length", 3.5),
+        f"{G}.cylinders.boom_cylinder.reference_length",
         "outside the stroke",
     ),
-    "stroke reversed": (_set("bucket_cylinder", "min_length", 3.0), "bucket_cylinder.max_length", "above"),
+    "stroke reversed": (
+        _set(f"{G}.cylinders.bucket_cylinder.min_length", 3.0),
+        f"{G}.cylinders.bucket_cylinder.max_length",
+        "above",
+    ),
+    "imu body": (
+        _set("excavator.imu.bucket_linkage.body", "stick"),
+        "excavator.imu.bucket_linkage.body",
+        "expected one of 'h_link', 'bucket'",
+    ),
     # Whole-stroke assembly: every length of the stroke box must close the linkages.
-    "arm stroke cannot assemble": (_set("arm_cylinder", "max_length", 9.0), "arm_cylinder", "assembled"),
-    "side link too short": (_set("side_link", "length", 0.05), "bucket_cylinder", "assembled"),
+    "arm stroke cannot assemble": (
+        _set(f"{G}.cylinders.arm_cylinder.max_length", 9.0),
+        f"{G}.cylinders.arm_cylinder",
+        "assembled",
+    ),
+    "side link too short": (
+        _set(f"{G}.links.side_link.length", 0.05),
+        f"{G}.cylinders.bucket_cylinder",
+        "assembled",
+    ),
 }
 
 
@@ -464,14 +540,21 @@ def test_invalid_machine_description_names_the_key(case):
     mutate(description)
     with pytest.raises(ConfigError) as info:
         Excavator.from_parameters(description)
-    assert f"excavator.{key}" in str(info.value) and message in str(info.value), str(info.value)
+    text = str(info.value)
+    assert text.startswith(key) and message in text and "\n" not in text, text
 
 
 def test_the_shipped_file_is_complete_and_exact():
-    """Every key of the schema is given (none falls back to a default) and the file loads
-    through the registered machine as through the class."""
-    assert validate(_description(), SCHEMA, "excavator") == _description()
-    assert MACHINE.parameters() == _description()
+    """Every key of the schemas is given (none falls back to a default, but the zero offsets a
+    calibrated file adds) and the file loads through the registered machine as through the class."""
+    shipped = _description()
+    assert validate(shipped["excavator"], SCHEMA, "excavator") == shipped["excavator"]
+    geometry = validate(shipped[G], GEOMETRY, G)
+    geometry["swing"].pop("zero_offset")
+    for cylinder in geometry["cylinders"].values():
+        cylinder.pop("zero_offset")
+    assert geometry == shipped[G]
+    assert MACHINE.parameters() == {**shipped["excavator"], G: validate(shipped[G], GEOMETRY, G)}
     np.testing.assert_array_equal(MACHINE.model().pose(LIM.reference), EXC.pose(LIM.reference))
 
 
@@ -485,8 +568,10 @@ def test_registered_machine():
     np.testing.assert_array_equal(limits.lower, [LIM.swing_min, *LIM.stroke_min])
     np.testing.assert_array_equal(limits.upper, [LIM.swing_max, *LIM.stroke_max])
     assert limits.within(LIM.reference) and not limits.within(LIM.d_max + 0.01)
-    with pytest.raises(ConfigError, match=r"excavator\.bucket\.length"):
-        MACHINE.model_from({**_description(), "bucket": {"length": 1e300}})
+    sections = _description()
+    sections[G]["bodies"]["bucket"]["pins"]["tip"] = [1e300, 0.0]
+    with pytest.raises(ConfigError, match=r"^hydraulic_machine\.bodies\.bucket\.pins\.tip\[0\]"):
+        MACHINE.model_of(sections)
 
 
 # What flows on each topic key of the excavator nodes' settings (their publishers/subscriptions).
@@ -532,7 +617,7 @@ def test_registered_topics_are_the_nodes_topics():
 
 def test_custom_machine_changes_the_numbers():
     description = _description()
-    description["bucket"]["length"] = 1.5
+    description[G]["bodies"]["bucket"]["pins"]["tip"] = [1.5, 0.0]
     other = Excavator.from_parameters(description)
     reach = other.pose(LIM.reference)[0] - EXC.pose(LIM.reference)[0]
     alpha = EXC.pose(LIM.reference)[3]

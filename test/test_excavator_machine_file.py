@@ -24,12 +24,13 @@ LIMITED = Excavator.default()
 
 
 def _section() -> dict:
-    return copy.deepcopy(load_parameters(config_path("excavator_cet200.yaml"))["excavator"])
+    """The shipped file's top-level sections (hydraulic_machine and excavator), a copy."""
+    return copy.deepcopy(load_parameters(config_path("excavator_cet200.yaml")))
 
 
 def _continuous() -> dict:
     section = _section()
-    section["swing"].update(min_angle=-math.inf, max_angle=math.inf)
+    section["hydraulic_machine"]["swing"].update(min_angle=-math.inf, max_angle=math.inf)
     return section
 
 
@@ -37,21 +38,21 @@ CONTINUOUS = Excavator.from_parameters(_continuous())
 
 
 @pytest.mark.parametrize(
-    ("key", "says"),
+    ("dyad", "says"),
     [
-        ("boom_cylinder", "raise the boom"),
-        ("arm_cylinder", "curl the arm in"),
-        ("bucket_cylinder", "curl the bucket in"),
-        ("h_link", "crosses the bucket linkage"),
+        ("boom_cyl_rod", "raise the boom"),
+        ("arm_cyl_rod", "curl the arm in"),
+        ("bkt_cyl_rod", "curl the bucket in"),
+        ("hlink_pin_on_bucket", "crosses the bucket linkage"),
     ],
 )
-def test_a_flipped_orientation_is_refused_in_one_line_naming_the_key(key: str, says: str) -> None:
+def test_a_flipped_orientation_is_refused_in_one_line_naming_the_key(dyad: str, says: str) -> None:
     section = _section()
-    section[key]["orientation"] *= -1
+    section["hydraulic_machine"]["dyads"][dyad]["orientation"] *= -1
     with pytest.raises(ConfigError) as info:
         Excavator.from_parameters(section)
     message = str(info.value)
-    assert message.startswith(f"excavator.{key}.orientation: ") and says in message, message
+    assert message.startswith(f"hydraulic_machine.dyads.{dyad}.orientation: ") and says in message, message
     assert "\n" not in message
 
 
@@ -70,22 +71,25 @@ def test_a_tip_behind_the_swing_axis_is_refused() -> None:
     """The boom's foot pin and cylinder base moved 10 m back: every cylinder still turns its joint
     the documented way, but the tip (4.2 m in front) ends up 5.8 m behind the swing axis."""
     section = _section()
-    section["boom"]["foot_pin"][0] -= 10.0
-    section["boom_cylinder"]["base_pin"][0] -= 10.0
-    with pytest.raises(ConfigError, match=r"^excavator\.boom_cylinder\.reference_length: .*behind"):
+    base = section["hydraulic_machine"]["bodies"]["upper_structure"]["pins"]
+    base["boom_foot"][0] -= 10.0
+    base["boom_cyl_base"][0] -= 10.0
+    with pytest.raises(
+        ConfigError, match=r"^hydraulic_machine\.cylinders\.boom_cylinder\.reference_length: .*behind"
+    ):
         Excavator.from_parameters(section)
 
 
 @pytest.mark.parametrize(
     ("limits", "key"),
     [
-        ((-math.inf, 3.0), "excavator.swing.max_angle"),  # the finite one is named
-        ((-3.0, math.inf), "excavator.swing.min_angle"),
+        ((-math.inf, 3.0), "hydraulic_machine.swing.max_angle"),  # the finite one is named
+        ((-3.0, math.inf), "hydraulic_machine.swing.min_angle"),
     ],
 )
 def test_a_half_open_swing_is_refused(limits: tuple[float, float], key: str) -> None:
     section = _section()
-    section["swing"].update(min_angle=limits[0], max_angle=limits[1])
+    section["hydraulic_machine"]["swing"].update(min_angle=limits[0], max_angle=limits[1])
     with pytest.raises(ConfigError, match=rf"^{key}: a continuous swing has both limits open"):
         Excavator.from_parameters(section)
 
@@ -94,7 +98,9 @@ def test_open_limits_read_from_yaml_as_written_in_the_file(tmp_path) -> None:
     """``.inf`` in the file is the open limit (YAML 1.1 float infinity)."""
     text = config_path("excavator_cet200.yaml").read_text()
     data = yaml.safe_load(text)
-    data["/**"]["ros__parameters"]["excavator"]["swing"].update(min_angle=-math.inf, max_angle=math.inf)
+    data["/**"]["ros__parameters"]["hydraulic_machine"]["swing"].update(
+        min_angle=-math.inf, max_angle=math.inf
+    )
     path = tmp_path / "continuous.yaml"
     path.write_text(yaml.safe_dump(data))
     assert "-.inf" in path.read_text()

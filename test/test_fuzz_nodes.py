@@ -1054,11 +1054,14 @@ class WideExcavator:
     at both ends (clipped to them)."""
 
     def __init__(self) -> None:
-        section = copy.deepcopy(load_parameters(config_path("excavator_cet200.yaml"))["excavator"])
+        sections = copy.deepcopy(load_parameters(config_path("excavator_cet200.yaml")))
+        machine = sections["hydraulic_machine"]
         for name in CYLINDERS:
-            section[name]["min_length"] -= 0.05
-            section[name]["max_length"] += 0.05
-        self.model = Excavator.from_parameters(section)
+            machine["cylinders"][name]["min_length"] -= 0.05
+            machine["cylinders"][name]["max_length"] += 0.05
+        for joint in machine["chain"].values():  # the wider strokes turn the joints further
+            joint["limits"] = [-math.pi, math.pi]
+        self.model = Excavator.from_parameters(sections)
         self.ik_modes, self.ik_branches = self.model.ik_modes, self.model.ik_branches
 
     def fkine(self, q: np.ndarray) -> np.ndarray:

@@ -7,6 +7,8 @@ written here, not the dyad solver's), the open chain (J0 K = JC0), assembly over
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -15,7 +17,7 @@ from manipulator_kinematics.param_files import config_path
 
 LOADER = HydraulicModel.from_file(config_path("wheel_loader_wl20.yaml"))
 CRANE = HydraulicModel.from_file(config_path("knuckle_crane_kc100.yaml"))
-CET200 = HydraulicModel.from_file(config_path("excavator_cet200_family.yaml"))
+CET200 = HydraulicModel.from_file(config_path("excavator_cet200.yaml"))
 MODELS = {"WL20": LOADER, "KC100": CRANE, "CET200": CET200}
 RNG = np.random.default_rng(20261204)
 DEG = np.pi / 180.0
@@ -606,12 +608,13 @@ def test_crane_position_ik_keeps_the_seed_extension() -> None:
 
 
 def test_old_excavator_file_converts_to_the_family_form() -> None:
-    """config/excavator_cet200.yaml (old form) converted equals the family file of the CET200."""
+    """The CET200's file of the old form (test/data) converted equals the shipped file's family
+    section."""
     from manipulator_kinematics.hydraulic import parse
     from manipulator_kinematics.hydraulic.convert import from_excavator_section
     from manipulator_kinematics.param_files import load_parameters
 
-    old = load_parameters(config_path("excavator_cet200.yaml"))["excavator"]
+    old = load_parameters(Path(__file__).parent / "data" / "excavator_cet200_old_form.yaml")["excavator"]
     converted = HydraulicModel(parse(from_excavator_section(old)))
     D = inside(CET200, 50, margin=0.0)
     np.testing.assert_allclose(converted.pose(D), CET200.pose(D), rtol=0, atol=1e-12)

@@ -18,7 +18,7 @@ from manipulator_kinematics.hydraulic import model as core
 from manipulator_kinematics.param_files import config_path
 
 FILES = {
-    "CET200": "excavator_cet200_family.yaml",
+    "CET200": "excavator_cet200.yaml",
     "WL20": "wheel_loader_wl20.yaml",
     "KC100": "knuckle_crane_kc100.yaml",
 }

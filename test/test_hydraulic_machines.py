@@ -193,7 +193,7 @@ def test_plant_saturates_and_stops_at_the_stroke_ends(arm) -> None:
 def test_a_family_file_no_record_ships_runs_the_same_way() -> None:
     """The CET200 in the family form (alpha beyond a turn over its box): read by the family's
     record, IK with orientation round-trips (alpha taken modulo a turn), its URDF is Pinocchio's."""
-    section = load_parameters(config_path("excavator_cet200_family.yaml"))["hydraulic_machine"]
+    section = load_parameters(config_path("excavator_cet200.yaml"))["hydraulic_machine"]
     entry = by_section("hydraulic_machine", section)
     arm = entry.model_from(section)
     assert arm.name == "CET200" and arm.joint_names[0] == "swing_joint"

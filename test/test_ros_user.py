@@ -166,7 +166,12 @@ def test_machine_parameters_are_described_with_their_range(probe: Probe) -> None
     with NodeProcess("excavator_forward") as process:
         client = probe.node.create_client(DescribeParameters, "/excavator_forward/describe_parameters")
         probe.wait_until(client.service_is_ready, TIMEOUT, "describe_parameters")
-        names = ["excavator.arm.length", "excavator.boom.foot_pin", "input_reliability", "frame_prefix"]
+        names = [
+            "hydraulic_machine.links.h_link.length",
+            "hydraulic_machine.bodies.boom.pins.arm_pin",
+            "input_reliability",
+            "frame_prefix",
+        ]
         length, pin, reliability, prefix = probe.call(
             client, DescribeParameters.Request(names=names), TIMEOUT
         ).descriptors
@@ -299,10 +304,19 @@ def test_the_urdf_takes_a_prefix_on_every_link() -> None:
 @pytest.mark.parametrize("name", ["excavator", "scara", "pump_boom", "tool_changer", "palletizer"])
 def test_the_urdf_robot_name_comes_from_the_machine_file(name: str) -> None:
     record = machine(name)
-    section = load_parameters(config_path(record.config_file))[record.section]
+    values = record.parameters()
+    # the excavator's name is in its linkage's section (hydraulic_machine), the others' in their own
+    key = next(iter(record.also), None)
+    named = values[key] if key else values
     shipped = ET.fromstring(machine_urdf(name)).get("name")
-    assert shipped == section["name"]
-    renamed = record.model_from({**section, "name": "left_machine"})
+    assert (
+        shipped
+        == named["name"]
+        == load_parameters(config_path(record.config_file))[key or record.section]["name"]
+    )
+    renamed = record.model_from(
+        {**values, key: {**named, "name": "left_machine"}} if key else {**values, "name": "left_machine"}
+    )
     assert ET.fromstring(record.urdf(renamed)).get("name") == "left_machine"
 
 

@@ -82,10 +82,12 @@ def test_excavator_linkage_and_frames_match_the_machine_file_and_pose() -> None:
     D = excavator_states(model, 500)
     scene = m.scene(model, D)
     seg = {s.name: s for s in scene.segments}
-    np.testing.assert_allclose(seg["side_link"].length, params["side_link"]["length"], atol=1e-9)
-    np.testing.assert_allclose(seg["h_link"].length, params["h_link"]["length"], atol=1e-9)
+    links, bodies = params["hydraulic_machine"]["links"], params["hydraulic_machine"]["bodies"]
+    np.testing.assert_allclose(seg["side_link"].length, links["side_link"]["length"], atol=1e-9)
+    np.testing.assert_allclose(seg["h_link"].length, links["h_link"]["length"], atol=1e-9)
     # arm pin -> side-link pivot: the pivot's distance in the arm frame
-    np.testing.assert_allclose(seg["arm_1"].length, np.hypot(*params["side_link"]["pivot"]), atol=1e-9)
+    pivot = bodies["arm"]["pins"]["ilink_pin_on_arm"]
+    np.testing.assert_allclose(seg["arm_1"].length, np.hypot(*pivot), atol=1e-9)
     pose = model.pose(D)
     np.testing.assert_allclose(scene.tool_point(), pose[:, :3], atol=1e-12)
     expected = quaternion_matrix(bucket_quaternion(D[:, 0], pose[:, 3]))
@@ -94,7 +96,7 @@ def test_excavator_linkage_and_frames_match_the_machine_file_and_pose() -> None:
     boom = scene.frames["boom"]
     np.testing.assert_allclose(
         np.linalg.norm(model.pins(D)["arm_pin"] - boom[:, :3, 3], axis=-1),
-        params["boom"]["length"],
+        bodies["boom"]["pins"]["arm_pin"][0],
         atol=1e-9,
     )
     for pose4 in scene.frames.values():  # proper rotations

@@ -15,8 +15,7 @@ from excavator_kinematics.core.rate_command import rate_command
 from excavator_kinematics.core.twist import split_twist
 from excavator_kinematics.grade.design_surface import read_landxml
 from excavator_kinematics.machine import MACHINE
-from manipulator_kinematics.param_files import ConfigError
-from manipulator_kinematics.schema import validate
+from manipulator_kinematics.param_files import ConfigError, config_path, load_parameters
 from manipulator_kinematics.zone_guard import STOPPED, ZoneGuard
 
 EXC = MACHINE.model()
@@ -168,31 +167,32 @@ def test_plan_path_ends_before_a_zone_with_the_reason() -> None:
 @pytest.mark.parametrize(
     "section, key, value, named",
     [
-        ("bucket", "outline", [0.1, 0.6, 0.7], "excavator.bucket.outline: expected [x, y] pairs"),
-        ("bucket", "outline", [0.1, float("nan")], "excavator.bucket.outline[1]"),
+        ("tool", "outline", [0.1, 0.6, 0.7], "hydraulic_machine.tool.outline: expected [x, z] pairs"),
+        ("tool", "outline", [0.1, float("nan")], "hydraulic_machine.tool.outline[1]"),
         (
             "swing",
             "tail_heights",
             None,
-            "excavator.swing.tail_heights: tail_radius and tail_heights go together",
+            "hydraulic_machine.swing.tail_heights: tail_radius and tail_heights go together",
         ),
-        ("swing", "tail_radius", -1.0, "excavator.swing.tail_radius"),
+        ("swing", "tail_radius", -1.0, "hydraulic_machine.swing.tail_radius"),
     ],
 )
 def test_the_optional_monitored_points_of_the_machine_file_are_checked(section, key, value, named) -> None:
-    """bucket.outline and swing.tail_radius/tail_heights: refused naming the key; left out, the
+    """tool.outline and swing.tail_radius/tail_heights: refused naming the key; left out, the
     machine has only its pins and tool corners."""
-    description = MACHINE.parameters()
+    sections = load_parameters(config_path("excavator_cet200.yaml"))
+    description = sections["hydraulic_machine"]
     if value is None:
         del description[section][key]
     else:
         description[section][key] = value
     with pytest.raises(ConfigError) as error:
-        MACHINE.factory(validate(description, MACHINE.schema, "excavator"))
+        MACHINE.model_of(sections)
     assert str(error.value).startswith(named), str(error.value)
     for optional in ("outline",):
-        del description["bucket"][optional]
+        description["tool"].pop(optional, None)
     for optional in ("tail_radius", "tail_heights"):
         description["swing"].pop(optional, None)
-    bare = MonitoredPoints(MACHINE.factory(validate(description, MACHINE.schema, "excavator")))
+    bare = MonitoredPoints(MACHINE.model_of(sections))
     assert bare.names == POINTS.names[: len(POINTS.names) - 8]

@@ -57,8 +57,10 @@ from excavator_kinematics.core.geometry import Linkages, StrokeError, closing_si
 from excavator_kinematics.core.layouts import STATE, check_compiled
 from excavator_kinematics.core.machine_file import (
     CYLINDERS,
-    SECTION,
+    DYADS,
+    FAMILY,
     STROKE_TOLERANCE,
+    TOPOLOGY,
     Description,
     parse,
     wrap_swing,
@@ -199,7 +201,7 @@ class Excavator:
             # Each linkage depends on its own cylinder only: the error names the culprit.
             i = next(i for i, name in enumerate(CYLINDERS) if str(error).startswith(name))
             raise ConfigError(
-                f"{SECTION}.{CYLINDERS[i]}: the stroke [{self.limits.stroke_min[i]:g}, "
+                f"{FAMILY}.cylinders.{CYLINDERS[i]}: the stroke [{self.limits.stroke_min[i]:g}, "
                 f"{self.limits.stroke_max[i]:g}] m cannot be assembled with these pins and links: {error}"
             ) from None
 
@@ -211,7 +213,8 @@ class Excavator:
         four-bar must not be crossed (the H-link pin and the side-link pivot on either side of the
         line from the bucket pin to the rod pin) and at the reference state the tip must be in
         front of the swing axis. A flipped boom cylinder orientation otherwise loads as a boom
-        hanging down behind the machine (theta2 = -164 deg, tip at r = -3.4 m)."""
+        hanging down behind the machine (theta2 = -164 deg, tip at r = -3.4 m). Then each joint's
+        range over its stroke (K keeps its sign: the stroke ends) must lie in the chain's limits."""
         samples = np.linspace(self.limits.stroke_min, self.limits.stroke_max, 2001)
         k, _ = self.k_entries(samples)
         for i, (name, sign, joint, what) in enumerate(
@@ -225,7 +228,7 @@ class Excavator:
             if np.any(wrong):
                 at = samples[np.argmax(wrong), i]
                 raise ConfigError(
-                    f"{SECTION}.{name}.orientation: extending the cylinder must {what} ({joint} "
+                    f"{FAMILY}.dyads.{DYADS[i]}.orientation: extending {name} must {what} ({joint} "
                     f"{'up' if sign > 0 else 'down'}), this branch turns it the other way "
                     f"(d{joint}/dd = {k[np.argmax(wrong), i]:.3g} rad/m at {at:.4g} m): flip the sign"
                 )
@@ -234,29 +237,42 @@ class Excavator:
         fx, fy = self.linkages.pivot_from_bucket_pin
         if (ex * hy - ey * hx) * (ex * fy - ey * fx) >= 0.0:
             raise ConfigError(
-                f"{SECTION}.h_link.orientation: this branch crosses the bucket linkage (the H-link "
+                f"{FAMILY}.dyads.{DYADS[3]}.orientation: this branch crosses the bucket linkage (the H-link "
                 "pin on the side-link pivot's side of the line bucket pin -> rod pin): flip the sign"
             )
         r = self.open_chain_pose(np.concatenate(([0.0], self.joint_angles(reference[1:]))))[0]
         if r <= 0.0:
             raise ConfigError(
-                f"{SECTION}.boom_cylinder.reference_length: at the reference lengths the bucket tip "
+                f"{FAMILY}.cylinders.boom_cylinder.reference_length: at the reference lengths the bucket tip "
                 f"is {-r:.3g} m behind the swing axis (r = {r:.3g} m); a backhoe's tool is in front: "
                 "check the pins"
             )
+        theta = (
+            self.joint_angles(self.limits.stroke_min[None]),
+            self.joint_angles(self.limits.stroke_max[None]),
+        )
+        for i, (joint, (lo, hi)) in enumerate(
+            zip(TOPOLOGY["chain"], self.description.joint_limits, strict=True)
+        ):
+            ends = sorted(float(t[0, i]) for t in theta)
+            if ends[0] < lo or ends[1] > hi:
+                raise ConfigError(
+                    f"{FAMILY}.chain.{joint}.limits: over the stroke {joint} spans "
+                    f"[{math.degrees(ends[0]):.3f}, {math.degrees(ends[1]):.3f}] deg, outside its limits "
+                    f"[{math.degrees(lo):.3f}, {math.degrees(hi):.3f}] deg"
+                )
 
     @classmethod
     def from_file(cls, path: str | Path, node_name: str = "/**") -> Excavator:
-        """The machine of the ``excavator`` section of a ROS 2 parameters file."""
-        parameters = load_parameters(path, node_name)
-        if SECTION not in parameters:
-            raise ConfigError(f"{path}: no {SECTION!r} section under /**: ros__parameters")
-        return cls(parse(parameters[SECTION]))
+        """The machine of a ROS 2 parameters file's ``hydraulic_machine`` and ``excavator``
+        sections (an old-form file converted on load, :mod:`excavator_kinematics.core.machine_file`)."""
+        return cls(parse(load_parameters(path, node_name), str(path)))
 
     @classmethod
-    def from_parameters(cls, section: Mapping[str, Any]) -> Excavator:
-        """The machine of a nested ``excavator`` section; ConfigError names a bad key."""
-        return cls(parse(section))
+    def from_parameters(cls, params: Mapping[str, Any]) -> Excavator:
+        """The machine of a file's nested top-level sections (``hydraulic_machine`` and
+        ``excavator``, or an old-form ``excavator``); ConfigError names a bad key."""
+        return cls(parse(params))
 
     @classmethod
     def default(cls) -> Excavator:

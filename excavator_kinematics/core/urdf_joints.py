@@ -166,7 +166,7 @@ _PINS = (
 
 def excavator_urdf(model: Excavator) -> str:
     """The URDF (XML text) of the excavator ``model`` (module docstring), named as the machine file
-    names the machine (``excavator.name``)."""
+    names the machine (``hydraulic_machine.name``)."""
     g = body_points(model)
     lower, upper = joint_ranges(model)
     limits = {joint: (lower[i], upper[i]) for i, joint in enumerate(URDF_JOINTS)}

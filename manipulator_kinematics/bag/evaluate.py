@@ -43,7 +43,7 @@ from manipulator_kinematics.bag.topics import (
 )
 from manipulator_kinematics.bag.types import BagError
 from manipulator_kinematics.param_files import flatten, load_parameters, merge, unflatten
-from manipulator_kinematics.registry import Machine, by_section, machines
+from manipulator_kinematics.registry import Machine, machines, machines_described
 
 NAME = "mk_evaluate"
 # Points per curve in a plot: each bin keeps its min and max, so spikes stay visible.
@@ -151,11 +151,14 @@ def load_setup(files: Sequence[Path]) -> Setup:
             for node, settings in node_sections(path).items():
                 nodes[node] = merge(nodes.get(node, {}), settings)
         models = {}
-        for key, section in unflatten(params).items():
-            machine = by_section(key, section)
+        top = unflatten(params)
+        found = machines_described(top)
+        taken = {key for m in found.values() for key in m.also}
+        for key, section in top.items():
+            machine = found.get(key)
             if machine is not None:
-                models[machine.name] = machine.model_from(section)
-            elif isinstance(section, dict):
+                models[machine.name] = machine.model_of(top)
+            elif isinstance(section, dict) and key not in taken:
                 known = [m.section for m in machines().values()]
                 close = difflib.get_close_matches(key, known, n=1)
                 hint = f" (did you mean {close[0]!r}?)" if close else ""

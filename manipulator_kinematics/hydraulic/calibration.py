@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -371,13 +371,22 @@ def _combination(names: Sequence[str], v: np.ndarray) -> str:
 
 
 def calibrate(
-    description: Description, data: Measurements, tolerance: float = 0.005, max_nfev: int = 200
+    description: Description,
+    data: Measurements,
+    tolerance: float = 0.005,
+    max_nfev: int = 200,
+    hold: Mapping[str, str] | None = None,
 ) -> Calibration:
     """Fit the machine to the measured points (module docstring). ``tolerance`` (m): a parameter
     combination the data determine worse than this (1 sigma, an angle as its arc at REACH) is not
-    observable and held at the drawing. Raises CalibrationError (one line) if the data are too few
+    observable and held at the drawing. ``hold``: parameters (by name) held at the drawing anyway,
+    each with the reason the report gives (the cylinders' zero offsets for a machine whose nodes
+    read its sensors without offsets). Raises CalibrationError (one line) if the data are too few
     or the fit does not converge or leaves the bounds."""
     g = Geometry(description)
+    for i, q in enumerate(g.parameters):
+        if hold and q.name in hold and not q.held:
+            g.parameters[i] = replace(q, held=hold[q.name])
     free = np.array([not p.held for p in g.parameters])
     names = [p.name for p in g.parameters]
     n_data = 3 * len(data.point)

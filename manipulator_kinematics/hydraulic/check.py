@@ -6,6 +6,11 @@ smallest dead-centre margin of every dyad and where it occurs, each main-chain j
 against its limits, the range of each K diagonal entry (a sign change or a near zero marks a
 linkage that stops driving its joint) and the tool's reach; and writes a side-view PNG of the
 linkage at every corner of the stroke box (docs/hydraulic_family.md, "Your own machine").
+
+``mk_machine_check OLD.yaml --convert NEW.yaml`` first writes the file in the current form, as
+the registered machine whose section it holds reads it (an excavator file of the old form, one
+``excavator`` section with the geometry, converted to its ``hydraulic_machine`` and ``excavator``
+sections), then checks NEW.yaml.
 """
 
 from __future__ import annotations
@@ -17,11 +22,42 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+import yaml
 
+from manipulator_kinematics.hydraulic.description import SECTION
 from manipulator_kinematics.hydraulic.model import HydraulicModel
-from manipulator_kinematics.param_files import ConfigError
+from manipulator_kinematics.param_files import ConfigError, load_parameters
+from manipulator_kinematics.registry import machines_described
 
-__all__ = ["box_grid", "main", "report", "side_views"]
+__all__ = ["box_grid", "convert", "main", "report", "side_views"]
+
+
+def convert(path: Path, out: Path) -> None:
+    """Write the machine file ``path`` to ``out`` in the current form: the sections the registered
+    machine whose section it holds reads (an old excavator file converted on load), optional keys
+    left out where not given; ConfigError names what is wrong."""
+    params = load_parameters(path)
+    found = machines_described(params)
+    if len(found) != 1:
+        raise ConfigError(f"expected the file of one registered machine, found sections {sorted(params)}")
+    machine = next(iter(found.values()))
+    values = machine.values(params, str(path))
+    sections = {key: values[key] for key in machine.also}
+    sections[machine.section] = {k: v for k, v in values.items() if k not in machine.also}
+    text = (
+        f"# {path.name} in the current form (mk_machine_check --convert; docs/hydraulic_family.md).\n"
+        + yaml.safe_dump(
+            {"/**": {"ros__parameters": _given(sections)}}, sort_keys=False, default_flow_style=None
+        )
+    )
+    out.write_text(text, encoding="utf-8")
+
+
+def _given(value: object) -> object:
+    """Nested values without the optional keys left out (None)."""
+    if isinstance(value, dict):
+        return {k: _given(v) for k, v in value.items() if v is not None}
+    return value
 
 
 def box_grid(model: HydraulicModel, n: int) -> np.ndarray:
@@ -142,10 +178,27 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="side-view picture to write (default: <machine file stem>_check.png here)",
     )
     parser.add_argument("--no-png", action="store_true", help="print the report only")
+    parser.add_argument(
+        "--convert",
+        type=Path,
+        metavar="NEW.yaml",
+        default=None,
+        help="first write the file in the current form to NEW.yaml (an excavator file of the old "
+        "form: its hydraulic_machine and excavator sections), then check NEW.yaml",
+    )
     args = parser.parse_args(argv)
     if args.grid < 2:
         parser.error("--grid: at least 2 points")
     try:
+        if args.convert is not None:
+            convert(args.machine, args.convert)
+            print(f"written: {args.convert}")
+            args.machine = args.convert
+        elif SECTION not in load_parameters(args.machine):
+            raise ConfigError(
+                f"no {SECTION!r} section under /**: ros__parameters (an excavator file of the old "
+                "form: convert it with --convert NEW.yaml)"
+            )
         model = HydraulicModel.from_file(args.machine)
     except (ConfigError, OSError) as error:
         print(f"{args.machine}: {error}", file=sys.stderr)

@@ -1,10 +1,13 @@
-"""An excavator file of the old form (``excavator:`` section, config/excavator_cet200.yaml) as a
-``hydraulic_machine`` section of the family form (docs/hydraulic_family.md).
+"""An excavator file of the old form (one ``excavator:`` section with the geometry under ``boom``,
+``arm``, ``boom_cylinder``, ... ``h_link``) in the current form: a ``hydraulic_machine`` section of
+the family form (docs/hydraulic_family.md) and an ``excavator`` section with what the family form
+does not carry (``base_height``, ``imu``), as config/excavator_cet200.yaml has them.
 
 The old form names one topology (boom, arm and bucket cylinders, a side link and an H-link); its
-keys map one to one onto bodies, links, cylinders and four dyads. Joint limits are not in the old
-form: the converted chain allows (-pi, pi] for each joint (the old loader checks the stroke box
-itself). Plain data in, plain data out: no machine package imported.
+keys map one to one onto bodies, links, cylinders and four dyads (the bucket outline and the
+swing tail onto ``tool.outline`` and ``swing.tail_*``). Joint limits are not in the old form: the
+converted chain allows [-pi, pi] for each joint. Plain data in, plain data out: no machine package
+imported (``mk_machine_check OLD.yaml --convert NEW.yaml`` writes a converted file).
 """
 
 from __future__ import annotations
@@ -13,7 +16,10 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["from_excavator_section"]
+__all__ = ["EXTRAS", "from_excavator_file", "from_excavator_section"]
+
+#: Keys of an old ``excavator`` section that stay in the ``excavator`` section.
+EXTRAS = ("base_height", "imu")
 
 _ALL = [-math.pi, math.pi]
 
@@ -80,6 +86,7 @@ def from_excavator_section(old: Mapping[str, Any]) -> dict[str, Any]:
             "max_angle": swing["max_angle"],
             "reference_angle": swing["reference_angle"],
             "max_speed": swing["max_speed"],
+            **{k: swing[k] for k in ("tail_radius", "tail_heights") if swing.get(k) is not None},
         },
         "actuators": ["boom_cylinder", "arm_cylinder", "bucket_cylinder"],
         "cylinders": {
@@ -122,5 +129,12 @@ def from_excavator_section(old: Mapping[str, Any]) -> dict[str, Any]:
             "width": bucket["width"],
             "angle": True,
             "velocity_rows": ["x", "y", "z", "alpha"],
+            **({"outline": list(bucket["outline"])} if bucket.get("outline") is not None else {}),
         },
     }
+
+
+def from_excavator_file(old: Mapping[str, Any]) -> dict[str, Any]:
+    """The sections of the current form (``hydraulic_machine`` and ``excavator``) of a validated
+    old ``excavator`` section."""
+    return {"hydraulic_machine": from_excavator_section(old), "excavator": {k: old[k] for k in EXTRAS}}

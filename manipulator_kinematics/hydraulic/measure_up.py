@@ -10,6 +10,11 @@ report's ``instrument_from_base``, read, never written here): the control-point 
 
 MEASURED.csv: header ``pose,<actuators, as the machine's joint_states names>,point,x,y,z[,sigma]``,
 one row per measured point. Bad input is refused with one line naming the row and the column.
+
+CALIBRATED.yaml keeps every other section of MACHINE.yaml as it is (the CET200's ``excavator``
+section: the excavator nodes load the calibrated file). A registered machine that reads the file
+but refuses it (the excavator nodes do not apply zero offsets: ``--hold-offsets`` holds them at
+the file's values) is named on stderr, with its reason.
 """
 
 from __future__ import annotations
@@ -39,7 +44,8 @@ from manipulator_kinematics.hydraulic.calibration import (
 )
 from manipulator_kinematics.hydraulic.description import SECTION, Description, read
 from manipulator_kinematics.hydraulic.model import HydraulicModel, StrokeError
-from manipulator_kinematics.param_files import ConfigError, open_input
+from manipulator_kinematics.param_files import ConfigError, load_parameters, open_input
+from manipulator_kinematics.registry import machines_described
 
 __all__ = ["main", "predict", "read_points", "report", "write_machine"]
 
@@ -240,11 +246,11 @@ def report(cal: Calibration, machine: Path, measured: Path, widened: Sequence[st
 
 
 def write_machine(cal: Calibration, machine: Path, out: Path) -> list[str]:
-    """The machine file with the calibrated pins, link lengths and zero offsets; checked by loading
-    it (HydraulicModel.from_file) before it replaces ``out``. A main-chain joint whose range over
-    the stroke box (5 points per stroke, as the loader checks) now leaves its limits gets them
-    widened by 0.5 deg beyond the range (the as-built linkage reaches further than the drawing's);
-    returned, one line each, for the report."""
+    """The machine file with the calibrated pins, link lengths and zero offsets (its other sections
+    as they are); checked by loading it (HydraulicModel.from_file) before it replaces ``out``. A
+    main-chain joint whose range over the stroke box (5 points per stroke, as the loader checks)
+    now leaves its limits gets them widened by 0.5 deg beyond the range (the as-built linkage
+    reaches further than the drawing's); returned, one line each, for the report."""
     g = cal.geometry
     d = g.description
     axes = [np.linspace(lo, hi, 5) for lo, hi in zip(d.lower, d.upper, strict=True)]
@@ -392,6 +398,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="a combination determined worse than this (m, 1 sigma) is held (default 0.005)",
     )
     parser.add_argument(
+        "--hold-offsets",
+        action="store_true",
+        help="hold every cylinder's zero offset at the machine file's value (sensors zeroed on the "
+        "machine): a file the excavator nodes load, which do not apply zero offsets",
+    )
+    parser.add_argument(
         "--max-evaluations",
         type=int,
         default=200,
@@ -405,8 +417,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.measured is None:
             parser.error("MEASURED.csv is required without --predict")
         data = read_points(args.measured, description)
-        cal = calibrate(description, data, tolerance=args.tolerance, max_nfev=args.max_evaluations)
+        hold = {
+            f"cylinders.{c.name}.zero_offset": "held by --hold-offsets (sensors zeroed on the machine)"
+            for c in description.cylinders
+            if args.hold_offsets
+        }
+        cal = calibrate(description, data, tolerance=args.tolerance, max_nfev=args.max_evaluations, hold=hold)
         widened = write_machine(cal, args.machine, args.output)
+        for note in _other_readers(args.output):
+            print(f"mk_calibrate: note: {note}", file=sys.stderr)
         content = report(cal, args.machine, args.measured, widened)
         args.report.write_text(json.dumps(content, indent=2) + "\n")
         if args.png is not None:
@@ -416,6 +435,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     print(content["summary"])
     return 0
+
+
+def _other_readers(path: Path) -> list[str]:
+    """One line per registered machine other than the family's that reads ``path`` (its own
+    section beside hydraulic_machine) and refuses it."""
+    params = load_parameters(path)
+    notes = []
+    for key, machine in machines_described(params).items():
+        if key == SECTION:
+            continue
+        try:
+            machine.model_of(params)
+        except ConfigError as error:
+            notes.append(f"the {machine.name} nodes do not load {path}: {error}")
+    return notes
 
 
 def _predict(args: argparse.Namespace, description: Description) -> int:

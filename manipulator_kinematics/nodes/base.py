@@ -44,7 +44,7 @@ from manipulator_kinematics.param_files import (
     ros_arguments,
     unflatten,
 )
-from manipulator_kinematics.registry import Machine
+from manipulator_kinematics.registry import Machine, machines
 from manipulator_kinematics.schema import Number, Schema, Text, validate
 
 #: Parameters rclpy declares on every node by itself.
@@ -87,12 +87,17 @@ def _plain(value: Any) -> Any:
 
 
 def machine_section(node: Node, machine: Machine, argv: Sequence[str]) -> dict[str, Any]:
-    """The machine description this node runs, validated (module docstring: the rules)."""
-    given = unflatten(_values(node, machine.section))
-    if machine.section in given_parameters(argv, node.get_fully_qualified_name()):
-        return validate(given, machine.schema, machine.section)
-    default = load_parameters(config_path(machine.config_file))[machine.section]
-    return validate(merge(default, given), machine.schema, machine.section)
+    """The machine description this node runs, validated (module docstring: the rules); a machine
+    that reads several sections (``Machine.also``) takes them all from the files given, or all
+    from its default file."""
+    keys = (machine.section, *machine.also)
+    given = {key: unflatten(_values(node, key)) for key in keys}
+    files = given_parameters(argv, node.get_fully_qualified_name())
+    if any(key in files for key in keys):
+        source = ", ".join(str(path) for path in params_files(argv)) or "parameters"
+        return machine.values({key: v for key, v in given.items() if key in files or v}, source)
+    default = load_parameters(config_path(machine.config_file))
+    return machine.values({key: merge(default.get(key, {}), given[key]) for key in keys})
 
 
 def node_settings(
@@ -172,14 +177,21 @@ class MachineNode(Node):
         apply_precedence(self, argv)
         self.machine = machine
         section = machine_section(self, machine, argv)
-        declare(self, section, machine.schema, machine.section)
+        declare(
+            self, {k: v for k, v in section.items() if k not in machine.also}, machine.schema, machine.section
+        )
+        for key, schema in machine.also.items():
+            declare(self, section[key], schema, key)
         self.model = machine.factory(section)
+        # Machine sections, not settings: this machine's, and those of machines that also read
+        # its section (the excavator's own keys in a file the family's nodes run).
+        readers = tuple(m.section for m in machines().values() if machine.section in m.also)
         self.settings = node_settings(
             self,
             self.SETTINGS,
             self.DEFAULTS_FILE or machine.config_file,
             node_name,
-            ignore=(machine.section,),
+            ignore=(machine.section, *machine.also, *readers),
         )
 
 

@@ -53,19 +53,21 @@ def help_text(node_class: type, machine: Machine | None, node_name: str, default
     if machine is None:
         files = [f"  {m.name}: config/{m.config_file} (section {m.section!r})" for m in machines().values()]
         return "\n".join([*head, "Machine: the one whose section the params files hold:", *files, *tail])
-    machine_rows = _rows(
-        machine.schema,
-        flatten(load_parameters(config_path(machine.config_file)).get(machine.section, {})),
-        machine.section,
-    )
+    shipped = load_parameters(config_path(machine.config_file))
+    machine_rows = [
+        row
+        for section, schema in ((machine.section, machine.schema), *machine.also.items())
+        for row in _rows(schema, flatten(shipped.get(section, {})), section)
+    ]
+    sections = " and ".join(repr(s) for s in (*machine.also, machine.section))
     return "\n".join(
         [
             *head,
             textwrap.fill(
-                f"Machine ({machine.name}: {machine.summary}): the section {machine.section!r} of a params "
-                f"file (default: config/{machine.config_file}). A file that is given must be complete; "
-                f"without one, -p {machine.section}.<key>:=<value> changes single values of the default "
-                "machine.",
+                f"Machine ({machine.name}: {machine.summary}): the section{'s' if machine.also else ''} "
+                f"{sections} of a params file (default: config/{machine.config_file}). A file that is "
+                f"given must be complete; without one, -p {'<section>' if machine.also else machine.section}"
+                ".<key>:=<value> changes single values of the default machine.",
                 WIDTH,
             ),
             *machine_rows,

@@ -51,7 +51,7 @@ from manipulator_kinematics.nodes.base import (
 from manipulator_kinematics.nodes.help import help_text, wants_help
 from manipulator_kinematics.nodes.zone_markers import point_marker, stamped, zone_markers
 from manipulator_kinematics.param_files import ConfigError, given_parameters
-from manipulator_kinematics.registry import Machine, by_section, machines
+from manipulator_kinematics.registry import Machine, machines, machines_described
 from manipulator_kinematics.scene import Solids, solids
 from manipulator_kinematics.schema import Names, Number, Text
 from manipulator_kinematics.zone_guard import ZoneGuard
@@ -220,7 +220,7 @@ class MarkersNode(MachineNode):
 def machine_of(argv: Sequence[str]) -> Machine:
     """The one registered machine whose section the ``--params-file`` files of ``argv`` hold."""
     given = given_parameters(argv)
-    found = {m.name: m for key, values in given.items() if (m := by_section(key, values)) is not None}
+    found = {m.name: m for m in machines_described(given).values()}
     if len(found) == 1:
         return next(iter(found.values()))
     if found:
