@@ -140,3 +140,38 @@ def test_a_path_ends_before_a_ceiling(tmp_path: Path) -> None:
     low.write_text(f"zones:\n  roof: {{kind: ceiling, height: {float(p[:, 2].max()) - 0.5}}}\n")
     refused = plan_clear(h, load_zones(low), waypoints, 0.02, 0.5, 0.5, seed=h.reference)
     assert not refused.ok and refused.last_waypoint == -1 and "starts inside a zone" in refused.message
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("h", [LOADER, CRANE], ids=["wheel_loader", "knuckle_crane"])
+def test_random_requests_give_a_plan_within_every_limit_or_a_reason(h: HydraulicModel) -> None:
+    """Waypoints scattered about the tool (many off the loader's plane or out of reach), seeds
+    anywhere (moved into the stroke box): every answer is a plan on the lines, inside the stroke
+    box and the speeds, up to its last reached point, or none with the reason; nothing raises."""
+    rng = np.random.default_rng(31)
+    start = h.pose(h.reference)[:3]
+    planned = refused = 0
+    for _ in range(12):
+        waypoints = start + rng.normal(scale=0.6, size=(int(rng.integers(1, 4)), 3))
+        if h is LOADER and rng.random() < 0.7:
+            waypoints[:, 1] = 0.0
+        if h is CRANE and rng.random() < 0.3:
+            waypoints[0, 2] += 15.0  # above its reach
+        seed = h.lower + rng.uniform(-0.2, 1.2, h.m) * (h.upper - h.lower)
+        plan = plan_path(h, waypoints, float(rng.uniform(0.02, 0.1)), 0.5, 0.5, seed=seed)
+        assert plan.message
+        if not plan.ok:
+            refused += 1
+            assert plan.last_waypoint == -1 and "not reachable" in plan.message, plan.message
+            continue
+        planned += 1
+        D = plan.timing.q
+        assert np.all(np.isfinite(D)) and np.all(np.isfinite(plan.timing.qd))
+        assert np.array_equal(np.clip(D, h.lower, h.upper), D)
+        assert np.all(np.abs(plan.timing.qd) <= h.max_speed * (1 + 1e-12))
+        reached = waypoints[: plan.last_waypoint + 1]
+        if plan.truncated:  # on the lines through the waypoints reached and the next one
+            reached = waypoints[: plan.last_waypoint + 2]
+        if len(reached) > 1:
+            assert on_polyline(h.pose(D)[:, :3], reached).max() < 1e-9
+    assert planned and refused  # both kinds were asked

@@ -59,6 +59,8 @@ def _held(h: HydraulicModel, start: np.ndarray) -> str:
     return ""
 
 
+#: Samples solved from one seed, the state before them (a bound on the work a branch change costs).
+BLOCK = 256
 #: An actuator this close to a stroke end (fraction of its range) at the end of a reachable line
 #: is the reason the line ends there.
 AT_END = 1e-3
@@ -96,38 +98,35 @@ def _solve(h: HydraulicModel, points: np.ndarray, seed: np.ndarray, alpha: float
 def _solve_line(
     h: HydraulicModel, line: np.ndarray, previous: np.ndarray, alpha: float | None, jump: np.ndarray
 ) -> tuple[np.ndarray, int | None, str]:
-    """D of every sample after the state ``previous``, nearest it; where a sample is not reached
-    from there, or only by a jump, the rest is solved again nearest the sample before it (two
-    branches may both reach the line, the loader's tilt: the path keeps the one it follows); the
-    first sample that fails even so (None: all pass) and why."""
+    """D of every sample after the state ``previous``, in blocks of :data:`BLOCK` samples, each
+    nearest the state before it; where a sample is not reached from there, or only by a jump,
+    the rest of its block is solved again nearest the sample before it (two branches may both
+    reach the line, the loader's tilt: the path keeps the one it follows). The first sample that
+    fails even so (None: all pass) and why."""
     D = np.full((len(line), h.m), np.nan)
-    start, seed = 0, previous
-    while True:
-        D[start:] = _solve(h, line[start:], seed, alpha).D  # NaN where not reached
-        steps = np.abs(np.diff(np.vstack((previous, D)), axis=0))
+    k = 0
+    while k < len(line):
+        before = previous if k == 0 else D[k - 1]
+        end = min(k + BLOCK, len(line))
+        D[k:end] = _solve(h, line[k:end], before, alpha).D  # NaN where not reached
+        steps = np.abs(np.diff(np.vstack((before, D[k:end])), axis=0))
         failed = ~np.all(steps <= jump, axis=1)  # NaN (no solution) counts as a jump too
-        if not failed.any():
-            return D, None, ""
-        bad = int(np.argmax(failed))
-        if bad == start:
+        if failed[0]:  # not even from its neighbour
+            bad = k
             break
-        start, seed = bad, D[bad - 1]
+        k = k + int(np.argmax(failed)) if failed.any() else end
+    else:
+        return D, None, ""
     near = previous if bad == 0 else D[bad - 1]
     if np.all(np.isfinite(D[bad])):
-        i = int(np.argmax(steps[bad] / jump))
+        i = int(np.argmax(steps[0] / jump))
         return (
             D,
             bad,
-            f"{h.actuator_names[i]} would jump by {steps[bad, i]:.4g} between samples (another branch of "
+            f"{h.actuator_names[i]} would jump by {steps[0, i]:.4g} between samples (another branch of "
             f"the linkage, or the line passes the swing axis); {_stop(h, near)}",
         )
-    point = line[bad]
-    plane = (
-        ""
-        if h.swing or abs(point[1]) <= 1e-9
-        else f" (no swing: the tool stays at y = 0, not {point[1]:.4g})"
-    )
-    return D, bad, f"no state inside the stroke box reaches {show(point)}{plane}: {_stop(h, near)}"
+    return D, bad, f"{_unreached(h, line[bad])}: {_stop(h, near)}"
 
 
 def plan_path(
