@@ -40,7 +40,7 @@ class BucketPlan(ToolPlan):
     """A planned path (:class:`manipulator_kinematics.tool_path.ToolPlan`, ``timing.q`` (M, 4))
     and ``alpha``, the bucket angle held along it (rad)."""
 
-    alpha: float = 0.0
+    alpha: float
 
 
 def plan_path(
