@@ -125,6 +125,15 @@ def test_plan_path_follows_the_lines_within_the_stroke_box_and_speeds(probe: Pro
         assert "step -1 m is outside" in bad.message
         nan = probe.call(planner, path_request([start, [math.nan, 0.0, 0.0]], names), TIMEOUT)
         assert not nan.success and nan.error_code.val == Codes.INVALID_GOAL_CONSTRAINTS
+        far = probe.call(planner, path_request([start, [1e300, 0.0, 0.0]], names), TIMEOUT)
+        assert not far.success and "implausible" in far.message
+        seed = probe.call(planner, path_request([start], names[:-1], seed=h.reference[:-1]), TIMEOUT)
+        assert not seed.success and seed.error_code.val == Codes.INVALID_ROBOT_STATE, seed.message
+        mode = PlanPath.Request(mode="region", waypoints=[Point(x=start[0], y=start[1], z=start[2])])
+        assert probe.call(planner, mode, TIMEOUT).error_code.val == Codes.INVALID_MODE
+        # A seed outside the stroke box is moved into it (as the excavator's): a plan from there.
+        outside = probe.call(planner, path_request(waypoints[:2], names, seed=h.upper + 0.5), TIMEOUT)
+        assert outside.success or outside.error_code.val == Codes.NO_IK_SOLUTION, outside.message
         assert process.alive()
     finally:
         log = process.stop()
