@@ -46,3 +46,15 @@ def test_an_unreadable_file_is_left_to_the_excavator_node(tmp_path: Path, text: 
     bad = tmp_path / "bad.yaml"
     bad.write_text(text)
     assert not family_file(argv(bad))  # the excavator node refuses it with the reason
+
+
+def test_each_old_name_has_the_family_node_of_its_role() -> None:
+    """The dispatch maps excavator_<role> to the family's <role> main (hydraulic_<role>)."""
+    from excavator_kinematics.nodes import forward_node, ik_server_node, sim_node, velocity_ik_node
+    from manipulator_kinematics.nodes import hydraulic
+
+    names = {module.NODE for module in (forward_node, ik_server_node, sim_node, velocity_ik_node)}
+    assert names == {f"excavator_{role}" for role in ("forward", "velocity_ik", "sim", "ik_server")}
+    for name in names:
+        role = getattr(hydraulic, name.removeprefix("excavator_"))
+        assert callable(role) and role.__module__ == hydraulic.__name__
