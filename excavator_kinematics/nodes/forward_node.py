@@ -19,7 +19,7 @@ at most ``swing_max_age`` apart) and accelerations as finite differences of succ
   (:class:`excavator_kinematics.nodes.display_outputs.DesignPlane`);
 * ``grade/tip``, ``grade/left``, ``grade/right`` (PointStamped) and ``grade/status`` (if
   ``design_surface.file``): the cutting edge's heights above a LandXML TIN in the site frame
-  (:mod:`excavator_kinematics.grade.surface_grade`);
+  (:mod:`manipulator_kinematics.nodes.surface_grade`);
 * ``bucket_pose_level`` (PoseStamped, if ``level.enabled``): the bucket pose in the
   gravity-aligned level frame, from the machine's tilt (:mod:`excavator_kinematics.sensing.level_pose`).
 
@@ -51,8 +51,7 @@ from excavator_kinematics.core.kinematics import (
     compiled_kernel,
 )
 from excavator_kinematics.core.urdf_joints import URDF_JOINTS
-from excavator_kinematics.grade.surface_grade import SurfaceGrade
-from excavator_kinematics.nodes import message_codec
+from excavator_kinematics.nodes import family, message_codec
 from excavator_kinematics.nodes.display_outputs import DesignPlane, urdf_joint_states
 from excavator_kinematics.nodes.node_schemas import FORWARD, NODES_CONFIG
 from excavator_kinematics.nodes.state_input import Plausible, RateDifferentiator, StaleInput, SwingHold
@@ -60,8 +59,9 @@ from excavator_kinematics.sensing.level_pose import LevelPose
 from manipulator_kinematics.codec.packed import PackedMessage
 from manipulator_kinematics.joint_state import InputError, decode_joint_state
 from manipulator_kinematics.node_util import ThrottledLog
-from manipulator_kinematics.nodes import MachineNode, run_node
+from manipulator_kinematics.nodes import MachineNode
 from manipulator_kinematics.nodes.base import input_qos
+from manipulator_kinematics.nodes.surface_grade import SurfaceGrade
 from manipulator_kinematics.registry import Machine
 
 NODE = "excavator_forward"
@@ -252,7 +252,7 @@ class ForwardKinematics(MachineNode):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    return run_node(ForwardKinematics, "excavator", NODE, args)
+    return family.run(ForwardKinematics, NODE, args)  # a family machine file runs the family node
 
 
 if __name__ == "__main__":

@@ -19,7 +19,7 @@ for the excavator, in the actuator coordinates D = [theta1, d2, d3, d4], plus ``
   the ranges of step, speed and acceleration) is refused before any work, INVALID_GOAL_CONSTRAINTS.
   With ``zones_file`` set, a path on which a monitored point would enter an avoidance zone ends
   before it, with the reason (:mod:`excavator_kinematics.core.path_zones`). Site-frame zones are
-  placed by the ``site`` settings (:class:`excavator_kinematics.grade.site_pose.SitePoseInput`):
+  placed by the ``site`` settings (:class:`manipulator_kinematics.nodes.site_pose.SitePoseInput`):
   the fixed pose, or the latest on ``topics.site_pose`` if its stamp is at most
   ``site_pose_max_age`` from now; without a fresh one a plan is refused (FAILURE, the reason):
   a path the zones cannot be checked on is not planned. The planned path's swing changes the
@@ -40,12 +40,11 @@ from excavator_kinematics.core.monitored import MonitoredPoints
 from excavator_kinematics.core.path import BucketPlan
 from excavator_kinematics.core.path_zones import plan_clear
 from excavator_kinematics.grade.design_surface import read_landxml
-from excavator_kinematics.grade.site_pose import SitePoseInput
+from excavator_kinematics.nodes import family
 from excavator_kinematics.nodes.node_schemas import NODES_CONFIG, SITE_POSE
 from manipulator_kinematics.node_util import ThrottledLog
-from manipulator_kinematics.nodes import run_node
-from manipulator_kinematics.nodes.ik_server import SETTINGS, PlanPathServer, Rejected
-from manipulator_kinematics.plan_bounds import ACCELERATION_RANGE, STEP_RANGE, TIP_SPEED_RANGE
+from manipulator_kinematics.nodes.ik_server import PATH_SETTINGS, SETTINGS, PlanPathServer, Rejected
+from manipulator_kinematics.nodes.site_pose import SitePoseInput
 from manipulator_kinematics.registry import Machine
 from manipulator_kinematics.schema import Number, Schema, Text
 from manipulator_kinematics.zone_guard import ZoneGuard
@@ -53,26 +52,6 @@ from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes
 from manipulator_kinematics_interfaces.srv import PlanPath
 
 NODE = "excavator_ik_server"
-PATH_SETTINGS = {
-    "step": Number(
-        min=STEP_RANGE[0],
-        max=STEP_RANGE[1],
-        unit="m",
-        doc="plan_path: sample spacing along each line when the request's step is 0",
-    ),
-    "tip_speed": Number(
-        min=TIP_SPEED_RANGE[0],
-        max=TIP_SPEED_RANGE[1],
-        unit="m/s",
-        doc="plan_path: tip speed limit when the request's tip_speed is 0",
-    ),
-    "acceleration": Number(
-        min=ACCELERATION_RANGE[0],
-        max=ACCELERATION_RANGE[1],
-        unit="m/s^2",
-        doc="plan_path: bound of the tip's acceleration along the path",
-    ),
-}
 
 
 class ExcavatorIKServer(PlanPathServer):
@@ -155,7 +134,7 @@ class ExcavatorIKServer(PlanPathServer):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    return run_node(ExcavatorIKServer, "excavator", NODE, args)
+    return family.run(ExcavatorIKServer, NODE, args)  # a family machine file runs the family node
 
 
 if __name__ == "__main__":

@@ -4,6 +4,8 @@
 from __future__ import annotations
 
 from manipulator_kinematics.nodes.base import FRAME_PREFIX, input_reliability
+from manipulator_kinematics.nodes.site_pose import SITE_POSE
+from manipulator_kinematics.nodes.surface_grade import DESIGN_SURFACE, GRADE_TOPICS
 from manipulator_kinematics.schema import Flag, Number, Numbers, Schema, Text
 
 NODES_CONFIG = "excavator_nodes.yaml"
@@ -28,24 +30,6 @@ _INPUT_DEPTH = Number(
 )
 _SWING_MAX_AGE = _seconds("max |stamp(cylinder_lengths) - stamp(joint_states)|")
 
-#: Where base_link is in the site frame (excavator_kinematics.grade.site_pose): the forward node's
-#: grade outputs and the velocity IK's and IK server's site-frame zones, same names and meanings.
-SITE_POSE: Schema = {
-    "site_frame": Text(empty=False, doc="frame_id of the site (x easting, y northing, z up)"),
-    "site_pose_source": Text(
-        choices=("fixed", "topic"),
-        doc="base_link in the site frame: fixed (site_position, site_rpy) or from topics.site_pose",
-    ),
-    "site_position": Numbers(
-        3, Number(min=-1e8, max=1e8, unit="m"), doc="fixed position of base_link in the site frame (m)"
-    ),
-    "site_rpy": Numbers(
-        3,
-        Number(min=-7.0, max=7.0, unit="rad"),
-        doc="fixed roll, pitch, yaw of base_link in the site frame (rad, fixed axes)",
-    ),
-    "site_pose_max_age": _seconds("max |stamp(cylinder_lengths) - stamp(site pose)|"),
-}
 #: The machine's tilt from topics.machine_tilt (excavator_kinematics.sensing.machine_tilt).
 _TILT_MAX_AGE = _seconds("max |stamp(cylinder_lengths) - stamp(machine_tilt)|")
 _SITE_POSE_TOPIC = _topic("input: geometry_msgs/PoseStamped, base_link in the site frame (GNSS)")
@@ -105,11 +89,7 @@ FORWARD: Schema = {
         "frame": Text(empty=False, doc="frame_id of bucket_pose_level: base_link levelled by gravity"),
         "tilt_max_age": _TILT_MAX_AGE,
     },
-    "design_surface": {
-        "file": Text(doc="LandXML 1.2 file of the design TIN (read at start-up); empty: none"),
-        "surface": Text(doc="name of the Surface in the file; empty: the file's only surface"),
-        **SITE_POSE,
-    },
+    "design_surface": DESIGN_SURFACE,
     "topics": {
         "cylinder_lengths": _topic("input: sensor_msgs/JointState, boom/arm/bucket cylinder length and rate"),
         "joint_states": _topic("input: sensor_msgs/JointState, swing_joint angle and rate"),
@@ -119,13 +99,9 @@ FORWARD: Schema = {
         "open_chain_joint_states": _topic("output: sensor_msgs/JointState of the open chain"),
         "urdf_joint_states": _topic("output: sensor_msgs/JointState of every joint of urdf/excavator.urdf"),
         "grade_height": _topic("output: geometry_msgs/PointStamped, the tip in the design surface's frame"),
-        "site_pose": _SITE_POSE_TOPIC,
         "machine_tilt": _MACHINE_TILT_TOPIC,
         "bucket_pose_level": _topic("output: geometry_msgs/PoseStamped in the level frame"),
-        "grade_tip": _topic("output: geometry_msgs/PointStamped, tip x, y and height above the TIN"),
-        "grade_left": _topic("output: geometry_msgs/PointStamped, left end of the cutting edge"),
-        "grade_right": _topic("output: geometry_msgs/PointStamped, right end of the cutting edge"),
-        "grade_status": _topic("output: diagnostic_msgs/DiagnosticArray, inside/outside the TIN"),
+        **GRADE_TOPICS,
     },
 }
 

@@ -22,12 +22,12 @@ from sensor_msgs.msg import JointState
 
 from excavator_kinematics.core.kinematics import ACTUATORS, CYLINDERS, JOINTS, Excavator
 from excavator_kinematics.core.plant import Plant
-from excavator_kinematics.nodes import message_codec
+from excavator_kinematics.nodes import family, message_codec
 from excavator_kinematics.nodes.node_schemas import NODES_CONFIG, SIM
 from excavator_kinematics.nodes.state_input import InputError, Plausible
 from manipulator_kinematics.joint_state import joint_values
 from manipulator_kinematics.node_util import ThrottledLog
-from manipulator_kinematics.nodes import MachineNode, run_node
+from manipulator_kinematics.nodes import MachineNode
 from manipulator_kinematics.nodes.base import input_qos
 from manipulator_kinematics.registry import Machine
 
@@ -99,7 +99,7 @@ class Simulator(MachineNode):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    return run_node(Simulator, "excavator", NODE, args)
+    return family.run(Simulator, NODE, args)  # a family machine file runs the family node
 
 
 if __name__ == "__main__":

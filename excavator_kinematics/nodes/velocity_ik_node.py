@@ -28,7 +28,7 @@ Avoidance zones (``zones_file``, docs/zones.md): the command is scaled once more
 at it in its own direction; the status names the zone and the point, and ``zone_clearance``
 carries each zone's smallest clearance. Site-frame zones are placed by the machine's pose in the
 site frame, read as the forward node's grade outputs read it (settings ``site``, topics
-``site_pose`` and ``machine_tilt``): :class:`excavator_kinematics.grade.site_pose.SitePoseInput`
+``site_pose`` and ``machine_tilt``): :class:`manipulator_kinematics.nodes.site_pose.SitePoseInput`
 (fixed, or the latest PoseStamped within ``site_pose_max_age`` of the cylinder stamp), with
 ``site.tilt`` its roll and pitch from the cab IMU's tilt
 (:class:`excavator_kinematics.sensing.machine_tilt.TiltInput`, the nearest within
@@ -66,8 +66,7 @@ from excavator_kinematics.core.rate_command import (
 )
 from excavator_kinematics.core.twist import split_twist
 from excavator_kinematics.grade.design_surface import read_landxml
-from excavator_kinematics.grade.site_pose import SitePoseInput
-from excavator_kinematics.nodes import message_codec
+from excavator_kinematics.nodes import family, message_codec
 from excavator_kinematics.nodes.node_schemas import NODES_CONFIG, VELOCITY_IK
 from excavator_kinematics.nodes.state_input import (
     PLAUSIBILITY_FACTOR,
@@ -80,8 +79,9 @@ from excavator_kinematics.sensing.imu import base_up
 from excavator_kinematics.sensing.machine_tilt import TiltInput
 from manipulator_kinematics.joint_state import joint_values
 from manipulator_kinematics.node_util import ThrottledLog
-from manipulator_kinematics.nodes import MachineNode, run_node
+from manipulator_kinematics.nodes import MachineNode
 from manipulator_kinematics.nodes.base import input_qos
+from manipulator_kinematics.nodes.site_pose import SitePoseInput
 from manipulator_kinematics.nodes.zone_output import ZoneOutput
 from manipulator_kinematics.registry import Machine
 
@@ -393,7 +393,7 @@ class VelocityIk(MachineNode):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    return run_node(VelocityIk, "excavator", NODE, args)
+    return family.run(VelocityIk, NODE, args)  # a family machine file runs the family node
 
 
 if __name__ == "__main__":

@@ -11,7 +11,12 @@ defaults are config/hydraulic_nodes.yaml. The actuators are joints named as in t
   :class:`~manipulator_kinematics.hydraulic.machine.FamilyArm`) and, at
   ``urdf_joint_states_rate``, ``urdf_joint_states``: every joint of the machine's URDF (the loops'
   passive joints computed), for robot_state_publisher (the URDF cannot close a loop:
-  :mod:`manipulator_kinematics.hydraulic.drawing`).
+  :mod:`manipulator_kinematics.hydraulic.drawing`). With ``design_surface.file`` (a LandXML TIN
+  in the site frame, the machine placed by ``design_surface.site_*``) the grade outputs of the
+  excavator's forward node: ``grade/tip``, ``grade/left``, ``grade/right`` (PointStamped: easting,
+  northing, height of the tool point and of the ends of its edge, tool point +- width/2 across the
+  boom plane, above the surface; + = cut) and ``grade/status``
+  (:mod:`manipulator_kinematics.nodes.surface_grade`).
 * ``hydraulic_velocity_ik``: target_twist (TwistStamped, base frame) + joint_states ->
   rate_commands (JointState velocities of the actuators) by
   :func:`manipulator_kinematics.hydraulic.control.rate_command` on the task rows the machine file
@@ -27,12 +32,23 @@ defaults are config/hydraulic_nodes.yaml. The actuators are joints named as in t
   ``zone_clearance`` carries each zone's smallest clearance.
 * ``hydraulic_sim``: rate_commands -> joint_states at ``rate`` Hz
   (:class:`manipulator_kinematics.hydraulic.control.Plant`).
-* ``hydraulic_ik_server``: solve_ik, solve_fk (the generic server; one branch, ``nearest``).
+* ``hydraulic_ik_server``: solve_ik, solve_fk (the generic server; one branch, ``nearest``) and
+  ``plan_path`` (manipulator_kinematics_interfaces/srv/PlanPath, as the excavator's): straight
+  tool-point lines through the waypoints from the seed (else the reference state), holding what
+  the point does not fix (the tool angle of a three-joint arm, the crane's extension), timed
+  within every actuator's max speed, ``path.tip_speed`` and ``path.acceleration``
+  (:mod:`manipulator_kinematics.hydraulic.path`); the trajectory in sensor readings as on
+  joint_states. A path leaving the stroke box ends at the farthest reachable point: success false
+  (NO_IK_SOLUTION), the reason (the actuator at its stroke end), ``last_reachable_waypoint`` and
+  the trajectory up to there; with ``zones_file`` it ends before a monitored point enters an
+  avoidance zone (base-frame zones). Requests beyond the bounds of every plan are refused as the
+  excavator's are (:class:`~manipulator_kinematics.nodes.ik_server.PlanPathServer`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import sys
 from collections.abc import Sequence
 from typing import Any
@@ -58,6 +74,7 @@ from manipulator_kinematics.hydraulic.control import (
 from manipulator_kinematics.hydraulic.description import SECTION
 from manipulator_kinematics.hydraulic.drawing import urdf_joint_values
 from manipulator_kinematics.hydraulic.model import HydraulicModel
+from manipulator_kinematics.hydraulic.path import plan_clear
 from manipulator_kinematics.joint_state import (
     PLAUSIBILITY_FACTOR,
     InputError,
@@ -71,11 +88,16 @@ from manipulator_kinematics.nodes.base import FRAME_PREFIX, MachineNode, input_q
 from manipulator_kinematics.nodes.forward import SETTINGS as FORWARD_SETTINGS
 from manipulator_kinematics.nodes.forward import ForwardNode
 from manipulator_kinematics.nodes.help import help_text, wants_help
-from manipulator_kinematics.nodes.ik_server import IKServerNode
+from manipulator_kinematics.nodes.ik_server import PATH_SETTINGS, PlanPathServer
+from manipulator_kinematics.nodes.ik_server import SETTINGS as IK_SETTINGS
+from manipulator_kinematics.nodes.surface_grade import DESIGN_SURFACE, GRADE_TOPICS, SurfaceGrade
 from manipulator_kinematics.nodes.zone_output import ZoneOutput
 from manipulator_kinematics.param_files import ConfigError, given_parameters
 from manipulator_kinematics.registry import Machine, by_section, machines
 from manipulator_kinematics.schema import Number, Numbers, Text
+from manipulator_kinematics.tool_path import ToolPlan
+from manipulator_kinematics.zone_guard import ZoneGuard
+from manipulator_kinematics_interfaces.srv import PlanPath
 
 DEFAULTS_FILE = "hydraulic_nodes.yaml"
 LEVELS = {TRACKING: DiagnosticStatus.OK, SLOWED: DiagnosticStatus.WARN, STOPPED: DiagnosticStatus.WARN}
@@ -124,9 +146,11 @@ FORWARD = {
     "urdf_joint_states_rate": Number(
         min=0.0, max=10_000.0, unit="Hz", doc="of urdf_joint_states by input stamps; 0 = every input"
     ),
+    "design_surface": DESIGN_SURFACE,
     "topics": {
         **FORWARD_SETTINGS["topics"],
         "urdf_joint_states": Text(empty=False, doc="output: every URDF joint, for robot_state_publisher"),
+        **GRADE_TOPICS,
     },
 }
 
@@ -145,6 +169,12 @@ class HydraulicForward(ForwardNode):
         rate = s["urdf_joint_states_rate"]
         self.urdf_period_ns = 0 if rate == 0.0 else int(1e9 / rate)
         self.urdf_sent_ns: int | None = None
+        surface = s["design_surface"]
+        self.grade = (
+            SurfaceGrade(self, surface, s["topics"], self.model.hydraulic.description.width, qos, self.log)
+            if surface["file"]
+            else None
+        )
 
     def on_joint_state(self, raw: bytes) -> None:
         super().on_joint_state(raw)
@@ -154,6 +184,8 @@ class HydraulicForward(ForwardNode):
         except InputError:
             return  # logged by the forward node
         stamp_ns = decoded.sec * 1_000_000_000 + decoded.nanosec
+        if self.grade is not None:
+            self.publish_grade(decoded, stamp_ns, q)
         if self.urdf_sent_ns is not None and 0 <= stamp_ns - self.urdf_sent_ns < self.urdf_period_ns:
             return
         with np.errstate(all="ignore"):
@@ -166,6 +198,18 @@ class HydraulicForward(ForwardNode):
         self.urdf_pub.publish(
             JointState(header=header, name=list(values), position=[float(v) for v in values.values()])
         )
+
+    def publish_grade(self, decoded: Any, stamp_ns: int, q: np.ndarray) -> None:
+        """The tool point and the ends of its edge above the design surface (module docstring)."""
+        with np.errstate(all="ignore"):
+            tip = self.model.fkine(q)[:3, 3]
+        D = self.model.true_state(q)
+        theta1 = float(D[0]) if self.model.hydraulic.swing else 0.0
+        if not (np.all(np.isfinite(tip)) and np.isfinite(theta1)):
+            return  # the forward node said why
+        values = self.grade.values(stamp_ns, theta1, tip.tolist())
+        if all(v is None or all(map(np.isfinite, v)) for v in values):
+            self.grade.publish((decoded.sec, decoded.nanosec), values)
 
 
 # ------------------------------------------------------------------------------------- velocity IK
@@ -494,10 +538,50 @@ class HydraulicSim(MachineNode):
         )
 
 
-class HydraulicIKServer(IKServerNode):
-    """solve_ik, solve_fk of a family machine (the generic server)."""
+IK_SERVER = {
+    **IK_SETTINGS,
+    "path": PATH_SETTINGS,
+    "zones_file": Text(doc="avoidance zone file (docs/zones.md): plan_path ends before a zone; empty: none"),
+}
 
+
+class HydraulicIKServer(PlanPathServer):
+    """solve_ik, solve_fk and plan_path of a family machine (module docstring)."""
+
+    SETTINGS = IK_SERVER
     DEFAULTS_FILE = DEFAULTS_FILE
+
+    def __init__(self, node_name: str, machine: Machine, argv: Sequence[str]) -> None:
+        super().__init__(node_name, machine, argv)
+        self.h = self.model.hydraulic
+        self.path = self.settings["path"]
+        file = self.settings["zones_file"]
+        names = self.h.monitored(self.h.reference, np.zeros(self.h.m))[0]
+        self.zones = (
+            ZoneGuard.from_file(file, names, self.h.max_speed, 1.0, read_landxml).zones if file else []
+        )
+        self.get_logger().info(
+            f"serving plan_path (defaults: step {self.path['step']:g} m, tip speed "
+            f"{self.path['tip_speed']:g} m/s, acceleration {self.path['acceleration']:g} m/s^2"
+            f"{f', {len(self.zones)} zone(s)' if self.zones else ''})"
+        )
+
+    def plan(self, request: PlanPath.Request, waypoints: np.ndarray, seed: np.ndarray | None) -> ToolPlan:
+        # 0 = the default; anything else (negative, NaN, tiny, huge) the shared bounds check.
+        plan = plan_clear(
+            self.h,
+            self.zones,
+            waypoints,
+            request.step or self.path["step"],
+            request.tip_speed or self.path["tip_speed"],
+            self.path["acceleration"],
+            None if seed is None else self.model.true_state(seed),
+        )
+        if plan.timing is None:
+            return plan
+        # Joint values on the wire are sensor readings (D - zero_offset), as on joint_states.
+        readings = dataclasses.replace(plan.timing, q=plan.timing.q - self.h.zero_offset)
+        return dataclasses.replace(plan, timing=readings)
 
 
 def forward(args: Sequence[str] | None = None) -> int:

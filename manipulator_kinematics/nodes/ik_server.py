@@ -42,9 +42,9 @@ from manipulator_kinematics.nodes.messages import (
     pose_stamped,
     twist_stamped,
 )
-from manipulator_kinematics.plan_bounds import MAX_WAYPOINTS
+from manipulator_kinematics.plan_bounds import ACCELERATION_RANGE, MAX_WAYPOINTS, STEP_RANGE, TIP_SPEED_RANGE
 from manipulator_kinematics.registry import Machine
-from manipulator_kinematics.schema import Text
+from manipulator_kinematics.schema import Number, Text
 from manipulator_kinematics.time_scaling import TimeScaling
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes
 from manipulator_kinematics_interfaces.srv import PlanPath, SolveFK, SolveIK
@@ -52,6 +52,29 @@ from manipulator_kinematics_interfaces.srv import PlanPath, SolveFK, SolveIK
 SETTINGS = {
     "base_frame": Text(empty=False, doc="frame of targets and results; an empty target frame_id means it"),
     "frame_prefix": FRAME_PREFIX,
+}
+
+#: The ``path`` settings of a server that plans straight tool-point lines
+#: (:mod:`manipulator_kinematics.tool_path`): the excavator's and the hydraulic family's.
+PATH_SETTINGS = {
+    "step": Number(
+        min=STEP_RANGE[0],
+        max=STEP_RANGE[1],
+        unit="m",
+        doc="plan_path: sample spacing along each line when the request's step is 0",
+    ),
+    "tip_speed": Number(
+        min=TIP_SPEED_RANGE[0],
+        max=TIP_SPEED_RANGE[1],
+        unit="m/s",
+        doc="plan_path: tip speed limit when the request's tip_speed is 0",
+    ),
+    "acceleration": Number(
+        min=ACCELERATION_RANGE[0],
+        max=ACCELERATION_RANGE[1],
+        unit="m/s^2",
+        doc="plan_path: bound of the tip's acceleration along the path",
+    ),
 }
 
 CODES = {

@@ -1,7 +1,8 @@
 """Where the machine stands in the site frame, for a node (ROS side of
-:class:`~excavator_kinematics.grade.design_surface.SitePose`): the forward node's grade outputs
-(:mod:`.surface_grade`) and the velocity IK's and the IK server's site-frame avoidance zones
-(docs/zones.md) read it with the same settings (``node_schemas.SITE_POSE``):
+:class:`~manipulator_kinematics.site.SitePose`): the forward nodes' grade outputs
+(:mod:`.surface_grade`: the excavator's and the hydraulic family's) and the excavator's velocity
+IK's and IK server's site-frame avoidance zones (docs/zones.md) read it with the same settings
+(:data:`SITE_POSE`):
 
 * ``site_pose_source: fixed``: ``site_position`` (m) and ``site_rpy`` (rad, fixed axes) of
   base_link in the site frame ``site_frame`` (x easting, y northing, z up), e.g. a surveyed stand;
@@ -21,8 +22,29 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
-from excavator_kinematics.grade.design_surface import SitePose
 from manipulator_kinematics.node_util import ThrottledLog
+from manipulator_kinematics.schema import Number, Numbers, Schema, Text
+from manipulator_kinematics.site import SitePose
+
+#: The settings of a site pose, same names and meanings in every node that reads one.
+SITE_POSE: Schema = {
+    "site_frame": Text(empty=False, doc="frame_id of the site (x easting, y northing, z up)"),
+    "site_pose_source": Text(
+        choices=("fixed", "topic"),
+        doc="base_link in the site frame: fixed (site_position, site_rpy) or from topics.site_pose",
+    ),
+    "site_position": Numbers(
+        3, Number(min=-1e8, max=1e8, unit="m"), doc="fixed position of base_link in the site frame (m)"
+    ),
+    "site_rpy": Numbers(
+        3,
+        Number(min=-7.0, max=7.0, unit="rad"),
+        doc="fixed roll, pitch, yaw of base_link in the site frame (rad, fixed axes)",
+    ),
+    "site_pose_max_age": Number(
+        unit="s", min=0.0, max=3600.0, doc="max |stamp(machine state) - stamp(site pose)|"
+    ),
+}
 
 
 class SitePoseInput:
@@ -74,4 +96,4 @@ class SitePoseInput:
         return self.pose, ""
 
 
-__all__ = ["SitePoseInput"]
+__all__ = ["SITE_POSE", "SitePoseInput"]

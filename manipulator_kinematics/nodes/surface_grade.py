@@ -1,17 +1,20 @@
-"""The forward node's grade outputs against a design TIN (ROS side of :mod:`.design_surface`).
+"""A forward node's grade outputs against a design TIN (ROS side of
+:mod:`manipulator_kinematics.landxml` and :mod:`manipulator_kinematics.site`): the excavator's
+(``excavator_forward``, its bucket's cutting edge) and every hydraulic family machine's
+(``hydraulic_forward``, its tool point and the tool's width), same settings, topics and messages.
 
-Settings ``design_surface.*`` of excavator_forward (docs/excavator_nodes.md):
+Settings ``design_surface.*`` (:data:`DESIGN_SURFACE`; docs/excavator_nodes.md, docs/nodes.md):
 
 * ``file``: a LandXML 1.2 file (``surface``: the Surface's name, empty = the only one), read at
-  start-up into a :class:`~excavator_kinematics.grade.design_surface.Tin` in the site frame
+  start-up into a :class:`~manipulator_kinematics.landxml.Tin` in the site frame
   ``site_frame`` (x easting, y northing, z up);
 * where the machine is: ``site_pose_source: fixed`` (``site_position`` m, ``site_rpy`` rad of
   base_link in the site frame) or ``topic``: geometry_msgs/PoseStamped on ``topics.site_pose``
   (GNSS localisation; frame_id must be ``site_frame``), at most ``site_pose_max_age`` s from the
-  cylinder stamp (:class:`~excavator_kinematics.grade.site_pose.SitePoseInput`, which the
-  velocity IK's site-frame zones read too).
+  state's stamp (:class:`~manipulator_kinematics.nodes.site_pose.SitePoseInput`, which the
+  excavator's site-frame zones read too).
 
-On each forward result it publishes, with the cylinder message's stamp, three
+On each forward result it publishes, with the state message's stamp, three
 geometry_msgs/PointStamped in ``site_frame``: ``topics.grade_tip``, ``grade_left``,
 ``grade_right`` for the middle and the two ends of the cutting edge, ``point.x``/``point.y`` =
 the point's easting and northing, ``point.z`` = its height above the surface vertically below it
@@ -31,10 +34,31 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Header
 
-from excavator_kinematics.grade.design_surface import Tin, cutting_edge, read_landxml
-from excavator_kinematics.grade.site_pose import SitePoseInput
 from manipulator_kinematics.codec.packed import PackedMessage
+from manipulator_kinematics.landxml import Tin, read_landxml
 from manipulator_kinematics.node_util import ThrottledLog
+from manipulator_kinematics.nodes.site_pose import SITE_POSE, SitePoseInput
+from manipulator_kinematics.schema import Schema, Text
+from manipulator_kinematics.site import cutting_edge
+
+#: The ``design_surface`` settings of a forward node.
+DESIGN_SURFACE: Schema = {
+    "file": Text(doc="LandXML 1.2 file of the design TIN (read at start-up); empty: none"),
+    "surface": Text(doc="name of the Surface in the file; empty: the file's only surface"),
+    **SITE_POSE,
+}
+#: Its topics (the forward node's ``topics``).
+GRADE_TOPICS: Schema = {
+    "site_pose": Text(
+        empty=False, doc="input: geometry_msgs/PoseStamped, base_link in the site frame (GNSS)"
+    ),
+    "grade_tip": Text(
+        empty=False, doc="output: geometry_msgs/PointStamped, tip x, y and height above the TIN"
+    ),
+    "grade_left": Text(empty=False, doc="output: geometry_msgs/PointStamped, left end of the cutting edge"),
+    "grade_right": Text(empty=False, doc="output: geometry_msgs/PointStamped, right end of the cutting edge"),
+    "grade_status": Text(empty=False, doc="output: diagnostic_msgs/DiagnosticArray, inside/outside the TIN"),
+}
 
 POINTS = ("tip", "left", "right")
 _FIELDS = ("header.stamp", "point")
