@@ -17,6 +17,7 @@ import pytest
 
 from excavator_kinematics.core.geometry import StrokeError
 from excavator_kinematics.core.kinematics import Excavator
+from excavator_kinematics.core.monitored import MonitoredPoints
 from excavator_kinematics.tools.scene import excavator_scene
 from excavator_kinematics.tools.synthetic import excavator_bag
 from manipulator_kinematics.bag.evaluate import Setup, evaluate_bag
@@ -24,6 +25,7 @@ from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.bag.synthetic import write_bag
 from manipulator_kinematics.hydraulic import HydraulicModel, parse
 from manipulator_kinematics.param_files import config_path, load_parameters
+from manipulator_kinematics.registry import machine
 
 #: Offsets of a measure-up: 0.5 deg on the swing, 1-2 cm on the cylinders.
 OFFSETS = np.array([np.radians(0.5), 0.012, -0.018, 0.015])
@@ -119,3 +121,11 @@ def test_mk_evaluate_reads_readings_of_a_calibrated_machine(models, tmp_path: Pa
 
     good, off = position_error(calibrated), position_error(zero)
     assert good < 1e-9 and off > 0.005, (good, off)
+
+
+def test_the_registrys_monitored_points_take_readings(models) -> None:
+    """machine_markers draws the zones' points of joint_states readings (registry hook)."""
+    calibrated, zero = models
+    readings = readings_inside(calibrated, 20, 5)
+    points = machine("excavator").monitored(calibrated).positions(readings)
+    np.testing.assert_allclose(points, MonitoredPoints(zero).positions(readings + OFFSETS), atol=1e-12)
