@@ -108,11 +108,20 @@ def test_ik_server_takes_and_answers_readings(probe: Probe, params: tuple[str, .
     ns = "/ik"
     readings = ZERO.limits.reference - OFFSETS + np.array([-0.2, 0.1, 0.05, -0.05])
     process, (ik, fk) = start_with_services(
-        probe, "excavator_ik_server", *params, "-r", f"__ns:={ns}", services=IK_FK, timeout=TIMEOUT, namespace=ns
+        probe,
+        "excavator_ik_server",
+        *params,
+        "-r",
+        f"__ns:={ns}",
+        services=IK_FK,
+        timeout=TIMEOUT,
+        namespace=ns,
     )
     with process:
         fk_answer = probe.call(
-            fk, SolveFK.Request(joint_state=JointState(name=list(ACTUATORS), position=readings.tolist())), TIMEOUT
+            fk,
+            SolveFK.Request(joint_state=JointState(name=list(ACTUATORS), position=readings.tolist())),
+            TIMEOUT,
         )
         assert fk_answer.success, fk_answer.message
         np.testing.assert_allclose(

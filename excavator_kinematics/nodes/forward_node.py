@@ -1,12 +1,13 @@
 """excavator_forward: bucket pose, twist and acceleration from cylinder and swing states.
 
-A thin adapter around :meth:`Excavator.state` (paper eqs. 3-11; one state per message: the
-compiled single call, :mod:`excavator_kinematics.core.state_kernel`, loaded in the background from
-the node's construction on, numpy answering until then). On each ``cylinder_lengths``
-message it takes the latest swing state from ``joint_states`` (extrapolated to the cylinder stamp,
-at most ``swing_max_age`` apart), turns the sensor readings into the true state D = reading +
-zero_offset (the machine file's, :meth:`Excavator.true_state`; rates unchanged) and accelerations as finite differences of successive rates
-(:mod:`excavator_kinematics.nodes.state_input`), and publishes with the cylinder message's stamp:
+A thin adapter around :meth:`Excavator.state` (paper eqs. 3-11; one state per message: the compiled
+single call, :mod:`excavator_kinematics.core.state_kernel`, loaded in the background from the
+node's construction on, numpy answering until then). On each ``cylinder_lengths`` message it takes
+the latest swing state from ``joint_states`` (extrapolated to the cylinder stamp, at most
+``swing_max_age`` apart), turns the sensor readings into the true state D = reading + zero_offset
+(the machine file's, :meth:`Excavator.true_state`; rates unchanged) and accelerations as finite
+differences of successive rates (:mod:`excavator_kinematics.nodes.state_input`), and publishes with
+the cylinder message's stamp:
 
 * ``bucket_pose`` (PoseStamped), ``bucket_twist`` (TwistStamped), ``bucket_accel`` (AccelStamped,
   only once accelerations are known: from the second message on);
