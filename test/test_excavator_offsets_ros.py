@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -23,7 +22,7 @@ from test_excavator_offsets import OFFSETS, calibrated_sections
 
 from excavator_kinematics.core.kinematics import ACTUATORS, CYLINDERS, Excavator
 from excavator_kinematics.nodes import message_codec
-from manipulator_kinematics.param_files import config_path
+from manipulator_kinematics.param_files import config_path, dump_parameters
 from manipulator_kinematics_interfaces.srv import SolveFK, SolveIK
 
 pytestmark = pytest.mark.ros
@@ -44,7 +43,7 @@ def probe() -> Iterator[Probe]:
 @pytest.fixture(scope="module")
 def params(tmp_path_factory: pytest.TempPathFactory) -> tuple[str, ...]:
     path = Path(tmp_path_factory.mktemp("offsets")) / "calibrated.yaml"
-    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": calibrated_sections()}}))
+    path.write_text(dump_parameters({"/**": {"ros__parameters": calibrated_sections()}}))
     return ("--params-file", str(path), "--params-file", str(config_path("excavator_nodes.yaml")))
 
 
@@ -93,11 +92,16 @@ def test_sim_and_forward_agree_on_the_calibrated_file(probe: Probe, params: tupl
     probe.node.create_subscription(JointState, f"{ns}/cylinder_lengths", sim_readings.append, QOS)
     received = poses(probe, ns)
     with start("excavator_sim", ns, params) as sim, start("excavator_forward", ns, params) as forward:
-        probe.wait_until(
-            lambda: (bool(received) and bool(sim_readings)) or not (sim.alive() and forward.alive()),
-            TIMEOUT,
-            "cylinder_lengths from excavator_sim and bucket_pose from excavator_forward",
-        )
+        try:
+            # Two nodes starting at once on a shared machine (each loads its kernels): 2 x TIMEOUT.
+            probe.wait_until(
+                lambda: (bool(received) and bool(sim_readings)) or not (sim.alive() and forward.alive()),
+                2 * TIMEOUT,
+                "cylinder_lengths from excavator_sim and bucket_pose from excavator_forward",
+            )
+        except TimeoutError:
+            print(sim.log(), forward.log())
+            raise
         assert received and sim_readings, sim.log() + forward.log()
     true = CALIBRATED.limits.reference  # the sim stands at its initial (true) state
     np.testing.assert_allclose(list(sim_readings[-1].position), true[1:] - OFFSETS[1:], rtol=0, atol=1e-12)

@@ -45,7 +45,7 @@ from manipulator_kinematics.hydraulic.calibration import (
 )
 from manipulator_kinematics.hydraulic.description import SECTION, Description, read
 from manipulator_kinematics.hydraulic.model import HydraulicModel, StrokeError
-from manipulator_kinematics.param_files import ConfigError, load_parameters, open_input
+from manipulator_kinematics.param_files import ConfigError, dump_parameters, load_parameters, open_input
 from manipulator_kinematics.registry import machines_described
 
 __all__ = ["main", "predict", "read_points", "report", "write_machine"]
@@ -298,7 +298,7 @@ def write_machine(cal: Calibration, machine: Path, out: Path) -> list[str]:
     text = (
         f"# {cal.geometry.description.name} as measured up by mk_calibrate from {machine.name} "
         "(docs/calibration.md).\n# true actuator value = sensor reading + zero_offset.\n"
-        + yaml.safe_dump(document, sort_keys=False, default_flow_style=None)
+        + dump_parameters(document)
     )
     with tempfile.NamedTemporaryFile("w", suffix=".yaml", dir=out.parent or ".", delete=False) as f:
         f.write(text)
