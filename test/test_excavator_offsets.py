@@ -24,7 +24,7 @@ from manipulator_kinematics.bag.evaluate import Setup, evaluate_bag
 from manipulator_kinematics.bag.reader import BagReader
 from manipulator_kinematics.bag.synthetic import write_bag
 from manipulator_kinematics.hydraulic import HydraulicModel, parse
-from manipulator_kinematics.param_files import config_path, load_parameters
+from manipulator_kinematics.param_files import config_path, dump_parameters, load_parameters, parse_yaml
 from manipulator_kinematics.registry import machine
 
 #: Offsets of a measure-up: 0.5 deg on the swing, 1-2 cm on the cylinders.
@@ -134,3 +134,11 @@ def test_the_registrys_monitored_points_take_readings(models) -> None:
     readings = readings_inside(calibrated, 20, 5)
     points = machine("excavator").monitored(calibrated).positions(readings)
     np.testing.assert_allclose(points, MonitoredPoints(zero).positions(readings + OFFSETS), atol=1e-12)
+
+
+def test_a_written_machine_file_quotes_what_rcl_reads_as_a_boolean() -> None:
+    """mk_calibrate and mk_machine_check --convert write velocity_rows [x, y, z, alpha]: a plain y
+    is a boolean to rcl, which then refuses the list; dump_parameters quotes it."""
+    text = dump_parameters({"tool": {"velocity_rows": ["x", "y", "z", "alpha"], "angle": True}})
+    assert '"y"' in text and "'x'" not in text and '"x"' not in text, text
+    assert parse_yaml(text) == {"tool": {"velocity_rows": ["x", "y", "z", "alpha"], "angle": True}}
