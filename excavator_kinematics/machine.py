@@ -73,6 +73,6 @@ MACHINE = Machine(
     forward_node="excavator_forward",
     urdf=Hook("excavator_kinematics.core.urdf_joints:excavator_urdf"),
     scene=Hook("excavator_kinematics.tools.scene:excavator_scene"),
-    monitored=Hook("excavator_kinematics.core.monitored:MonitoredPoints"),
+    monitored=Hook("excavator_kinematics.core.monitored:ReadingPoints"),
     read_surface=Hook("excavator_kinematics.grade.design_surface:read_landxml"),
 )

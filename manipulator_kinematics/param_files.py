@@ -122,6 +122,29 @@ RosLoader.add_implicit_resolver(
 )
 
 
+#: Plain scalars rcl's parser reads as booleans though YAML 1.1 (PyYAML) reads them as strings
+#: (``velocity_rows: [x, y, z]``: rcl refuses the list, "Sequence should be of same type").
+_RCL_BOOLEAN = re.compile(r"^(?:y|Y|n|N)$")
+
+
+class _RosDumper(yaml.SafeDumper):
+    """PyYAML's safe dumper, quoting the strings rcl would read as something else."""
+
+    def represent_str(self, data: str) -> yaml.ScalarNode:
+        if _RCL_BOOLEAN.match(data):
+            return self.represent_scalar("tag:yaml.org,2002:str", data, style='"')
+        return super().represent_str(data)
+
+
+_RosDumper.add_representer(str, _RosDumper.represent_str)
+
+
+def dump_parameters(document: Any) -> str:
+    """``document`` (nested plain data) as a parameters file rcl reads as :func:`load_parameters`
+    does: block mappings, flow lists, keys in their order, ``y``/``n`` quoted."""
+    return yaml.dump(document, Dumper=_RosDumper, sort_keys=False, default_flow_style=None)
+
+
 class ConfigError(ValueError):
     """A machine description is missing a key or holds an invalid value; the message names it."""
 

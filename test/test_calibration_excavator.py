@@ -1,11 +1,11 @@
 """A measure-up of the CET200 (issue 33) writes a file the excavator nodes load (issue 31).
 
 The calibrated file keeps the input's ``excavator`` section; the excavator's loader reads its
-``hydraulic_machine`` section as the family core does (poses compared to 1e-12). The excavator
-nodes do not apply zero offsets, so ``mk_calibrate --hold-offsets`` holds the cylinders' at the
-file's values; without it, a file with fitted offsets is written for the family's nodes and the
-excavator's refusal is named on stderr. The as-built machine and its measurements are those of
-test_calibration (HydraulicModel, a tilted and displaced instrument, 2 mm noise).
+``hydraulic_machine`` section as the family core does (poses compared to 1e-12), zero offsets
+included: both turn readings into true states (reading + offset). ``mk_calibrate --hold-offsets``
+holds the cylinders' offsets at the file's values (sensors zeroed on the machine). The as-built
+machine and its measurements are those of test_calibration (HydraulicModel, a tilted and
+displaced instrument, 2 mm noise).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from test_calibration import EDGE, as_built, instrument, measure, poses, write_c
 from excavator_kinematics.core.kinematics import Excavator
 from manipulator_kinematics.hydraulic import HydraulicModel, parse
 from manipulator_kinematics.hydraulic.measure_up import main
-from manipulator_kinematics.param_files import ConfigError, config_path, load_parameters
+from manipulator_kinematics.param_files import config_path, load_parameters
 
 DRAWING = config_path("excavator_cet200.yaml")
 pytestmark = pytest.mark.slow  # a fit each: 10 s on a shared machine
@@ -72,11 +72,21 @@ def test_the_excavator_loads_a_calibrated_cet200_as_the_family_does(tmp_path: Pa
     assert moved.max() > 0.01, moved.max()
 
 
-def test_fitted_offsets_are_written_and_the_excavators_refusal_named(tmp_path: Path, capsys) -> None:
+def test_fitted_offsets_are_written_and_the_excavator_applies_them(tmp_path: Path, capsys) -> None:
     code, out = _calibrate(tmp_path)
     err = capsys.readouterr().err
-    assert code == 0 and out.exists()
-    HydraulicModel.from_file(out)  # the family's nodes read the offsets
-    assert "note: the excavator nodes do not load" in err and "zero_offset" in err, err
-    with pytest.raises(ConfigError, match=r"^hydraulic_machine\.cylinders\.\w+\.zero_offset: "):
-        Excavator.from_file(out)
+    assert code == 0 and out.exists(), err
+    assert "note:" not in err, err  # every reader of the file loads it
+    excavator, family = Excavator.from_file(out), HydraulicModel.from_file(out)
+    g = load_parameters(out)["hydraulic_machine"]
+    written = [g["swing"]["zero_offset"], *(g["cylinders"][c]["zero_offset"] for c in g["actuators"])]
+    np.testing.assert_array_equal(excavator.zero_offset, written)
+    np.testing.assert_array_equal(excavator.zero_offset, family.zero_offset)
+    true = np.random.default_rng(6).uniform(excavator.limits.d_min, excavator.limits.d_max, (500, 4))
+    readings = true - excavator.zero_offset
+    np.testing.assert_allclose(
+        excavator.pose(excavator.true_state(readings)),
+        family.pose(family.from_readings(readings)),
+        rtol=0,
+        atol=1e-12,
+    )

@@ -169,15 +169,17 @@ def test_joint_limits_narrower_than_the_stroke_are_refused() -> None:
 
 
 @pytest.mark.parametrize("where", ["swing", "cylinders.bucket_cylinder"])
-def test_zero_offsets_the_excavator_nodes_do_not_apply_are_refused(where: str) -> None:
+def test_zero_offsets_are_read_in_the_order_of_D(where: str) -> None:
+    """A calibrated file's zero offset (issue 33) reaches the model, in the order of D."""
     sections = _sections()
     part = sections["hydraulic_machine"]
     for name in where.split("."):
         part = part[name]
     part["zero_offset"] = 0.01
-    assert _refused(sections).startswith(f"hydraulic_machine.{where}.zero_offset: 0.01")
-    part["zero_offset"] = 0.0
-    Excavator.from_parameters(sections)
+    expected = np.zeros(4)
+    expected[0 if where == "swing" else 3] = 0.01
+    np.testing.assert_array_equal(Excavator.from_parameters(sections).zero_offset, expected)
+    np.testing.assert_array_equal(Excavator.from_file(SHIPPED).zero_offset, np.zeros(4))
 
 
 @pytest.mark.parametrize("missing", ["excavator", "hydraulic_machine"])

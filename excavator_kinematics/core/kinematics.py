@@ -158,6 +158,9 @@ class Excavator:
         #: The cylinder linkages (eqs. 1-2), read by this model and by the pose IK.
         self.linkages = Linkages.of(g)
         self.limits = g.limits
+        #: The sensors' zero offsets in the order of D: true state = reading + zero_offset
+        #: (:meth:`true_state`, :meth:`readings`); the limits are true values.
+        self.zero_offset = np.array(g.zero_offset, dtype=float)
         # The limits of D as the shared IK pieces read them (cylinder values are lengths, m).
         # A continuous swing's angles are wrapped to (-pi, pi]: the IK answers in that range, and a
         # state outside it takes validate's slow path, which wraps it.
@@ -370,6 +373,20 @@ class Excavator:
                 f"[{self.limits.swing_min:.6g}, {self.limits.swing_max:.6g}] rad"
             )
         return D
+
+    def true_state(self, readings: Any) -> np.ndarray:
+        """D (4,) or (N, 4) from sensor readings [swing, boom, arm, bucket] (as on joint_states and
+        cylinder_lengths): reading + zero_offset, validated as :meth:`validate` (the stroke box is
+        of true lengths). Rates need no conversion: an offset is constant."""
+        return self.validate(np.asarray(readings, dtype=float) + self.zero_offset)
+
+    def readings(self, D: Any) -> np.ndarray:
+        """What the sensors read at true states D (4,) or (N, 4): D - zero_offset (a continuous
+        swing's reading wrapped to (-pi, pi]); the inverse of :meth:`true_state`."""
+        out = np.asarray(D, dtype=float) - self.zero_offset
+        if self.limits.continuous_swing:
+            out[..., 0] = wrap_swing(out[..., 0])
+        return out
 
     def _check_lengths(self, lengths: np.ndarray) -> None:
         finite = np.isfinite(lengths)

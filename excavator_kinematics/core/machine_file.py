@@ -345,6 +345,9 @@ class Description:
     # outline (bucket frame), and [r, z] of the upper structure's tail (r behind the swing axis).
     bucket_outline: tuple[tuple[float, float], ...] = ()
     tail: tuple[tuple[float, float], ...] = ()
+    # The sensors' zero offsets in the order of D (swing rad, boom/arm/bucket cylinder m): true =
+    # reading + offset (issue 33; a measure-up writes them). Strokes and swing limits are true.
+    zero_offset: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
 
 
 def upgrade(params: Mapping[str, Any], source: str = "") -> dict[str, Any]:
@@ -450,18 +453,6 @@ def describe(params: Mapping[str, Any]) -> Description:
             f"{key}.reference_length",
             f"{c['reference_length']} m outside the stroke [{c['min_length']}, {c['max_length']}] m",
         )
-    # The excavator's zero offsets are not applied by its nodes yet (the hydraulic_* nodes do):
-    # a calibrated file with offsets would read its sensors wrong, so it is refused.
-    for key, value in [(f"{prefix}.swing.zero_offset", swing["zero_offset"])] + [
-        (f"{prefix}.cylinders.{name}.zero_offset", c["zero_offset"])
-        for name, c in zip(CYLINDERS, cylinders, strict=True)
-    ]:
-        require(
-            value == 0.0,
-            key,
-            f"{value}: the excavator nodes do not apply zero offsets; run a calibrated file with "
-            "offsets on the hydraulic_* nodes, or zero the sensors",
-        )
     chain = g["chain"]
     for joint in TOPOLOGY["chain"]:
         lo, hi = chain[joint]["limits"]
@@ -528,6 +519,7 @@ def describe(params: Mapping[str, Any]) -> Description:
         joint_limits=tuple((chain[j]["limits"][0], chain[j]["limits"][1]) for j in TOPOLOGY["chain"]),
         bucket_outline=tuple(zip(outline[::2], outline[1::2], strict=True)),
         tail=tuple((radius, z) for z in heights or ()),
+        zero_offset=(swing["zero_offset"], *(c["zero_offset"] for c in cylinders)),
     )
 
 

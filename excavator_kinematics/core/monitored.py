@@ -74,4 +74,13 @@ class MonitoredPoints:
         return both[0], (both[1] - both[0]) / STEP
 
 
-__all__ = ["STEP", "MonitoredPoints"]
+class ReadingPoints(MonitoredPoints):
+    """The monitored points of sensor readings (as joint_states / cylinder_lengths carry them; D =
+    reading + zero_offset): the registry's ``monitored`` hook, whose states are the machine's
+    joint values (machine_markers draws the zones' points with it)."""
+
+    def positions(self, D: np.ndarray) -> np.ndarray:
+        return super().positions(np.asarray(D, dtype=float) + self.exc.zero_offset)
+
+
+__all__ = ["STEP", "MonitoredPoints", "ReadingPoints"]

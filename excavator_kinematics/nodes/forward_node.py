@@ -1,11 +1,13 @@
 """excavator_forward: bucket pose, twist and acceleration from cylinder and swing states.
 
-A thin adapter around :meth:`Excavator.state` (paper eqs. 3-11; one state per message: the
-compiled single call, :mod:`excavator_kinematics.core.state_kernel`, loaded in the background from
-the node's construction on, numpy answering until then). On each ``cylinder_lengths``
-message it takes the latest swing state from ``joint_states`` (extrapolated to the cylinder stamp,
-at most ``swing_max_age`` apart) and accelerations as finite differences of successive rates
-(:mod:`excavator_kinematics.nodes.state_input`), and publishes with the cylinder message's stamp:
+A thin adapter around :meth:`Excavator.state` (paper eqs. 3-11; one state per message: the compiled
+single call, :mod:`excavator_kinematics.core.state_kernel`, loaded in the background from the
+node's construction on, numpy answering until then). On each ``cylinder_lengths`` message it takes
+the latest swing state from ``joint_states`` (extrapolated to the cylinder stamp, at most
+``swing_max_age`` apart), turns the sensor readings into the true state D = reading + zero_offset
+(the machine file's, :meth:`Excavator.true_state`; rates unchanged) and accelerations as finite
+differences of successive rates (:mod:`excavator_kinematics.nodes.state_input`), and publishes with
+the cylinder message's stamp:
 
 * ``bucket_pose`` (PoseStamped), ``bucket_twist`` (TwistStamped), ``bucket_accel`` (AccelStamped,
   only once accelerations are known: from the second message on);
@@ -167,8 +169,9 @@ class ForwardKinematics(MachineNode):
             lengths, rates = message_codec.positions_and_rates(msg, CYLINDERS)
             self.plausible.rates(CYLINDERS, rates.tolist())
             stamp_ns = msg.stamp_ns
-            theta1, theta1_dot, theta1_ddot = self.swing.at(stamp_ns)
-            D = self.exc.validate([theta1, *lengths])
+            swing_reading, theta1_dot, theta1_ddot = self.swing.at(stamp_ns)
+            # Sensor readings -> true state (reading + zero_offset), validated on the true strokes.
+            D = self.exc.true_state([swing_reading, *lengths])
         except StaleInput as error:
             # Transient (start-up, a loaded machine): one info line until the first output, then
             # throttled warnings. ERROR is kept for inputs that need a person.
@@ -181,6 +184,7 @@ class ForwardKinematics(MachineNode):
         except (InputError, StrokeError) as error:
             self.log("error", f"rejected cylinder_lengths: {error}")
             return
+        theta1 = float(D[0])
         # Only accepted messages feed the differencing, so a rejected one cannot spike it.
         cylinder_ddot = self.acceleration(self.cylinder_acceleration, CYLINDERS, stamp_ns, rates)
         known = cylinder_ddot is not None and theta1_ddot is not None

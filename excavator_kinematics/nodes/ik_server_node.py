@@ -1,8 +1,12 @@
 """``excavator_ik_server``: the shared IK/FK server (:mod:`manipulator_kinematics.nodes.ik_server`)
 for the excavator, in the actuator coordinates D = [theta1, d2, d3, d4], plus ``plan_path``.
 
+Joint values in requests and answers (seeds, solutions, solve_fk's state, plan_path's positions)
+are the sensors' readings, as on ``cylinder_lengths`` / ``joint_states``: the true state D =
+reading + zero_offset (the machine file's) is what the kinematics and the stroke box see.
+
 * ``solve_ik``: a bucket pose -> D (joints ``swing_joint`` rad, ``boom_cylinder``,
-  ``arm_cylinder``, ``bucket_cylinder`` lengths m, as on ``cylinder_lengths`` / ``joint_states``),
+  ``arm_cylinder``, ``bucket_cylinder`` lengths m),
   closed form (:mod:`excavator_kinematics.core.inverse`). Mode ``pose`` (default with
   ``use_orientation``): the orientation gives the swing heading and the bucket angle alpha;
   mode ``position`` (default without): alpha of the seed, else the widest stroke margin. Branches
@@ -35,6 +39,7 @@ from typing import ClassVar
 
 import numpy as np
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
 
 from excavator_kinematics.core.monitored import MonitoredPoints
 from excavator_kinematics.core.path import BucketPlan
@@ -49,7 +54,7 @@ from manipulator_kinematics.registry import Machine
 from manipulator_kinematics.schema import Number, Schema, Text
 from manipulator_kinematics.zone_guard import ZoneGuard
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes
-from manipulator_kinematics_interfaces.srv import PlanPath
+from manipulator_kinematics_interfaces.srv import PlanPath, SolveFK, SolveIK
 
 NODE = "excavator_ik_server"
 
@@ -108,6 +113,34 @@ class ExcavatorIKServer(PlanPathServer):
             f"serving plan_path (defaults: step {path['step']:g} m, tip speed "
             f"{path['tip_speed']:g} m/s, acceleration {path['acceleration']:g} m/s^2)"
         )
+
+    # The services speak the sensors' readings (as joint_states / cylinder_lengths carry them);
+    # the kinematics true states D = reading + zero_offset (Excavator.true_state / readings).
+    def _seed(self, seed: JointState, names: Sequence[str]) -> np.ndarray | None:
+        q = super()._seed(seed, names)
+        return None if q is None else q + self.model.zero_offset
+
+    def _solve_ik(self, request: SolveIK.Request, response: SolveIK.Response) -> None:
+        super()._solve_ik(request, response)
+        for state in (response.solution, *response.solutions):
+            state.position = self.model.readings(state.position).tolist()
+
+    def _solve_fk(self, request: SolveFK.Request, response: SolveFK.Response) -> None:
+        state = request.joint_state
+        if len(state.position) == len(state.name) == len(self.joint_names):
+            # By name: the message's order is the sender's. A malformed state goes through as it
+            # is, for the shared check to name what is wrong.
+            offset = dict(zip(self.joint_names, self.model.zero_offset.tolist(), strict=True))
+            state.position = [v + offset.get(n, 0.0) for n, v in zip(state.name, state.position, strict=True)]
+        super()._solve_fk(request, response)
+
+    def _plan_path(self, request: PlanPath.Request, response: PlanPath.Response) -> None:
+        try:
+            super()._plan_path(request, response)
+        finally:  # a path that ends short is answered with its trajectory too
+            # Not wrapped: a continuous swing's path runs on through +-pi.
+            for point in response.trajectory.points:
+                point.positions = (np.asarray(point.positions) - self.model.zero_offset).tolist()
 
     def plan(self, request: PlanPath.Request, waypoints: np.ndarray, seed: np.ndarray | None) -> BucketPlan:
         site = None

@@ -8,7 +8,8 @@ complementary filter of :class:`excavator_kinematics.sensing.imu.TiltFilter` (ti
 ``gravity_time_constant``). :class:`excavator_kinematics.sensing.imu.ImuArm` turns the four into theta2..4
 relative to the upper structure (a tilted cab cancels) and the cylinder lengths and rates, which
 go out on ``cylinder_lengths`` (sensor_msgs/JointState, boom/arm/bucket_cylinder, position and
-velocity): the topic excavator_forward and excavator_velocity_ik read, so the chain runs on IMUs
+velocity; the positions as a length sensor would read them, true - the machine file's
+zero_offset): the topic excavator_forward and excavator_velocity_ik read, so the chain runs on IMUs
 unchanged (the swing still comes from its encoder on ``joint_states``). With each set it also
 publishes ``machine_tilt`` (geometry_msgs/Vector3Stamped, frame_id ``upper_structure_frame``):
 world up in the upper structure's frame from the cab IMU, from which excavator_forward's
@@ -256,7 +257,10 @@ class ImuState(MachineNode):
                 header=Header(stamp=stamp, frame_id=self.upper_frame), vector=Vector3(x=x, y=y, z=z)
             )
         )
-        self.cylinder_pub.publish(message_codec.joint_state(stamp, CYLINDERS, joints.lengths, joints.rates))
+        # The lengths from the geometry are true ones; cylinder_lengths carries sensor readings
+        # (true - zero_offset), which excavator_forward turns back into true lengths.
+        readings = joints.lengths - self.exc.zero_offset[1:]
+        self.cylinder_pub.publish(message_codec.joint_state(stamp, CYLINDERS, readings, joints.rates))
 
 
 def main(args: Sequence[str] | None = None) -> int:

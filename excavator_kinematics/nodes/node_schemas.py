@@ -207,12 +207,15 @@ SIM: Schema = {
     "time_constant": _seconds("first-order lag of the actuators; 0 = ideal"),
     "command_timeout": _seconds("no rate command for this long: the actuators stop"),
     "warning_period": _WARNING_PERIOD,
-    "initial_swing_angle": Number(min=-7.0, max=7.0, unit="rad", doc="swing angle at start (rad)"),
+    "initial_swing_angle": Number(
+        min=-7.0, max=7.0, unit="rad", doc="true swing angle at start (rad; the reading is it - zero_offset)"
+    ),
     "initial_cylinder_lengths": Numbers(
         3,
         Number(min=0.0, max=20.0, unit="m"),
         default=None,
-        doc="boom, arm, bucket cylinder lengths at start (m); default: the machine's reference lengths",
+        doc="true boom, arm, bucket cylinder lengths at start (m; readings are them - zero_offset); "
+        "default: the machine's reference lengths",
     ),
     "qos_depth": _QOS_DEPTH,
     "input_queue_depth": _INPUT_DEPTH,

@@ -3,12 +3,14 @@
 Integrates the rate commands of ``cylinder_rate_commands`` (JointState velocities of swing_joint,
 boom_cylinder, arm_cylinder, bucket_cylinder) with :class:`excavator_kinematics.core.plant.Plant`
 (speed limits, stroke ends, optional first-order lag) and publishes, at ``rate`` Hz and with one
-stamp, ``cylinder_lengths`` (position m, velocity m/s) and ``joint_states`` (swing_joint angle
-and rate). A command older than ``command_timeout`` s counts as zero. A command that is not
-finite or beyond 1000 x a speed limit (:class:`excavator_kinematics.nodes.state_input.Plausible`) is
-refused with a reason and leaves the previous one in force; a plausible one is saturated at the
-speed limits by the plant. What is published is checked to be finite. Steps use the measured time
-between timer calls, so timer jitter does not change the integrated motion.
+stamp, ``cylinder_lengths`` (position m, velocity m/s) and ``joint_states`` (swing_joint angle and
+rate), the positions as the machine's sensors read them: true - zero_offset (the machine file's;
+the plant and ``initial_*`` are true values). A command older than ``command_timeout`` s counts as
+zero. A command that is not finite or beyond 1000 x a speed limit
+(:class:`excavator_kinematics.nodes.state_input.Plausible`) is refused with a reason and leaves the
+previous one in force; a plausible one is saturated at the speed limits by the plant. What is
+published is checked to be finite. Steps use the measured time between timer calls, so timer jitter
+does not change the integrated motion.
 """
 
 from __future__ import annotations
@@ -94,8 +96,10 @@ class Simulator(MachineNode):
             return
         # Swing first: a node combining the two (excavator_forward) then usually holds the swing
         # state of this very step when the cylinder message arrives.
-        self.swing_pub.publish(message_codec.joint_state(stamp, JOINTS[:1], d[:1], d_dot[:1]))
-        self.cylinder_pub.publish(message_codec.joint_state(stamp, CYLINDERS, d[1:], d_dot[1:]))
+        # What the machine's sensors would read (true - zero_offset); rates are unchanged.
+        reading = self.exc.readings(d)
+        self.swing_pub.publish(message_codec.joint_state(stamp, JOINTS[:1], reading[:1], d_dot[:1]))
+        self.cylinder_pub.publish(message_codec.joint_state(stamp, CYLINDERS, reading[1:], d_dot[1:]))
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -214,7 +214,7 @@ class VelocityIk(MachineNode):
             self.command(msg.header.stamp)
         elif self.zones is not None and self.target is None:  # standing: the clearances still go out
             with contextlib.suppress(ValueError):
-                D = self.exc.validate(self.state())
+                D = self.exc.true_state(self.state())
                 self.zones.watch(msg.header.stamp, self.points.positions(D), self.site_pose(D[0])[0])
         self.target_since_state = False
 
@@ -243,7 +243,8 @@ class VelocityIk(MachineNode):
             self.stop(f"no target_bucket_twist for {self.command_timeout_ns * 1e-9:g} s", "info", idle=True)
 
     def state(self) -> np.ndarray:
-        """D = [theta1, d2, d3, d4] now; StaleInput when missing or late, InputError when wrong."""
+        """The sensor readings [theta1, d2, d3, d4] now (:meth:`Excavator.true_state` makes D of
+        them); StaleInput when missing or late, InputError when wrong."""
         if self.cylinders is None:
             raise StaleInput("no cylinder_lengths received yet")
         stamp_ns, received_ns, lengths = self.cylinders
@@ -275,7 +276,7 @@ class VelocityIk(MachineNode):
         """Publish the rates for the current target at the current state (or stop, saying why)."""
         _, linear, angular = self.target
         try:
-            D = self.exc.validate(self.state())
+            D = self.exc.true_state(self.state())
             Q = self.exc.pose(D)
             tip = Q[:3]
             split = split_twist(D[0], tip, linear, angular)

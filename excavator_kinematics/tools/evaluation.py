@@ -141,7 +141,8 @@ def _inputs(
     j = np.where(j >= 0, j, match_latest(stamp, s_j))
     gap = np.where(j >= 0, (stamp - s_j[j]) * 1e-9, np.inf)
     theta1 = angle[j] + rate[j] * gap
-    D = np.column_stack([theta1, lengths])
+    # Sensor readings -> true states, as the node's boundary does (Excavator.true_state).
+    D = np.column_stack([theta1, lengths]) + exc.zero_offset
     D_dot = np.column_stack([rate[j], rates])
     lim = exc.limits
     accepted = (
@@ -328,7 +329,9 @@ def _actuators(
     out: dict[str, Any] = {}
     if "cylinder_lengths" in data:
         cyl = data["cylinder_lengths"]
-        lengths, rates = cyl.by_name("position", CYLINDERS), cyl.by_name("velocity", CYLINDERS)
+        # True lengths (reading + zero_offset): the strokes are physical.
+        lengths = cyl.by_name("position", CYLINDERS) + exc.zero_offset[1:]
+        rates = cyl.by_name("velocity", CYLINDERS)
         t = since(cyl.stamp_ns(), t0)
         for i, name in enumerate(CYLINDERS):
             low, high, limit = lim.stroke_min[i], lim.stroke_max[i], lim.max_cylinder_speed[i]

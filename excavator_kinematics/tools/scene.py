@@ -73,9 +73,11 @@ def _frame(origin: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return pose
 
 
-def excavator_scene(model: Excavator, D: np.ndarray) -> Scene:
-    """Scene of states D (..., 4) = [theta1, d_boom, d_arm, d_bucket] (rad, m); StrokeError for a
-    state the machine cannot take (as :meth:`Excavator.pins`)."""
+def excavator_scene(model: Excavator, readings: np.ndarray) -> Scene:
+    """Scene of the states of sensor readings (..., 4) = [theta1, d_boom, d_arm, d_bucket] (rad,
+    m; as on joint_states / cylinder_lengths, D = reading + zero_offset); StrokeError for a state
+    the machine cannot take (as :meth:`Excavator.pins`)."""
+    D = np.asarray(readings, dtype=float) + model.zero_offset
     pins = model.pins(D)
     theta1 = np.asarray(D, dtype=float)[..., 0]
     body = BODY_SHARE * (model.l2 + model.l3 + model.l4)

@@ -73,14 +73,15 @@ def excavator_bag(
     # The node's accelerations: raw differences of successive rates (none for the first message).
     D_ddot = np.vstack([np.zeros((1, 4)), np.diff(D_dot, axis=0) * rate_hz])
     s = exc.state(D, D_dot, D_ddot)
+    reading = exc.readings(D)  # what the sensors read: true - zero_offset
     topics = {
         "/joint_states": Topic(
-            JOINT_STATE, stamp, joint_messages(stamp, ["swing_joint"], D[:, :1], D_dot[:, :1])
+            JOINT_STATE, stamp, joint_messages(stamp, ["swing_joint"], reading[:, :1], D_dot[:, :1])
         ),
         "/cylinder_lengths": Topic(
             JOINT_STATE,
             stamp + CYLINDER_DELAY,
-            joint_messages(stamp, list(CYLINDERS), D[:, 1:], D_dot[:, 1:]),
+            joint_messages(stamp, list(CYLINDERS), reading[:, 1:], D_dot[:, 1:]),
         ),
     }
     out = stamp + OUTPUT_DELAY

@@ -22,11 +22,10 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from manipulator_kinematics.hydraulic.description import SECTION
 from manipulator_kinematics.hydraulic.model import HydraulicModel
-from manipulator_kinematics.param_files import ConfigError, load_parameters
+from manipulator_kinematics.param_files import ConfigError, dump_parameters, load_parameters
 from manipulator_kinematics.registry import machines_described
 
 __all__ = ["box_grid", "convert", "main", "report", "side_views"]
@@ -46,9 +45,7 @@ def convert(path: Path, out: Path) -> None:
     sections[machine.section] = {k: v for k, v in values.items() if k not in machine.also}
     text = (
         f"# {path.name} in the current form (mk_machine_check --convert; docs/hydraulic_family.md).\n"
-        + yaml.safe_dump(
-            {"/**": {"ros__parameters": _given(sections)}}, sort_keys=False, default_flow_style=None
-        )
+        + dump_parameters({"/**": {"ros__parameters": _given(sections)}})
     )
     out.write_text(text, encoding="utf-8")
 

@@ -12,9 +12,10 @@ MEASURED.csv: header ``pose,<actuators, as the machine's joint_states names>,poi
 one row per measured point. Bad input is refused with one line naming the row and the column.
 
 CALIBRATED.yaml keeps every other section of MACHINE.yaml as it is (the CET200's ``excavator``
-section: the excavator nodes load the calibrated file). A registered machine that reads the file
-but refuses it (the excavator nodes do not apply zero offsets: ``--hold-offsets`` holds them at
-the file's values) is named on stderr, with its reason.
+section: the excavator nodes load the calibrated file and apply its zero offsets, as the family's
+do). A registered machine that reads the file but refuses it is named on stderr, with its reason.
+``--hold-offsets`` holds the cylinders' zero offsets at the file's values, for sensors zeroed on
+the machine instead.
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ from manipulator_kinematics.hydraulic.calibration import (
 )
 from manipulator_kinematics.hydraulic.description import SECTION, Description, read
 from manipulator_kinematics.hydraulic.model import HydraulicModel, StrokeError
-from manipulator_kinematics.param_files import ConfigError, load_parameters, open_input
+from manipulator_kinematics.param_files import ConfigError, dump_parameters, load_parameters, open_input
 from manipulator_kinematics.registry import machines_described
 
 __all__ = ["main", "predict", "read_points", "report", "write_machine"]
@@ -297,7 +298,7 @@ def write_machine(cal: Calibration, machine: Path, out: Path) -> list[str]:
     text = (
         f"# {cal.geometry.description.name} as measured up by mk_calibrate from {machine.name} "
         "(docs/calibration.md).\n# true actuator value = sensor reading + zero_offset.\n"
-        + yaml.safe_dump(document, sort_keys=False, default_flow_style=None)
+        + dump_parameters(document)
     )
     with tempfile.NamedTemporaryFile("w", suffix=".yaml", dir=out.parent or ".", delete=False) as f:
         f.write(text)
@@ -400,8 +401,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--hold-offsets",
         action="store_true",
-        help="hold every cylinder's zero offset at the machine file's value (sensors zeroed on the "
-        "machine): a file the excavator nodes load, which do not apply zero offsets",
+        help="hold every cylinder's zero offset at the machine file's value (for sensors zeroed on "
+        "the machine rather than offsets in the file)",
     )
     parser.add_argument(
         "--max-evaluations",
