@@ -112,7 +112,7 @@ def one_round(models: dict[str, HydraulicModel], exc: Excavator, scale: float) -
     row: dict[str, float] = {}
     D = exc.limits.reference.copy()
     V, A = np.array([0.3, 0.05, -0.08, 0.1]), np.array([0.1, 0.02, 0.01, -0.03])
-    packed = exc._packed
+    packed = exc.packed
     row["excavator: plain numba pose"] = per_call_us(lambda: excavator_pose(packed, D), n)
     row["excavator: Excavator.state"] = per_call_us(lambda: exc.state(D, V, A), n)
     for name, model in models.items():
