@@ -44,6 +44,8 @@ from manipulator_kinematics.hydraulic.layout import FLOAT, INT, OP, SIGNATURE
 _P, _V, _A, _T, _J = 0, 1, 2, 3, 4
 # How much a call computes: positions; with the Jacobians; with rates and accelerations too.
 POSITION, JACOBIAN, MOTION = 0, 1, 2
+#: A scalar jet: value, rate, acceleration (an actuator's, or a constant's).
+Scalar = tuple[float, float, float]
 
 
 @njit(cache=True)
@@ -87,23 +89,14 @@ def _fixed(w: np.ndarray, out: int, x: float, z: float, m: int, order: int) -> N
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _actuator(
-    w: np.ndarray,
-    out: int,
-    act: int,
-    offset: float,
-    D: np.ndarray,
-    Dd: np.ndarray,
-    Ddd: np.ndarray,
-    order: int,
-) -> None:
-    """The scalar jet of D[act] + offset (``HydraulicModel._solve``'s ``actuator``)."""
-    w[out, _P, 0] = D[act] + offset
+def _actuator(w: np.ndarray, out: int, act: int, d: Scalar, m: int, order: int) -> None:
+    """The scalar jet ``d`` of actuator ``act`` (``HydraulicModel._solve``'s ``actuator``)."""
+    w[out, _P, 0] = d[0]
     if order >= JACOBIAN:
-        for j in range(D.shape[0]):
+        for j in range(m):
             w[out, _J + j, 0] = 1.0 if j == act else 0.0
     if order >= MOTION:
-        w[out, _V, 0], w[out, _A, 0] = Dd[act], Ddd[act]
+        w[out, _V, 0], w[out, _A, 0] = d[1], d[2]
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -114,19 +107,18 @@ def _dyad(
     b: int,
     act_a: int,
     act_b: int,
-    fixed_a: float,
-    fixed_b: float,
+    radius_a: Scalar,
+    radius_b: Scalar,
     sign: float,
-    D: np.ndarray,
-    Dd: np.ndarray,
-    Ddd: np.ndarray,
+    m: int,
     order: int,
 ) -> bool:
     """X = circle(A, r_a) with circle(B, r_b) on the side ``sign`` (dyads.intersect), its Jacobian
-    and rate (dyads.rates) and acceleration (dyads.second_rates); False where it does not close."""
+    and rate (dyads.rates) and acceleration (dyads.second_rates); False where it does not close.
+    Each radius an actuator's (index >= 0) or fixed, as a scalar jet."""
     ax, az, bx, bz = w[a, _P, 0], w[a, _P, 1], w[b, _P, 0], w[b, _P, 1]
-    ra = D[act_a] if act_a >= 0 else fixed_a
-    rb = D[act_b] if act_b >= 0 else fixed_b
+    ra, ra_v, ra_a = radius_a
+    rb, rb_v, rb_a = radius_b
     dx, dz = bx - ax, bz - az
     dist2 = dx * dx + dz * dz
     along = (ra * ra - rb * rb + dist2) / (2.0 * dist2)
@@ -140,15 +132,13 @@ def _dyad(
         return True
     u0, u1, v0, v1 = x - ax, z - az, x - bx, z - bz
     det = u0 * v1 - u1 * v0
-    for j in range(D.shape[0]):
+    for j in range(m):
         rhs_a = u0 * w[a, _J + j, 0] + u1 * w[a, _J + j, 1] + ra * (1.0 if j == act_a else 0.0)
         rhs_b = v0 * w[b, _J + j, 0] + v1 * w[b, _J + j, 1] + rb * (1.0 if j == act_b else 0.0)
         w[out, _J + j, 0] = (v1 * rhs_a - u1 * rhs_b) / det
         w[out, _J + j, 1] = (u0 * rhs_b - v0 * rhs_a) / det
     if order < MOTION:
         return True
-    ra_v, ra_a = (Dd[act_a], Ddd[act_a]) if act_a >= 0 else (0.0, 0.0)
-    rb_v, rb_a = (Dd[act_b], Ddd[act_b]) if act_b >= 0 else (0.0, 0.0)
     rhs_a = u0 * w[a, _V, 0] + u1 * w[a, _V, 1] + ra * ra_v
     rhs_b = v0 * w[b, _V, 0] + v1 * w[b, _V, 1] + rb * rb_v
     xv, zv = (v1 * rhs_a - u1 * rhs_b) / det, (u0 * rhs_b - v0 * rhs_a) / det
@@ -232,27 +222,25 @@ def _slide(
     act: int,
     px: float,
     pz: float,
-    offset: float,
-    D: np.ndarray,
-    Dd: np.ndarray,
-    Ddd: np.ndarray,
+    stroke: Scalar,
+    m: int,
     order: int,
 ) -> None:
-    """The prismatic child's origin: O_p + R(phi_p) (axis point + (s, 0)), s = D[act] + offset
-    (``HydraulicModel._slide``)."""
+    """The prismatic child's origin: O_p + R(phi_p) (axis point + (s, 0)), s the scalar jet
+    ``stroke`` of actuator ``act`` (``HydraulicModel._slide``)."""
     c, s = w[f, _T, 0], w[f, _T, 1]
-    lx = px + (D[act] + offset)
+    lx = px + stroke[0]
     w0, w1 = c * lx - s * pz, s * lx + c * pz
     w[out, _P, 0], w[out, _P, 1] = w[o, _P, 0] + w0, w[o, _P, 1] + w1
     if order < JACOBIAN:
         return
-    for j in range(D.shape[0]):
+    for j in range(m):
         sj = 1.0 if j == act else 0.0
         w[out, _J + j, 0] = w[o, _J + j, 0] + w[f, _J + j, 0] * -w1 + sj * c
         w[out, _J + j, 1] = w[o, _J + j, 1] + w[f, _J + j, 0] * w0 + sj * s
     if order < MOTION:
         return
-    fv, fa, sv, sa = w[f, _V, 0], w[f, _A, 0], Dd[act], Ddd[act]
+    fv, fa, sv, sa = w[f, _V, 0], w[f, _A, 0], stroke[1], stroke[2]
     w[out, _V, 0] = w[o, _V, 0] + fv * -w1 + sv * c
     w[out, _V, 1] = w[o, _V, 1] + fv * w0 + sv * s
     w[out, _A, 0] = w[o, _A, 0] + fa * -w1 - fv * fv * w0 + 2.0 * fv * sv * -s + sa * c
@@ -277,12 +265,10 @@ def _angle(w: np.ndarray, out: int, child: int, parent: int, m: int, order: int)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _task(
-    w: np.ndarray, out: int, tool: int, act: int, D: np.ndarray, Dd: np.ndarray, Ddd: np.ndarray, order: int
-) -> None:
+def _task(w: np.ndarray, out: int, tool: int, act: int, swing: Scalar, m: int, order: int) -> None:
     """x, y, z of Q (eq. 3) into slots out..out + 2: the boom-plane tool point (r, z) turned by the
-    swing D[act] (``HydraulicModel._task``); no swing (act < 0): x = r, y = 0."""
-    rows = _rows(D.shape[0], order)
+    swing, actuator ``act``'s scalar jet (``HydraulicModel._task``); no swing (act < 0): x = r, y = 0."""
+    rows = _rows(m, order)
     for row in range(rows):
         w[out + 2, row, 0] = w[tool, row, 1]
     if act < 0:
@@ -290,15 +276,15 @@ def _task(
             w[out, row, 0], w[out + 1, row, 0] = w[tool, row, 0], 0.0
         return
     r = w[tool, _P, 0]
-    c, s = math.cos(D[act]), math.sin(D[act])
+    c, s = math.cos(swing[0]), math.sin(swing[0])
     w[out, _P, 0], w[out + 1, _P, 0] = r * c, r * s
     if order >= JACOBIAN:
-        for j in range(D.shape[0]):
+        for j in range(m):
             sj = 1.0 if j == act else 0.0
             w[out, _J + j, 0] = w[tool, _J + j, 0] * c - r * s * sj
             w[out + 1, _J + j, 0] = w[tool, _J + j, 0] * s + r * c * sj
     if order >= MOTION:
-        rv, ra, sv, sa = w[tool, _V, 0], w[tool, _A, 0], Dd[act], Ddd[act]
+        rv, ra, sv, sa = w[tool, _V, 0], w[tool, _A, 0], swing[1], swing[2]
         w[out, _V, 0] = rv * c - r * s * sv
         w[out + 1, _V, 0] = rv * s + r * c * sv
         w[out, _A, 0] = ra * c - 2.0 * rv * s * sv - r * (c * sv * sv + s * sa)
@@ -311,7 +297,7 @@ def _work(code: np.ndarray, m: int) -> np.ndarray:
     return np.empty((code[0, INT.out], _J + m, 2))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _run(
     code: np.ndarray,
     values: np.ndarray,
@@ -327,9 +313,13 @@ def _run(
         op, out = code[row, INT.op], code[row, INT.out]
         p, q, f, act = code[row, INT.p], code[row, INT.q], code[row, INT.angle], code[row, INT.act]
         x, z, length = values[row, FLOAT.x], values[row, FLOAT.z], values[row, FLOAT.length]
+        # The scalar jet of D[act] + length, or the constant length (act < 0): read here, so that
+        # no helper takes D, D_dot, D_ddot (an array passed costs two atomic reference counts).
+        d = (D[act] + length, Dd[act], Ddd[act]) if act >= 0 else (length, 0.0, 0.0)
         if op == OP.dyad:
-            act2, length2, sign = code[row, INT.act2], values[row, FLOAT.length2], values[row, FLOAT.sign]
-            if not _dyad(w, out, p, q, act, act2, length, length2, sign, D, Dd, Ddd, order):
+            act2, length2 = code[row, INT.act2], values[row, FLOAT.length2]
+            d2 = (D[act2] + length2, Dd[act2], Ddd[act2]) if act2 >= 0 else (length2, 0.0, 0.0)
+            if not _dyad(w, out, p, q, act, act2, d, d2, values[row, FLOAT.sign], m, order):
                 return False
         elif op == OP.point:
             _point(w, out, p, f, x, z, m, order)
@@ -338,20 +328,20 @@ def _run(
         elif op == OP.fixed:
             _fixed(w, out, x, z, m, order)
         elif op == OP.slide:
-            _slide(w, out, p, f, act, x, z, length, D, Dd, Ddd, order)
+            _slide(w, out, p, f, act, x, z, d, m, order)
         elif op == OP.actuator:
-            _actuator(w, out, act, length, D, Dd, Ddd, order)
+            _actuator(w, out, act, d, m, order)
         elif op == OP.angle:
             _angle(w, out, p, q, m, order)
         elif op == OP.task:
-            _task(w, out, p, act, D, Dd, Ddd, order)
+            _task(w, out, p, act, d, m, order)
         elif op == OP.add:
             for k in range(_rows(m, order)):
                 w[out, k, 0] += w[p, k, 0]
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _state(
     code: np.ndarray,
     values: np.ndarray,
@@ -391,7 +381,7 @@ def state(
     return _state(code, values, D, D_dot, D_ddot, out, _work(code, D.shape[0]))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _pose(code: np.ndarray, values: np.ndarray, D: np.ndarray, out: np.ndarray, w: np.ndarray) -> bool:
     """:func:`pose` with the work array given."""
     if not _inside(code, values, D) or out.shape[0] != code[0, INT.q]:

@@ -18,8 +18,9 @@ op         fields read (``out`` is the slot written)
 =========  ======================================================================================
 fixed      ``x``, ``z``: a constant point (a ground pin; (0, 0) for the ground's origin, angle)
 actuator   ``act``: the jet of D[act] + ``length`` (the swing, a prismatic joint d = s + offset)
-dyad       pins ``p`` (A), ``q`` (B); radii: D[``act``] (``act`` >= 0) or ``length``, D[``act2``] or
-           ``length2``; ``sign`` the branch (eqs. 1-2, :mod:`~manipulator_kinematics.hydraulic.dyads`)
+dyad       pins ``p`` (A), ``q`` (B); radii: D[``act``] (``act`` >= 0, ``length`` 0) or ``length``,
+           D[``act2``] or ``length2`` alike; ``sign`` the branch (eqs. 1-2,
+           :mod:`~manipulator_kinematics.hydraulic.dyads`)
 place      pins ``p``, ``q`` (one, two); ``angle`` the body's angle slot (written too: its cos
            and sin); (``x``, ``z``) the body's local of ``p``; ``cos``, ``sin`` those of the
            direction of (local two - local one) in the body
