@@ -313,8 +313,8 @@ def _run(
         op, out = code[row, INT.op], code[row, INT.out]
         p, q, f, act = code[row, INT.p], code[row, INT.q], code[row, INT.angle], code[row, INT.act]
         x, z, length = values[row, FLOAT.x], values[row, FLOAT.z], values[row, FLOAT.length]
-        # The scalar jet of D[act] + length, or the constant length (act < 0): read here, so that
-        # no helper takes D, D_dot, D_ddot (an array passed costs two atomic reference counts).
+        # The scalar jet of D[act] + length, or the constant length (act < 0), read once here: the
+        # helpers take scalars, none of them D, D_dot, D_ddot, nor the "no actuator" case.
         d = (D[act] + length, Dd[act], Ddd[act]) if act >= 0 else (length, 0.0, 0.0)
         if op == OP.dyad:
             act2, length2 = code[row, INT.act2], values[row, FLOAT.length2]
