@@ -15,7 +15,7 @@ of the numpy path: dyads (eqs. 1-2, implicit differentiation of the loop closure
 ``_Body.point``, ``_joints`` and ``_task`` (eq. 3; eqs. 7-8 and 10-11 through the jets), with
 one difference in how a body's angle is held: as its cosine and sine (row :data:`_T`), made from
 the placing pins' direction and the packed cos/sin of the body's own (no atan2, cos and sin per
-placed body, a third of a state's time), its value only where a joint angle needs it
+placed body, a fifth of a state's compute), its value only where a joint angle needs it
 (theta = atan2 of the child's turn relative to the parent, in (-pi, pi] as numpy's wrap). The
 results agree with the numpy path to rounding (1e-12, test/test_hydraulic_kernel.py).
 
@@ -23,7 +23,8 @@ Each instruction writes every row of its slot that a call of its order reads (no
 cleared first), and a batch makes one work array for all its states. The instructions' helpers
 are inlined into the interpreter (``inline="always"``: numba inlines them before LLVM sees them;
 left as calls, with the work array and D, D_dot, D_ddot passed to each, the full state took a
-quarter longer; docs/benchmarks.md).
+quarter longer; docs/hydraulic_family.md, "Speed"). The interpreter itself is not inlined into
+its callers: that gained a tenth of the compute for five times the compile (100 s of CPU).
 
 Each function returns False, writing nothing valid, for a state outside the stroke box (faces
 included), not finite, of the wrong length, or where a dyad does not close: the caller then takes
@@ -297,7 +298,7 @@ def _work(code: np.ndarray, m: int) -> np.ndarray:
     return np.empty((code[0, INT.out], _J + m, 2))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _run(
     code: np.ndarray,
     values: np.ndarray,
@@ -341,7 +342,7 @@ def _run(
     return True
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _state(
     code: np.ndarray,
     values: np.ndarray,
@@ -381,7 +382,7 @@ def state(
     return _state(code, values, D, D_dot, D_ddot, out, _work(code, D.shape[0]))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _pose(code: np.ndarray, values: np.ndarray, D: np.ndarray, out: np.ndarray, w: np.ndarray) -> bool:
     """:func:`pose` with the work array given."""
     if not _inside(code, values, D) or out.shape[0] != code[0, INT.q]:
