@@ -23,8 +23,9 @@ Each instruction writes every row of its slot that a call of its order reads (no
 cleared first), and a batch makes one work array for all its states. The instructions' helpers
 are inlined into the interpreter (``inline="always"``: numba inlines them before LLVM sees them;
 left as calls, with the work array and D, D_dot, D_ddot passed to each, the full state took a
-quarter longer; docs/hydraulic_family.md, "Speed"). The interpreter itself is not inlined into
-its callers: that gained a tenth of the compute for five times the compile (100 s of CPU).
+quarter longer; docs/hydraulic_family.md, "Speed"). The interpreter is inlined into its five
+callers too, a tenth of the compute and issue 31's 2x target, for five times the cold compile
+(about 100 s of CPU, was 22; scripts/warm_kernels.py does it at set-up).
 
 Each function returns False, writing nothing valid, for a state outside the stroke box (faces
 included), not finite, of the wrong length, or where a dyad does not close: the caller then takes
@@ -298,7 +299,7 @@ def _work(code: np.ndarray, m: int) -> np.ndarray:
     return np.empty((code[0, INT.out], _J + m, 2))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _run(
     code: np.ndarray,
     values: np.ndarray,
@@ -342,7 +343,7 @@ def _run(
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _state(
     code: np.ndarray,
     values: np.ndarray,
@@ -382,7 +383,7 @@ def state(
     return _state(code, values, D, D_dot, D_ddot, out, _work(code, D.shape[0]))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _pose(code: np.ndarray, values: np.ndarray, D: np.ndarray, out: np.ndarray, w: np.ndarray) -> bool:
     """:func:`pose` with the work array given."""
     if not _inside(code, values, D) or out.shape[0] != code[0, INT.q]:
