@@ -19,9 +19,10 @@ Exit and signals (issue 28 item 2: a process stops within 2 s at any moment):
 
 * a cold cache (no index of the module in numba's cache, or one older than its source) is
   filled by a child process (``python -c``, the warm function and its sample pickled to it), so
-  the compile (5-30 s on 2 cores) can be abandoned: the child is killed when the process ends
-  (:func:`abandon`, at exit or from :func:`manipulator_kinematics.node_util.run`) and ends
-  itself if its parent vanishes; the numpy path goes on answering;
+  the compile (5-30 s on 2 cores, the hydraulic family's about 100 s) can be abandoned: the
+  child is killed when the process ends (:func:`abandon`, at exit or from
+  :func:`manipulator_kinematics.node_util.run`) and ends itself if its parent vanishes; the numpy
+  path goes on answering;
 * from a warm cache the module is loaded in this process (0.5-1.2 s, up to 5 s on a loaded
   machine: numba's import) by a daemon thread, which a process that ends does not wait for.
   A daemon thread still running Python while the interpreter finalizes is ended inside whatever

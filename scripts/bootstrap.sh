@@ -238,7 +238,7 @@ fi
 # numba invalidates a kernel's cache when its source changes; the stamp only skips a run.
 KERNELS_HASH="$( { echo "$PROJ_HASH"; hash_files $(cd "$REPO" && ls -- */*_kernel.py | grep -v "^test/"); } | sha256sum | cut -c1-64)"
 if [ "$(stamp_get kernels)" != "$KERNELS_HASH" ]; then
-    say "compiling the numba kernels into their cache (first run: about a minute)"
+    say "compiling the numba kernels into their cache (first run: about two minutes)"
     run_logged warm-kernels "$PYV" "$REPO/scripts/warm_kernels.py"
     stamp_set kernels "$KERNELS_HASH"
 fi

@@ -18,14 +18,16 @@ op         fields read (``out`` is the slot written)
 =========  ======================================================================================
 fixed      ``x``, ``z``: a constant point (a ground pin; (0, 0) for the ground's origin, angle)
 actuator   ``act``: the jet of D[act] + ``length`` (the swing, a prismatic joint d = s + offset)
-dyad       pins ``p`` (A), ``q`` (B); radii: D[``act``] (``act`` >= 0) or ``length``, D[``act2``] or
-           ``length2``; ``sign`` the branch (eqs. 1-2, :mod:`~manipulator_kinematics.hydraulic.dyads`)
-place      pins ``p``, ``q`` (one, two); ``angle`` the body's angle slot (written too);
-           (``x``, ``z``) the body's local of ``p``, ``length`` atan2 of (local two - local one)
+dyad       pins ``p`` (A), ``q`` (B); radii: D[``act``] (``act`` >= 0, ``length`` 0) or ``length``,
+           D[``act2``] or ``length2`` alike; ``sign`` the branch (eqs. 1-2,
+           :mod:`~manipulator_kinematics.hydraulic.dyads`)
+place      pins ``p``, ``q`` (one, two); ``angle`` the body's angle slot (written too: its cos
+           and sin); (``x``, ``z``) the body's local of ``p``; ``cos``, ``sin`` those of the
+           direction of (local two - local one) in the body
 point      body origin ``p``, body angle ``angle``; (``x``, ``z``) the point's local
 slide      parent origin ``p``, parent angle ``angle``, stroke D[``act``] + ``length`` along the
            parent's x axis from (``x``, ``z``)
-angle      theta = wrap(angle ``p`` - angle ``q``) (a revolute joint: child minus parent)
+angle      theta = angle ``p`` - angle ``q`` in (-pi, pi] (a revolute joint: child minus parent)
 task       x, y, z of Q into ``out``.. ``out`` + 2 from the tool point ``p``, turned by the swing
            D[``act``] (``act`` < 0: no swing)
 add        slot ``out`` += slot ``p`` (alpha: the revolute joints' sum)
@@ -82,6 +84,8 @@ class _Floats(NamedTuple):
     length: int
     length2: int
     sign: int
+    cos: int
+    sin: int
 
 
 #: Instruction codes (ints; a namedtuple: a compile-time constant to numba).

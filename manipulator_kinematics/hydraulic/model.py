@@ -690,30 +690,25 @@ class HydraulicModel:
         Qddot = JC0 Dddot + (d/dt JC0) Ddot (the dyads' second derivatives along the motion)."""
         if type(D) is not np.ndarray:
             D = np.asarray(D, dtype=float)
-        if D.shape == self._one and (kernel := KERNEL.ready or KERNEL.get()) is not None:
-            # The single call (a 1 kHz node calls it per message): the kernel checks shapes, types
+        if D.ndim == 1 and (kernel := KERNEL.ready or KERNEL.get()) is not None:
+            # The single call (a 1 kHz node calls it per message): the kernel checks lengths, types
             # and values; the numpy path below converts and raises the error for what it refuses.
             # Written out (no _compiled, no asarray of an array, no of_table): each Python call
-            # costs 0.1-0.2 us, a tenth of the kernel's.
+            # costs 0.1-0.2 us, an eighth of the kernel's (docs/benchmarks.md).
             table = np.empty(self._table_shape)
+            accelerations = self._no_acceleration if D_ddot is None else D_ddot
             try:
-                if kernel.state(
-                    self._code,
-                    self._constants,
-                    D,
-                    D_dot if type(D_dot) is np.ndarray else np.asarray(D_dot, dtype=float),
-                    self._no_acceleration
-                    if D_ddot is None
-                    else D_ddot
-                    if type(D_ddot) is np.ndarray
-                    else np.asarray(D_ddot, dtype=float),
-                    table,
-                ):
-                    state = _NEW(HydraulicState)
-                    state._values, state._table, state._n = None, table, self._n
-                    return state
-            except TypeError:  # arguments of types the kernel does not take (_warm)
-                pass
+                done = kernel.state(self._code, self._constants, D, D_dot, accelerations, table)
+            except TypeError:  # not arrays of floats (_warm): once more as such
+                try:
+                    rates = np.asarray(D_dot, dtype=float), np.asarray(accelerations, dtype=float)
+                    done = kernel.state(self._code, self._constants, D, *rates, table)
+                except (TypeError, ValueError):  # the numpy path says why
+                    done = False
+            if done:
+                state = _NEW(HydraulicState)
+                state._values, state._table, state._n = None, table, self._n
+                return state
         elif (
             D.ndim > 1 and (tables := self._batch("states", self._table_shape, D, D_dot, D_ddot)) is not None
         ):

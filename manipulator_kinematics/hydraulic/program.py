@@ -106,6 +106,7 @@ def pack(d: Description, lower: np.ndarray, upper: np.ndarray) -> Program:
             local = d.bodies[step.body]
             one, two = local[step.one], local[step.two]
             origin[step.body], angle[step.body] = w.slot(), w.slot()
+            phase = math.atan2(two[1] - one[1], two[0] - one[0])
             w.emit(
                 OP.place,
                 {
@@ -114,11 +115,7 @@ def pack(d: Description, lower: np.ndarray, upper: np.ndarray) -> Program:
                     "p": pins[step.one],
                     "q": pins[step.two],
                 },
-                {
-                    "x": float(one[0]),
-                    "z": float(one[1]),
-                    "length": math.atan2(two[1] - one[1], two[0] - one[0]),
-                },
+                {"x": float(one[0]), "z": float(one[1]), "cos": math.cos(phase), "sin": math.sin(phase)},
             )
             points(step.body)
         else:
