@@ -23,8 +23,9 @@ import numpy as np
 
 from excavator_kinematics.core.kinematics import Excavator
 
-#: Time step (s) of the differences along the command.
-STEP = 1e-6
+#: Time step (s) of the differences along the command: the velocities' and the accelerations'
+#: (the second differences need a longer one: the positions' round-off, about 1e-11 m, over k^2).
+STEP, CURVE_STEP = 1e-6, 1e-3
 
 
 class MonitoredPoints:
@@ -70,8 +71,19 @@ class MonitoredPoints:
 
     def __call__(self, D: np.ndarray, D_dot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Positions and velocities (P, 3) at state D (4,) for the actuator rates D_dot (4,)."""
-        both = self.positions(np.stack((D, D + STEP * np.asarray(D_dot, dtype=float))))
-        return both[0], (both[1] - both[0]) / STEP
+        return self.motion(D, D_dot)[:2]
+
+    def motion(self, D: np.ndarray, D_dot: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions, velocities and accelerations (P, 3) at state D (4,) for the actuator rates
+        D_dot (4,) held: the accelerations are how the points' paths curve (the zones' check),
+        second differences (p(D + 2k D_dot) - 2 p(D + k D_dot) + p(D)) / k^2, k =
+        :data:`CURVE_STEP`; all four states in one batched call."""
+        D = np.asarray(D, dtype=float)
+        D_dot = np.asarray(D_dot, dtype=float)
+        at = self.positions(
+            np.stack((D, D + STEP * D_dot, D + CURVE_STEP * D_dot, D + 2.0 * CURVE_STEP * D_dot))
+        )
+        return at[0], (at[1] - at[0]) / STEP, (at[3] - 2.0 * at[2] + at[0]) / CURVE_STEP**2
 
 
-__all__ = ["STEP", "MonitoredPoints"]
+__all__ = ["CURVE_STEP", "STEP", "MonitoredPoints"]
