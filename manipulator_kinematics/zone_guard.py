@@ -145,15 +145,17 @@ class ZoneGuard:
 
 class CommandTimes:
     """How long a node's command acts, from what its loop shows (docs/zones.md, "In the velocity
-    IK"): the command in force goes on for the state's age twice (the state's way in, the new
-    command's way out: ``delay``), and the new one acts for that plus the longest of the node's
-    last :data:`GAPS` gaps between commands (``period``; a gap over :data:`MAX_GAP` is a pause, the
-    machine was stopped, and does not count). On a loaded machine, whose commands come late, the
-    approach is slower, not deeper."""
+    IK"): the command in force goes on for the longest of the last :data:`GAPS` states' ages,
+    twice (the state's way in, the new command's way out, which the node cannot see: taken as
+    long as the way in at its longest: ``delay``), and the new one acts for that plus the longest
+    of the node's last :data:`GAPS` gaps between commands (``period``; a gap over
+    :data:`MAX_GAP` is a pause, the machine was stopped, and does not count). On a loaded
+    machine, whose commands come late, the approach is slower, not deeper."""
 
     def __init__(self) -> None:
         self.last: float | None = None
         self.gaps: deque[float] = deque(maxlen=GAPS)
+        self.ages: deque[float] = deque(maxlen=GAPS)
 
     def __call__(self, now: float, sampled: float) -> tuple[float, float]:
         """(period, delay) (s) of a command computed at ``now`` (s) from the state sampled at
@@ -161,7 +163,8 @@ class CommandTimes:
         if self.last is not None and now - self.last <= MAX_GAP:
             self.gaps.append(now - self.last)
         self.last = now
-        delay = 2.0 * min(max(now - sampled, 0.0), MAX_AGE)
+        self.ages.append(min(max(now - sampled, 0.0), MAX_AGE))
+        delay = 2.0 * max(self.ages)
         return delay + max(self.gaps, default=0.0), delay
 
 

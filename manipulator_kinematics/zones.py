@@ -21,15 +21,22 @@ whose clearance is the vertical height above or below the TIN, (-a, -b, 1) of th
 plane z = a x + b y + c, turned for ``side: above``). A TIN zone covers its footprint only: a point
 outside it (clearance inf) is not watched.
 
-**Speed scale.** A command moves each point at velocity ``v`` (at full command); it approaches a
-zone at ``u = -g . v``. Scaled by ``s``, the point needs ``s u dt`` until the next command can
-react (``dt``, the control period) and ``s^2 u T / 2`` to stop, where ``T = max_i |Ddot_i| /
-a_i`` is the time the actuators need to stop the unscaled command at their deceleration limits
-``a_i`` (every actuator slows in proportion, so the motion keeps its direction and the point
-decelerates along it). The largest ``s`` in [0, 1] with ``s u dt + s^2 u T / 2 <= c`` for every
-approaching (point, zone) pair is the command's scale; a pair with ``u <= 0`` (moving away or
-along) never limits it, so a machine inside a zone may only move out. The velocity IK applies this
-one factor to its whole command: it slows approaching a zone and stops at it, never bent.
+**Speed scale.** A command moves each point along a path p + v sigma + a sigma^2 / 2, where
+sigma is time at the full command, ``v`` the point's velocity and ``a`` its acceleration at
+constant actuator rates (how the path curves: a point swung about a joint moves on a circle); its
+clearance along the path is c - u sigma - w sigma^2 / 2 with u = -g . v and w = -g . a. Until this
+command takes over, the one in force goes on for ``delay`` (the state's way in, the command's way
+out, the actuators' lag) at its own approach speed u_f: ``room`` = c - max(u_f, 0) delay. Scaled
+by ``s``, the command covers sigma = ``s dt`` until the next command can react (``dt``, the
+control period) and ``s^2 T / 2`` while stopping, where ``T = max_i |Ddot_i| / a_i`` is the time
+the actuators need to stop the unscaled command at their deceleration limits ``a_i`` (every
+actuator slows in proportion, so the motion keeps its path and the point decelerates along it).
+The largest ``s`` in [0, 1] with ``s dt + s^2 T / 2 <= reach`` for every (point, zone) pair, where
+``reach`` is the first sigma at which the clearance along the path reaches 0 (none: a pair moving
+away or along on a path that does not curve into the zone never limits it), is the command's
+scale. A pair with no room left stops it if it approaches (u > 0) and never limits it if it moves
+out, so a machine inside a zone may only move out. The velocity IK applies this one factor to its
+whole command: it slows approaching a zone and stops at it, never bent.
 """
 
 from __future__ import annotations

@@ -18,6 +18,10 @@ import numpy as np
 
 from manipulator_kinematics.zone_guard import CommandTimes, ZoneGuard
 
+#: Crossing allowed in this loop, m: the check predicts a point's path to second order over its
+#: horizon; the third-order term (jerk x sigma^3 / 6, about 1e-7 m over 50 ms) and round-off are
+#: below it.
+CURVE_TOLERANCE = 1e-6
 #: A velocity IK's own rules for a state (and the time, s): the command's actuator rates and the
 #: monitored points' positions, velocities and accelerations (P, 3) for it.
 Command = Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
@@ -34,6 +38,8 @@ class Timing:
     stall_time: tuple[float, float] = (0.0, 0.0)
 
 
+#: An idle machine: sub-ms to 3 ms each way.
+IDLE = Timing()
 #: A loaded machine: a few ms each way, jittering, and one simulator step in 20 late by 10-40 ms.
 LOADED = Timing(way_in=(0.001, 0.012), way_out=(0.001, 0.012), stall=0.05, stall_time=(0.01, 0.04))
 
@@ -50,7 +56,7 @@ def drive(
     in_force = np.zeros_like(plant.d)
     now, received = 0.0, 0.0
     states, scales = [], []
-    while now < seconds:
+    while True:
         step = 1.0 / timing.rate
         if rng.uniform() < timing.stall:
             step += rng.uniform(*timing.stall_time)
@@ -59,6 +65,8 @@ def drive(
             in_force = pending.pop(0)[1]
         plant.step(in_force, step)
         states.append(plant.d.copy())
+        if now > seconds - 1e-9:  # the last state: no command from it (the targets end here)
+            break
         received = max(now + rng.uniform(*timing.way_in), received)
         rates, p, v, a = command(plant.d.copy(), now)
         period, delay = times(received, now)
