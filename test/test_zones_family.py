@@ -189,7 +189,8 @@ def test_minutes_of_random_targets_never_cross_a_zone_and_reach_them(name: str) 
 def test_a_straight_prediction_lets_the_crane_creep_past_its_ceiling() -> None:
     """The crane lifted to its ceiling, then driven ahead along it: its points' paths curve up
     between commands. Taken as straight (the check before 0.2) they cross; with their curvature
-    they do not, and the tool still goes ahead along the ceiling to the wall."""
+    they do not, and the tool still goes ahead along the ceiling (slowed: held to the ceiling,
+    its path would rise into it within the horizon), over half of the 1.6 m to the wall in 6 s."""
     scenario = SCENARIOS["knuckle_crane"]
     opening = scenario.opening[:2]
     seconds = sum(t for t, _ in opening)
@@ -197,7 +198,7 @@ def test_a_straight_prediction_lets_the_crane_creep_past_its_ceiling() -> None:
     curved = scenario.clearances(run(scenario, seconds, 34, LOADED, opening)[1])
     assert straight["power_line"].min() < -2e-4, straight["power_line"].min()
     assert curved["power_line"].min() >= -CURVE_TOLERANCE, curved["power_line"].min()
-    assert curved["road_edge"].min() < 0.03
+    assert curved["road_edge"].min() < 0.8, curved["road_edge"].min()
 
 
 def test_a_machine_inside_a_zone_may_only_move_out() -> None:
