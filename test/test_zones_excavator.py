@@ -63,6 +63,29 @@ def test_point_velocities_are_the_positions_derivative() -> None:
         np.testing.assert_allclose(v[POINTS.names.index("bucket_tip")], EXC.jc0(D)[:3] @ D_dot, atol=2e-5)
 
 
+def test_point_accelerations_are_the_second_derivative_along_the_command() -> None:
+    """MonitoredPoints.motion's accelerations against second differences of the positions at
+    another step; the tip's also against the derivative of its closed-form velocity (eq. 8); at
+    a stroke end commanded inward, the one-sided difference."""
+    rng = np.random.default_rng(5)
+    h = 4e-3
+    for _ in range(20):
+        D = EXC.limits.d_min + rng.uniform(0.1, 0.9, 4) * (EXC.limits.d_max - EXC.limits.d_min)
+        D_dot = rng.uniform(-1, 1, 4) * EXC.limits.max_rates
+        a = POINTS.motion(D, D_dot)[2]
+        at = POINTS.positions(np.stack((D - h * D_dot, D, D + h * D_dot)))
+        np.testing.assert_allclose(a, (at[0] - 2 * at[1] + at[2]) / h**2, atol=1e-4)
+        tip = (EXC.jc0(D + h * D_dot)[:3] - EXC.jc0(D - h * D_dot)[:3]) @ D_dot / (2 * h)
+        np.testing.assert_allclose(a[POINTS.names.index("bucket_tip")], tip, atol=1e-4)
+    # At the ends, commanded inward: one-sided, within its first-order error.
+    for end, inward in ((EXC.limits.d_max, -1.0), (EXC.limits.d_min, 1.0)):
+        D = np.where(np.arange(4) == 0, 0.3, end)
+        D_dot = inward * EXC.limits.max_rates * [0.0, 1.0, 1.0, 1.0]
+        a = POINTS.motion(D, D_dot)[2]
+        at = POINTS.positions(np.stack((D, D + h * D_dot, D + 2 * h * D_dot)))
+        np.testing.assert_allclose(a, (at[0] - 2 * at[1] + at[2]) / h**2, atol=0.1)
+
+
 #: The velocity IK's bucket_angle_gives_way: at a stroke end the tip keeps its direction and the
 #: bucket angle gives way, so the random walk is not held at every stroke end it runs into.
 GIVES_WAY = True

@@ -66,6 +66,10 @@ def test_the_optional_points_are_the_tool_outline_and_the_tail() -> None:
     h_ = 1e-6  # the velocities: central differences of the positions along the motion
     ahead, behind = h.monitored(D + h_ * D_dot, D_dot)[1], h.monitored(D - h_ * D_dot, D_dot)[1]
     np.testing.assert_allclose(v, (ahead - behind) / (2 * h_), atol=1e-6)
+    # The accelerations at constant rates: central differences of the velocities along the motion.
+    a, k = h.monitored_motion(D, D_dot)[3], 1e-5
+    ahead, behind = h.monitored(D + k * D_dot, D_dot)[2], h.monitored(D - k * D_dot, D_dot)[2]
+    np.testing.assert_allclose(a, (ahead - behind) / (2 * k), atol=1e-5)
     # A tool without width has its outline once.
     raw["tool"]["width"] = 0.0
     assert HydraulicModel(parse(raw)).monitored(D, D_dot)[0][len(plain) : len(plain) + 2] == [

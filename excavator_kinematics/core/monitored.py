@@ -76,14 +76,37 @@ class MonitoredPoints:
     def motion(self, D: np.ndarray, D_dot: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Positions, velocities and accelerations (P, 3) at state D (4,) for the actuator rates
         D_dot (4,) held: the accelerations are how the points' paths curve (the zones' check),
-        second differences (p(D + 2k D_dot) - 2 p(D + k D_dot) + p(D)) / k^2, k =
-        :data:`CURVE_STEP`; all four states in one batched call."""
+        second differences along the command with k = :data:`CURVE_STEP`: central, (p(D + k D_dot)
+        - 2 p(D) + p(D - k D_dot)) / k^2, where both states are inside the strokes, else one-sided
+        (p(D) - 2 p(D + k D_dot) + p(D + 2k D_dot)) / k^2 ahead, or behind (k < 0), whichever is
+        (a command close to an end), else ahead in a quarter of the room there is. The four
+        states in one batched call."""
         D = np.asarray(D, dtype=float)
         D_dot = np.asarray(D_dot, dtype=float)
-        at = self.positions(
-            np.stack((D, D + STEP * D_dot, D + CURVE_STEP * D_dot, D + 2.0 * CURVE_STEP * D_dot))
-        )
-        return at[0], (at[1] - at[0]) / STEP, (at[3] - 2.0 * at[2] + at[0]) / CURVE_STEP**2
+        k, central = self._curve_step(D, D_dot)
+        offsets = (-k, k) if central else (k, 2.0 * k)
+        at = self.positions(np.stack((D, D + STEP * D_dot, D + offsets[0] * D_dot, D + offsets[1] * D_dot)))
+        middle, side = (at[0], at[2]) if central else (at[2], at[0])
+        return at[0], (at[1] - at[0]) / STEP, (side - 2.0 * middle + at[3]) / (k * k)
+
+    def _curve_step(self, D: np.ndarray, D_dot: np.ndarray) -> tuple[float, bool]:
+        """(k, central) of :meth:`motion`'s second difference."""
+        limits = self.exc.limits
+        lo, hi = limits.d_min.copy(), limits.d_max.copy()
+        if limits.continuous_swing:
+            lo[0], hi[0] = -np.inf, np.inf
+
+        def inside(*offsets: float) -> bool:
+            ends = D + np.multiply.outer(offsets, D_dot)
+            return bool(np.all((lo <= ends) & (ends <= hi)))
+
+        if inside(-CURVE_STEP, CURVE_STEP):
+            return CURVE_STEP, True
+        for k in (CURVE_STEP, -CURVE_STEP):
+            if inside(k, 2.0 * k):
+                return k, False
+        room = np.where(D_dot > 0.0, hi - D, D - lo) / np.maximum(np.abs(D_dot), 1e-300)
+        return 0.25 * float(np.min(room)), False
 
 
 __all__ = ["CURVE_STEP", "STEP", "MonitoredPoints"]
