@@ -8,7 +8,6 @@ one before the zone with it."""
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -106,7 +105,10 @@ def test_a_site_ceiling_stops_the_bucket_and_a_stale_site_pose_stops_the_machine
 
         commands: list[float] = []
         n.create_subscription(
-            JointState, f"{NS}/cylinder_rate_commands", lambda _: commands.append(time.monotonic()), QOS
+            JointState,
+            f"{NS}/cylinder_rate_commands",
+            lambda _: commands.append(n.get_clock().now().nanoseconds * 1e-9),
+            QOS,
         )
 
         n.create_subscription(JointState, f"{NS}/cylinder_lengths", on_state, QOS)

@@ -69,7 +69,10 @@ def test_random_targets_never_cross_a_zone_and_the_machine_reaches_them(probe: P
             ),
             n.create_subscription(DiagnosticArray, f"{ns}/zone_clearance", reported.append, QOS),
             n.create_subscription(
-                JointState, f"{ns}/rate_commands", lambda _: commands.append(time.monotonic()), QOS
+                JointState,
+                f"{ns}/rate_commands",
+                lambda _: commands.append(n.get_clock().now().nanoseconds * 1e-9),
+                QOS,
             ),
         ]
         target = n.create_publisher(TwistStamped, f"{ns}/target_twist", QOS)

@@ -42,17 +42,29 @@ OPENING = (
 
 
 def uncovered(stamps: np.ndarray, points: np.ndarray, commands: np.ndarray) -> float:
-    """How far a monitored point may have gone in time no zone check covered (m): the fastest
-    point between two simulated states (``stamps`` (N,) s, ``points`` (N, P, 3)) times the
-    longest a command acted beyond PERIOD, the horizon the check counts at the least: a simulator
-    step, or a gap between two commands (``commands``: their arrival times, s) plus the step over
-    which the simulator applies the last one received. Nothing but a process stalled longer than
-    the loop ever was (a loaded machine) makes it more than 0; then what moves the machine is no
-    command the zones could slow but its actuators' watchdog's to stop (docs/zones.md)."""
+    """How far a monitored point went in time no zone check covered (m), from the simulated
+    states (``stamps`` (N,) s, ``points`` (N, P, 3)) and the commands' arrival times
+    (``commands``, s, the same clock): the check counts a command acting for PERIOD at the least;
+    time beyond it is a simulator step longer than PERIOD, or a gap between two commands plus the
+    step over which the simulator applies the last one received (it holds it over its whole
+    step) longer than PERIOD. Only a process stalled longer than the loop ever was (a loaded
+    machine) gives such time; what moves the machine then is no command the zones could slow but
+    its actuators' watchdog's to stop (docs/zones.md). The largest distance any point covered in
+    one such stretch, 0 where there is none."""
+    travelled = np.concatenate(
+        ([0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=-1).max(axis=-1)))
+    )
     steps = np.diff(stamps)
-    moved = np.linalg.norm(np.diff(points, axis=0), axis=-1).max(axis=-1)
-    longest = max(steps.max(), np.diff(commands).max() + np.median(steps))
-    return float((moved / steps).max() * max(longest - PERIOD, 0.0))
+    step = float(np.median(steps))
+    arrived = commands[(commands >= stamps[0]) & (commands <= stamps[-1])]
+    ends = np.concatenate((stamps[1:], arrived[1:] + step))
+    starts = np.concatenate((stamps[:-1] + PERIOD, arrived[:-1] + PERIOD - step))
+    beyond = ends > starts
+    if not beyond.any():
+        return 0.0
+    return float(
+        np.max(np.interp(ends[beyond], stamps, travelled) - np.interp(starts[beyond], stamps, travelled))
+    )
 
 
 def smallest_reported(reported: list[DiagnosticArray]) -> dict[str, float]:
@@ -123,7 +135,10 @@ def test_random_targets_never_cross_a_zone_and_the_machine_reaches_them(probe: P
         n.create_subscription(DiagnosticArray, f"{NS}/zone_clearance", reported.append, QOS)
         commands: list[float] = []
         n.create_subscription(
-            JointState, f"{NS}/cylinder_rate_commands", lambda _: commands.append(time.monotonic()), QOS
+            JointState,
+            f"{NS}/cylinder_rate_commands",
+            lambda _: commands.append(n.get_clock().now().nanoseconds * 1e-9),
+            QOS,
         )
         target = n.create_publisher(TwistStamped, f"{NS}/target_bucket_twist", QOS)
         targets = Targets(34, EXC.pose(EXC.limits.reference)[:3], OPENING)
