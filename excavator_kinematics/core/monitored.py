@@ -79,11 +79,14 @@ class MonitoredPoints:
         second differences along the command with k = :data:`CURVE_STEP`: central, (p(D + k D_dot)
         - 2 p(D) + p(D - k D_dot)) / k^2, where both states are inside the strokes, else one-sided
         (p(D) - 2 p(D + k D_dot) + p(D + 2k D_dot)) / k^2 ahead, or behind (k < 0), whichever is
-        (a command close to an end), else ahead in a quarter of the room there is. The four
-        states in one batched call."""
+        (a command close to an end), else ahead in a quarter of the room there is (none: zero, a
+        straight path). The four states in one batched call."""
         D = np.asarray(D, dtype=float)
         D_dot = np.asarray(D_dot, dtype=float)
         k, central = self._curve_step(D, D_dot)
+        if k == 0.0:  # no room on either side (a command outward at an end): taken as straight
+            p, v = self.positions(np.stack((D, D + STEP * D_dot)))
+            return p, (v - p) / STEP, np.zeros_like(p)
         offsets = (-k, k) if central else (k, 2.0 * k)
         at = self.positions(np.stack((D, D + STEP * D_dot, D + offsets[0] * D_dot, D + offsets[1] * D_dot)))
         middle, side = (at[0], at[2]) if central else (at[2], at[0])
@@ -106,7 +109,7 @@ class MonitoredPoints:
             if inside(k, 2.0 * k):
                 return k, False
         room = np.where(D_dot > 0.0, hi - D, D - lo) / np.maximum(np.abs(D_dot), 1e-300)
-        return 0.25 * float(np.min(room)), False
+        return max(0.25 * float(np.min(room)), 0.0), False
 
 
 __all__ = ["CURVE_STEP", "STEP", "MonitoredPoints"]
