@@ -41,30 +41,27 @@ OPENING = (
 )
 
 
-def uncovered(stamps: np.ndarray, points: np.ndarray, commands: np.ndarray) -> float:
+def uncovered(stamps: np.ndarray, points: np.ndarray, rates: np.ndarray) -> float:
     """How far a monitored point went in time no zone check covered (m), from the simulated
-    states (``stamps`` (N,) s, ``points`` (N, P, 3)) and the commands' arrival times
-    (``commands``, s, the same clock): the check counts a command acting for PERIOD at the least;
-    time beyond it is a simulator step longer than PERIOD, or a gap between two commands plus the
-    step over which the simulator applies the last one received (it holds it over its whole
-    step) longer than PERIOD. Only a process stalled longer than the loop ever was (a loaded
-    machine) gives such time; what moves the machine then is no command the zones could slow but
-    its actuators' watchdog's to stop (docs/zones.md). The largest distance any point covered in
-    one such stretch, 0 where there is none."""
-    travelled = np.concatenate(
-        ([0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=-1).max(axis=-1)))
-    )
-    steps = np.diff(stamps)
-    step = float(np.median(steps))
-    arrived = commands[(commands >= stamps[0]) & (commands <= stamps[-1])]
-    ends = np.concatenate((stamps[1:], arrived[1:] + step))
-    starts = np.concatenate((stamps[:-1] + PERIOD, arrived[:-1] + PERIOD - step))
-    beyond = ends > starts
+    states alone: ``stamps`` (N,) s, ``points`` (N, P, 3) and ``rates`` (N, m), the rates the
+    simulator applied over the step to each state (its ideal actuators: the command it held).
+    The check counts a command acting for PERIOD at the least; a command held longer (the same
+    nonzero rates over steps spanning more than PERIOD: no new command came, or one simulator
+    step was that long) moved the points beyond it. Only a process stalled longer than the loop
+    ever was (a loaded machine) does that; what moves the machine then is no command the zones
+    could slow but its actuators' watchdog's to stop (docs/zones.md). The largest distance any
+    point covered beyond PERIOD in one such hold, 0 where there is none."""
+    step = np.linalg.norm(np.diff(points, axis=0), axis=-1).max(axis=-1)
+    travelled = np.concatenate(([0.0], np.cumsum(step)))
+    new = np.concatenate(([True], np.any(rates[1:] != rates[:-1], axis=-1)))
+    first = np.flatnonzero(new)  # each hold: states first[k] .. first[k + 1] - 1
+    last = np.concatenate((first[1:], [len(stamps)])) - 1
+    moving = np.any(rates[first] != 0.0, axis=-1) & (first > 0)
+    start = stamps[np.maximum(first - 1, 0)] + PERIOD  # the hold acts from the state before
+    beyond = moving & (stamps[last] > start)
     if not beyond.any():
         return 0.0
-    return float(
-        np.max(np.interp(ends[beyond], stamps, travelled) - np.interp(starts[beyond], stamps, travelled))
-    )
+    return float(np.max(travelled[last[beyond]] - np.interp(start[beyond], stamps, travelled)))
 
 
 def smallest_reported(reported: list[DiagnosticArray]) -> dict[str, float]:
@@ -126,6 +123,7 @@ def test_random_targets_never_cross_a_zone_and_the_machine_reaches_them(probe: P
         def on_state(msg: JointState) -> None:
             entry = states.setdefault(message_codec.stamp_ns(msg.header.stamp), {})
             entry.update(zip(msg.name, msg.position, strict=False))
+            entry.update(zip((f"{k}/rate" for k in msg.name), msg.velocity, strict=False))
 
         n.create_subscription(JointState, f"{NS}/cylinder_lengths", on_state, QOS)
         n.create_subscription(JointState, f"{NS}/joint_states", on_state, QOS)
@@ -133,13 +131,6 @@ def test_random_targets_never_cross_a_zone_and_the_machine_reaches_them(probe: P
             PoseStamped, f"{NS}/bucket_pose", lambda m: poses.append(vec(m.pose.position)), QOS
         )
         n.create_subscription(DiagnosticArray, f"{NS}/zone_clearance", reported.append, QOS)
-        commands: list[float] = []
-        n.create_subscription(
-            JointState,
-            f"{NS}/cylinder_rate_commands",
-            lambda _: commands.append(n.get_clock().now().nanoseconds * 1e-9),
-            QOS,
-        )
         target = n.create_publisher(TwistStamped, f"{NS}/target_bucket_twist", QOS)
         targets = Targets(34, EXC.pose(EXC.limits.reference)[:3], OPENING)
         began: list[float] = []
@@ -157,13 +148,14 @@ def test_random_targets_never_cross_a_zone_and_the_machine_reaches_them(probe: P
     finally:
         logs = [p.stop() for p in processes]
     names = (JOINTS[0], *CYLINDERS)
-    both = [(t, s) for t, s in sorted(states.items()) if all(k in s for k in names)]
+    both = [(t, s) for t, s in sorted(states.items()) if all(f"{k}/rate" in s for k in names)]
     D = np.array([[s[k] for k in names] for _, s in both])
+    rates = np.array([[s[f"{k}/rate"] for k in names] for _, s in both])
     assert len(D) > 0.5 * 100 * DRIVE, f"{len(D)} states in {DRIVE} s"  # the sim publishes at 100 Hz
     points = MonitoredPoints(EXC).positions(D)
     clear = clearances(points)
     tips = clearances(np.array(poses)[:, None, :])  # the forward node's poses, independently
-    allowed = TOLERANCE + uncovered(np.array([t for t, _ in both]) * 1e-9, points, np.array(commands))
+    allowed = TOLERANCE + uncovered(np.array([t for t, _ in both]) * 1e-9, points, rates)
     print(f"crossing allowed: {allowed * 1000:.3f} mm (time no check covered)")
     for zone, c in clear.items():
         assert c.min() >= -allowed, f"{zone}: crossed by {-c.min():.4f} m, {allowed:.4f} m allowed"
