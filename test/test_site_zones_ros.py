@@ -136,7 +136,7 @@ def test_a_site_ceiling_stops_the_bucket_and_a_stale_site_pose_stops_the_machine
         held = complete()[: len(points)]
         stamps = np.array([t for t, _ in held]) * 1e-9
         rates = np.array([[s[f"{k}/rate"] for k in NAMES] for _, s in held])
-        allowed = TOLERANCE + uncovered(stamps, points, rates)
+        allowed = TOLERANCE + uncovered(stamps, points, rates, EXC.limits.max_rates)
         print(
             f"highest point {top.max():.4f} m, the ceiling's margin at {LIMIT:.4f} m (base_link), "
             f"{allowed * 1000:.3f} mm allowed past it"

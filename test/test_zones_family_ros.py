@@ -99,7 +99,7 @@ def test_random_targets_never_cross_a_zone_and_the_machine_reaches_them(probe: P
     points = h.monitored(D, np.zeros_like(D))[1]
     clear = scenario.clearances(points)
     tips = scenario.clearances(np.array(poses)[:, None, :])  # the forward node's poses, independently
-    allowed = TOLERANCE + uncovered(np.array(sorted(states)) * 1e-9, points, readings[:, 1])
+    allowed = TOLERANCE + uncovered(np.array(sorted(states)) * 1e-9, points, readings[:, 1], h.max_speed)
     print(f"{name}: crossing allowed {allowed * 1000:.3f} mm (time no check covered)")
     for zone, c in clear.items():
         assert c.min() >= -allowed, f"{zone}: crossed by {-c.min():.4f} m, {allowed:.4f} m allowed"
