@@ -92,10 +92,9 @@ SCENARIOS = {
         # Up, down, and the bucket curled and dumped (its tip goes ahead and back with alpha).
         at_zones=(np.array([0.0, 0.0, 0.4]), np.array([0.0, 0.0, -0.4]), np.array([0.0, 0.0, 0.1])),
         turn=0.5,
-        # Lifted level to the wall (the bucket goes ahead as it lifts), curled back (its tip up
-        # and in), lifted to the roof, lowered to the ground.
+        # The bucket curled back (its tip up and in), lifted to the roof, lowered to the ground.
+        # The wall is met in the random targets (docs/zones.md, "Checked").
         opening=(
-            (4.0, np.array([0.0, 0.0, 0.6])),
             (3.0, np.array([0.0, 0.0, 0.0, 0.0, 0.3, 0.0])),
             (12.0, np.array([0.0, 0.0, 0.4])),
             (8.0, np.array([0.0, 0.0, -0.6])),
