@@ -302,7 +302,7 @@ def test_the_compiled_check_is_the_numpy_check() -> None:
         v = rng.normal(size=(40, 3))
         names = [f"p{i}" for i in range(40)]
         T, dt = rng.uniform(0, 0.5), rng.uniform(0.005, 0.1)
-        # Half the trials with the paths' curvature and a command in flight (0.2).
+        # Half the trials with the paths' curvature and a command in flight.
         curved = {}
         if trial % 4 >= 2:
             flight = rng.normal(0.0, 0.5, (40, len(zones)))

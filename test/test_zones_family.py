@@ -192,7 +192,7 @@ def test_minutes_of_random_targets_never_cross_a_zone_and_reach_them(name: str) 
 @pytest.mark.slow
 def test_a_straight_prediction_lets_the_crane_creep_past_its_ceiling() -> None:
     """The crane lifted to its ceiling, then driven ahead along it: its points' paths curve up
-    between commands. Taken as straight (the check before 0.2) they cross; with their curvature
+    between commands. Taken as straight (the check in its first form) they cross; with their curvature
     they do not, and the tool still goes ahead along the ceiling (slowed: held to the ceiling,
     its path would rise into it within the horizon): at a loaded machine's timing, over half of
     the 1.6 m to the wall in 6 s; across processes, on a loaded machine, it crept far slower
