@@ -116,7 +116,9 @@ SCENARIOS = {
         # the ceiling, down to the TIN. Not ahead along the ceiling to the wall: held at the
         # ceiling, the tool's path curves up into it within the check's horizon, so it slides
         # along it only slowly (docs/zones.md; test_zones_family.py's creep test).
+        # The first 3 s down: slack for nodes that start slowly on a loaded machine.
         opening=(
+            (3.0, np.array([0.0, 0.0, -0.6])),
             (6.0, np.array([0.6, 0.0, 0.0])),
             (3.0, np.array([-0.6, 0.0, 0.0])),
             (14.0, np.array([0.0, 0.0, 0.6])),
