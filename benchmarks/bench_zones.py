@@ -5,16 +5,19 @@ Measured in the same run, in rounds, at 30 points (random, about a machine) and 
 ceiling, a floor, three walls, two boxes, two swing sectors and a 1,800-triangle LandXML-style
 TIN surface):
 
-* ``ZoneGuard.check``: what the velocity IK adds per command given the points' positions and
-  velocities (stop time, clearances, the scale, the verdict);
+* ``ZoneGuard.check``: what the velocity IK adds per command given the points' positions,
+  velocities and accelerations (stop time, clearances, the command in flight, the scale, the
+  verdict);
 * ``Monitor.check`` alone: compiled (:mod:`manipulator_kinematics.zone_kernel`, the TIN in
   numpy), without the TIN, on the numpy path (``compiled=False``: every zone of a kind in one
   array operation), and zone by zone (a loop over ``Zone.clearance`` and ``scale_for``: the
   baseline);
-* the excavator's 23 monitored points with their velocities (``MonitoredPoints``: one batched
-  ``Excavator.pins`` of two states), the machine-specific part of the command's cost;
+* the excavator's 23 monitored points with their velocities and accelerations
+  (``MonitoredPoints.motion``: one batched ``Excavator.pins`` of four states), the
+  machine-specific part of the command's cost;
 * the same for the hydraulic family's wheel loader (WL20) and knuckle crane (KC100):
-  ``HydraulicModel.monitored`` (every pin and both corners, velocities in closed form), alone and
+  ``HydraulicModel.monitored_motion`` (every pin and both corners, velocities and accelerations
+  in closed form), alone and
   with ``ZoneGuard.check``: what hydraulic_velocity_ik adds per command.
 
 Run: python benchmarks/bench_zones.py [--quick]
@@ -40,6 +43,8 @@ from manipulator_kinematics.zone_guard import ZoneGuard
 from manipulator_kinematics.zones import KERNEL, Monitor, Zone, scale_for, stop_time
 
 POINTS, PERIOD, STOP = 30, 0.05, 0.3
+#: How long the command in force goes on (s): the check's in-flight term (its cost is the same at any value).
+DELAY = 0.02
 
 
 def per_call_us(fn: Callable[[], object], repeat: int, rounds: int) -> list[float]:
@@ -95,6 +100,7 @@ def main() -> None:
     names = [f"point_{i}" for i in range(POINTS)]
     p = rng.uniform([-4.0, -4.0, -1.0], [8.0, 4.0, 7.0], (POINTS, 3))
     v = rng.normal(0.0, 0.5, (POINTS, 3))
+    a = rng.normal(0.0, 0.3, (POINTS, 3))
     rates = rng.uniform(-0.2, 0.2, 4)
     decelerations = np.array([1.0, 0.15, 0.18, 0.2]) / STOP
     guard = ZoneGuard(all_zones, names, decelerations, PERIOD)
@@ -111,12 +117,16 @@ def main() -> None:
     exc = Excavator.default()
     points = MonitoredPoints(exc)
     D, D_dot = exc.limits.reference, np.array([0.3, 0.1, -0.1, 0.15])
-    q, qv = points(D, D_dot)
+    q, qv, qa = points.motion(D, D_dot)
     excavator_guard = ZoneGuard(all_zones, points.names, exc.limits.max_rates / STOP, PERIOD)
+
+    def excavator_check(q: np.ndarray, qv: np.ndarray, qa: np.ndarray) -> object:
+        return excavator_guard.check(q, qv, D_dot, accelerations=qa, delay=DELAY)
+
     rows = [
         (
             f"ZoneGuard.check, {POINTS} points x 10 zones",
-            per_call_us(lambda: guard.check(p, v, rates), repeat, rounds),
+            per_call_us(lambda: guard.check(p, v, rates, accelerations=a, delay=DELAY), repeat, rounds),
         ),
         (
             f"Monitor.check, {POINTS} x 10",
@@ -135,12 +145,12 @@ def main() -> None:
             per_call_us(lambda: zone_by_zone(all_zones, p, v, T), repeat, rounds),
         ),
         (
-            f"excavator: {len(points.names)} points + velocities",
-            per_call_us(lambda: points(D, D_dot), repeat, rounds),
+            f"excavator: {len(points.names)} points + velocities + accelerations",
+            per_call_us(lambda: points.motion(D, D_dot), repeat, rounds),
         ),
         (
             f"excavator: points + ZoneGuard.check ({len(points.names)} x 10)",
-            per_call_us(lambda: excavator_guard.check(*points(D, D_dot), D_dot), repeat, rounds),
+            per_call_us(lambda: excavator_check(*points.motion(D, D_dot)), repeat, rounds),
         ),
     ]
     for label, file in (
@@ -151,21 +161,24 @@ def main() -> None:
         rate = 0.5 * h.max_speed
         names = h.monitored(h.reference, rate)[0]
         family_guard = ZoneGuard(all_zones, names, h.max_speed / STOP, PERIOD)
+
+        def family_check(
+            h: HydraulicModel = h, rate: np.ndarray = rate, g: ZoneGuard = family_guard
+        ) -> object:
+            _, fp, fv, fa = h.monitored_motion(h.reference, rate)
+            return g.check(fp, fv, rate, accelerations=fa, delay=DELAY)
+
         rows += [
             (
-                f"{label}: {len(names)} points + velocities",
-                per_call_us(lambda h=h, rate=rate: h.monitored(h.reference, rate), repeat, rounds),
+                f"{label}: {len(names)} points + velocities + accelerations",
+                per_call_us(lambda h=h, rate=rate: h.monitored_motion(h.reference, rate), repeat, rounds),
             ),
             (
                 f"{label}: points + ZoneGuard.check ({len(names)} x 10)",
-                per_call_us(
-                    lambda h=h, rate=rate, g=family_guard: g.check(*h.monitored(h.reference, rate)[1:], rate),
-                    repeat,
-                    rounds,
-                ),
+                per_call_us(family_check, repeat, rounds),
             ),
         ]
-    assert q.shape == qv.shape == (len(points.names), 3)
+    assert q.shape == qv.shape == qa.shape == (len(points.names), 3)
     print_table(
         ["per command", f"us, median of {rounds} rounds", "rounds (us)"],
         [

@@ -21,22 +21,29 @@ whose clearance is the vertical height above or below the TIN, (-a, -b, 1) of th
 plane z = a x + b y + c, turned for ``side: above``). A TIN zone covers its footprint only: a point
 outside it (clearance inf) is not watched.
 
-**Speed scale.** A command moves each point at velocity ``v`` (at full command); it approaches a
-zone at ``u = -g . v``. Scaled by ``s``, the point needs ``s u dt`` until the next command can
-react (``dt``, the control period) and ``s^2 u T / 2`` to stop, where ``T = max_i |Ddot_i| /
-a_i`` is the time the actuators need to stop the unscaled command at their deceleration limits
-``a_i`` (every actuator slows in proportion, so the motion keeps its direction and the point
-decelerates along it). The largest ``s`` in [0, 1] with ``s u dt + s^2 u T / 2 <= c`` for every
-approaching (point, zone) pair is the command's scale; a pair with ``u <= 0`` (moving away or
-along) never limits it, so a machine inside a zone may only move out. The velocity IK applies this
-one factor to its whole command: it slows approaching a zone and stops at it, never bent.
+**Speed scale.** A command moves each point along a path p + v sigma + a sigma^2 / 2, where
+sigma is time at the full command, ``v`` the point's velocity and ``a`` its acceleration at
+constant actuator rates (how the path curves: a point swung about a joint moves on a circle); its
+clearance along the path is c - u sigma - w sigma^2 / 2 with u = -g . v and w = -g . a. Until this
+command takes over, the one in force goes on for ``delay`` (the state's way in, the command's way
+out, the actuators' lag) at its own approach speed u_f: ``room`` = c - max(u_f, 0) delay. Scaled
+by ``s``, the command covers sigma = ``s dt`` until the next command can react (``dt``, the
+control period) and ``s^2 T / 2`` while stopping, where ``T = max_i |Ddot_i| / a_i`` is the time
+the actuators need to stop the unscaled command at their deceleration limits ``a_i`` (every
+actuator slows in proportion, so the motion keeps its path and the point decelerates along it).
+The largest ``s`` in [0, 1] with ``s dt + s^2 T / 2 <= reach`` for every (point, zone) pair, where
+``reach`` is the first sigma at which the clearance along the path reaches 0 (none: a pair moving
+away or along on a path that does not curve into the zone never limits it), is the command's
+scale. A pair with no room left stops it if it approaches (u > 0) and never limits it if it moves
+out, so a machine inside a zone may only move out. The velocity IK applies this one factor to its
+whole command: it slows approaching a zone and stops at it, never bent.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
 from typing import Any, Protocol
@@ -150,13 +157,14 @@ class _Kind:
             arrays = ()
         return _Kind(kind, arrays, tuple(zones))
 
-    def approach(self, p: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Clearances (P, K) of points p (P, 3) and their approach speeds u = -g . v (P, K)."""
+    def approach(self, p: np.ndarray, v: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Clearances (P, K) of points p (P, 3), their approach speeds u = -g . v and
+        accelerations w = -g . a (P, K)."""
         if self.kind == "plane":
             normals, offsets = self.arrays
-            return p @ normals.T + offsets, -(v @ normals.T)
+            return p @ normals.T + offsets, -(v @ normals.T), -(a @ normals.T)
         c, g = self.clearance(p)
-        return c, -np.einsum("pzk,pk->pz", g, v)
+        return c, -np.einsum("pzk,pk->pz", g, v), -np.einsum("pzk,pk->pz", g, a)
 
     def clearance(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if self.kind == "plane":
@@ -278,6 +286,8 @@ class Check:
     zone: str | None
     point: str | None
     clearance: dict[str, tuple[float, str]]
+    #: Per point and zone (P, K, file order) the approach speed u = -g . v at the full command.
+    approach: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     @property
     def violated(self) -> list[str]:
@@ -285,20 +295,36 @@ class Check:
         return [name for name, (c, _) in self.clearance.items() if c < 0.0]
 
 
-def scale_for(clearance: np.ndarray, approach: np.ndarray, stop_time: float, period: float) -> np.ndarray:
-    """Largest scale s in [0, 1] per pair with ``s u period + s^2 u T / 2 <= c`` (module
-    docstring); 1 where the pair is not approaching (u <= 0), 0 where it approaches at c <= 0."""
-    u = np.asarray(approach, float)
-    near = u > 0.0
-    # A pair moving away or along (also one with no clearance to speak of: inf off a TIN):
-    # a = b = 0 and no room, left at 1 below.
-    room = np.where(near, np.maximum(np.asarray(clearance, float), 0.0), 0.0)
-    u = np.maximum(u, 0.0)
-    a, b = 0.5 * stop_time * u, period * u
-    # The root of a s^2 + b s = c written as 2c / (b + sqrt(b^2 + 4ac)): no division by a (0 with
-    # T = 0), and the denominator of an approaching pair is at least b > 0.
-    denominator = b + np.sqrt(b * b + 4.0 * a * room)
-    s = np.divide(2.0 * room, denominator, out=np.ones(np.broadcast(room, u).shape), where=near)
+def scale_for(
+    clearance: np.ndarray,
+    approach: np.ndarray,
+    stop_time: float,
+    period: float,
+    curving: np.ndarray | float = 0.0,
+    in_flight: np.ndarray | float = 0.0,
+    delay: float = 0.0,
+) -> np.ndarray:
+    """Largest scale s in [0, 1] per pair (module docstring, "Speed scale"): with ``room`` = c -
+    max(u_f, 0) ``delay`` (``in_flight`` u_f), the first path parameter ``reach`` at which
+    room - u sigma - w sigma^2 / 2 = 0 (``curving`` w), and s sigma_H + s^2 T / 2 <= reach. 1 where
+    the path never reaches the zone (u <= 0 and w <= 0, or it curves away first), 0 where the
+    pair approaches (u > 0) with no room left."""
+    c, u, w, u_f = np.broadcast_arrays(
+        *(np.asarray(x, float) for x in (clearance, approach, curving, in_flight))
+    )
+    room = c - np.maximum(u_f, 0.0) * delay
+    # The smaller root of w s^2 / 2 + u s = room as 2 room / (u + sqrt(u^2 + 2 w room)): no
+    # division by w (0 on a straight path), and the denominator is > 0 wherever it reaches. A
+    # pair with infinite room (off a TIN) has u = w = 0: NaN here, never reaching.
+    with np.errstate(invalid="ignore", divide="ignore"):
+        disc = u * u + 2.0 * w * np.maximum(room, 0.0)
+        reaches = (room > 0.0) & ~((w <= 0.0) & (u <= 0.0)) & (disc >= 0.0)
+        reach = np.where(reaches, 2.0 * room / (u + np.sqrt(np.maximum(disc, 0.0))), 0.0)
+        # s period + s^2 T / 2 = reach, the same way.
+        s = np.where(
+            reaches, 2.0 * reach / (period + np.sqrt(period * period + 2.0 * stop_time * reach)), 1.0
+        )
+    s = np.where((room <= 0.0) & (u > 0.0), 0.0, s)
     return np.minimum(s, 1.0)
 
 
@@ -312,12 +338,11 @@ def _warm(kernel: ModuleType) -> None:
     box = Zone("b", "box", "base", 0.1, {"min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 1.0]})
     sector = Zone("s", "sector", "base", 0.1, {"from": 0.5, "to": 1.0})
     _, arrays, n = Monitor([plane, box, sector], ["p"])._frames["base"]
-    c, s, p = np.empty((2, n)), np.empty((2, n)), np.ones((2, 3))
-    kernel.check(p, p, *arrays, 0.3, 0.05, c, s)
+    c, u, w, p = np.empty((2, n)), np.empty((2, n)), np.empty((2, n)), np.ones((2, 3))
+    kernel.geometry(p, p, p, *arrays, c, u, w)
     # A TIN's located triangles are matplotlib's int32 (-1: off the TIN).
-    kernel.surface(
-        p, p, np.array([0, -1], np.int32), np.ones((1, 3)), np.zeros(3), 1.0, 0.1, 0.3, 0.05, c, s, 0
-    )
+    kernel.surface(p, p, p, np.array([0, -1], np.int32), np.ones((1, 3)), np.zeros(3), 1.0, 0.1, c, u, w, 0)
+    kernel.scales(c, u, w, u, 0.02, 0.3, 0.05, np.empty((2, n)))
 
 
 #: The compiled check (:mod:`manipulator_kinematics.zone_kernel`), see manipulator_kinematics.compiled.
@@ -346,6 +371,7 @@ class Monitor:
         order = [z.name for kinds, _, _ in self._frames.values() for k in kinds for z in k.zones]
         self._order = np.array([order.index(z.name) for z in self.zones], dtype=int)
         self._reordered = bool(np.any(self._order != np.arange(len(self.zones))))
+        self._site = np.array([z.frame == "site" for z in self.zones], dtype=bool)
 
     def check(
         self,
@@ -355,49 +381,69 @@ class Monitor:
         period: float,
         site: tuple[np.ndarray, np.ndarray] | None = None,
         compiled: bool = True,
+        accelerations: np.ndarray | None = None,
+        in_flight: np.ndarray | None = None,
+        delay: float = 0.0,
     ) -> Check:
         """``positions``, ``velocities`` (P, 3) of the monitored points in the base frame (the
-        velocities at full command); ``stop_time`` T and ``period`` dt (module docstring);
-        ``site`` = (R, t) with p_site = R p + t, needed by site-frame zones (without it they are
-        reported at clearance -inf and stop every approach: no pose, no motion toward them).
-        ``compiled`` false: the numpy path even where the kernel is loaded (tests compare them)."""
+        velocities at full command) and their ``accelerations`` along its path (P, 3, the
+        second derivative at constant actuator rates; None: a straight path); ``stop_time`` T
+        and ``period`` dt; ``in_flight`` (P, K, zones in file order) the approach speeds of the
+        command still in force for ``delay`` s (the last check's ``approach`` times its scale;
+        module docstring). ``site`` = (R, t) with p_site = R p + t, needed by site-frame zones
+        (without it they are reported at clearance -inf and stop every command: no pose, no
+        motion toward them). ``compiled`` false: the numpy path even where the kernel is loaded
+        (tests compare them)."""
         p, v = np.asarray(positions, float), np.asarray(velocities, float)
+        a = np.zeros_like(p) if accelerations is None else np.asarray(accelerations, float)
         kernel = (KERNEL.ready or KERNEL.get()) if compiled else None
-        cs, ss = [], []
+        cs, us, ws = [], [], []
         for frame, (kinds, arrays, columns) in self._frames.items():
             if frame == "site":
                 if site is None:
                     n = sum(len(k.zones) for k in kinds)
                     cs.append(np.full((len(p), n), -np.inf))
-                    ss.append(np.zeros((len(p), n)))  # no pose: no approach
+                    us.append(np.zeros((len(p), n)))
+                    ws.append(np.zeros((len(p), n)))
                     continue
                 R = np.asarray(site[0], float)
-                zp, zv = p @ R.T + site[1], v @ R.T
+                zp, zv, za = p @ R.T + site[1], v @ R.T, a @ R.T
             else:
-                zp, zv = p, v
+                zp, zv, za = p, v, a
             if kernel is not None:
                 surfaces = [z for k in kinds if k.kind == "surface" for z in k.zones]
                 width = columns + len(surfaces)
-                c, s = np.empty((len(p), width)), np.empty((len(p), width))
-                zp, zv = np.ascontiguousarray(zp), np.ascontiguousarray(zv)
-                kernel.check(zp, zv, *arrays, stop_time, period, c, s)
+                c, u, w = np.empty((len(p), width)), np.empty((len(p), width)), np.empty((len(p), width))
+                zp, zv, za = np.ascontiguousarray(zp), np.ascontiguousarray(zv), np.ascontiguousarray(za)
+                kernel.geometry(zp, zv, za, *arrays, c, u, w)
                 for col, z in enumerate(surfaces, start=columns):
                     tin = z.surface
                     assert tin is not None
                     triangle = np.asarray(tin.locate(zp[:, :2]))
                     sign = 1.0 if z.values["side"] == "below" else -1.0
-                    kernel.surface(
-                        zp, zv, triangle, tin.planes, tin.origin, sign, z.margin, stop_time, period, c, s, col
-                    )
+                    kernel.surface(zp, zv, za, triangle, tin.planes, tin.origin, sign, z.margin, c, u, w, col)
             else:
-                parts = [k.approach(zp, zv) for k in kinds]
-                c = np.concatenate([c for c, _ in parts], axis=1)
-                s = scale_for(c, np.concatenate([u for _, u in parts], axis=1), stop_time, period)
+                parts = [k.approach(zp, zv, za) for k in kinds]
+                c, u, w = (np.concatenate([part[i] for part in parts], axis=1) for i in range(3))
             cs.append(c)
-            ss.append(s)
-        c, s = (cs[0], ss[0]) if len(cs) == 1 else (np.concatenate(cs, axis=1), np.concatenate(ss, axis=1))
+            us.append(u)
+            ws.append(w)
+        if len(cs) == 1:
+            c, u, w = cs[0], us[0], ws[0]
+        else:
+            c, u, w = (np.concatenate(x, axis=1) for x in (cs, us, ws))
         if self._reordered:
-            c, s = c[:, self._order], s[:, self._order]
+            c, u, w = c[:, self._order], u[:, self._order], w[:, self._order]
+        u_f = np.zeros_like(c) if in_flight is None else np.asarray(in_flight, float)
+        if kernel is not None:
+            s = np.empty_like(c)
+            kernel.scales(
+                c, u, w, np.ascontiguousarray(u_f), float(delay), float(stop_time), float(period), s
+            )
+        else:
+            s = scale_for(c, u, stop_time, period, w, u_f, delay)
+        if site is None and "site" in self._frames:
+            s[:, self._site] = 0.0  # no pose: no motion at all
         nearest = np.argmin(c, axis=0)
         smallest = c[nearest, np.arange(c.shape[1])].tolist()
         clearance = {
@@ -406,9 +452,9 @@ class Monitor:
         }
         j, i = np.unravel_index(int(np.argmin(s)), s.shape)
         if s[j, i] >= 1.0:
-            return Check(1.0, None, None, clearance)
-        blind = self.zones[i].frame == "site" and site is None
-        return Check(float(s[j, i]), self.zones[i].name, None if blind else self.points[j], clearance)
+            return Check(1.0, None, None, clearance, u)
+        lost = self.zones[i].frame == "site" and site is None
+        return Check(float(s[j, i]), self.zones[i].name, None if lost else self.points[j], clearance, u)
 
 
 def _packed(kinds: list[_Kind]) -> tuple[tuple[np.ndarray, ...], int]:

@@ -93,6 +93,7 @@ SCENARIOS = {
         at_zones=(np.array([0.0, 0.0, 0.4]), np.array([0.0, 0.0, -0.4]), np.array([0.0, 0.0, 0.1])),
         turn=0.5,
         # The bucket curled back (its tip up and in), lifted to the roof, lowered to the ground.
+        # The wall is met in the random targets (docs/zones.md, "Checked").
         opening=(
             (3.0, np.array([0.0, 0.0, 0.0, 0.0, 0.3, 0.0])),
             (12.0, np.array([0.0, 0.0, 0.4])),
@@ -111,6 +112,9 @@ SCENARIOS = {
         reached=("power_line", "road_edge", "gas_main"),
         at_zones=Targets.AT_ZONES,
         turn=0.0,
+        # Up to the ceiling, ahead along it to the wall, down to the TIN. Held at the ceiling,
+        # the tool's path curves up into it within the check's horizon, so it slides ahead only
+        # slowly (docs/zones.md, "Checked"; test_zones_family.py's creep test).
         opening=(
             (14.0, np.array([0.0, 0.0, 0.6])),
             (6.0, np.array([0.6, 0.0, 0.0])),

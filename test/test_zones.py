@@ -71,6 +71,27 @@ def test_planes_and_walls() -> None:
     assert c.tolist() == pytest.approx([1.75, -1.25]) and g[0].tolist() == [-1.0, 0.0, 0.0]
 
 
+def test_scale_along_a_curved_path_is_where_it_first_meets_the_zone() -> None:
+    """scale_for with the path's curvature w and a command in flight, against a brute-force
+    search: the largest s whose path c - u sigma - w sigma^2 / 2, run to sigma = s dt + s^2 T / 2
+    from the room the command in flight leaves, stays >= 0 all the way."""
+    rng = np.random.default_rng(8)
+    c = rng.uniform(0.0, 0.05, 200)
+    u, w, u_f = rng.normal(0.0, 0.3, 200), rng.normal(0.0, 2.0, 200), rng.normal(0.0, 0.3, 200)
+    T, dt, delay = 0.3, 0.05, 0.02
+    s = scale_for(c, u, T, dt, w, u_f, delay)
+    room = c - np.maximum(u_f, 0.0) * delay
+    grid = np.linspace(0.0, 1.0, 2001)
+    for i in range(200):
+        sigma = np.linspace(0.0, 1.0, 400)[:, None] * (grid * dt + grid**2 * T / 2)
+        clear = np.all(room[i] - u[i] * sigma - w[i] * sigma**2 / 2 >= -1e-12, axis=0)
+        if room[i] <= 0.0:  # no room: only a pair moving out goes on
+            assert s[i] == (1.0 if u[i] <= 0.0 else 0.0)
+            continue
+        best = grid[np.argmin(clear)] if not clear.all() else 1.0
+        assert s[i] == pytest.approx(best, abs=1e-3), (c[i], u[i], w[i], u_f[i])
+
+
 def test_scale_moving_away_or_along_is_never_limited() -> None:
     s = scale_for(np.array([0.01, -0.5, 0.0, 2.0]), np.array([-1.0, -0.1, 0.0, 0.0]), 0.5, 0.01)
     assert s.tolist() == [1.0, 1.0, 1.0, 1.0]
@@ -284,9 +305,15 @@ def test_the_compiled_check_is_the_numpy_check() -> None:
         v = rng.normal(size=(40, 3))
         names = [f"p{i}" for i in range(40)]
         T, dt = rng.uniform(0, 0.5), rng.uniform(0.005, 0.1)
-        compiled = Monitor(zones, names).check(p, v, T, dt)
-        numpy_path = Monitor(zones, names).check(p, v, T, dt, compiled=False)
+        # Half the trials with the paths' curvature and a command in flight.
+        curved = {}
+        if trial % 4 >= 2:
+            flight = rng.normal(0.0, 0.5, (40, len(zones)))
+            curved = {"accelerations": rng.normal(size=(40, 3)), "in_flight": flight, "delay": 0.03}
+        compiled = Monitor(zones, names).check(p, v, T, dt, **curved)
+        numpy_path = Monitor(zones, names).check(p, v, T, dt, compiled=False, **curved)
         assert compiled.scale == pytest.approx(numpy_path.scale, abs=1e-12)
+        np.testing.assert_allclose(compiled.approach, numpy_path.approach, atol=1e-12)
         assert (compiled.zone, compiled.point) == (numpy_path.zone, numpy_path.point)
         for name, (c, point) in numpy_path.clearance.items():
             assert (

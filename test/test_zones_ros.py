@@ -15,6 +15,7 @@ from geometry_msgs.msg import PoseStamped, TwistStamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ros_harness import RELIABLE_INPUTS, NodeProcess, Probe
 from sensor_msgs.msg import JointState
+from zone_loop import CURVE_TOLERANCE
 from zone_scenario import PERIOD, STOP_TIME, ZONES, Targets, clearances
 
 from excavator_kinematics.core.kinematics import CYLINDERS, JOINTS, Excavator
@@ -29,17 +30,28 @@ QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 NS = "/zones"
 #: Wall-clock seconds of driving (the sim runs in real time).
 DRIVE = 60.0
-#: Crossing allowed, m: a point's path within a command is curved, the check linear in it (0.3 mm
-#: in one process, test_zones_excavator.py); across processes a command can also act longer than
-#: zones_period when a process stalls on a loaded machine. The zones' margins (0.2-0.5 m) are
-#: far beyond it.
-TOLERANCE = 0.005
+#: Crossing allowed beyond :func:`uncovered`, m: round-off and the third-order term of the
+#: check's path prediction (test/zone_loop.py).
+TOLERANCE = CURVE_TOLERANCE
 #: Straight at the ceiling, the wall and the TIN first, then random targets.
 OPENING = (
     (8.0, np.array([0.0, 0.0, 0.6])),
     (6.0, np.array([0.6, 0.0, 0.0])),
     (8.0, np.array([0.0, 0.0, -0.6])),
 )
+
+
+def uncovered(stamps: np.ndarray, points: np.ndarray) -> float:
+    """How far a monitored point went in time no zone check covered (m), from the simulated
+    states (``stamps`` (N,) s, ``points`` (N, P, 3)): the check counts a command acting for
+    PERIOD at the least, and the simulator holds the last command it received over each of its
+    steps, so a step longer than PERIOD (the simulator stalled on a loaded machine) moved the
+    points beyond it; what moves the machine then is no command the zones could slow but its
+    actuators' watchdog's to stop (docs/zones.md). The largest distance a point covered beyond
+    PERIOD in one step (its part of the step's straight move), 0 where no step is that long."""
+    steps = np.diff(stamps)
+    moved = np.linalg.norm(np.diff(points, axis=0), axis=-1).max(axis=-1)
+    return float(np.max(moved * np.maximum(steps - PERIOD, 0.0) / steps, initial=0.0))
 
 
 def smallest_reported(reported: list[DiagnosticArray]) -> dict[str, float]:
@@ -125,14 +137,17 @@ def test_random_targets_never_cross_a_zone_and_the_machine_reaches_them(probe: P
     finally:
         logs = [p.stop() for p in processes]
     names = (JOINTS[0], *CYLINDERS)
-    D = np.array([[s[k] for k in names] for _, s in sorted(states.items()) if all(k in s for k in names)])
+    both = [(t, s) for t, s in sorted(states.items()) if all(k in s for k in names)]
+    D = np.array([[s[k] for k in names] for _, s in both])
     assert len(D) > 0.5 * 100 * DRIVE, f"{len(D)} states in {DRIVE} s"  # the sim publishes at 100 Hz
     points = MonitoredPoints(EXC).positions(D)
     clear = clearances(points)
     tips = clearances(np.array(poses)[:, None, :])  # the forward node's poses, independently
+    allowed = TOLERANCE + uncovered(np.array([t for t, _ in both]) * 1e-9, points)
+    print(f"crossing allowed: {allowed * 1000:.3f} mm (time no check covered)")
     for zone, c in clear.items():
-        assert c.min() >= -TOLERANCE, f"{zone}: crossed by {-c.min():.4f} m"
-        assert tips[zone].min() >= -TOLERANCE, f"{zone}: the tip crossed by {-tips[zone].min():.4f} m"
+        assert c.min() >= -allowed, f"{zone}: crossed by {-c.min():.4f} m, {allowed:.4f} m allowed"
+        assert tips[zone].min() >= -allowed, f"{zone}: the tip crossed by {-tips[zone].min():.4f} m"
     for zone in ("power_line", "road_edge", "gas_main"):
         assert clear[zone].min() < 0.03, f"{zone}: never within 3 cm ({clear[zone].min():.3f} m)"
     tip = points[:, MonitoredPoints(EXC).names.index("bucket_tip")]
@@ -144,7 +159,7 @@ def test_random_targets_never_cross_a_zone_and_the_machine_reaches_them(probe: P
     assert np.ptp(tip[:, 2]) > 3.0 and np.ptp(tip[:, 0]) > 1.0  # it moved about, not just stopped
     # The monitor topic says the same: every zone's smallest clearance, never below the tolerance.
     smallest = smallest_reported(reported)
-    assert set(smallest) == set(clear) and min(smallest.values()) >= -TOLERANCE, smallest
+    assert set(smallest) == set(clear) and min(smallest.values()) >= -allowed, smallest
     ik_log = logs[2]
     assert "approaching zone" in ik_log or "at zone" in ik_log, ik_log[-2000:]
 

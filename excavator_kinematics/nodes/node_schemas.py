@@ -143,6 +143,7 @@ VELOCITY_IK: Schema = {
         exclusive_min=True,
         doc="the actuators stop from full speed within this (deceleration limits: max speed / this)",
     ),
+    "zones_lag": _seconds(doc="the actuators' first-order time constant (0: they follow at once)"),
     "site": {
         **SITE_POSE,
         "tilt": Flag(

@@ -168,6 +168,7 @@ class VelocityIk(MachineNode):
             self.exc.name,
             read_landxml,
             site_pose=True,
+            lag=s["zones_lag"],
         )
         # The machine's pose in the site frame, read only when a site-frame zone needs it.
         site = s["site"]
@@ -312,7 +313,9 @@ class VelocityIk(MachineNode):
             zone = (
                 None
                 if self.zones is None
-                else self.zones(stamp, *self.points(D, rates.d_dot), rates.d_dot, self.cylinders[0], site)
+                else self.zones(
+                    stamp, *self.points.motion(D, rates.d_dot), rates.d_dot, self.cylinders[0], site
+                )
             )
             if blind:  # the clearances went out (site-frame zones STALE); the machine stops
                 raise StaleInput(blind)

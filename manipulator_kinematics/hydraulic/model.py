@@ -602,49 +602,63 @@ class HydraulicModel:
         point +- w/2 across the boom plane), the tool body's ``tool.outline`` points on both side
         faces (one where the width is 0) and the tail (``swing.tail_radius`` behind the swing
         axis at each of ``swing.tail_heights``); velocities in closed form from the jets."""
+        names, p, v, _ = self.monitored_motion(D, D_dot)
+        return names, p, v
+
+    def monitored_motion(self, D: Any, D_dot: Any) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`monitored` and the points' accelerations (..., P, 3) along the motion at the
+        constant rates ``D_dot`` (the jets' second derivatives with D_ddot = 0, and the swing's
+        centripetal and Coriolis terms): how a point's path curves, for the zones' check."""
         D = self.validate(D)
         D_dot = _finite(D_dot, D.shape, "D_dot")
         solved = self._solve(D, D_dot)
         d = self.description
         tool = solved.bodies[d.tool_body]
         jets = [*solved.pins.values(), *(tool.point(np.array(xz, dtype=float)) for xz in d.outline)]
-        r = np.stack([jet.p[..., 0] for jet in jets], axis=-1)
-        z = np.stack([jet.p[..., 1] for jet in jets], axis=-1)
-        r_dot = np.stack([jet.v[..., 0] for jet in jets], axis=-1)
-        z_dot = np.stack([jet.v[..., 1] for jet in jets], axis=-1)
+        r, z = (np.stack([jet.p[..., i] for jet in jets], axis=-1) for i in (0, 1))
+        r_dot, z_dot = (np.stack([jet.v[..., i] for jet in jets], axis=-1) for i in (0, 1))
+        r_ddot, z_ddot = (np.stack([jet.a[..., i] for jet in jets], axis=-1) for i in (0, 1))
         t1 = D[..., 0:1] if self.swing else np.zeros(D.shape[:-1] + (1,))
         w = D_dot[..., 0:1] if self.swing else np.zeros(D.shape[:-1] + (1,))
         c, s = np.cos(t1), np.sin(t1)
         p = np.stack((r * c, r * s, z), axis=-1)
         v = np.stack((r_dot * c - r * s * w, r_dot * s + r * c * w, z_dot), axis=-1)
+        spin = r_ddot - r * w * w  # radial: the boom plane's own and the centripetal
+        a = np.stack((spin * c - 2.0 * r_dot * s * w, spin * s + 2.0 * r_dot * c * w, z_ddot), axis=-1)
         n_pins = len(solved.pins)
         half = 0.5 * d.width
-        across = half * np.concatenate((-s, c, np.zeros_like(c)), axis=-1)[..., None, :]
-        turning = half * np.concatenate((-c * w, -s * w, np.zeros_like(c)), axis=-1)[..., None, :]
+        zero = np.zeros_like(c)
+        across = half * np.concatenate((-s, c, zero), axis=-1)[..., None, :]
+        turning = half * np.concatenate((-c * w, -s * w, zero), axis=-1)[..., None, :]
+        turned = half * np.concatenate((s * w * w, -c * w * w, zero), axis=-1)[..., None, :]
         Q = solved.Q
-        tool_p, tool_v = Q.p[..., None, :3], Q.v[..., None, :3]
+        tool_p, tool_v, tool_a = Q.p[..., None, :3], Q.v[..., None, :3], Q.a[..., None, :3]
         parts_p = [p[..., :n_pins, :], tool_p + across, tool_p - across]
         parts_v = [v[..., :n_pins, :], tool_v + turning, tool_v - turning]
+        parts_a = [a[..., :n_pins, :], tool_a + turned, tool_a - turned]
         names = [*solved.pins, "left_corner", "right_corner"]
         if d.outline:
-            outline_p, outline_v = p[..., n_pins:, :], v[..., n_pins:, :]
+            outline_p, outline_v, outline_a = p[..., n_pins:, :], v[..., n_pins:, :], a[..., n_pins:, :]
             if half > 0.0:
                 parts_p += [outline_p + across, outline_p - across]
                 parts_v += [outline_v + turning, outline_v - turning]
+                parts_a += [outline_a + turned, outline_a - turned]
                 names += [
                     f"tool_outline_{i}_{side}" for side in ("left", "right") for i in range(len(d.outline))
                 ]
             else:
                 parts_p.append(outline_p)
                 parts_v.append(outline_v)
+                parts_a.append(outline_a)
                 names += [f"tool_outline_{i}" for i in range(len(d.outline))]
         if d.tail:
             radius, height = np.array(d.tail, dtype=float).T
             level = height * np.ones_like(c)
             parts_p.append(np.stack((-radius * c, -radius * s, level), axis=-1))
             parts_v.append(np.stack((radius * s * w, -radius * c * w, np.zeros_like(level)), axis=-1))
+            parts_a.append(np.stack((radius * c * w * w, radius * s * w * w, np.zeros_like(level)), axis=-1))
             names += [f"tail_{i}" for i in range(len(d.tail))]
-        return names, np.concatenate(parts_p, axis=-2), np.concatenate(parts_v, axis=-2)
+        return names, *(np.concatenate(parts, axis=-2) for parts in (parts_p, parts_v, parts_a))
 
     def measured(self, D: Any, D_dot: Any = None) -> HydraulicState:
         """:meth:`state` of a measurement: D (..., m) checked finite, not against the stroke box (a

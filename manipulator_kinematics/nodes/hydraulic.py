@@ -242,6 +242,9 @@ VELOCITY_IK = {
         exclusive_min=True,
         doc="the actuators stop from full speed within this (deceleration limits: max speed / this)",
     ),
+    "zones_lag": Number(
+        0.0, 60.0, "s", doc="the actuators' first-order time constant (0: they follow at once)"
+    ),
     "topics": {
         "target_twist": Text(empty=False, doc="input: geometry_msgs/TwistStamped of the tool"),
         "joint_states": Text(empty=False, doc="input: sensor_msgs/JointState of the actuators"),
@@ -254,14 +257,13 @@ VELOCITY_IK = {
 }
 
 
-def monitored(h: HydraulicModel, D: np.ndarray, D_dot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Positions and velocities of the monitored points at a measured state D; a state a
+def monitored(h: HydraulicModel, D: np.ndarray, D_dot: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Positions, velocities and accelerations of the monitored points at a measured state D; a state a
     round-off beyond a stroke end (reading + zero_offset of a state at the end) is taken at the
     end, one farther out is refused (StrokeError)."""
     at_end = np.clip(D, h.lower, h.upper)
     D = at_end if np.all(np.abs(at_end - D) <= 1e-9) else D
-    _, p, v = h.monitored(D, D_dot)
-    return p, v
+    return h.monitored_motion(D, D_dot)[1:]
 
 
 class HydraulicVelocityIK(MachineNode):
@@ -316,6 +318,7 @@ class HydraulicVelocityIK(MachineNode):
             s["qos_depth"],
             self.h.description.name,
             read_landxml,
+            lag=s["zones_lag"],
         )
         commanded = [self.h.task_names[r] for r in self.rows]
         self.get_logger().info(

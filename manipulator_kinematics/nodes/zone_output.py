@@ -13,16 +13,14 @@ rqt_runtime_monitor, the recorder and ``mk_evaluate``), and the package's status
 already DiagnosticArrays; a Float64MultiArray would need its labels in a layout no tool shows.
 
 The time a command may act (the guard's period) is at least the set one (``zones_period``) and
-at least what the loop shows: twice the age of the state the command is computed from (its way
-in, and the command's way out) plus the longest gap between this node's recent commands
-(:data:`GAPS` of them; a gap over :data:`MAX_GAP` is a pause, the machine was stopped, and does
-not count). On a loaded machine, whose commands come late, the approach is slower, not deeper.
+at least what the loop shows, and the command in force goes on while the new one is on its way
+(:class:`~manipulator_kinematics.zone_guard.CommandTimes`): on a loaded machine, whose commands
+come late, the approach is slower, not deeper.
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -32,14 +30,8 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Header
 
-from manipulator_kinematics.zone_guard import Verdict, ZoneGuard
+from manipulator_kinematics.zone_guard import CommandTimes, Verdict, ZoneGuard
 from manipulator_kinematics.zones import Check, Surface
-
-#: Recent command gaps the period looks at, and the longest gap that still counts (s).
-GAPS, MAX_GAP = 50, 0.5
-#: A state older than this (s, node clock minus its stamp: another machine's clock) is taken as
-#: this old: a clock skew must not stop the machine.
-MAX_AGE = 0.5
 
 
 def clearance_message(stamp: Time, hardware_id: str, guard: ZoneGuard, check: Check) -> DiagnosticArray:
@@ -83,8 +75,7 @@ class ZoneOutput:
 
     def __init__(self, node: Node, guard: ZoneGuard, topic: str, qos_depth: int, hardware_id: str) -> None:
         self.node, self.guard, self.hardware_id = node, guard, hardware_id
-        self.last_ns: int | None = None
-        self.gaps: deque[float] = deque(maxlen=GAPS)
+        self.times = CommandTimes()
         self.publisher = node.create_publisher(
             DiagnosticArray, topic, QoSProfile(depth=qos_depth, reliability=ReliabilityPolicy.RELIABLE)
         )
@@ -102,13 +93,16 @@ class ZoneOutput:
         hardware_id: str,
         read_surface: Callable[[str, str], Surface] | None = None,
         site_pose: bool = False,
+        lag: float = 0.0,
     ) -> ZoneOutput | None:
         """The zones of the node's ``zones_file`` setting (None when it is ""); ConfigError naming
         the setting and the zone file's key when the file is malformed, or has a site-frame zone
         where the node has no site pose (``site_pose`` false)."""
         if not file:
             return None
-        guard = ZoneGuard.from_file(file, points, decelerations, period, read_surface, site_pose=site_pose)
+        guard = ZoneGuard.from_file(
+            file, points, decelerations, period, read_surface, site_pose=site_pose, lag=lag
+        )
         node.get_logger().info(
             f"{len(guard.zones)} avoidance zones from {file} ({', '.join(z.name for z in guard.zones)}), "
             f"{len(points)} monitored points; clearances on {topic}"
@@ -120,6 +114,7 @@ class ZoneOutput:
         stamp: Time,
         positions: np.ndarray,
         velocities: np.ndarray,
+        accelerations: np.ndarray | None,
         rates: np.ndarray,
         sampled_ns: int | None = None,
         site: tuple[np.ndarray, np.ndarray] | None = None,
@@ -127,15 +122,13 @@ class ZoneOutput:
         """The verdict on a command (:meth:`ZoneGuard.check`) computed from the state sampled at
         ``sampled_ns`` (its stamp, ns; default ``stamp``'s), for the time it may act (module
         docstring); its clearances published with ``stamp``. ``site``: the site pose (R, t) of
-        site-frame zones (p_site = R p + t)."""
+        site-frame zones (p_site = R p + t). ``positions``, ``velocities``, ``accelerations``:
+        the monitored points' (:meth:`ZoneGuard.check`; accelerations None: straight paths)."""
         now = self.node.get_clock().now().nanoseconds
-        if self.last_ns is not None and (now - self.last_ns) * 1e-9 <= MAX_GAP:
-            self.gaps.append((now - self.last_ns) * 1e-9)
-        self.last_ns = now
         sampled = stamp.sec * 1_000_000_000 + stamp.nanosec if sampled_ns is None else sampled_ns
-        age = min(max((now - sampled) * 1e-9, 0.0), MAX_AGE)
+        period, delay = self.times(now * 1e-9, sampled * 1e-9)
         verdict = self.guard.check(
-            positions, velocities, rates, site, period=2.0 * age + max(self.gaps, default=0.0)
+            positions, velocities, rates, site, period=period, accelerations=accelerations, delay=delay
         )
         self.publisher.publish(clearance_message(stamp, self.hardware_id, self.guard, verdict.check))
         return verdict
