@@ -92,12 +92,17 @@ SCENARIOS = {
         # Up, down, and the bucket curled and dumped (its tip goes ahead and back with alpha).
         at_zones=(np.array([0.0, 0.0, 0.4]), np.array([0.0, 0.0, -0.4]), np.array([0.0, 0.0, 0.1])),
         turn=0.5,
-        # The bucket curled back (its tip up and in), lifted to the roof, lowered to the ground.
-        # The wall is met in the random targets (docs/zones.md, "Checked").
+        # The bucket curled back to its stroke end (about 2 s; 5 s leave room for the nodes'
+        # start-up: half curled, the lift's arc meets the wall before the roof), lifted to the
+        # roof (4 cm from the wall on the way), dumped at the top (its tip goes out to the wall),
+        # curled back and lowered (dumped, the way down runs into the wall). The ground is met
+        # in the random targets.
         opening=(
-            (3.0, np.array([0.0, 0.0, 0.0, 0.0, 0.3, 0.0])),
+            (5.0, np.array([0.0, 0.0, 0.0, 0.0, 0.3, 0.0])),
             (12.0, np.array([0.0, 0.0, 0.4])),
-            (8.0, np.array([0.0, 0.0, -0.6])),
+            (3.0, np.array([0.0, 0.0, 0.0, 0.0, -0.3, 0.0])),
+            (3.0, np.array([0.0, 0.0, 0.0, 0.0, 0.3, 0.0])),
+            (10.0, np.array([0.0, 0.0, -0.6])),
         ),
     ),
     "knuckle_crane": Scenario(
@@ -112,12 +117,12 @@ SCENARIOS = {
         reached=("power_line", "road_edge", "gas_main"),
         at_zones=Targets.AT_ZONES,
         turn=0.0,
-        # Up to the ceiling, ahead along it to the wall, down to the TIN. Held at the ceiling,
-        # the tool's path curves up into it within the check's horizon, so it slides ahead only
-        # slowly (docs/zones.md, "Checked"; test_zones_family.py's creep test).
+        # Ahead to the wall, up along it to the ceiling, down to the TIN. Not up first: held at
+        # the ceiling, the tool's path curves up into it within the check's horizon, so it slides
+        # ahead only slowly (docs/zones.md, "Checked"; test_zones_family.py's creep test).
         opening=(
+            (8.0, np.array([0.6, 0.0, 0.0])),
             (14.0, np.array([0.0, 0.0, 0.6])),
-            (6.0, np.array([0.6, 0.0, 0.0])),
             (16.0, np.array([0.0, 0.0, -0.6])),
         ),
     ),
