@@ -658,7 +658,12 @@ class HydraulicModel:
             parts_v.append(np.stack((radius * s * w, -radius * c * w, np.zeros_like(level)), axis=-1))
             parts_a.append(np.stack((radius * c * w * w, radius * s * w * w, np.zeros_like(level)), axis=-1))
             names += [f"tail_{i}" for i in range(len(d.tail))]
-        return names, *(np.concatenate(parts, axis=-2) for parts in (parts_p, parts_v, parts_a))
+        return (
+            names,
+            np.concatenate(parts_p, axis=-2),
+            np.concatenate(parts_v, axis=-2),
+            np.concatenate(parts_a, axis=-2),
+        )
 
     def measured(self, D: Any, D_dot: Any = None) -> HydraulicState:
         """:meth:`state` of a measurement: D (..., m) checked finite, not against the stroke box (a
