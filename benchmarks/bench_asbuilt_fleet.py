@@ -144,11 +144,7 @@ def main() -> int:
                 wall, cpu = time.perf_counter() - t, cpu_seconds() - cpu
                 assert not any(x.error for x in results)
                 base = wall if base is None else base
-                print(
-                    f"| {r} | fleet, {n} worker{'s' if n > 1 else ''} | {wall:.1f} | {wall / len(paths):.2f} "
-                    f"| {base / wall:.2f} | {cpu / len(paths):.2f} | {os.getloadavg()[0]:.1f} |",
-                    flush=True,
-                )
+                row(r, f"fleet, {n} worker{'s' if n > 1 else ''}", wall, len(paths), base, cpu)
             if ray is not None:
                 ray_rounds(ray, paths, out, args.workers, r)
     return 0
@@ -181,11 +177,18 @@ def ray_rounds(ray: Any, paths: list[Path], out: Path, workers: list[int], r: in
             ray.shutdown()
         assert not any(x.error for x in results)
         base = wall if base is None else base
-        print(
-            f"| {r} | Ray, {n} CPU{'s' if n > 1 else ''} (+{start:.1f} s ray.init) | {wall:.1f} "
-            f"| {wall / len(paths):.2f} | {base / wall:.2f} | - | {os.getloadavg()[0]:.1f} |",
-            flush=True,
-        )
+        row(r, f"Ray, {n} CPU{'s' if n > 1 else ''} (+{start:.1f} s ray.init)", wall, len(paths), base, None)
+
+
+def row(r: int, what: str, wall: float, bags: int, base: float, cpu: float | None) -> None:
+    """One engine's row: wall s, per bag, speed-up over its one-worker run, CPU s per bag (None:
+    not measurable), load."""
+    per_bag = "-" if cpu is None else f"{cpu / bags:.2f}"
+    print(
+        f"| {r} | {what} | {wall:.1f} | {wall / bags:.2f} | {base / wall:.2f} | {per_bag} "
+        f"| {os.getloadavg()[0]:.1f} |",
+        flush=True,
+    )
 
 
 if __name__ == "__main__":
