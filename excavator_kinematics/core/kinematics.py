@@ -101,7 +101,7 @@ _BLOCK = 2 * BLOCK
 # never writes them).
 _NO_ACCELERATION = np.zeros(4)
 _NO_ACCELERATIONS = np.zeros((1, 4))
-# The cylinders at 1 m/s, the swing still (Excavator._plane); the rates along which Qddot gives
+# The cylinders at 1 m/s, the swing still (Excavator.k_entries); the rates along which Qddot gives
 # eq. 11's matrices: each actuator alone, then each pair (Excavator.acceleration_matrices).
 _CYLINDER_RATES = np.array([0.0, 1.0, 1.0, 1.0])
 _PAIRS = np.array([(i, j) for i in range(4) for j in range(i + 1, 4)])
@@ -439,28 +439,29 @@ class Excavator:
         out = in_blocks(lambda *block: part(self.hydraulic.solve(*block)), *flat, block=_BLOCK)
         return out.reshape(D.shape[:-1] + out.shape[1:])
 
-    def _plane(self, lengths: np.ndarray) -> np.ndarray:
-        """theta2..theta4, dtheta_i/dd_i (K's diagonal, eq. 7) and d2theta_i/dd_i^2 (K1's), rows
-        of (..., 3, 3), of cylinder lengths (3,) or (N, 3) (checked): :meth:`state` at the
-        reference swing with every cylinder extending at 1 m/s (each joint turns with its own
-        cylinder alone, eqs. 1-2: theta_dot is K's diagonal, theta_ddot K1's), so the compiled
-        kernel once loaded (a node's IMU state per message), else the family core."""
-        swing = np.full(lengths.shape[:-1] + (1,), self.limits.reference[0])
-        state = self.state(np.concatenate((swing, lengths), axis=-1), _CYLINDER_RATES)
-        return np.stack((state.theta, state.theta_dot, state.theta_ddot), axis=-2)[..., 1:]
-
     def joint_angles(self, lengths: Any) -> np.ndarray:
-        """Cylinder lengths [d2, d3, d4] (..., 3) -> [theta2, theta3, theta4] (eqs. 1-2)."""
+        """Cylinder lengths [d2, d3, d4] (..., 3) -> [theta2, theta3, theta4] (eqs. 1-2): the family
+        core's, the same arithmetic as :meth:`pins` (the URDF's body frames, urdf_joints, are made
+        from both and must agree to the bit; the compiled kernel's would differ in the last bits)."""
         lengths = _vectors(lengths, 3, "[boom, arm, bucket] lengths")
         self._check_lengths(lengths)
-        return self._plane(lengths)[..., 0, :]
+        return self._in_blocks(_joints, self._at_reference_swing(lengths))
 
     def k_entries(self, lengths: Any) -> tuple[np.ndarray, np.ndarray]:
-        """dtheta_i/dd_i (the diagonal of K, eq. 7) and d2theta_i/dd_i2 (of K1), for i = 2..4."""
+        """dtheta_i/dd_i (the diagonal of K, eq. 7) and d2theta_i/dd_i2 (of K1), for i = 2..4:
+        :meth:`state` with every cylinder extending at 1 m/s (each joint turns with its own cylinder
+        alone, eqs. 1-2: theta_dot is K's diagonal, theta_ddot K1's), so the compiled kernel once
+        loaded (the IMU state node's rates, per message), else the family core."""
         lengths = _vectors(lengths, 3, "[boom, arm, bucket] lengths")
         self._check_lengths(lengths)
-        plane = self._plane(lengths)
-        return plane[..., 1, :], plane[..., 2, :]
+        state = self.state(self._at_reference_swing(lengths), _CYLINDER_RATES)
+        return state.theta_dot[..., 1:], state.theta_ddot[..., 1:]
+
+    def _at_reference_swing(self, lengths: np.ndarray) -> np.ndarray:
+        """D of cylinder lengths (..., 3) at the reference swing (the joints do not depend on it)."""
+        return np.concatenate(
+            (np.full(lengths.shape[:-1] + (1,), self.limits.reference[0]), lengths), axis=-1
+        )
 
     def cylinder_lengths(self, angles: Any) -> np.ndarray:
         """Joint angles [theta2, theta3, theta4] (..., 3) -> cylinder lengths (inverse of eqs. 1-2).
@@ -705,6 +706,10 @@ class RateSolution:
 
 def _pose(state: HydraulicState) -> np.ndarray:
     return state.Q
+
+
+def _joints(state: HydraulicState) -> np.ndarray:
+    return state.theta[..., 1:]
 
 
 def _k(state: HydraulicState) -> np.ndarray:
