@@ -1,12 +1,14 @@
 """The excavator's cylinder linkages, folded once from its machine description (paper 000, eqs.
-1-2): what the forward model (:mod:`excavator_kinematics.core.kinematics`) and the pose IK
-(:mod:`excavator_kinematics.core.inverse`) both read, so neither reads the other's private state.
+1-2): the constants the pose IK (:mod:`excavator_kinematics.core.inverse`) and the compiled
+kernels (:mod:`excavator_kinematics.core.layouts`) read. The forward numpy path is the hydraulic
+family's core (:attr:`excavator_kinematics.core.kinematics.Excavator.hydraulic`), which solves the
+same linkages from the machine file's pins.
 
 * :class:`Triangle`: a cylinder closing a triangle at a pivot (eq. 1), for the boom, the arm and
   the bucket cylinder's side link;
 * :class:`Linkages`: the three triangles and the bucket four-bar's pins and links (eq. 2), in the
   frames of the bodies they sit on;
-* :func:`cos_sin`: cos and sin by the tangent half-angle formulas (the swing angle of both paths).
+* :func:`cos_sin`: cos and sin by the tangent half-angle formulas (the IK's swing angle).
 """
 
 from __future__ import annotations
@@ -24,15 +26,6 @@ class StrokeError(ValueError):
     """A state outside the machine's strokes/limits, non-finite, or geometrically impossible."""
 
 
-def closing_sine(c: np.ndarray, name: str) -> np.ndarray:
-    """sqrt(1 - c^2), the sine for the cosine c of a linkage angle: every |c| < 1 (in floats as in
-    reals, 1 - c^2 > 0 exactly when |c| < 1) or the linkage cannot be assembled: StrokeError."""
-    radicand = 1.0 - c * c
-    if np.all(radicand > 0.0):
-        return np.sqrt(radicand)
-    raise StrokeError(f"{name}: the linkage cannot close (triangle inequality violated)")
-
-
 def direction(v: np.ndarray) -> float:
     """The direction of a planar vector [r, z], rad."""
     return math.atan2(v[1], v[0])
@@ -40,7 +33,7 @@ def direction(v: np.ndarray) -> float:
 
 def cos_sin(angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """cos and sin by the tangent half-angle formulas, within 2.3e-16 of np.cos and np.sin (the
-    IK's and the forward batches' swing angle).
+    IK's swing angle).
 
     Why not np.cos and np.sin: numpy runs float64 sin and cos element by element through libm
     but has a vectorised tan: one tan and a few products cost a quarter of the pair (measured
@@ -59,7 +52,8 @@ class Triangle:
 
     ``first`` and ``second`` are the pins at the cylinder's ends, relative to the pivot, each in
     the frame of the body it sits on; the joint angle is the rotation of the second body that
-    makes the pin distance equal d: theta = ang(first) + orientation * gamma - ang(second).
+    makes the pin distance equal d: theta = ang(first) + orientation * gamma - ang(second), gamma
+    the angle at the pivot (``constants``: its cosine's folded terms, for the kernel).
     """
 
     name: str
@@ -67,7 +61,7 @@ class Triangle:
     b: float  # |second - pivot|
     offset: float  # ang(first) - ang(second)
     orientation: int
-    radius: float = 1.0  # scale of the cosine and sine that closes() returns
+    radius: float = 1.0  # scale of the joint angle's cosine and sine (the kernel's)
 
     @property
     def constants(self) -> TriangleConstants:
@@ -94,36 +88,14 @@ class Triangle:
             orientation,
         )
 
-    def closes(
-        self, d: np.ndarray, angle: bool = True
-    ) -> tuple[np.ndarray | None, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Joint angle (None unless ``angle``), its derivatives w.r.t. d (eq. 1: k21, k22) and
-        its cosine and sine times ``radius``.
-
-        cos/sin come from cos(gamma) and sin(gamma) = sqrt(1 - cos^2) by angle addition: the
-        open chain needs no trigonometry of theta2..theta4.
-        """
-        t = self.constants
-        c = t.c0 - t.c1 * d * d
-        s = t.o * closing_sine(c, self.name)  # sin(o * gamma)
-        k = d / (t.ab * s)  # o * dgamma/dd
-        theta = t.offset + t.o * np.arccos(c) if angle else None
-        return (
-            theta,
-            k,
-            k / d - k * k * c / s,
-            t.cos_offset * c - t.sin_offset * s,
-            t.sin_offset * c + t.cos_offset * s,
-        )
-
 
 @dataclass(frozen=True)
 class Linkages:
     """The cylinder linkages of one machine (eqs. 1-2), points [r, z] in their bodies' frames
     (docs/excavator.md): the boom and arm triangles, the bucket cylinder's side-link triangle
-    (Fig. 7b: its rod pin R at (side length, 0) of a frame turning with the side link, so
-    ``closes`` gives R relative to the pivot) and the bucket four-bar (Fig. 7c): the H-link pin on
-    a circle of ``h_radius`` about the bucket pin, linked to R by ``h_link``."""
+    (Fig. 7b: its rod pin R at (side length, 0) of a frame turning with the side link, so its
+    cosine and sine give R relative to the pivot) and the bucket four-bar (Fig. 7c): the H-link
+    pin on a circle of ``h_radius`` about the bucket pin, linked to R by ``h_link``."""
 
     boom: Triangle
     arm: Triangle
@@ -136,7 +108,7 @@ class Linkages:
     h_phase: float  # direction of the H-link pin in the bucket frame
     h_link: float  # H-link length
     h_orientation: int
-    pins: dict[str, np.ndarray]  # every cylinder pin and the H-link pin, in its body's frame
+    bucket_cylinder_base: np.ndarray  # (2,) arm frame
     pivot_from_bucket_pin: tuple[float, float]  # side-link pivot - bucket pin (arm frame)
     h_constants: FourBarConstants  # the bucket four-bar's, folded (eq. 2)
 
@@ -159,7 +131,7 @@ class Linkages:
         return cls(
             boom=Triangle.of("boom_cylinder", boom_base - foot, boom_rod, boom_orientation),
             arm=Triangle.of("arm_cylinder", arm_base - arm_pin, arm_rod, arm_orientation),
-            # eq. 1 applied to Fig. 7b; closes() then gives the rod pin R relative to the pivot
+            # eq. 1 applied to Fig. 7b: the joint angle's cosine and sine give R relative to the pivot
             side=Triangle(
                 "bucket_cylinder",
                 float(np.hypot(*to_base)),
@@ -176,14 +148,7 @@ class Linkages:
             h_phase=h_phase,
             h_link=a,
             h_orientation=h_orientation,
-            pins={
-                "boom_cylinder_base": boom_base,
-                "boom_cylinder_rod": boom_rod,
-                "arm_cylinder_base": arm_base,
-                "arm_cylinder_rod": arm_rod,
-                "bucket_cylinder_base": bucket_base,
-                "h_link_pin": h_pin,
-            },
+            bucket_cylinder_base=bucket_base,
             pivot_from_bucket_pin=tuple((pivot - bucket_pin).tolist()),
             h_constants=FourBarConstants(
                 b=b,

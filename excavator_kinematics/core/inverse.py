@@ -135,7 +135,7 @@ class Constants(NamedTuple):
     def of(cls, model: Excavator, arm_tol: float = 1e-12) -> Constants:
         linkages = model.linkages
         boom, arm = linkages.boom, linkages.arm
-        pivot, pin, base = linkages.pivot, linkages.bucket_pin, linkages.pins["bucket_cylinder_base"]
+        pivot, pin, base = linkages.pivot, linkages.bucket_pin, linkages.bucket_cylinder_base
         side, stroke = linkages.side_link, (model.limits.stroke_min[2], model.limits.stroke_max[2])
         k = cls(
             model.l0,

@@ -5,46 +5,53 @@ driven by independent closed-loop cylinder mechanisms with secondary coordinates
 D = [theta1, d2, d3, d4] (swing angle and the boom, arm and bucket cylinder lengths). The
 bucket tip is Q = [x, y, z, alpha] (m, rad). Frames and conventions: docs/excavator.md.
 
+The numpy path, the reference, is the hydraulic family's numpy core
+(:class:`manipulator_kinematics.hydraulic.HydraulicModel`, held as :attr:`Excavator.hydraulic`):
+the same machine file's ``hydraulic_machine`` section solved by sequential dyads, the pins carried
+with their derivatives (docs/hydraulic_family.md). This module checks D the excavator's way (the
+stroke tolerance, a continuous swing wrapped), maps the core's results onto the excavator's API
+(:class:`BucketState`, the excavator's pin names, its errors) and adds what only the excavator
+has (sensor offsets, the bucket frame, the pose IK of :mod:`excavator_kinematics.core.inverse`).
+
 Paper equation -> where it is computed:
 
 ====  ===========================================  ==============================================
 eq.   relation                                     function
 ====  ===========================================  ==============================================
-1     boom/arm triangle: theta(d), d(theta),       ``Triangle.closes`` (via ``joint_angles``,
+1     boom/arm triangle: theta(d), d(theta),       the core's dyads (via ``joint_angles``,
       k21 = dtheta/dd, k22 = d2theta/dd2           ``k_entries``); inverse: ``cylinder_lengths``
-2     bucket six-bar = cylinder four-bar + bucket  ``Excavator._linkages`` (via
-      four-bar in series: theta4(d4) and rates     ``joint_angles``); inverse: ``cylinder_lengths``
-3     Q(theta), open chain                         ``pose``, ``open_chain_pose`` (``_tip``)
-4     Qdot by columns: coefficients a_i, b_i       ``Excavator._chain_terms``
-5     Qdot = J0 thetadot                           ``j0``
+2     bucket six-bar = cylinder four-bar + bucket  the core's dyads (via ``joint_angles``);
+      four-bar in series: theta4(d4) and rates     inverse: ``cylinder_lengths``
+3     Q(theta), open chain                         ``pose``, ``open_chain_pose``
+4-5   Qdot = J0 thetadot, J0 by columns            ``j0`` (the core's closed form)
 6     thetadot = J0^-1 Qdot                        ``joint_rates``
 7     thetadot = K Ddot                            ``k_matrix``, ``k_entries``; ``state.theta_dot``
 8     Qdot = JC0 Ddot, JC0 = J0 K                  ``jc0``; ``state.Q_dot``, ``state.jc0``
 9     Ddot = JC0^-1 Qdot                           ``cylinder_rates``
-10    Qddot = J0 thetaddot + Jdot0 thetadot        ``state.Q_ddot`` (``Excavator._states``)
+10    Qddot = J0 thetaddot + Jdot0 thetadot        ``state.Q_ddot`` (the core's jets)
 11    Qddot = JC0 Dddot + JC1_0 Ddot^2 + JC2_0 DD  ``acceleration_matrices`` (same value as eq. 10)
 12    thetaddot = J0^-1 (Qddot - Jdot0 thetadot)   ``joint_accelerations``
 13    Dddot = JC0^-1 (Qddot - JC1_0 .. - JC2_0 ..) ``cylinder_accelerations``
 ====  ===========================================  ==============================================
 
-Everything is closed form, written once as plain vectorised numpy on (..., n) arrays: one state
-(shape (4,)) is a batch of one through the same code (the same bits as that row of a batch); a
-batch (shape (N, 4)) runs in blocks of rows (:func:`manipulator_kinematics.row_blocks.in_blocks`).
-Rates and accelerations have D's shape or (4,), broadcast over a batch. The single call of
+Everything is closed form, plain vectorised numpy on (..., n) arrays: one state (shape (4,)) is
+a batch of one through the same code (the same bits as that row of a batch); a batch (shape (N,
+4)) runs in blocks of rows (:func:`manipulator_kinematics.row_blocks.in_blocks`). Rates and
+accelerations have D's shape or (4,), broadcast over a batch. The single call of
 :meth:`Excavator.state`, :meth:`Excavator.pose` and :meth:`Excavator.jc0`, and a batch of
 ``state`` and ``pose``, run the same steps compiled (:mod:`excavator_kinematics.core.state_kernel`,
-numba) once that kernel has loaded in the background
-(:class:`manipulator_kinematics.compiled.Kernel`; the numpy path answers meanwhile and
-stays the reference, within 1e-12). Errors: a wrong shape is a ``ValueError`` saying "shape"; a
-state the machine cannot take (outside a stroke or the swing range, not finite, a linkage that
-cannot close, a singular JC0) is a :class:`StrokeError` (also a ValueError). The machine file is
-read by :mod:`excavator_kinematics.core.machine_file`.
+numba; the excavator's own kernel, faster than the family's generic one: see ``Excavator.packed``)
+once that kernel has loaded in the background (:class:`manipulator_kinematics.compiled.Kernel`;
+the numpy path answers meanwhile and stays the reference, within 1e-12). Errors: a wrong shape
+is a ``ValueError`` saying "shape"; a state the machine cannot take (outside a stroke or the
+swing range, not finite, a singular JC0) is a :class:`StrokeError` (also a ValueError). The
+machine file is read by :mod:`excavator_kinematics.core.machine_file`.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
@@ -53,12 +60,13 @@ from typing import Any
 import numpy as np
 
 from excavator_kinematics.core import inverse
-from excavator_kinematics.core.geometry import Linkages, StrokeError, closing_sine, cos_sin
+from excavator_kinematics.core.geometry import Linkages, StrokeError
 from excavator_kinematics.core.layouts import STATE, check_compiled
 from excavator_kinematics.core.machine_file import (
     CYLINDERS,
     DYADS,
     FAMILY,
+    PINS,
     STROKE_TOLERANCE,
     TOPOLOGY,
     Description,
@@ -66,6 +74,7 @@ from excavator_kinematics.core.machine_file import (
     wrap_swing,
 )
 from manipulator_kinematics.compiled import Kernel
+from manipulator_kinematics.hydraulic import HydraulicModel, HydraulicState
 from manipulator_kinematics.model import IKSolutions
 from manipulator_kinematics.param_files import ConfigError, config_path, load_parameters
 from manipulator_kinematics.row_blocks import BLOCK, in_blocks
@@ -76,11 +85,10 @@ JOINTS = ("swing_joint", "boom_joint", "arm_joint", "bucket_joint")
 ACTUATORS = (JOINTS[0], *CYLINDERS)
 DEFAULT_CONFIG = "excavator_cet200.yaml"
 
-# States per block of pose, jc0 and state: the blocks write their entries into the batch's table
-# where they stay (in_blocks' rows); numpy's fixed cost per call (60-200 calls per block) falls
-# with the block, the cache misses of its some 150 temporaries rise. Measured on 10^5 states, CPU
-# ms per batch (state / pose): 4096 states per block 17.2 / 9.6, 8192 15.2 / 8.3, 16384 15.7 /
-# 10.0, 32768 18.8 / 9.3, the whole batch in one 39.0 / 8.4.
+# States per block of the numpy path (pose, jc0, K and state): the family core's fixed cost per
+# call (some 600 array operations) falls with the block, the cache misses of its temporaries rise.
+# Measured on 10^5 states, CPU ms per batch (state / pose): 1024 states per block 788 / 686,
+# 2048 618 / 591, 4096 557 / 551, 8192 554 / 553, 16384 591 / 539, 32768 771 / 603.
 _BLOCK = 2 * BLOCK
 # Once the kernel is loaded, batches of full states and poses of every size run its loop into
 # one preallocated table (issue #32): numpy's fixed cost made a batch of one 10x (state) or 90x
@@ -93,6 +101,11 @@ _BLOCK = 2 * BLOCK
 # never writes them).
 _NO_ACCELERATION = np.zeros(4)
 _NO_ACCELERATIONS = np.zeros((1, 4))
+# The cylinders at 1 m/s, the swing still (Excavator.k_entries); the rates along which Qddot gives
+# eq. 11's matrices: each actuator alone, then each pair (Excavator.acceleration_matrices).
+_CYLINDER_RATES = np.array([0.0, 1.0, 1.0, 1.0])
+_PAIRS = np.array([(i, j) for i in range(4) for j in range(i + 1, 4)])
+_PROBES = np.concatenate((np.eye(4), np.eye(4)[_PAIRS[:, 0]] + np.eye(4)[_PAIRS[:, 1]]))
 
 
 def _warm(state_kernel: ModuleType) -> None:
@@ -155,7 +168,7 @@ class Excavator:
         self.l1, self.l0 = g.foot
         self.l2, self.l3, self.l4 = g.boom_length, g.arm_length, g.bucket_length
         self.bucket_width = g.bucket_width
-        #: The cylinder linkages (eqs. 1-2), read by this model and by the pose IK.
+        #: The cylinder linkages (eqs. 1-2) folded: the pose IK's and the kernel's constants.
         self.linkages = Linkages.of(g)
         self.limits = g.limits
         #: The sensors' zero offsets in the order of D: true state = reading + zero_offset
@@ -173,10 +186,20 @@ class Excavator:
         self._hi = upper + STROKE_TOLERANCE
         if self.limits.continuous_swing:  # exactly (-pi, pi]: -pi goes the slow way, to pi
             self._lo[0], self._hi[0] = np.nextafter(-math.pi, 0.0), math.pi
-        self._check_whole_stroke()
-        self._check_branches()
+        #: The hydraulic family's model of this machine (the same section of the same file): its
+        #: numpy core computes every forward quantity here (the reference); the excavator adds its
+        #: checks of D (the stroke tolerance, a continuous swing) and its API around it.
+        self.hydraulic = HydraulicModel(g.family, check=False)
+        self._check_assembly()
+        self.hydraulic.check()  # the family's own checks too, after the excavator's named ones
         #: The IK's constants (:class:`excavator_kinematics.core.inverse.Constants`).
         self.ik_constants = inverse.Constants.of(self)
+        # The compiled path stays the excavator's own kernel (state_kernel, packed from the folded
+        # linkages), not the family's generic one (manipulator_kinematics.hydraulic.kernel, which
+        # runs this machine's program): that one is 2x slower on one call and 3.5x slower per state
+        # in batches (docs/benchmarks.md: 2.5 against 1.2-1.35 us, 1.07 against 0.29 us a state
+        # at 10^4), which would lose issue 31's "batch >= today". One numpy core, two kernels: this
+        # one is tested against the family's numpy core (the numpy path here) to 1e-12.
         #: The constants of the compiled single call (state_kernel), layout ``layouts.STATE``.
         self.packed = STATE.pack(
             {
@@ -195,31 +218,32 @@ class Excavator:
             }
         )
 
-    def _check_whole_stroke(self) -> None:
-        """Every length in the stroke box must assemble; a bad pin or length fails here, naming it."""
+    def _check_assembly(self) -> None:
+        """Refuse, naming the key, a linkage that does not assemble over its whole stroke box the
+        way a backhoe's does (on 2001 lengths of each stroke, ends included: each joint depends
+        on its own cylinder alone). Every length must close its linkage. Each cylinder must move
+        its joint the documented way over its whole stroke (a backhoe's: extending the boom
+        cylinder raises the boom, theta2 up; the arm and bucket cylinders curl the arm and the
+        bucket in, theta3 and theta4 down; docs/excavator.md), the bucket's four-bar must not be
+        crossed (the H-link pin and the side-link pivot on either side of the line from the bucket
+        pin to the rod pin) and at the reference state the tip must be in front of the swing axis:
+        a wrong assembly branch (an orientation's sign) otherwise loads, e.g. a flipped boom
+        cylinder as a boom hanging down behind the machine (theta2 = -164 deg, tip at r = -3.4 m).
+        Then each joint's range over its stroke (K keeps its sign: the stroke ends) must lie in the
+        chain's limits."""
         samples = np.linspace(self.limits.stroke_min, self.limits.stroke_max, 2001)
-        try:
-            self.joint_angles(samples)
-        except StrokeError as error:
-            # Each linkage depends on its own cylinder only: the error names the culprit.
-            i = next(i for i, name in enumerate(CYLINDERS) if str(error).startswith(name))
+        with np.errstate(invalid="ignore"):  # a linkage that does not close: NaN, named below
+            plane = self.hydraulic.solve(np.insert(samples, 0, 0.0, axis=1), _CYLINDER_RATES)
+        theta, k = plane.theta[:, 1:], plane.theta_dot[:, 1:]  # K's diagonal: the rates of 1 m/s
+        open_ = np.isnan(theta)
+        if np.any(open_):
+            # Each linkage depends on its own cylinder only: the column names the culprit.
+            i = int(np.argmax(np.any(open_, axis=0)))
             raise ConfigError(
                 f"{FAMILY}.cylinders.{CYLINDERS[i]}: the stroke [{self.limits.stroke_min[i]:g}, "
-                f"{self.limits.stroke_max[i]:g}] m cannot be assembled with these pins and links: {error}"
-            ) from None
-
-    def _check_branches(self) -> None:
-        """What a wrong assembly branch (an orientation's sign) does, refused naming the key: each
-        cylinder must move its joint the documented way over its whole stroke (a backhoe's:
-        extending the boom cylinder raises the boom, theta2 up; the arm and bucket cylinders curl
-        the arm and the bucket in, theta3 and theta4 down; docs/excavator.md), the bucket's
-        four-bar must not be crossed (the H-link pin and the side-link pivot on either side of the
-        line from the bucket pin to the rod pin) and at the reference state the tip must be in
-        front of the swing axis. A flipped boom cylinder orientation otherwise loads as a boom
-        hanging down behind the machine (theta2 = -164 deg, tip at r = -3.4 m). Then each joint's
-        range over its stroke (K keeps its sign: the stroke ends) must lie in the chain's limits."""
-        samples = np.linspace(self.limits.stroke_min, self.limits.stroke_max, 2001)
-        k, _ = self.k_entries(samples)
+                f"{self.limits.stroke_max[i]:g}] m cannot be assembled with these pins and links: its "
+                f"linkage does not close at {samples[np.argmax(open_[:, i]), i]:.6g} m"
+            )
         for i, (name, sign, joint, what) in enumerate(
             (
                 ("boom_cylinder", 1.0, "theta2", "raise the boom"),
@@ -235,29 +259,28 @@ class Excavator:
                     f"{'up' if sign > 0 else 'down'}), this branch turns it the other way "
                     f"(d{joint}/dd = {k[np.argmax(wrong), i]:.3g} rad/m at {at:.4g} m): flip the sign"
                 )
-        reference = self.limits.reference
-        (ex, ey), (hx, hy) = (np.ravel(v) for v in self._linkages(*(reference[1:, None]))[4])
-        fx, fy = self.linkages.pivot_from_bucket_pin
+        reference = np.concatenate(([0.0], self.limits.reference[1:]))  # in the boom plane (r, z)
+        pins = {name: p[[0, 2]] for name, p in self.hydraulic.solve_pins(reference).items()}
+        (ex, ey), (hx, hy), (fx, fy) = (
+            pins[pin] - pins["bucket_pin"]
+            for pin in ("bkt_cyl_rod", "hlink_pin_on_bucket", "ilink_pin_on_arm")
+        )
         if (ex * hy - ey * hx) * (ex * fy - ey * fx) >= 0.0:
             raise ConfigError(
                 f"{FAMILY}.dyads.{DYADS[3]}.orientation: this branch crosses the bucket linkage (the H-link "
                 "pin on the side-link pivot's side of the line bucket pin -> rod pin): flip the sign"
             )
-        r = self.open_chain_pose(np.concatenate(([0.0], self.joint_angles(reference[1:]))))[0]
+        r = pins["tip"][0]
         if r <= 0.0:
             raise ConfigError(
                 f"{FAMILY}.cylinders.boom_cylinder.reference_length: at the reference lengths the bucket tip "
                 f"is {-r:.3g} m behind the swing axis (r = {r:.3g} m); a backhoe's tool is in front: "
                 "check the pins"
             )
-        theta = (
-            self.joint_angles(self.limits.stroke_min[None]),
-            self.joint_angles(self.limits.stroke_max[None]),
-        )
         for i, (joint, (lo, hi)) in enumerate(
             zip(TOPOLOGY["chain"], self.description.joint_limits, strict=True)
         ):
-            ends = sorted(float(t[0, i]) for t in theta)
+            ends = sorted((float(theta[0, i]), float(theta[-1, i])))
             if ends[0] < lo or ends[1] > hi:
                 raise ConfigError(
                     f"{FAMILY}.chain.{joint}.limits: over the stroke {joint} spans "
@@ -405,65 +428,39 @@ class Excavator:
                     f"[{self.limits.stroke_min[i]:.6g}, {self.limits.stroke_max[i]:.6g}] m"
                 )
 
-    # ------------------------------------------------------------------ closed loops (eqs. 1-2, 7)
-    def _linkages(self, d2: np.ndarray, d3: np.ndarray, d4: np.ndarray) -> tuple[tuple[Any, ...], ...]:
-        """theta2..4 (eqs. 1-2) with their first (K, eq. 7) and second (K1) derivatives w.r.t.
-        d2..d4 and their cosines and sines, plus the bucket linkage's rod pin R and H-link pin H
-        relative to the bucket pin (arm frame): ``(theta, k, dk, trig, (R, H))``."""
-        linkages = self.linkages
-        theta2, k2, dk2, c2, s2 = linkages.boom.closes(d2)
-        theta3, k3, dk3, c3, s3 = linkages.arm.closes(d3)
-        # Cylinder four-bar (Fig. 7b): side-link angle phi's derivatives, same form; phi itself is
-        # never needed, only R - pivot = side length * (cos, sin) phi.
-        _, phi_d, phi_dd, rx, ry = linkages.side.closes(d4, angle=False)
-        fx, fy = linkages.pivot_from_bucket_pin
-        ex, ey = fx + rx, fy + ry  # R - bucket pin
-        # Bucket four-bar (Fig. 7c, eq. 2): H from the triangle (bucket pin, R, H).
-        h = linkages.h_constants
-        b, o, cp, sp = h.b, h.o, h.cos_phase, h.sin_phase
-        e2 = ex * ex + ey * ey
-        e = np.sqrt(e2)
-        ch = (e2 + h.bb_aa) / (h.two_b * e)
-        sh = o * closing_sine(ch, "bucket_cylinder (bucket four-bar)")
-        # H - bucket pin = fc (R - bucket pin) + fs perp(R - bucket pin): turned by the H angle
-        # and scaled to length b.
-        f = b / e
-        fc, fs = f * ch, f * sh
-        ox, oy = fc * ex - fs * ey, fc * ey + fs * ex
-        theta4 = np.arctan2(ey, ex) + o * np.arccos(ch) - h.phase
-        c4, s4 = ox * cp + oy * sp, oy * cp - ox * sp
-        # Four-bar velocity ratio g1 = dpsi/dphi and g2 = d2psi/dphi2 from the loop constraint
-        # (H - R).(vH - vR) = 0 and its time derivative; closed form, no iteration. With the
-        # form of H above, (H - R) . perp(H - O4) = fs e^2 and (H - R) . (H - O4) = b^2 - fc e^2.
-        cx, cy = ox - ex, oy - ey  # H - R
-        den = fs * e2
-        g1 = (cy * rx - cx * ry) / den
-        wx, wy = g1 * ox - rx, g1 * oy - ry
-        g2 = (g1 * g1 * (h.bb - fc * e2) - (cx * rx + cy * ry) - (wx * wx + wy * wy)) / den
-        return (
-            (theta2, theta3, theta4),
-            (k2, k3, g1 * phi_d),
-            (dk2, dk3, g2 * phi_d * phi_d + g1 * phi_dd),
-            (c2, s2, c3, s3, c4, s4),
-            ((ex, ey), (ox, oy)),
-        )
+    # ------------------------------------------------------------------ the numpy core (eqs. 1-11)
+    def _in_blocks(
+        self, part: Callable[[HydraulicState], np.ndarray], D: np.ndarray, *motion: Any
+    ) -> np.ndarray:
+        """``part`` of the family core's state (:meth:`HydraulicModel.solve`) of valid states D
+        (..., 4) with their rates and accelerations (D's shape, or None: zero), computed _BLOCK
+        states at a time; the result has D's leading axes."""
+        flat = [None if x is None else x.reshape(-1, 4) for x in (D, *motion)]
+        out = in_blocks(lambda *block: part(self.hydraulic.solve(*block)), *flat, block=_BLOCK)
+        return out.reshape(D.shape[:-1] + out.shape[1:])
 
     def joint_angles(self, lengths: Any) -> np.ndarray:
-        """Cylinder lengths [d2, d3, d4] (..., 3) -> [theta2, theta3, theta4] (eqs. 1-2)."""
+        """Cylinder lengths [d2, d3, d4] (..., 3) -> [theta2, theta3, theta4] (eqs. 1-2): the family
+        core's, the same arithmetic as :meth:`pins` (the URDF's body frames, urdf_joints, are made
+        from both and must agree to the bit; the compiled kernel's would differ in the last bits)."""
         lengths = _vectors(lengths, 3, "[boom, arm, bucket] lengths")
         self._check_lengths(lengths)
-        flat = lengths.reshape(-1, 3)
-        return _table(self._linkages(*_columns(flat))[0], flat.shape[:-1]).reshape(lengths.shape)
+        return self._in_blocks(_joints, self._at_reference_swing(lengths))
 
     def k_entries(self, lengths: Any) -> tuple[np.ndarray, np.ndarray]:
-        """dtheta_i/dd_i (the diagonal of K, eq. 7) and d2theta_i/dd_i2 (of K1), for i = 2..4."""
+        """dtheta_i/dd_i (the diagonal of K, eq. 7) and d2theta_i/dd_i2 (of K1), for i = 2..4:
+        :meth:`state` with every cylinder extending at 1 m/s (each joint turns with its own cylinder
+        alone, eqs. 1-2: theta_dot is K's diagonal, theta_ddot K1's), so the compiled kernel once
+        loaded (the IMU state node's rates, per message), else the family core."""
         lengths = _vectors(lengths, 3, "[boom, arm, bucket] lengths")
         self._check_lengths(lengths)
-        flat = lengths.reshape(-1, 3)
-        _, k, dk, _, _ = self._linkages(*_columns(flat))
-        return (
-            _table(k, flat.shape[:-1]).reshape(lengths.shape),
-            _table(dk, flat.shape[:-1]).reshape(lengths.shape),
+        state = self.state(self._at_reference_swing(lengths), _CYLINDER_RATES)
+        return state.theta_dot[..., 1:], state.theta_ddot[..., 1:]
+
+    def _at_reference_swing(self, lengths: np.ndarray) -> np.ndarray:
+        """D of cylinder lengths (..., 3) at the reference swing (the joints do not depend on it)."""
+        return np.concatenate(
+            (np.full(lengths.shape[:-1] + (1,), self.limits.reference[0]), lengths), axis=-1
         )
 
     def cylinder_lengths(self, angles: Any) -> np.ndarray:
@@ -515,111 +512,23 @@ class Excavator:
                     return Q
             except TypeError:  # arguments of types the kernel does not take (_warm)
                 pass
-        D = self.validate(D)
-        return in_blocks(self._poses, D.reshape(-1, 4), block=_BLOCK, rows=True).T.reshape(D.shape)
-
-    def _poses(self, D: np.ndarray) -> tuple[np.ndarray, ...]:
-        """The columns of Q (N, 4) of valid states D (N, 4) (eqs. 1-3)."""
-        t1, d2, d3, d4 = _columns(D)
-        (t2, t3, t4), _, _, trig, _ = self._linkages(d2, d3, d4)
-        a1, _, _, b1, _, _ = self._chain_terms(*trig)
-        return tuple(self._tip(t1, a1, b1, t2 + t3 + t4))
+        return self._in_blocks(_pose, self.validate(D))
 
     def open_chain_pose(self, theta: Any) -> np.ndarray:
         """Q = [x, y, z, alpha] from the open-chain joints theta1..theta4 (eq. 3), no limits."""
-        theta = _vectors(theta, 4, "theta = [theta1, theta2, theta3, theta4]")
-        t1, t2, t3, t4 = _columns(theta.reshape(-1, 4))
-        a1, _, _, b1, _, _ = self._chain_terms(
-            np.cos(t2), np.sin(t2), np.cos(t3), np.sin(t3), np.cos(t4), np.sin(t4)
-        )
-        return _table(self._tip(t1, a1, b1, t2 + t3 + t4), t1.shape).reshape(theta.shape)
-
-    def _tip(self, t1: np.ndarray, a1: np.ndarray, b1: np.ndarray, alpha: np.ndarray) -> list[np.ndarray]:
-        """Eq. 3 from eq. 4's coefficients: the boom-plane radius rho = l1 + b1 turned by the
-        swing, z = l0 + a1."""
-        rho, (c1, s1) = self.l1 + b1, cos_sin(t1)
-        return [rho * c1, rho * s1, self.l0 + a1, alpha]
+        return self.hydraulic.open_chain_pose(_vectors(theta, 4, "theta = [theta1, theta2, theta3, theta4]"))
 
     def pins(self, D: Any) -> dict[str, np.ndarray]:
-        """Every pin (and the tip) in the base frame, shape (..., 3), for drawing and checking."""
-        D = self.validate(D)
-        t1, d2, d3, d4 = _columns(D)
-        (t2, t3, t4), _, _, _, ((ex, ey), (ox, oy)) = self._linkages(d2, d3, d4)
-        bx, by = self.linkages.bucket_pin.tolist()
-        pins = self.linkages.pins
-        foot = np.array([self.l1, self.l0])
-
-        def place(origin: np.ndarray, angle: Any, local: Any) -> np.ndarray:
-            c, s = np.cos(angle), np.sin(angle)
-            x = np.asarray(local[0]) * c - np.asarray(local[1]) * s
-            y = np.asarray(local[0]) * s + np.asarray(local[1]) * c
-            return np.stack((origin[..., 0] + x, origin[..., 1] + y), axis=-1)
-
-        zero = np.zeros_like(t2)
-        boom = (foot + zero[..., None], t2)
-        arm_pin = place(*boom, (self.l2, 0.0))
-        arm = (arm_pin, t2 + t3)
-        bucket_pin = place(*arm, self.linkages.bucket_pin)
-        bucket = (bucket_pin, t2 + t3 + t4)
-        side = {
-            "boom_foot": foot + zero[..., None],
-            "boom_cylinder_base": pins["boom_cylinder_base"] + zero[..., None],
-            "boom_cylinder_rod": place(*boom, pins["boom_cylinder_rod"]),
-            "arm_pin": arm_pin,
-            "arm_cylinder_base": place(*boom, pins["arm_cylinder_base"]),
-            "arm_cylinder_rod": place(*arm, pins["arm_cylinder_rod"]),
-            "bucket_pin": bucket_pin,
-            "bucket_cylinder_base": place(*arm, pins["bucket_cylinder_base"]),
-            "side_link_pivot": place(*arm, self.linkages.pivot),
-            "bucket_cylinder_rod": place(*arm, (bx + ex, by + ey)),
-            "h_link_pin": place(*arm, (bx + ox, by + oy)),
-            "h_link_pin_on_bucket": place(*bucket, pins["h_link_pin"]),
-            "bucket_tip": place(*bucket, (self.l4, 0.0)),
-        }
-        c1, s1 = np.cos(t1)[..., None], np.sin(t1)[..., None]
-        return {
-            name: np.concatenate((p[..., :1] * c1, p[..., :1] * s1, p[..., 1:]), axis=-1)
-            for name, p in side.items()
-        }
-
-    def _chain_terms(
-        self, c2: np.ndarray, s2: np.ndarray, c3: np.ndarray, s3: np.ndarray, c4: np.ndarray, s4: np.ndarray
-    ) -> tuple[np.ndarray, ...]:
-        """a1..a3, b1..b3 of eq. 4 from cos/sin of theta2, theta3, theta4 (the sums by angle
-        addition): a_i = sum of l_j sin(theta2 + .. + theta_j) over j >= i, b_i the cosines."""
-        c23, s23 = c2 * c3 - s2 * s3, s2 * c3 + c2 * s3
-        c234, s234 = c23 * c4 - s23 * s4, s23 * c4 + c23 * s4
-        a3, b3 = self.l4 * s234, self.l4 * c234
-        a2, b2 = self.l3 * s23 + a3, self.l3 * c23 + b3
-        return self.l2 * s2 + a2, a2, a3, self.l2 * c2 + b2, b2, b3
+        """Every pin (and the tip) in the base frame, shape (..., 3), for drawing and checking:
+        the family core's pins under the excavator's names (``machine_file.PINS``; the H-link pin
+        under both of its names is one array)."""
+        pins = self.hydraulic.solve_pins(self.validate(D))
+        return {name: pins[pin] for name, pin in PINS.items()}
 
     def j0(self, theta: Any) -> np.ndarray:
-        """J0(theta) of eq. 5: Qdot = J0 thetadot, rows x, y, z, alpha; columns theta1..theta4."""
-        theta = _vectors(theta, 4, "theta = [theta1, theta2, theta3, theta4]")
-        t1, t2, t3, t4 = _columns(theta.reshape(-1, 4))
-        a1, a2, a3, b1, b2, b3 = self._chain_terms(
-            np.cos(t2), np.sin(t2), np.cos(t3), np.sin(t3), np.cos(t4), np.sin(t4)
-        )
-        rho, c1, s1 = self.l1 + b1, np.cos(t1), np.sin(t1)
-        entries = [
-            -rho * s1,
-            -a1 * c1,
-            -a2 * c1,
-            -a3 * c1,
-            rho * c1,
-            -a1 * s1,
-            -a2 * s1,
-            -a3 * s1,
-            0.0,
-            b1,
-            b2,
-            b3,
-            0.0,
-            1.0,
-            1.0,
-            1.0,
-        ]
-        return _table(entries, t1.shape).reshape(theta.shape[:-1] + (4, 4))
+        """J0(theta) of eq. 5: Qdot = J0 thetadot, rows x, y, z, alpha; columns theta1..theta4
+        (eq. 4's columns, the family's closed form)."""
+        return self.hydraulic.j0(_vectors(theta, 4, "theta = [theta1, theta2, theta3, theta4]"))
 
     def joint_rates(self, theta: Any, Q_dot: Any) -> np.ndarray:
         """thetadot = J0^-1 Qdot (eq. 6): open-chain joint rates for a tip velocity.
@@ -636,29 +545,14 @@ class Excavator:
 
     def k_matrix(self, D: Any) -> np.ndarray:
         """K = diag(1, dtheta2/dd2, dtheta3/dd3, dtheta4/dd4) of eq. 7 (theta1 is D's own swing)."""
-        D = self.validate(D)
-        k, _ = self.k_entries(D[..., 1:])
-        ones = np.ones(D.shape[:-1] + (1,))
-        diagonal = np.concatenate((ones, k), axis=-1)
-        return diagonal[..., :, None] * np.eye(4)
+        return self._in_blocks(_k, self.validate(D))
 
     def jc0(self, D: Any) -> np.ndarray:
         """JC0 = J0 K (eq. 8): Qdot = JC0 Ddot."""
         D = np.asarray(D, dtype=float)
         if D.shape == (4,) and (jc0 := self._compiled("jc0", np.empty((4, 4)), D)) is not None:
             return jc0
-        D = self.validate(D)
-        table = in_blocks(self._jc0s, D.reshape(-1, 4), block=_BLOCK, rows=True)
-        return table.T.reshape(D.shape[:-1] + (4, 4))
-
-    def _jc0s(self, D: np.ndarray) -> tuple[np.ndarray, ...]:
-        """The 16 entries of JC0 (eq. 8), row by row, of valid states D (N, 4), each (N,)."""
-        t1, d2, d3, d4 = _columns(D)
-        _, (k2, k3, k4), _, trig, _ = self._linkages(d2, d3, d4)
-        a1, a2, a3, b1, b2, b3 = self._chain_terms(*trig)
-        return tuple(
-            _jc0_entries(self.l1 + b1, *cos_sin(t1), a1, a2, a3, b1, b2, b3, k2, k3, k4, np.zeros(t1.shape))
-        )
+        return self._in_blocks(_jc0, self.validate(D))
 
     # ------------------------------------------------------------------ full state (eqs. 3-11)
     def state(self, D: Any, D_dot: Any, D_ddot: Any = None) -> BucketState:
@@ -694,107 +588,26 @@ class Excavator:
             except TypeError:  # arguments of types the kernel does not take (_warm)
                 pass
         D = self.validate(D)
-        rates = _finite(D_dot, D.shape, "D_dot").reshape(-1, 4)
-        accelerations = None if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot").reshape(-1, 4)
-        flat = np.ascontiguousarray(D.reshape(-1, 4))
-        # (40, N): entry j of every state in row j.
-        table = in_blocks(self._states, flat, rates, accelerations, block=_BLOCK, rows=True)
-        return BucketState(table.reshape(10, 4, len(flat)).swapaxes(1, 2).reshape((10, *D.shape)))
-
-    def _states(self, D: np.ndarray, D_dot: np.ndarray, D_ddot: np.ndarray | None) -> tuple[np.ndarray, ...]:
-        """The 40 entries of BucketStates, each (N,): theta, theta_dot, theta_ddot, Q, Q_dot,
-        Q_ddot, then JC0 row by row, of valid states D (N, 4) with rates D_dot and accelerations
-        D_ddot (None: zero)."""
-        t1, d2, d3, d4 = _columns(D)
-        w1, v2, v3, v4 = _columns(D_dot)
-        e1, f2, f3, f4 = np.zeros((4, len(D))) if D_ddot is None else _columns(D_ddot)
-        (t2, t3, t4), (k2, k3, k4), (dk2, dk3, dk4), trig, _ = self._linkages(d2, d3, d4)
-        a1, a2, a3, b1, b2, b3 = self._chain_terms(*trig)
-        rho, (c1, s1) = self.l1 + b1, cos_sin(t1)
-        # thetadot = K Ddot (eq. 7); thetaddot = K Dddot + K1 Ddot^2 (its time derivative).
-        w2, w3, w4 = k2 * v2, k3 * v3, k4 * v4
-        e2, e3, e4 = k2 * f2 + dk2 * v2 * v2, k3 * f3 + dk3 * v3 * v3, k4 * f4 + dk4 * v4 * v4
-        # Eqs. 8 and 10 in the boom plane: rho = l1 + l2 c2 + l3 c23 + l4 c234 and z = l0 +
-        # l2 s2 + l3 s23 + l4 s234, whose links turn at w2, o23 = w2 + w3 and alphadot = o23 + w4.
-        # The rates are eq. 4's columns times thetadot; the accelerations add each link's
-        # centripetal term -(l c, l s) o^2, where l2 c2 = b1 - b2, l3 c23 = b2 - b3, l4 c234 = b3
-        # (likewise a for the sines): eq. 4's coefficients, no new trigonometry.
-        o23 = w2 + w3
-        alpha_dot = o23 + w4
-        q2, q23, q234 = w2 * w2, o23 * o23, alpha_dot * alpha_dot
-        rho_dot, z_dot = -(a1 * w2 + a2 * w3 + a3 * w4), b1 * w2 + b2 * w3 + b3 * w4
-        rho_ddot = -(a1 * e2 + a2 * e3 + a3 * e4 + (b1 - b2) * q2 + (b2 - b3) * q23 + b3 * q234)
-        z_ddot = b1 * e2 + b2 * e3 + b3 * e4 - ((a1 - a2) * q2 + (a2 - a3) * q23 + a3 * q234)
-        # x, y = rho (cos, sin) theta1: the boom plane's motion turned by the swing; d/dt of
-        # (c1, s1) brings in the swing rate w1 and acceleration e1.
-        x, y = rho * c1, rho * s1
-        radial = rho_ddot - rho * w1 * w1
-        tangential = 2.0 * rho_dot * w1 + rho * e1
-        entries = [
-            t1,
-            t2,
-            t3,
-            t4,
-            w1,
-            w2,
-            w3,
-            w4,
-            e1,
-            e2,
-            e3,
-            e4,
-            x,
-            y,
-            self.l0 + a1,
-            t2 + t3 + t4,
-            rho_dot * c1 - y * w1,
-            rho_dot * s1 + x * w1,
-            z_dot,
-            alpha_dot,
-            c1 * radial - s1 * tangential,
-            s1 * radial + c1 * tangential,
-            z_ddot,
-            e2 + e3 + e4,
-            *_jc0_entries(rho, c1, s1, a1, a2, a3, b1, b2, b3, k2, k3, k4, np.zeros(t1.shape)),
-        ]
-        return tuple(entries)
+        D = self.validate(D)
+        rates = _finite(D_dot, D.shape, "D_dot")
+        accelerations = None if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot")
+        return BucketState(np.moveaxis(self._in_blocks(_state_rows, D, rates, accelerations), -2, 0))
 
     def acceleration_matrices(self, D: Any) -> tuple[np.ndarray, np.ndarray]:
         """JC1_0 (..., 4, 4) and JC2_0 (..., 4, 6) of eq. 11.
 
         Qddot = JC0 Dddot + JC1_0 Ddot^2 + JC2_0 DDdot with Ddot^2 = the squared rates and
         DDdot = [d1 d2, d1 d3, d1 d4, d2 d3, d2 d4, d3 d4] (products of the rates of D).
-        JC1_0 = J0 K1 + J1_0 K^2, JC2_0 = J2_0 K2, where J1_0 / J2_0 hold the pure and mixed
-        second derivatives of eq. 3 and K2 the products k_i k_j.
+        Without Dddot, Qddot (eq. 10, the family core's) is the quadratic form Ddot^T H Ddot of
+        H = d2Q/dD2: along e_i it is H_ii, JC1_0's column i; along e_i + e_j it adds 2 H_ij,
+        JC2_0's column of the pair (i, j).
         """
         D = self.validate(D)
-        t1, d2, d3, d4 = (D[..., i] for i in range(4))
-        (t2, t3, t4), (k2, k3, k4), (dk2, dk3, dk4), trig, _ = self._linkages(d2, d3, d4)
-        a1, a2, a3, b1, b2, b3 = self._chain_terms(*trig)
-        rho, c1, s1 = self.l1 + b1, np.cos(t1), np.sin(t1)
-        k = np.stack((np.ones_like(k2), k2, k3, k4), axis=-1)
-        dk = np.stack((np.zeros_like(dk2), dk2, dk3, dk4), axis=-1)
-        # Hessian of Q(theta): d2rho/dthj dthk = -b_max(j,k); d2z = -a_max(j,k); rho = l1 + b1.
-        a = np.stack((a1, a2, a3), axis=-1)
-        b = np.stack((b1, b2, b3), axis=-1)
-        hess = np.zeros(D.shape[:-1] + (4, 4, 4))
-        hess[..., 0, 0, 0], hess[..., 1, 0, 0] = -rho * c1, -rho * s1
-        for j in range(1, 4):
-            hess[..., 0, 0, j] = hess[..., 0, j, 0] = s1 * a[..., j - 1]
-            hess[..., 1, 0, j] = hess[..., 1, j, 0] = -c1 * a[..., j - 1]
-            for i in range(1, 4):
-                top = max(i, j) - 1
-                hess[..., 0, i, j] = -c1 * b[..., top]
-                hess[..., 1, i, j] = -s1 * b[..., top]
-                hess[..., 2, i, j] = -a[..., top]
-        j0 = self.j0(np.stack((t1, t2, t3, t4), axis=-1))
-        diag = np.arange(4)
-        jc1 = j0 * dk[..., None, :] + hess[..., diag, diag] * (k * k)[..., None, :]
-        pairs = [(i, j) for i in range(4) for j in range(i + 1, 4)]
-        jc2 = np.stack(
-            [2.0 * hess[..., i, j] * (k[..., i] * k[..., j])[..., None] for i, j in pairs], axis=-1
-        )
-        return jc1, jc2
+        along = np.broadcast_to(D[..., None, :], D.shape[:-1] + _PROBES.shape)
+        Q_ddot = self.hydraulic.solve(along, _PROBES).Q_ddot  # (..., 10, 4): per probe
+        i, j = _PAIRS.T
+        jc2 = Q_ddot[..., 4:, :] - Q_ddot[..., i, :] - Q_ddot[..., j, :]
+        return Q_ddot[..., :4, :].swapaxes(-1, -2), jc2.swapaxes(-1, -2)
 
     # ------------------------------------------------------------------ inverse (eqs. 9, 12-13)
     def cylinder_rates(self, D: Any, Q_dot: Any) -> RateSolution:
@@ -891,60 +704,27 @@ class RateSolution:
     condition: np.ndarray  # (...,) 2-norm condition number of JC0
 
 
-def _jc0_entries(
-    rho: np.ndarray,
-    c1: np.ndarray,
-    s1: np.ndarray,
-    a1: np.ndarray,
-    a2: np.ndarray,
-    a3: np.ndarray,
-    b1: np.ndarray,
-    b2: np.ndarray,
-    b3: np.ndarray,
-    k2: np.ndarray,
-    k3: np.ndarray,
-    k4: np.ndarray,
-    zero: np.ndarray,
-) -> list[np.ndarray]:
-    """JC0 = J0 K (eqs. 5, 7, 8), row by row; column 1 is theta1 itself (k1 = 1).
-
-    The boom-plane columns are -a_i k_i (d rho / d D_i, eq. 4) turned by the swing; ``zero``
-    (zeros of the batch's shape) fills the two entries that are zero by structure.
-    """
-    r2, r3, r4 = a1 * k2, a2 * k3, a3 * k4
-    return [
-        -s1 * rho,
-        -c1 * r2,
-        -c1 * r3,
-        -c1 * r4,
-        c1 * rho,
-        -s1 * r2,
-        -s1 * r3,
-        -s1 * r4,
-        zero,
-        b1 * k2,
-        b2 * k3,
-        b3 * k4,
-        zero,
-        k2,
-        k3,
-        k4,
-    ]
+def _pose(state: HydraulicState) -> np.ndarray:
+    return state.Q
 
 
-def _columns(values: np.ndarray) -> np.ndarray:
-    """The columns of values (N, k) as the contiguous rows of one array (k, N): every later
-    ufunc then streams memory instead of striding through rows."""
-    return np.ascontiguousarray(values.T)
+def _joints(state: HydraulicState) -> np.ndarray:
+    return state.theta[..., 1:]
 
 
-def _table(entries: Any, shape: tuple[int, ...]) -> np.ndarray:
-    """Entries (arrays of ``shape`` (N,) or floats) -> array (N, len(entries)); filled entry by
-    entry into contiguous rows and returned as a view (the layout of the blocks' outputs)."""
-    out = np.empty((len(entries), *shape))
-    for row, entry in zip(out, entries, strict=True):
-        row[...] = entry
-    return out.T
+def _k(state: HydraulicState) -> np.ndarray:
+    return state.k
+
+
+def _jc0(state: HydraulicState) -> np.ndarray:
+    return state.jc0
+
+
+def _state_rows(state: HydraulicState) -> np.ndarray:
+    """The rows of a BucketState (..., 10, 4): theta, theta_dot, theta_ddot, Q, Q_dot, Q_ddot,
+    then JC0's rows."""
+    fields = tuple(state)
+    return np.concatenate((np.stack(fields[:6], axis=-2), fields[6]), axis=-2)
 
 
 def _finite(values: Any, shape: tuple[int, ...], name: str) -> np.ndarray:

@@ -24,7 +24,9 @@ Every value is checked by the shared :func:`manipulator_kinematics.schema.valida
 missing, mistyped and out-of-range keys are errors naming the dotted key); :func:`describe` then
 checks what one key alone cannot (a stroke's ends in order, reference values inside their limits,
 the bodies' frames) and folds the values into a :class:`Description`, the geometry the kinematics
-(:class:`excavator_kinematics.core.kinematics.Excavator`) is built from. Whether the linkage
+(:class:`excavator_kinematics.core.kinematics.Excavator`) is built from, with the family's
+description of the same section (``Description.family``: what the family's numpy core, the
+excavator's numpy path, solves; :data:`PINS` names its pins the excavator's way). Whether the linkage
 assembles over the whole stroke box, on the right branches and inside the chain's joint limits is
 checked by the model, which has the closed loops. Plain data and numpy: no rclpy.
 """
@@ -41,6 +43,8 @@ import numpy as np
 
 from manipulator_kinematics.hydraulic.convert import from_excavator_file
 from manipulator_kinematics.hydraulic.description import SECTION as FAMILY
+from manipulator_kinematics.hydraulic.description import Description as FamilyDescription
+from manipulator_kinematics.hydraulic.description import parse as parse_family
 from manipulator_kinematics.param_files import ConfigError
 from manipulator_kinematics.schema import (
     Field,
@@ -160,6 +164,23 @@ TOPOLOGY: dict[str, Any] = {
 }
 #: The dyads in the order of Description.orientations (boom, arm, bucket cylinder, H-link).
 DYADS = tuple(TOPOLOGY["dyads"])
+#: The excavator's pin names (Excavator.pins, in its order) -> TOPOLOGY's: the H-link pin under
+#: both of its names (as the H-link's end and as the bucket's pin).
+PINS = {
+    "boom_foot": "boom_foot",
+    "boom_cylinder_base": "boom_cyl_base",
+    "boom_cylinder_rod": "boom_cyl_rod",
+    "arm_pin": "arm_pin",
+    "arm_cylinder_base": "arm_cyl_base",
+    "arm_cylinder_rod": "arm_cyl_rod",
+    "bucket_pin": "bucket_pin",
+    "bucket_cylinder_base": "bkt_cyl_base",
+    "side_link_pivot": "ilink_pin_on_arm",
+    "bucket_cylinder_rod": "bkt_cyl_rod",
+    "h_link_pin": "hlink_pin_on_bucket",
+    "h_link_pin_on_bucket": "hlink_pin_on_bucket",
+    "bucket_tip": "tip",
+}
 _HINT = (
     "the excavator nodes and Excavator read the excavator's topology only (docs/excavator.md); "
     "run this machine with the hydraulic_* nodes or HydraulicModel"
@@ -323,6 +344,9 @@ class Description:
     """
 
     name: str
+    # The same machine in the family's form: what the model's numpy core solves
+    # (manipulator_kinematics.hydraulic.HydraulicModel), from the same section (:func:`family_description`).
+    family: FamilyDescription
     foot: tuple[float, float]  # boom foot pin [l1, l0]
     boom_length: float  # l2
     arm_length: float  # l3
@@ -493,6 +517,7 @@ def describe(params: Mapping[str, Any]) -> Description:
     )
     return Description(
         name=g["name"],
+        family=family_description(g),
         foot=(base["boom_foot"][0], base["boom_foot"][1]),
         boom_length=boom["arm_pin"][0],
         arm_length=arm["bucket_pin"][0],
@@ -524,6 +549,22 @@ def describe(params: Mapping[str, Any]) -> Description:
 
 
 _FRAME = "the excavator's link frames run from the body's root pin along its next pin"
+
+
+def family_description(section: Mapping[str, Any]) -> FamilyDescription:
+    """The family's description of a ``hydraulic_machine`` section validated as the excavator's
+    (:func:`geometry`): its optional keys left out where not given, and a continuous swing's open
+    limits as [-pi, pi] (the family's swing has ends; the excavator wraps every angle into them)."""
+    values = _given(section)
+    swing = values["swing"]
+    if math.isinf(swing["max_angle"]):
+        swing.update(min_angle=-math.pi, max_angle=math.pi)
+    return parse_family(values)
+
+
+def _given(values: Mapping[str, Any]) -> dict[str, Any]:
+    """A copy of nested ``values`` without the keys whose value is None (optional, not given)."""
+    return {k: _given(v) if isinstance(v, Mapping) else v for k, v in values.items() if v is not None}
 
 
 def parse(params: Mapping[str, Any], source: str = "") -> Description:

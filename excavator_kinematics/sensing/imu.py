@@ -149,6 +149,8 @@ class ImuArm:
         h_pin = np.array(g.h_link_pin)  # bucket frame
         self._h_radius, self._h_phase = float(np.hypot(*h_pin)), math.atan2(h_pin[1], h_pin[0])
         self._h_orientation = g.orientations[3]
+        # The joints at the reference state: the branch every reading is brought to (joints()).
+        self._reference = exc.joint_angles(exc.limits.reference[1:])
 
     def joints(self, up: ArrayLike, omega: ArrayLike) -> ImuJoints:
         """theta2..4, rates, cylinder lengths and rates from up vectors and angular velocities
@@ -176,8 +178,7 @@ class ImuArm:
             theta4, theta4_dot = relative[..., 2], relative_dot[..., 2]
         # Side angles are in (-pi, pi]: bring the joints to the branch the model uses (eqs. 1-2).
         theta = np.stack([theta2, theta3, theta4], axis=-1)
-        reference = self.exc.joint_angles(self.exc.limits.reference[1:])
-        theta = reference + (theta - reference + np.pi) % (2.0 * np.pi) - np.pi
+        theta = self._reference + (theta - self._reference + np.pi) % (2.0 * np.pi) - np.pi
         theta_dot = np.stack([relative_dot[..., 0], relative_dot[..., 1], theta4_dot], axis=-1)
         lengths = self.exc.cylinder_lengths(theta.reshape(-1, 3)).reshape(theta.shape)
         k, _ = self.exc.k_entries(lengths.reshape(-1, 3))

@@ -58,6 +58,7 @@ QUANTITIES = {
 }
 # Pins on the upper structure: they swing with it at a fixed radius, not part of the attachment.
 _BODY_PINS = ("boom_foot", "boom_cylinder_base")
+_AT_REST = np.zeros(4)  # D_dot of the joint angles' state (arm_tilt)
 
 
 @dataclass(frozen=True)
@@ -97,8 +98,10 @@ class WorkingRanges:
 
     def arm_tilt(self, L: np.ndarray) -> np.ndarray:
         """theta2 + theta3 + 90 deg (rad): 0 where the arm points straight down."""
-        theta = self.model.joint_angles(np.reshape(L, (-1, 3)))
-        return (theta[:, 0] + theta[:, 1] + np.pi / 2).reshape(np.shape(L)[:-1])
+        # The joints of the full state: its compiled kernel (joint_angles is the numpy core's,
+        # 30x slower on the grid's 41^3 states).
+        theta = self.model.state(self._states(L).reshape(-1, 4), _AT_REST).theta
+        return (theta[:, 1] + theta[:, 2] + np.pi / 2).reshape(np.shape(L)[:-1])
 
     def front_radius(self, L: np.ndarray) -> np.ndarray:
         """Largest r (...,) of the attachment's pins and teeth."""

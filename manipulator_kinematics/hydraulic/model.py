@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -214,7 +215,11 @@ class IKResult:
 class HydraulicModel:
     """The kinematics of one machine of the family (module docstring)."""
 
-    def __init__(self, description: Description) -> None:
+    def __init__(self, description: Description, *, check: bool = True) -> None:
+        """The model of ``description``, refused (ConfigError naming the key) unless it assembles
+        over its stroke box (:meth:`check`). ``check`` False: the caller checks first, then calls
+        :meth:`check` (the excavator's Excavator, whose checks of the same linkage name its keys
+        its own way)."""
         self.description = description
         d = description
         self.actuator_names = d.actuator_names
@@ -242,8 +247,8 @@ class HydraulicModel:
         self._n, self._nq = self.program.n, self.program.nq
         self._one, self._table_shape = (self.m,), (self._n + self._nq, 3 + self.m)
         self._no_acceleration = np.zeros(self.m)  # D_ddot of a state without (the kernel only reads it)
-        self._check_box()
-        self._inverse = self._inverse_plan()
+        if check:
+            self.check()
 
     @classmethod
     def from_file(cls, path: str | Path, node_name: str = "/**") -> HydraulicModel:
@@ -299,9 +304,10 @@ class HydraulicModel:
                 out[step.child] = out[step.parent]
         return out
 
-    def _check_box(self) -> None:
+    def check(self) -> None:
         """Refuse a machine file whose linkage does not close, or leaves a joint's limits, over a
-        5-point grid of every cylinder's stroke (swing at its reference): the key named."""
+        5-point grid of every cylinder's stroke (swing at its reference): ConfigError naming the
+        key (the constructor runs it unless told not to)."""
         axes = [np.linspace(lo, hi, 5) for lo, hi in zip(self.lower, self.upper, strict=True)]
         if self.swing:
             axes[0] = np.array([self.reference[0]])
@@ -578,7 +584,10 @@ class HydraulicModel:
 
     def pins(self, D: Any) -> dict[str, np.ndarray]:
         """Every pin in the base frame (..., 3) under its machine-file name."""
-        D = self.validate(D)
+        return self.solve_pins(self.validate(D))
+
+    def solve_pins(self, D: np.ndarray) -> dict[str, np.ndarray]:
+        """:meth:`pins` of states D (..., m) that the caller has checked (as :meth:`solve`)."""
         solved = self._solve(D)
         c, s = (np.cos(D[..., 0]), np.sin(D[..., 0])) if self.swing else (1.0, 0.0)
         out = {}
@@ -674,8 +683,7 @@ class HydraulicModel:
             raise StrokeError(f"D: expected (..., {self.m}) values [{', '.join(self.actuator_names)}]")
         D_dot = np.zeros(D.shape) if D_dot is None else _finite(D_dot, D.shape, "D_dot")
         with np.errstate(invalid="ignore"):  # a dyad that does not close: NaN, the caller's to drop
-            s = self._solve(D, D_dot)
-        return HydraulicState(s.theta.p, s.theta.v, s.theta.a, s.Q.p, s.Q.v, s.Q.a, s.Q.J, s.theta.J)
+            return self.solve(D, D_dot)
 
     def placements(self, D: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Every body's frame in the boom plane: name -> (origin (..., 2) as (r, z), angle (...)
@@ -734,7 +742,15 @@ class HydraulicModel:
             return HydraulicState.of_table(tables, self._n)
         D = self.validate(D)
         D_dot = _finite(D_dot, D.shape, "D_dot")
-        D_ddot = None if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot")
+        return self.solve(D, D_dot, None if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot"))
+
+    def solve(self, D: np.ndarray, D_dot: Any = None, D_ddot: Any = None) -> HydraulicState:
+        """The numpy core's :meth:`state` of states D (..., m) that the caller has checked: no
+        check and no compiled path here, rates and accelerations (None: zero) broadcast to D's
+        shape, NaN where a dyad does not close. For a model that holds this one and checks D its
+        own way (the excavator's Excavator: its stroke tolerance, its continuous swing)."""
+        D_dot = None if D_dot is None else np.broadcast_to(D_dot, D.shape)
+        D_ddot = None if D_ddot is None else np.broadcast_to(D_ddot, D.shape)
         s = self._solve(D, D_dot, D_ddot, every_pin=False)
         return HydraulicState(s.theta.p, s.theta.v, s.theta.a, s.Q.p, s.Q.v, s.Q.a, s.Q.J, s.theta.J)
 
@@ -859,6 +875,12 @@ class HydraulicModel:
         return self._solve_rows(free.jc0, Q_ddot - free.Q_ddot)[0]
 
     # ------------------------------------------------------------------ position IK
+    @cached_property
+    def _inverse(self) -> list[tuple[str, str, str, float, float, int]] | None:
+        """The linkage inverse's plan, made on first use (from the reference state, which a model
+        built unchecked assembles only once its owner has checked it)."""
+        return self._inverse_plan()
+
     def _inverse_plan(self) -> list[tuple[str, str, str, float, float, int]] | None:
         """The linkage inverse: with the main chain's bodies placed from theta, every other body
         placed from two known pins (body, pin, pin, 0, 0, 0) and every other pin solved as a dyad
