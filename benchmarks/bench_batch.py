@@ -54,8 +54,8 @@ def apis(largest: int) -> dict:
     loaded."""
     import numpy as np
 
-    from excavator_kinematics import inverse
-    from excavator_kinematics import kinematics as excavator
+    from excavator_kinematics.core import inverse
+    from excavator_kinematics.core import kinematics as excavator
     from manipulator_kinematics import serial_chain
     from manipulator_kinematics.param_files import config_path
     from palletizer_kinematics import kinematics as palletizer

@@ -1071,13 +1071,20 @@ class WideExcavator:
 
 
 def random_path(
-    rng: np.random.Generator, start: np.ndarray, names: tuple[str, ...], reference: np.ndarray, k: int
+    rng: np.random.Generator,
+    start: np.ndarray,
+    names: tuple[str, ...],
+    reference: np.ndarray,
+    k: int,
+    planar: bool = False,
 ) -> PlanPath.Request:
-    """A PlanPath request: plausible waypoints near the tool point ``start``, or malformed
-    (extremes, NaN, bad steps and speeds, seeds of the joints ``names`` wrong or short, many
-    waypoints)."""
+    """A PlanPath request: plausible waypoints near the tool point ``start`` (``planar``: in the
+    plane y = start's, a machine without a swing), or malformed (extremes, NaN, bad steps and
+    speeds, seeds of the joints ``names`` wrong or short, many waypoints)."""
     count = int(rng.integers(0, 5)) if k % 5 else int(rng.integers(0, 200))
     waypoints = start + rng.normal(scale=2.0, size=(count, 3))
+    if planar:
+        waypoints[:, 1] = start[1]
     request = PlanPath.Request(
         step=float(rng.choice([0.0, 0.05, 0.5, 1e-300, -1.0, math.nan, math.inf])),
         tip_speed=float(rng.choice([0.0, 0.2, 3.0, 1e-300, -0.5, math.nan, 1e308])),
@@ -1496,7 +1503,8 @@ def test_family_ik_server_survives_any_input(
         counts = fuzz_ik_server(probe, ik, fk, arm, limits, rng)
         reference = h.reference - h.zero_offset
         start_point = arm.fkine(reference)[:3, 3]
-        requests = [random_path(rng, start_point, tuple(limits.names), reference, k) for k in range(100)]
+        names = tuple(limits.names)
+        requests = [random_path(rng, start_point, names, reference, k, not h.swing) for k in range(100)]
         plans = calls(probe, planner, requests, window=2)
         plan_problems = count_plan_problems(plans)
         alive = server.alive()
