@@ -1076,15 +1076,16 @@ def random_path(
     names: tuple[str, ...],
     reference: np.ndarray,
     k: int,
-    planar: bool = False,
+    reachable: np.ndarray | None = None,
 ) -> PlanPath.Request:
-    """A PlanPath request: plausible waypoints near the tool point ``start`` (``planar``: in the
-    plane y = start's, a machine without a swing), or malformed (extremes, NaN, bad steps and
-    speeds, seeds of the joints ``names`` wrong or short, many waypoints)."""
+    """A PlanPath request: plausible waypoints near the tool point ``start`` (or rows of
+    ``reachable``, tool points of the machine), or malformed (extremes, NaN, bad steps and speeds,
+    seeds of the joints ``names`` wrong or short, many waypoints)."""
     count = int(rng.integers(0, 5)) if k % 5 else int(rng.integers(0, 200))
-    waypoints = start + rng.normal(scale=2.0, size=(count, 3))
-    if planar:
-        waypoints[:, 1] = start[1]
+    if reachable is None:
+        waypoints = start + rng.normal(scale=2.0, size=(count, 3))
+    else:
+        waypoints = reachable[rng.integers(len(reachable), size=count)]
     request = PlanPath.Request(
         step=float(rng.choice([0.0, 0.05, 0.5, 1e-300, -1.0, math.nan, math.inf])),
         tip_speed=float(rng.choice([0.0, 0.2, 3.0, 1e-300, -0.5, math.nan, 1e308])),
@@ -1504,7 +1505,10 @@ def test_family_ik_server_survives_any_input(
         reference = h.reference - h.zero_offset
         start_point = arm.fkine(reference)[:3, 3]
         names = tuple(limits.names)
-        requests = [random_path(rng, start_point, names, reference, k, not h.swing) for k in range(100)]
+        # Plausible waypoints: tool points of states near the reference (some plans succeed).
+        near = h.reference + 0.2 * rng.uniform(-1.0, 1.0, (50, h.m)) * (h.upper - h.lower)
+        reachable = arm.fkine(np.clip(near, h.lower, h.upper) - h.zero_offset)[:, :3, 3]
+        requests = [random_path(rng, start_point, names, reference, k, reachable) for k in range(100)]
         plans = calls(probe, planner, requests, window=2)
         plan_problems = count_plan_problems(plans)
         alive = server.alive()
