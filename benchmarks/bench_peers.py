@@ -35,6 +35,7 @@ import json
 import math
 import os
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -359,13 +360,18 @@ def readme_block(result: dict, rounds: int, load: str, versions: str) -> str:
     return "\n".join(
         [
             MARKERS[0],
-            f"Measured {time.strftime('%Y-%m-%d')} by `python benchmarks/bench_peers.py --readme --write`: "
-            f"{os.cpu_count()} cores, load average (1, 5, 15 min) {load} (start-end); {versions}. "
-            "Ours and the peer in one process, in turn; thread CPU time; medians of "
-            f"{rounds} rounds; ratio = ours / peer, median (min-max) of the per-round ratios (< 1: "
-            "ours is faster). The same robot in both, checked equal first; each peer at its fastest "
-            "documented call (docs/benchmarks.md). A peer has no batch call: its batch of N costs N "
-            "of its single calls, so the batch's ratio is ours per state / the peer's call.",
+            *textwrap.wrap(
+                f"Measured {time.strftime('%Y-%m-%d')} by "
+                "`python benchmarks/bench_peers.py --readme --write`: "
+                f"{os.cpu_count()} cores, load average (1, 5, 15 min) {load} (start-end); {versions}. "
+                "Ours and the peer in one process, in turn; thread CPU time; medians of "
+                f"{rounds} rounds; ratio = ours / peer, median (min-max) of the per-round ratios (< 1: "
+                "ours is faster). The same robot in both, checked equal first; each peer at its fastest "
+                "documented call (docs/benchmarks.md). A peer has no batch call: its batch of N costs N "
+                "of its single calls, so the batch's ratio is ours per state / the peer's call.",
+                width=100,
+                break_on_hyphens=False,
+            ),
             "",
             table_text(header, result["readme"]),
             MARKERS[1],
