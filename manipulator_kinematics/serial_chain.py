@@ -150,6 +150,7 @@ class SerialChain:
         self._offset = np.array([r.offset for r in rows], dtype=float)
         self._prismatic = np.array([r.prismatic for r in rows], dtype=bool)
         self._jacobian_shape, self._columns = (6, self.n), self.n
+        self._jacobian_one = (1, 6, self.n)  # a batch of one's, made once
         self._packed = self._pack()
 
     @property
@@ -264,7 +265,10 @@ class SerialChain:
                     return pose, jacobian
                 if ndim == 2:
                     n = len(q)
-                    pose, jacobian = np.empty((n, 4, 4)), np.empty((n, 6, self._columns))
+                    if n == 1:
+                        pose, jacobian = np.empty((1, 4, 4)), np.empty(self._jacobian_one)
+                    else:
+                        pose, jacobian = np.empty((n, 4, 4)), np.empty((n, 6, self._columns))
                     kernel.fkine_jacob0_batch(self._packed, q, pose, jacobian)
                     return pose, jacobian
             except (TypeError, ValueError):

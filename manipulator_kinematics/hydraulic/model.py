@@ -242,8 +242,10 @@ class HydraulicModel:
         self._code, self._constants = self.program.code, self.program.values
         self._n, self._nq = self.program.n, self.program.nq
         self._table_shape = (self._n + self._nq, 3 + self.m)
-        self._table_rows = self._n + self._nq  # a batch's table: (N, rows, 3 + m), built of ints
-        self._pose_shape, self._jc0_shape = (self._nq,), (self._nq, self.m)
+        # A batch's outputs: (N, *shape) built of ints, that of a batch of one made once.
+        self._table_rows, self._table_one = self._n + self._nq, (1, *self._table_shape)
+        self._pose_shapes = (self._nq,), (1, self._nq)
+        self._jc0_shapes = (self._nq, self.m), (1, self._nq, self.m)
         # D_ddot of a state without, and of every state of a batch (the kernel only reads it).
         self._no_acceleration, self._no_accelerations = np.zeros(self.m), np.zeros((1, self.m))
         self._check_box()
@@ -516,9 +518,12 @@ class HydraulicModel:
         return _Jet(*(np.stack([getattr(q, f) for q in rows], axis=-1 if f != "J" else -2) for f in "pJva"))
 
     # ------------------------------------------------------------------ forward API
-    def _compiled(self, one: str, many: str, shape: tuple[int, ...], D: np.ndarray) -> np.ndarray | None:
+    def _compiled(
+        self, one: str, many: str, shapes: tuple[tuple[int, ...], tuple[int, ...]], D: np.ndarray
+    ) -> np.ndarray | None:
         """The kernel's ``one`` (:mod:`manipulator_kinematics.hydraulic.kernel`) of one state D (m,),
-        or its loop ``many`` over a batch D (N, m), into a new array (shape) or (N, *shape); None
+        or its loop ``many`` over a batch D (N, m), into a new array (shape) or (N, *shape) (shapes:
+        shape and that of a batch of one); None
         where the kernel is not loaded yet, cannot take D as given (another dtype or layout:
         :func:`_warm`) or refuses a state (the caller's numpy path then says why). A batch of one
         is the single call with one axis more (issue #32: it costs no more than the single call)."""
@@ -526,11 +531,13 @@ class HydraulicModel:
         if kernel is None:
             return None
         try:
-            if D.ndim == 1:
-                out = np.empty(shape)
+            ndim = D.ndim
+            if ndim == 1:
+                out = np.empty(shapes[0])
                 return out if getattr(kernel, one)(self._code, self._constants, D, out) else None
-            if D.ndim == 2:
-                out = np.empty((len(D),) + shape)
+            if ndim == 2:
+                n = len(D)
+                out = np.empty(shapes[1] if n == 1 else (n, *shapes[0]))
                 return out if getattr(kernel, many)(self._code, self._constants, D, out) else None
         except TypeError:
             pass
@@ -559,9 +566,9 @@ class HydraulicModel:
         """Q (..., nq) for D (eq. 3 through the linkages, eqs. 1-2)."""
         if type(D) is not np.ndarray:  # (another dtype: the kernel refuses it, validate converts)
             D = np.asarray(D, dtype=float)
-        if (Q := self._compiled("pose", "poses", self._pose_shape, D)) is not None:
+        if (Q := self._compiled("pose", "poses", self._pose_shapes, D)) is not None:
             return Q
-        if D.ndim > 1 and (Q := self._batch("poses", self._pose_shape, D)) is not None:
+        if D.ndim > 1 and (Q := self._batch("poses", self._pose_shapes[0], D)) is not None:
             return Q
         return self._solve(self.validate(D), every_pin=False).Q.p
 
@@ -693,9 +700,9 @@ class HydraulicModel:
         """JC0 = dQ/dD (..., nq, m) (eq. 8), rows in Q's order."""
         if type(D) is not np.ndarray:
             D = np.asarray(D, dtype=float)
-        if (J := self._compiled("jc0", "jc0s", self._jc0_shape, D)) is not None:
+        if (J := self._compiled("jc0", "jc0s", self._jc0_shapes, D)) is not None:
             return J
-        if D.ndim > 1 and (J := self._batch("jc0s", self._jc0_shape, D)) is not None:
+        if D.ndim > 1 and (J := self._batch("jc0s", self._jc0_shapes[0], D)) is not None:
             return J
         return self._solve(self.validate(D), every_pin=False).Q.J
 
@@ -727,7 +734,8 @@ class HydraulicModel:
             # A batch (N, m), the same steps as the single call: the rates as given, (N, m) or one
             # row for all (the kernel checks their rows; other shapes and types: _batch below), so
             # that a batch of one costs what a single call does (issue #32).
-            table = np.empty((len(D), self._table_rows, 3 + self.m))
+            n = len(D)
+            table = np.empty(self._table_one if n == 1 else (n, self._table_rows, 3 + self.m))
             accelerations = self._no_accelerations if D_ddot is None else D_ddot
             try:
                 done = kernel.states(self._code, self._constants, D, D_dot, accelerations, table)
