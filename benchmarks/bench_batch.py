@@ -41,6 +41,12 @@ BLOCK_US = 2000.0  # a timed block's length, about
 SINGLES = 500  # different states the single call takes in turn
 FRESH_CALLS = 7  # calls of a size in its fresh process, at least, and at least FRESH_US of CPU
 FRESH_US = 200_000.0
+#: The hydraulic family's machines timed (HydraulicModel of each machine file in config/).
+FAMILY = {
+    "CET200 (family)": "excavator_cet200.yaml",
+    "wheel loader": "wheel_loader_wl20.yaml",
+    "knuckle crane": "knuckle_crane_kc100.yaml",
+}
 
 
 def apis(largest: int) -> dict:
@@ -48,9 +54,10 @@ def apis(largest: int) -> dict:
     loaded."""
     import numpy as np
 
-    from excavator_kinematics import inverse
-    from excavator_kinematics import kinematics as excavator
+    from excavator_kinematics.core import inverse
+    from excavator_kinematics.core import kinematics as excavator
     from manipulator_kinematics import serial_chain
+    from manipulator_kinematics.param_files import config_path
     from palletizer_kinematics import kinematics as palletizer
     from pump_boom_kinematics import kinematics as pump_boom
     from scara_kinematics import kinematics as scara_module
@@ -80,6 +87,9 @@ def apis(largest: int) -> dict:
     boom = pump_boom.PumpBoom.default()
     pump_boom.compiled_kernel(boom, wait=True)
     bT = boom.fkine(rng.uniform(boom.limits.lower, boom.limits.upper, (largest, 6)))
+    family = {}
+    for machine, file in FAMILY.items():
+        family[machine] = family_apis(config_path(file), rng, largest)
     return {
         "tool changer fkine_jacob0": (
             lambda i: arm.chain.fkine_jacob0(q[i]),
@@ -103,6 +113,29 @@ def apis(largest: int) -> dict:
             lambda i: boom.solve_ik(bT[i], use_orientation=False),
             lambda n: boom.solve_ik(bT[:n], use_orientation=False),
         ),
+        **{f"{machine} {name}": api for machine, apis in family.items() for name, api in apis.items()},
+    }
+
+
+def family_apis(path: Path, rng, largest: int) -> dict:
+    """``state``, ``pose`` and ``jc0`` of a hydraulic family machine file (HydraulicModel), states
+    inside its stroke box and rates within its speed limits."""
+
+    from manipulator_kinematics.hydraulic import HydraulicModel
+    from manipulator_kinematics.hydraulic import model as family
+
+    family.compiled_kernel(wait=True)
+    h = HydraulicModel.from_file(path)
+    span = h.upper - h.lower
+    D = rng.uniform(h.lower + 0.01 * span, h.upper - 0.01 * span, (largest, h.m))
+    D_dot, D_ddot = (rng.uniform(-1, 1, (largest, h.m)) * h.max_speed for _ in range(2))
+    return {
+        "state": (
+            lambda i: h.state(D[i], D_dot[i], D_ddot[i]),
+            lambda n: h.state(D[:n], D_dot[:n], D_ddot[:n]),
+        ),
+        "pose": (lambda i: h.pose(D[i]), lambda n: h.pose(D[:n])),
+        "jc0": (lambda i: h.jc0(D[i]), lambda n: h.jc0(D[:n])),
     }
 
 

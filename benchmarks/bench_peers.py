@@ -22,7 +22,10 @@ Peers, at their fastest documented call paths (printed with the tables):
   chosen so the answers reach the targets to about 1e-12 m (ours: 1e-15); the FK + Jacobian of the
   ETS, ``ets.fkine`` + ``ets.jacob0``. A peer has no batch call: its batch is N single calls.
 
-Run: .venv/bin/python benchmarks/bench_peers.py [--rounds 5] [--largest 100000]
+``--readme`` prints only the README's table (each machine's one call and a batch of 1000 against
+each peer, how it was measured); ``--readme --write`` puts it into README.md between its markers.
+
+Run: .venv/bin/python benchmarks/bench_peers.py [--rounds 5] [--largest 100000] [--readme [--write]]
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ import json
 import math
 import os
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -43,6 +47,24 @@ PACKAGES = ("roboticstoolbox-python", "pin", "numba==0.68.1", "PyYAML")
 SIZES = (1, 2, 5, 10, 30, 100, 1000, 10_000, 100_000)
 IK_TOL = 1e-24  # ik_LM's E = e' We e / 2: 1e-24 gives errors of about 1e-12 m
 BLOCK_US = 2000.0  # a timed block's length, about (several calls: thread_time_ns costs ~1 us)
+README_BATCH = 1000  # the README table's batch: ours per state in one call of this many
+README = REPO / "README.md"
+MARKERS = ("<!-- bench_peers --readme: begin -->", "<!-- bench_peers --readme: end -->")
+#: The README table's machine and call of each case.
+README_ROWS = {
+    "tool changer FK + Jacobian": ("tool changer (6R)", "FK + Jacobian"),
+    "tool changer IK (all 8 + selection)": ("tool changer (6R)", "IK, all 8 + selection"),
+    "SCARA solve_ik (the service's entry)": ("SCARA", "`solve_ik` (the service's entry)"),
+    "SCARA ik()": ("SCARA", "`ik()`"),
+}
+#: The peers' calls in the README table (CALLS, shortened).
+SHORT = {
+    "pin_cfj": "Pinocchio `computeFrameJacobian`",
+    "pin_doc": "Pinocchio `forwardKinematics` + `computeJointJacobians` + `getFrameJacobian`",
+    "rtb_fkj": "RTB `ets.fkine` + `ets.jacob0`",
+    "rtb_ik": "RTB C++ `ets.ik_LM`",
+    "rtb_ik_mask": "RTB C++ `ets.ik_LM` (mask x, y, yaw)",
+}
 CALLS = {
     "pin_cfj": "pin.computeFrameJacobian(model, data, q, frame, LOCAL_WORLD_ALIGNED); data.oMf[frame]",
     "pin_doc": "pin.forwardKinematics; pin.computeJointJacobians; pin.updateFramePlacement; "
@@ -95,6 +117,11 @@ class Case:
 
 def shown(micro: float) -> str:
     return f"{micro:.3g} us" if micro < 1e4 else f"{micro / 1e3:.3g} ms"
+
+
+def ratio_text(value: float) -> str:
+    """A ratio to two decimals, or two significant digits below 0.1."""
+    return f"{value:.2f}" if value >= 0.1 else f"{value:.2g}"
 
 
 def spread(ratio: tuple[float, float, float]) -> str:
@@ -209,10 +236,15 @@ def worker() -> None:
             errors.append(np.abs(scara_ets.fkine(solution.q).A[:2, 3] - target[:2, 3]).max())
     scara_ik_note = f"ik_LM found {found}/200, max error {max(errors):.1e} m"
 
+    nb = min(README_BATCH, count)  # ours as a batch, per state (README table)
+    q_batch = np.ascontiguousarray(q[:nb])
+    s_positions = np.ascontiguousarray(s_targets[:nb, :2, 3])
+    s_phis = np.arctan2(s_targets[:nb, 1, 0], s_targets[:nb, 0, 0])
     peers = {
         "tool changer FK + Jacobian": Case(
             {
                 "ours": (chain.fkine_jacob0, single),
+                "batch": (lambda _: chain.fkine_jacob0(q_batch), [0]),
                 "pin_cfj": (pin_cfj, single),
                 "pin_doc": (pin_doc, single),
                 "rtb_fkj": (lambda s: (ets.fkine(s), ets.jacob0(s)), single),
@@ -221,6 +253,7 @@ def worker() -> None:
         "tool changer IK (all 8 + selection)": Case(
             {
                 "ours": (lambda item: arm.solve_ik(item[0], seed=item[1]), ik_items),
+                "batch": (lambda _: arm.solve_ik(targets[:nb], seed=seeds[:nb]), [0]),
                 "rtb_ik": (
                     lambda item: ets.ik_LM(item[0], q0=item[1], tol=IK_TOL, joint_limits=True),
                     ik_items,
@@ -230,6 +263,7 @@ def worker() -> None:
         "SCARA solve_ik (the service's entry)": Case(
             {
                 "ours": (lambda item: scara.solve_ik(item[0], seed=item[1]), s_items),
+                "batch": (lambda _: scara.solve_ik(s_targets[:nb], seed=s_seeds[:nb]), [0]),
                 "rtb_ik_mask": (
                     lambda item: scara_ets.ik_LM(
                         item[0], q0=item[1], tol=IK_TOL, mask=mask, joint_limits=True
@@ -241,6 +275,7 @@ def worker() -> None:
         "SCARA ik()": Case(
             {
                 "ours": (lambda item: scara.ik(item[0], phi=item[1], seed=item[2]), s_planar),
+                "batch": (lambda _: scara.ik(s_positions, phi=s_phis, seed=s_seeds[:nb]), [0]),
                 "rtb_ik_mask": (
                     lambda item: scara_ets.ik_LM(
                         item[3], q0=item[2], tol=IK_TOL, mask=mask, joint_limits=True
@@ -258,7 +293,7 @@ def worker() -> None:
     }
 
     # -- every batch API against N single calls (ours): bench_batch.py's list of them
-    apis = batch_apis(largest)
+    apis = {} if job.get("readme") else batch_apis(largest)
     for one, batch in apis.values():
         one(0), batch(2)
     batches = {}
@@ -273,20 +308,30 @@ def worker() -> None:
             case.round(index)
 
     versions = {"roboticstoolbox": rtb.__version__, "pinocchio": pin.__version__, "numpy": np.__version__}
-    out = {"versions": versions, "peers": [], "batches": [], "notes": notes}
+    out = {"versions": versions, "peers": [], "batches": [], "notes": notes, "readme": []}
     for what, case in peers.items():
         ours = case.median("ours")
+        per_state = [r["batch"] / nb for r in case.rounds]  # ours as a batch of nb, per state
         for side in case.sides:
-            if side != "ours":
-                out["peers"].append(
-                    [
-                        what,
-                        f"{ours:.3g} us",
-                        CALLS[side],
-                        f"{case.median(side):.3g} us",
-                        spread(case.ratio("ours", side)),
-                    ]
-                )
+            if side in ("ours", "batch"):
+                continue
+            one_ratio = case.ratio("ours", side)
+            out["peers"].append(
+                [what, f"{ours:.3g} us", CALLS[side], f"{case.median(side):.3g} us", spread(one_ratio)]
+            )
+            batch_ratio = sorted(b / r[side] for b, r in zip(per_state, case.rounds, strict=True))
+            out["readme"].append(
+                [
+                    *README_ROWS[what],
+                    f"{ours:.3g} us",
+                    SHORT[side],
+                    f"{case.median(side):.3g} us",
+                    f"**{ratio_text(one_ratio[0])}** ({ratio_text(one_ratio[1])}-{ratio_text(one_ratio[2])})",
+                    f"{sorted(per_state)[len(per_state) // 2]:.3g} us",
+                    f"**{ratio_text(batch_ratio[len(batch_ratio) // 2])}** "
+                    f"({ratio_text(batch_ratio[0])}-{ratio_text(batch_ratio[-1])})",
+                ]
+            )
     for what, case in batches.items():
         one = case.median("one")
         row = [what, f"{one:.3g} us"]
@@ -298,17 +343,66 @@ def worker() -> None:
     json.dump(out, sys.stdout)
 
 
+def readme_block(result: dict, rounds: int, load: str, versions: str) -> str:
+    """The README's table (between MARKERS) and how it was measured."""
+    from tables import table_text
+
+    header = [
+        "machine",
+        "call",
+        "ours, one call",
+        "peer",
+        "peer, one call",
+        "ratio",
+        f"ours, batch of {README_BATCH} (per state)",
+        "ratio",
+    ]
+    return "\n".join(
+        [
+            MARKERS[0],
+            *textwrap.wrap(
+                f"Measured {time.strftime('%Y-%m-%d')} by "
+                "`python benchmarks/bench_peers.py --readme --write`: "
+                f"{os.cpu_count()} cores, load average (1, 5, 15 min) {load} (start-end); {versions}. "
+                "Ours and the peer in one process, in turn; thread CPU time; medians of "
+                f"{rounds} rounds; ratio = ours / peer, median (min-max) of the per-round ratios (< 1: "
+                "ours is faster). The same robot in both, checked equal first; each peer at its fastest "
+                "documented call (docs/benchmarks.md). A peer has no batch call: its batch of N costs N "
+                "of its single calls, so the batch's ratio is ours per state / the peer's call.",
+                width=100,
+                break_on_hyphens=False,
+            ),
+            "",
+            table_text(header, result["readme"]),
+            MARKERS[1],
+        ]
+    )
+
+
+def write_readme(block: str) -> None:
+    """Replace what stands between the MARKERS in README.md with ``block``."""
+    text = README.read_text(encoding="utf-8")
+    begin, end = text.find(MARKERS[0]), text.find(MARKERS[1])
+    if begin < 0 or end < begin:
+        sys.exit(f"README.md has no {MARKERS[0]} ... {MARKERS[1]} block")
+    README.write_text(text[:begin] + block + text[end + len(MARKERS[1]) :], encoding="utf-8")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--largest", type=int, default=100_000, help="the largest batch")
+    parser.add_argument(
+        "--readme", action="store_true", help="print only the README's table (one call and a batch per peer)"
+    )
+    parser.add_argument("--write", action="store_true", help="with --readme: put it into README.md")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
         worker()
         return
     before = os.getloadavg()
-    job = {"rounds": args.rounds, "largest": args.largest}
+    job = {"rounds": args.rounds, "largest": args.largest, "readme": args.readme}
     check = "import roboticstoolbox, pinocchio, numba"
     result, why = run_worker(__file__, "--worker", job, PACKAGES, check, VENV, "MK_BENCH_PYTHON", 7200)
     if result is None:
@@ -317,6 +411,12 @@ def main() -> None:
 
     load = ", ".join(f"{a:.1f}-{b:.1f}" for a, b in zip(before, os.getloadavg(), strict=True))
     versions = ", ".join(f"{k} {v}" for k, v in result["versions"].items())
+    if args.readme:
+        block = readme_block(result, args.rounds, load, versions)
+        print(block)
+        if args.write:
+            write_readme(block)
+        return
     print(
         f"Measured {time.strftime('%Y-%m-%d')}: {os.cpu_count()} cores, load average (1, 5, 15 min) {load} "
         f"(start-end); {versions}; one process, ours and the peer in turn, CPU time, medians of "

@@ -149,7 +149,8 @@ class SerialChain:
         self._theta = np.array([r.theta for r in rows], dtype=float)
         self._offset = np.array([r.offset for r in rows], dtype=float)
         self._prismatic = np.array([r.prismatic for r in rows], dtype=bool)
-        self._jacobian_shape = (6, self.n)
+        self._jacobian_shape, self._columns = (6, self.n), self.n
+        self._jacobian_one = (1, 6, self.n)  # a batch of one's, made once
         self._packed = self._pack()
 
     @property
@@ -201,11 +202,12 @@ class SerialChain:
         kernel = KERNEL.ready
         if kernel is not None and compiled and not all_frames and type(q) is np.ndarray:
             try:  # the hot paths, as in fkine_jacob0
-                if q.ndim == 1:
+                ndim = q.ndim
+                if ndim == 1:
                     pose = np.empty((4, 4))
                     kernel.fkine(self._packed, q, pose)
                     return pose
-                if q.ndim == 2:
+                if ndim == 2:
                     pose = np.empty((len(q), 4, 4))
                     kernel.fkine_batch(self._packed, q, pose)
                     return pose
@@ -253,15 +255,20 @@ class SerialChain:
             # q as given: the kernel's signature takes float64 C-contiguous arrays only and checks
             # the length, so any other q raises before the kernel runs and takes the general path
             # below, which converts or refuses it. Validating here first cost 0.3 us of 1.5, and
-            # a batch of one 2.4x a single call through the general path (issue #32).
+            # a batch of one 2.4x a single call through the general path (issue #32). A batch's
+            # shapes are built of ints: np.empty((n, *shape)) costs 0.1-0.2 us more.
             try:
-                if q.ndim == 1:
+                ndim = q.ndim
+                if ndim == 1:
                     pose, jacobian = np.empty((4, 4)), np.empty(self._jacobian_shape)
                     kernel.fkine_jacob0(self._packed, q, pose, jacobian)
                     return pose, jacobian
-                if q.ndim == 2:
+                if ndim == 2:
                     n = len(q)
-                    pose, jacobian = np.empty((n, 4, 4)), np.empty((n, *self._jacobian_shape))
+                    if n == 1:
+                        pose, jacobian = np.empty((1, 4, 4)), np.empty(self._jacobian_one)
+                    else:
+                        pose, jacobian = np.empty((n, 4, 4)), np.empty((n, 6, self._columns))
                     kernel.fkine_jacob0_batch(self._packed, q, pose, jacobian)
                     return pose, jacobian
             except (TypeError, ValueError):

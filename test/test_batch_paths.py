@@ -1,7 +1,8 @@
 """Every batch API through its compiled batch path (issue #32: a batch of any size through the
 kernels) against the same targets as single calls and against the numpy path, the reference:
 numbers within 1e-12 (never bitwise), statuses, selections, ties and texts equal, for N in
-{1, 2, 5, 30}; targets include unreachable, out-of-limit and non-finite ones."""
+{1, 2, 5, 30}; targets include unreachable, out-of-limit and non-finite ones. The machines of the
+hydraulic family (HydraulicModel's state, pose and jc0) for each shipped machine file."""
 
 from __future__ import annotations
 
@@ -15,6 +16,10 @@ from excavator_kinematics.core import inverse
 from excavator_kinematics.core import kinematics as excavator
 from excavator_kinematics.core.kinematics import Excavator, StrokeError
 from manipulator_kinematics import serial_chain
+from manipulator_kinematics.hydraulic import HydraulicModel, HydraulicState
+from manipulator_kinematics.hydraulic import StrokeError as FamilyStrokeError
+from manipulator_kinematics.hydraulic import model as family
+from manipulator_kinematics.param_files import config_path
 from palletizer_kinematics import kinematics as palletizer
 from palletizer_kinematics.kinematics import Palletizer
 from pump_boom_kinematics import kinematics as pump_boom
@@ -29,6 +34,14 @@ ARM = ToolChanger.default()
 PAL = Palletizer.default()
 SCARA = Scara.default()
 BOOM = PumpBoom.default()
+FAMILY = {
+    name: HydraulicModel.from_file(config_path(file))
+    for name, file in (
+        ("cet200", "excavator_cet200.yaml"),
+        ("wheel_loader", "wheel_loader_wl20.yaml"),
+        ("knuckle_crane", "knuckle_crane_kc100.yaml"),
+    )
+}
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -40,6 +53,7 @@ def kernels() -> None:
     excavator.compiled_kernel(EXC, wait=True)
     inverse.compiled_kernel(EXC, wait=True)
     pump_boom.compiled_kernel(BOOM, wait=True)
+    family.compiled_kernel(wait=True)
 
 
 @contextlib.contextmanager
@@ -58,6 +72,7 @@ def kernel_only(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
             (Excavator, "validate"),
             (inverse, "candidates"),
             (PumpBoom, "region_ik"),
+            (HydraulicModel, "_solve"),
         ):
             patch.setattr(owner, name, refused)
         yield
@@ -326,6 +341,74 @@ def test_pump_boom_ik_batches(monkeypatch: pytest.MonkeyPatch, n: int, seeding: 
         reference = BOOM.solve_ik(targets, use_orientation=False, seed=seed)
     same_solutions(batch, singles, reference)
     assert len(set(batch.status.ravel().tolist())) >= (2 if n >= 5 else 1)
+
+
+# ---- the hydraulic family ---------------------------------------------------------------------------
+def numpy_family(monkeypatch: pytest.MonkeyPatch, model: HydraulicModel, method: str, *args):
+    with monkeypatch.context() as patch:
+        patch.setattr(family.KERNEL, "ready", None)
+        patch.setenv("MK_COMPILED", "0")
+        return getattr(model, method)(*args)
+
+
+def _family_states(model: HydraulicModel, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(600 + n)
+    D = rng.uniform(model.lower, model.upper, (n, model.m))
+    rates = rng.uniform(-1.0, 1.0, (n, model.m)) * model.max_speed
+    return D, rates, rng.uniform(-1.0, 1.0, (n, model.m)) * model.max_speed
+
+
+@contextlib.contextmanager
+def rows_as_given() -> Iterator[None]:
+    """The family's general batch path (``_batch``: conversions, broadcasting) made to fail too."""
+
+    def refused(*args: object, **kwargs: object) -> None:
+        raise AssertionError("_batch ran")
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(HydraulicModel, "_batch", refused)
+        yield
+
+
+@pytest.mark.parametrize("n", SIZES)
+@pytest.mark.parametrize("name", FAMILY)
+def test_family_batches_equal_single_calls_and_numpy(
+    monkeypatch: pytest.MonkeyPatch, name: str, n: int
+) -> None:
+    """state, pose and jc0 of a batch (N, m): the kernels' loops on the arrays as given (rates
+    (N, m) or one row (1, m) for all); rates of one state (m,) through ``_batch``."""
+    model = FAMILY[name]
+    D, rates, accelerations = _family_states(model, n)
+    for args in ((D, rates, accelerations), (D, rates), (D, rates[:1], accelerations[:1]), (D, rates[0])):
+        with kernel_only(monkeypatch), rows_as_given() if args[1].ndim == 2 else contextlib.nullcontext():
+            batch = model.state(*args)
+        reference = numpy_family(monkeypatch, model, "state", *args)
+        for field in HydraulicState._fields:
+            got = getattr(batch, field)
+            close(got, getattr(reference, field))
+            for i in range(n):
+                one = model.state(*(a[i if len(a) == n else 0] if a.ndim == 2 else a for a in args))
+                close(got[i], getattr(one, field))
+    with kernel_only(monkeypatch), rows_as_given():
+        Q, J = model.pose(D), model.jc0(D)
+    close(Q, numpy_family(monkeypatch, model, "pose", D))
+    close(J, numpy_family(monkeypatch, model, "jc0", D))
+    for i in range(n):
+        close(Q[i], model.pose(D[i]))
+        close(J[i], model.jc0(D[i]))
+
+
+def test_a_family_batch_with_a_state_refused_raises_as_the_numpy_path() -> None:
+    model = FAMILY["wheel_loader"]
+    D, rates, _ = _family_states(model, 5)
+    D[3, 1] = model.upper[1] + 0.5  # the second actuator beyond its stroke
+    name = model.actuator_names[1]
+    for call in (lambda: model.state(D, rates), lambda: model.pose(D), lambda: model.jc0(D)):
+        with pytest.raises(FamilyStrokeError, match=name):
+            call()
+    with pytest.raises(FamilyStrokeError, match="D_dot"):
+        model.state(_family_states(model, 5)[0], rates[:3])
+    assert model.pose(np.empty((0, model.m))).shape == (0, len(model.task_names))
 
 
 def test_a_read_only_batch_takes_the_numpy_path_without_compiling(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -59,6 +59,8 @@ from excavator_kinematics.core.rate_command import rate_command
 from excavator_kinematics.core.twist import split_twist
 from excavator_kinematics.nodes import message_codec
 from excavator_kinematics.nodes.display_outputs import DesignPlane
+from manipulator_kinematics.hydraulic.control import rate_command as family_rate_command
+from manipulator_kinematics.hydraulic.control import task_rates
 from manipulator_kinematics.model import RequestError, matrix_quaternion
 from manipulator_kinematics.param_files import config_path, load_parameters
 from manipulator_kinematics.registry import machine
@@ -1068,12 +1070,22 @@ class WideExcavator:
         return self.model.fkine(self.model.joint_limits.clip(q))
 
 
-def random_path(rng: np.random.Generator, model: Excavator, k: int) -> PlanPath.Request:
-    """A PlanPath request: plausible waypoints near the machine, or malformed (extremes, NaN,
-    bad steps and speeds, wrong seeds, many waypoints)."""
-    start = model.pose(model.limits.reference)[:3]
+def random_path(
+    rng: np.random.Generator,
+    start: np.ndarray,
+    names: tuple[str, ...],
+    reference: np.ndarray,
+    k: int,
+    reachable: np.ndarray | None = None,
+) -> PlanPath.Request:
+    """A PlanPath request: plausible waypoints near the tool point ``start`` (or rows of
+    ``reachable``, tool points of the machine), or malformed (extremes, NaN, bad steps and speeds,
+    seeds of the joints ``names`` wrong or short, many waypoints)."""
     count = int(rng.integers(0, 5)) if k % 5 else int(rng.integers(0, 200))
-    waypoints = start + rng.normal(scale=2.0, size=(count, 3))
+    if reachable is None:
+        waypoints = start + rng.normal(scale=2.0, size=(count, 3))
+    else:
+        waypoints = reachable[rng.integers(len(reachable), size=count)]
     request = PlanPath.Request(
         step=float(rng.choice([0.0, 0.05, 0.5, 1e-300, -1.0, math.nan, math.inf])),
         tip_speed=float(rng.choice([0.0, 0.2, 3.0, 1e-300, -0.5, math.nan, 1e308])),
@@ -1083,9 +1095,22 @@ def random_path(rng: np.random.Generator, model: Excavator, k: int) -> PlanPath.
         waypoints[rng.integers(count)] = extreme(rng, 3, 10.0)
     request.waypoints = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in waypoints]
     if k % 4 == 2:
-        seed = extreme(rng, 4, 1.0) if rng.random() < 0.5 else list(model.limits.reference)
-        request.seed = JointState(name=list(ACTUATORS)[: int(rng.integers(2, 5))], position=seed)
+        seed = extreme(rng, len(names), 1.0) if rng.random() < 0.5 else [float(v) for v in reference]
+        request.seed = JointState(name=list(names)[: int(rng.integers(2, len(names) + 1))], position=seed)
     return request
+
+
+def count_plan_problems(plans: list) -> int:
+    """PlanPath answers that are neither a success with points nor a failure with a code and a
+    reason, or that carry a non-finite number."""
+    return sum(
+        not (
+            (r.success and r.error_code.val == Codes.SUCCESS and len(r.trajectory.points) > 0)
+            or (not r.success and r.error_code.val != Codes.SUCCESS and r.message)
+        )
+        or not all_finite(r.trajectory)
+        for r in plans
+    )
 
 
 def test_excavator_ik_server_survives_any_input(probe: Probe, nodes: dict[str, NodeProcess]) -> None:
@@ -1106,15 +1131,10 @@ def test_excavator_ik_server_survives_any_input(probe: Probe, nodes: dict[str, N
         assert server.alive(), server.log()
         probe.call(ik, SolveIK.Request(), TIMEOUT)
         counts = fuzz_ik_server(probe, ik, fk, model, record.limits(model), rng, targets=WideExcavator())
-        plans = calls(probe, planner, [random_path(rng, model, k) for k in range(150)], window=2)
-        plan_problems = sum(
-            not (
-                (r.success and r.error_code.val == Codes.SUCCESS and len(r.trajectory.points) > 0)
-                or (not r.success and r.error_code.val != Codes.SUCCESS and r.message)
-            )
-            or not all_finite(r.trajectory)
-            for r in plans
-        )
+        start = model.pose(model.limits.reference)[:3]
+        requests = [random_path(rng, start, ACTUATORS, model.limits.reference, k) for k in range(150)]
+        plans = calls(probe, planner, requests, window=2)
+        plan_problems = count_plan_problems(plans)
         alive = server.alive()
     finally:
         log = server.stop()
@@ -1125,6 +1145,381 @@ def test_excavator_ik_server_survives_any_input(probe: Probe, nodes: dict[str, N
         plan_successes=sum(r.success for r in plans),
         plan_problems=plan_problems,
         alive=int(alive),
+    )
+    assert alive and counts["ik_problems"] == 0 and counts["fk_problems"] == 0 and plan_problems == 0
+    assert "Traceback" not in log and "failed on" not in log and "unexpectedly" not in log, log[-3000:]
+
+
+# ------------------------------------------------------------------------------ the hydraulic family
+FAMILY = ("wheel_loader", "knuckle_crane")
+FAMILY_BURSTS = 5
+
+
+@pytest.fixture(scope="module")
+def family_nodes(tmp: Path) -> Iterator[dict[str, NodeProcess]]:
+    """The family's four nodes for each machine file, started when the first family test runs (the
+    module's other nodes are done by then); a test takes its nodes out and stops them."""
+    started = {}
+    for name in FAMILY:
+        params = machine(name).node_arguments[1:]
+        ns = f"/fz_{name}"
+        reliable = {"input_reliability": "reliable", **FUZZ_SETTINGS}
+        started[f"{name} forward"] = start(
+            "hydraulic_forward", ns, tmp, params, qos_depth=400, urdf_joint_states_rate=0.0, **reliable
+        )
+        started[f"{name} velocity_ik"] = start(
+            "hydraulic_velocity_ik",
+            ns,
+            tmp,
+            params,
+            input_queue_depth=400,
+            command_timeout=30.0,
+            state_timeout=30.0,
+            **reliable,
+        )
+        # Its own namespace: the simulator's joint_states must not reach the other nodes.
+        started[f"{name} sim"] = start(
+            "hydraulic_sim", f"{ns}_sim", tmp, params, input_queue_depth=400, rate=100.0, **reliable
+        )
+        started[f"{name} ik_server"] = start("hydraulic_ik_server", ns, tmp, params)
+    yield started
+    for process in started.values():
+        process.stop()
+
+
+def family_started(probe: Probe, *processes: NodeProcess) -> None:
+    """Every process logged its start-up line (they start together, on a loaded machine slowly)."""
+    probe.wait_until(
+        lambda: (
+            all("->" in p.log() or "serving" in p.log() or "simulated" in p.log() for p in processes)
+            or not all(p.alive() for p in processes)
+        ),
+        4 * TIMEOUT,
+        "start-up",
+    )
+    assert all(p.alive() for p in processes), "\n".join(p.log()[-2000:] for p in processes)
+
+
+@pytest.mark.parametrize("name", FAMILY)
+def test_family_forward_survives_any_input(
+    probe: Probe, family_nodes: dict[str, NodeProcess], name: str
+) -> None:
+    """hydraulic_forward: bursts of bad joint_states and bytes (finite extremes too, which the
+    linkage cannot take), each followed by a valid state whose pose must come; nothing non-finite
+    on tool_pose, tool_twist or urdf_joint_states; the library's pose and twist afterwards."""
+    record = machine(name)
+    arm = record.model()
+    limits = record.limits(arm)
+    names = tuple(limits.names)
+    ns = f"/fz_{name}"
+    process = family_nodes.pop(f"{name} forward")
+    node = probe.node
+    states = node.create_publisher(JointState, f"{ns}/joint_states", QOS)
+    topics = {
+        f"{ns}/tool_pose": PoseStamped,
+        f"{ns}/tool_twist": TwistStamped,
+        f"{ns}/urdf_joint_states": JointState,
+    }
+    out = Outputs(probe, topics)
+    poses = out.messages[f"{ns}/tool_pose"]
+    rng = np.random.default_rng(9300 + FAMILY.index(name))
+    h = arm.hydraulic
+    q_good = 0.5 * (limits.lower + limits.upper)
+    sent = 0
+    try:
+        family_started(probe, process)
+        probe.wait_until(
+            lambda: states.get_subscription_count() > 0 and all(node.count_publishers(t) > 0 for t in topics),
+            TIMEOUT,
+            f"{name} hydraulic_forward",
+        )
+
+        def marker(sec: int, q: np.ndarray, qd: np.ndarray) -> PoseStamped:
+            def seen() -> list:
+                return [m for m in poses if m.header.stamp.sec == sec]
+
+            for _ in range(20):
+                states.publish(joint_state(names, q, qd, sec))
+                try:
+                    probe.wait_until(lambda: bool(seen()), 1.0, f"pose of marker {sec}")
+                    return seen()[0]
+                except TimeoutError:
+                    continue
+            raise TimeoutError(f"no pose for marker {sec}")
+
+        for burst in range(FAMILY_BURSTS):
+            for k in range(BURST):
+                i = burst * BURST + k
+                msg = bad_joint_states(rng, names, limits.lower, limits.upper, h.max_speed, i)
+                data = serialize_message(msg)
+                if rng.random() < 0.3:
+                    data = bad_bytes(rng, data, i)
+                states.publish(data)
+                sent += 1
+            marker(100_000 + burst, q_good, np.zeros(len(names)))
+            assert process.alive(), process.log()[-3000:]
+        until_logged(
+            probe,
+            process,
+            "implausible",
+            lambda: states.publish(joint_state(names, limits.upper + 1e6, np.zeros(len(names)), 150_000)),
+        )
+        # The library's numbers afterwards.
+        q = limits.lower + 0.3 * (limits.upper - limits.lower)
+        qd = 0.2 * h.max_speed
+        pose = marker(200_000, q, qd)
+        T = arm.fkine(q)
+        p, o = pose.pose.position, pose.pose.orientation
+        np.testing.assert_allclose(
+            [p.x, p.y, p.z, o.x, o.y, o.z, o.w], [*T[:3, 3], *matrix_quaternion(T[:3, :3])], atol=1e-12
+        )
+        twists = out.messages[f"{ns}/tool_twist"]
+        probe.wait_until(lambda: any(m.header.stamp.sec == 200_000 for m in twists), TIMEOUT, "twist")
+        t = next(m for m in twists if m.header.stamp.sec == 200_000).twist
+        np.testing.assert_allclose(
+            [t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z],
+            arm.jacob0(q) @ qd,
+            atol=1e-12,
+        )
+        assert process.alive()
+    finally:
+        log = process.stop()
+    report(f"{name} hydraulic_forward", sent=sent, outputs_checked=out.count(), non_finite=out.non_finite())
+    assert out.non_finite() == 0
+    assert "Traceback" not in log and "failed on" not in log, log[-3000:]
+    assert "dropped joint_states" in log
+
+
+@pytest.mark.parametrize("name", FAMILY)
+def test_family_velocity_ik_survives_any_input(
+    probe: Probe, family_nodes: dict[str, NodeProcess], name: str
+) -> None:
+    """hydraulic_velocity_ik: bursts of bad targets (extremes, other frames), bad joint_states and
+    bad bytes, each followed by a valid state and target whose command must come; every command
+    finite and within the speed limits; the library's rates afterwards."""
+    record = machine(name)
+    arm = record.model()
+    limits = record.limits(arm)
+    names = tuple(limits.names)
+    h = arm.hydraulic
+    ns = f"/fz_{name}"
+    process = family_nodes.pop(f"{name} velocity_ik")
+    node = probe.node
+    states = node.create_publisher(JointState, f"{ns}/joint_states", QOS)
+    target = node.create_publisher(TwistStamped, f"{ns}/target_twist", QOS)
+    topic = f"{ns}/rate_commands"
+    out = Outputs(probe, {topic: JointState})
+    rng = np.random.default_rng(9400 + FAMILY.index(name))
+    D = 0.5 * (h.lower + h.upper)  # away from every stroke end: a target is followed, not stopped
+    q = D - h.zero_offset
+    sent = 0
+
+    def twist_message(sec: int, values: list[float], frame: str = "base_link") -> TwistStamped:
+        msg = TwistStamped()
+        msg.header.stamp, msg.header.frame_id = Time(sec=sec), frame
+        t = msg.twist
+        t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z = map(float, values)
+        return msg
+
+    try:
+        family_started(probe, process)
+        probe.wait_until(
+            lambda: (
+                states.get_subscription_count() > 0
+                and target.get_subscription_count() > 0
+                and node.count_publishers(topic) > 0
+            ),
+            TIMEOUT,
+            f"{name} hydraulic_velocity_ik",
+        )
+
+        def marker(sec: int, linear: np.ndarray) -> JointState:
+            """State D and a target stamped ``sec``, re-sent until the command for it is out."""
+
+            def seen() -> list:
+                return [m for m in out.messages[topic] if m.header.stamp.sec == sec and any(m.velocity)]
+
+            for _ in range(20):
+                states.publish(joint_state(names, q, np.zeros(len(names)), 1))
+                target.publish(twist_message(sec, [*linear, 0.0, 0.0, 0.0]))
+                try:
+                    probe.wait_until(lambda: bool(seen()), 1.0, f"command of marker {sec}")
+                    return seen()[0]
+                except TimeoutError:
+                    continue
+            raise TimeoutError(f"no command for marker {sec}")
+
+        for burst in range(FAMILY_BURSTS):
+            for k in range(BURST):
+                i = burst * BURST + k
+                if i % 2 == 0:
+                    frame = "base_link" if rng.random() < 0.8 else "map"
+                    target.publish(twist_message(i, extreme(rng, 6, 1.0), frame))
+                else:
+                    msg = bad_joint_states(rng, names, limits.lower, limits.upper, h.max_speed, i // 2)
+                    data = serialize_message(msg)
+                    states.publish(bad_bytes(rng, data, i) if rng.random() < 0.3 else data)
+                sent += 1
+            marker(100_000 + burst, rng.uniform(-0.1, 0.1, 3))
+            assert process.alive(), process.log()[-3000:]
+        until_logged(
+            probe,
+            process,
+            "implausible",
+            lambda: target.publish(twist_message(150_000, [1e9, 0, 0, 0, 0, 0])),
+        )
+        # The library's numbers afterwards: a new target (a new line, no correction yet) at D,
+        # asked twice so that the state D has surely been taken before the second.
+        linear = np.array([0.05, 0.0, -0.04]) if h.swing else np.array([0.04, 0.0, 0.05])
+        marker(200_000, linear)
+        command = marker(200_001, linear)
+        twist = np.array([*linear, 0.0, 0.0, 0.0])
+        rows = list(h.description.velocity_rows)
+        q_dot = task_rates(D, twist, h.swing, h.description.has_angle)
+        expected = family_rate_command(
+            h.measured(D).jc0[rows], D, q_dot[rows], h.lower, h.upper, h.max_speed, 100.0, 0.1
+        ).d_dot
+        np.testing.assert_allclose(command.velocity, expected, rtol=1e-12, atol=1e-15)
+        assert process.alive()
+    finally:
+        log = process.stop()
+    commands = np.array([m.velocity for m in out.messages[topic] if len(m.velocity) == len(names)])
+    over = int(np.sum(np.abs(commands) > h.max_speed)) if len(commands) else 0
+    report(
+        f"{name} hydraulic_velocity_ik",
+        sent=sent,
+        outputs_checked=out.count(),
+        non_finite=out.non_finite(),
+        above_speed_limit=over,
+    )
+    assert out.non_finite() == 0 and over == 0 and len(commands) == out.count()
+    assert "Traceback" not in log and "failed on" not in log, log[-3000:]
+
+
+@pytest.mark.parametrize("name", FAMILY)
+def test_family_sim_survives_any_input(probe: Probe, family_nodes: dict[str, NodeProcess], name: str) -> None:
+    """hydraulic_sim: bursts of bad rate commands, each followed by a valid one the simulator must
+    move at; every state finite, inside the strokes and within the speed limits."""
+    record = machine(name)
+    arm = record.model()
+    limits = record.limits(arm)
+    names = tuple(limits.names)
+    h = arm.hydraulic
+    ns = f"/fz_{name}_sim"
+    process = family_nodes.pop(f"{name} sim")
+    node = probe.node
+    commands = node.create_publisher(JointState, f"{ns}/rate_commands", QOS)
+    topic = f"{ns}/joint_states"
+    out = Outputs(probe, {topic: JointState})
+    rng = np.random.default_rng(9500 + FAMILY.index(name))
+    sent = 0
+    try:
+        family_started(probe, process)
+        probe.wait_until(
+            lambda: commands.get_subscription_count() > 0 and node.count_publishers(topic) > 0,
+            TIMEOUT,
+            f"{name} hydraulic_sim",
+        )
+
+        def marker(command: np.ndarray) -> None:
+            """A valid command, re-sent until the simulator moves at it (where no stroke end stops it)."""
+
+            def moving() -> bool:
+                if not out.messages[topic]:
+                    return False
+                last = out.messages[topic][-1]
+                d = np.array(last.position) + h.zero_offset
+                free = (d > h.lower) & (d < h.upper)
+                return bool(np.array_equal(np.array(last.velocity)[free], command[free]))
+
+            for _ in range(20):
+                commands.publish(joint_state(names, velocity=command))
+                try:
+                    probe.wait_until(moving, 1.0, f"simulator moving at {command}")
+                    return
+                except TimeoutError:
+                    continue
+            raise TimeoutError(f"the simulator never moved at {command}")
+
+        for burst in range(FAMILY_BURSTS):
+            for k in range(BURST):
+                i = burst * BURST + k
+                msg = bad_joint_states(rng, names, limits.lower, limits.upper, h.max_speed, i)
+                msg.position = [] if rng.random() < 0.7 else msg.position
+                data = serialize_message(msg)
+                commands.publish(bad_bytes(rng, data, i) if rng.random() < 0.2 else data)
+                sent += 1
+            marker(0.01 * h.max_speed * (-1) ** burst * (1 + burst / 100))
+            assert process.alive(), process.log()[-3000:]
+        until_logged(
+            probe,
+            process,
+            "rejected rate command",
+            lambda: commands.publish(joint_state(names, velocity=1e9 * h.max_speed)),
+        )
+    finally:
+        log = process.stop()
+    states = out.messages[topic]
+    d = np.array([m.position for m in states]) + h.zero_offset
+    d_dot = np.array([m.velocity for m in states])
+    outside = int(np.sum((d < h.lower) | (d > h.upper)) + np.sum(np.abs(d_dot) > h.max_speed))
+    report(
+        f"{name} hydraulic_sim",
+        sent=sent,
+        outputs_checked=out.count(),
+        non_finite=out.non_finite(),
+        outside_limits=outside,
+    )
+    assert out.non_finite() == 0 and outside == 0
+    assert "Traceback" not in log and "failed on" not in log, log[-3000:]
+
+
+@pytest.mark.parametrize("name", FAMILY)
+def test_family_ik_server_survives_any_input(
+    probe: Probe, family_nodes: dict[str, NodeProcess], name: str
+) -> None:
+    """hydraulic_ik_server: every kind of bad solve_ik and solve_fk request (the serial machines'
+    fuzz), and bad plan_path requests; every answer a success with finite numbers or a failure
+    with a code and a reason; the library's numbers afterwards."""
+    record = machine(name)
+    arm = record.model()
+    limits = record.limits(arm)
+    h = arm.hydraulic
+    ns = f"/fz_{name}"
+    server = family_nodes.pop(f"{name} ik_server")
+    ik = probe.node.create_client(SolveIK, f"{ns}/solve_ik")
+    fk = probe.node.create_client(SolveFK, f"{ns}/solve_fk")
+    planner = probe.node.create_client(PlanPath, f"{ns}/plan_path")
+    rng = np.random.default_rng(9600 + FAMILY.index(name))
+    try:
+        family_started(probe, server)
+        clients = (ik, fk, planner)
+        probe.wait_until(
+            lambda: all(c.service_is_ready() for c in clients) or not server.alive(),
+            TIMEOUT,
+            f"{name} hydraulic_ik_server",
+        )
+        assert server.alive(), server.log()
+        probe.call(ik, SolveIK.Request(), TIMEOUT)
+        counts = fuzz_ik_server(probe, ik, fk, arm, limits, rng)
+        reference = h.reference - h.zero_offset
+        start_point = arm.fkine(reference)[:3, 3]
+        names = tuple(limits.names)
+        # Plausible waypoints: tool points of states near the reference (some plans succeed).
+        near = h.reference + 0.2 * rng.uniform(-1.0, 1.0, (50, h.m)) * (h.upper - h.lower)
+        reachable = arm.fkine(np.clip(near, h.lower, h.upper) - h.zero_offset)[:, :3, 3]
+        requests = [random_path(rng, start_point, names, reference, k, reachable) for k in range(100)]
+        plans = calls(probe, planner, requests, window=2)
+        plan_problems = count_plan_problems(plans)
+        alive = server.alive()
+    finally:
+        log = server.stop()
+    report(
+        f"{name} hydraulic_ik_server",
+        **counts,
+        plan_requests=len(plans),
+        plan_successes=sum(r.success for r in plans),
+        plan_problems=plan_problems,
     )
     assert alive and counts["ik_problems"] == 0 and counts["fk_problems"] == 0 and plan_problems == 0
     assert "Traceback" not in log and "failed on" not in log and "unexpectedly" not in log, log[-3000:]

@@ -23,9 +23,10 @@ Each instruction writes every row of its slot that a call of its order reads (no
 cleared first), and a batch makes one work array for all its states. The instructions' helpers
 are inlined into the interpreter (``inline="always"``: numba inlines them before LLVM sees them;
 left as calls, with the work array and D, D_dot, D_ddot passed to each, the full state took a
-quarter longer; docs/hydraulic_family.md, "Speed"). The interpreter is inlined into its five
-callers too, a tenth of the compute and issue 31's 2x target, for five times the cold compile
-(about 100 s of CPU, was 22; scripts/warm_kernels.py does it at set-up).
+quarter longer; docs/hydraulic_family.md, "Speed"). The interpreter is inlined into its callers
+too (the single calls and their batch loops), a tenth of the compute and issue 31's 2x target,
+for a cold compile several times longer (about 100 s of CPU with five callers, was 22;
+scripts/warm_kernels.py does it at set-up).
 
 Each function returns False, writing nothing valid, for a state outside the stroke box (faces
 included), not finite, of the wrong length, or where a dyad does not close: the caller then takes
@@ -401,19 +402,30 @@ def pose(code: np.ndarray, values: np.ndarray, D: np.ndarray, out: np.ndarray) -
     return _pose(code, values, D, out, _work(code, D.shape[0]))
 
 
-@njit(cache=True, error_model="numpy")
-def jc0(code: np.ndarray, values: np.ndarray, D: np.ndarray, out: np.ndarray) -> bool:
-    """JC0 = dQ/dD (eq. 8) into ``out`` (nq, m), rows in Q's order."""
+@njit(cache=True, error_model="numpy", inline="always")
+def _jc0(code: np.ndarray, values: np.ndarray, D: np.ndarray, out: np.ndarray, w: np.ndarray) -> bool:
+    """:func:`jc0` with the work array given."""
     m = D.shape[0]
     if not _inside(code, values, D) or out.shape[0] != code[0, INT.q] or out.shape[1] != m:
         return False
-    w = _work(code, m)
     ok = _run(code, values, D, D, D, JACOBIAN, w)
     first = code[0, INT.p] + code[0, INT.act]
     for i in range(out.shape[0]):
         for j in range(m):
             out[i, j] = w[first + i, _J + j, 0]
     return ok
+
+
+@njit(cache=True, error_model="numpy")
+def jc0(code: np.ndarray, values: np.ndarray, D: np.ndarray, out: np.ndarray) -> bool:
+    """JC0 = dQ/dD (eq. 8) into ``out`` (nq, m), rows in Q's order."""
+    return _jc0(code, values, D, out, _work(code, D.shape[0]))
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _rows_of(x: np.ndarray, n: int) -> bool:
+    """x (n, m) or one row (1, m), for a batch of n states."""
+    return x.shape[0] == n or x.shape[0] == 1
 
 
 @njit(cache=True, error_model="numpy")
@@ -425,18 +437,38 @@ def states(
     D_ddot: np.ndarray,
     out: np.ndarray,
 ) -> bool:
-    """:func:`state` of every row of D, D_dot, D_ddot (N, m) into ``out`` (N, n + nq, 3 + m); False
-    as soon as one state is refused (the caller's numpy path then says why)."""
+    """:func:`state` of every row of D (N, m) into ``out`` (N, n + nq, 3 + m), D_dot and D_ddot
+    (N, m) or one row (1, m) for every state (the caller passes the arrays as given: their row
+    counts are checked here); False for rows that do not match, or as soon as one state is
+    refused (the caller's numpy path then says why)."""
+    n = D.shape[0]
+    rows = _rows_of(D_dot, n) and _rows_of(D_ddot, n) and out.shape[0] == n
+    if not rows or D.shape[1] != code[0, INT.act2]:
+        return False
+    v, a = (1 if D_dot.shape[0] == n else 0), (1 if D_ddot.shape[0] == n else 0)
     w, i = _work(code, D.shape[1]), 0
-    while i < D.shape[0] and _state(code, values, D[i], D_dot[i], D_ddot[i], out[i], w):
+    while i < n and _state(code, values, D[i], D_dot[v * i], D_ddot[a * i], out[i], w):
         i += 1
-    return i == D.shape[0]
+    return i == n
 
 
 @njit(cache=True, error_model="numpy")
 def poses(code: np.ndarray, values: np.ndarray, D: np.ndarray, out: np.ndarray) -> bool:
     """:func:`pose` of every row of D (N, m) into ``out`` (N, nq); False as soon as one is refused."""
+    if out.shape[0] != D.shape[0] or D.shape[1] != code[0, INT.act2]:  # (an empty batch too)
+        return False
     w, i = _work(code, D.shape[1]), 0
     while i < D.shape[0] and _pose(code, values, D[i], out[i], w):
+        i += 1
+    return i == D.shape[0]
+
+
+@njit(cache=True, error_model="numpy")
+def jc0s(code: np.ndarray, values: np.ndarray, D: np.ndarray, out: np.ndarray) -> bool:
+    """:func:`jc0` of every row of D (N, m) into ``out`` (N, nq, m); False as soon as one is refused."""
+    if out.shape[0] != D.shape[0] or D.shape[1] != code[0, INT.act2]:
+        return False
+    w, i = _work(code, D.shape[1]), 0
+    while i < D.shape[0] and _jc0(code, values, D[i], out[i], w):
         i += 1
     return i == D.shape[0]

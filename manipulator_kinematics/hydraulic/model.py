@@ -51,7 +51,8 @@ def _warm(kernel: ModuleType) -> None:
     kernel.jc0(code, values, D, np.empty((1, 1)))
     kernel.states(code, values, batch, batch, batch, np.empty((1, 1, 4)))
     kernel.poses(code, values, batch, np.empty((1, 1)))
-    for function in (kernel.state, kernel.pose, kernel.jc0, kernel.states, kernel.poses):
+    kernel.jc0s(code, values, batch, np.empty((1, 1, 1)))
+    for function in (kernel.state, kernel.pose, kernel.jc0, kernel.states, kernel.poses, kernel.jc0s):
         function.disable_compile()
 
 
@@ -245,8 +246,13 @@ class HydraulicModel:
         # ... and what the single call reads of it and makes (one attribute lookup each).
         self._code, self._constants = self.program.code, self.program.values
         self._n, self._nq = self.program.n, self.program.nq
-        self._one, self._table_shape = (self.m,), (self._n + self._nq, 3 + self.m)
-        self._no_acceleration = np.zeros(self.m)  # D_ddot of a state without (the kernel only reads it)
+        self._table_shape = (self._n + self._nq, 3 + self.m)
+        # A batch's outputs: (N, *shape) built of ints, that of a batch of one made once.
+        self._table_rows, self._table_one = self._n + self._nq, (1, *self._table_shape)
+        self._pose_shapes = (self._nq,), (1, self._nq)
+        self._jc0_shapes = (self._nq, self.m), (1, self._nq, self.m)
+        # D_ddot of a state without, and of every state of a batch (the kernel only reads it).
+        self._no_acceleration, self._no_accelerations = np.zeros(self.m), np.zeros((1, self.m))
         if check:
             self.check()
 
@@ -518,49 +524,43 @@ class HydraulicModel:
         return _Jet(*(np.stack([getattr(q, f) for q in rows], axis=-1 if f != "J" else -2) for f in "pJva"))
 
     # ------------------------------------------------------------------ forward API
-    def _compiled(self, function: str, out: np.ndarray, *arguments: np.ndarray) -> np.ndarray | None:
-        """``out`` filled by the kernel's ``function`` (:mod:`manipulator_kinematics.hydraulic.kernel`)
-        for one state, or None: the kernel not loaded yet, arguments of types it does not take
-        (:func:`_warm`), or a state it refuses (the numpy path then says why)."""
+    def _compiled(
+        self, one: str, many: str, shapes: tuple[tuple[int, ...], tuple[int, ...]], D: np.ndarray
+    ) -> np.ndarray | None:
+        """The kernel's ``one`` (:mod:`manipulator_kinematics.hydraulic.kernel`) of one state D (m,),
+        or its loop ``many`` over a batch D (N, m), into a new array (shape) or (N, *shape) (shapes:
+        shape and that of a batch of one); None
+        where the kernel is not loaded yet, cannot take D as given (another dtype or layout:
+        :func:`_warm`) or refuses a state (the caller's numpy path then says why). A batch of one
+        is the single call with one axis more (issue #32: it costs no more than the single call)."""
         kernel = KERNEL.ready or KERNEL.get()
         if kernel is None:
             return None
         try:
-            return out if getattr(kernel, function)(self._code, self._constants, *arguments, out) else None
+            ndim = D.ndim
+            if ndim == 1:
+                out = np.empty(shapes[0])
+                return out if getattr(kernel, one)(self._code, self._constants, D, out) else None
+            if ndim == 2:
+                n = len(D)
+                out = np.empty(shapes[1] if n == 1 else (n, *shapes[0]))
+                return out if getattr(kernel, many)(self._code, self._constants, D, out) else None
         except TypeError:
-            return None
+            pass
+        return None
 
     def _batch(self, function: str, shape: tuple[int, ...], D: np.ndarray, *motion: Any) -> np.ndarray | None:
-        """The kernel's loop ``function`` over a batch D (..., m) (and D_dot, D_ddot, broadcast to
-        D; D_ddot None: zero): a table (..., *shape), or None where the kernel is not loaded or
-        refuses a state or the arguments (the numpy path then says why). Any batch: the scalar
-        kernel (about a microsecond a state) beats numpy's vectorised core (8-9 us a state from
-        10^3 states on) at every size (benchmarks/bench_family.py)."""
+        """The kernel's loop ``function`` over a batch D (..., m) the fast paths did not take (another
+        dtype, layout or number of axes; D_dot, D_ddot of another shape, broadcast to D's; D_ddot
+        None: zero): a table (..., *shape) of C-contiguous float copies, or None where the kernel is
+        not loaded or refuses a state or the arguments (the numpy path then says why)."""
         kernel = KERNEL.ready or KERNEL.get()
         if kernel is None or D.shape[-1] != self.m or D.size == 0:
             return None
-        rows = (D.size // self.m, self.m)
-        table = np.empty((rows[0], *shape))
-        # First as given where each array has D's shape (a 2-D one passes without a Python call:
-        # a batch of one costs little more than a single call); the kernel refuses any other
-        # dtype or layout (TypeError), then C-contiguous float copies, broadcast to D's shape.
-        given, fits = [], True
-        for x in motion:  # a loop, not all() of a generator: 0.5 us of a batch of one's 5
-            if x is None:
-                x = np.zeros(D.shape)
-            elif type(x) is not np.ndarray or x.shape != D.shape:
-                fits = False
-            given.append(x)
-        if fits:
-            try:
-                arrays = [D, *given] if D.ndim == 2 else [x.reshape(rows) for x in (D, *given)]
-                if getattr(kernel, function)(self._code, self._constants, *arrays, table):
-                    return table if D.ndim == 2 else table.reshape(D.shape[:-1] + shape)
-                return None  # a state refused: the numpy path says why
-            except TypeError:
-                pass
+        table = np.empty((D.size // self.m, *shape))
         try:
-            arrays = [_rows(x, D.shape, self.m) for x in (D, *given)]
+            rates = [np.zeros(D.shape) if x is None else x for x in motion]
+            arrays = [_rows(x, D.shape, self.m) for x in (D, *rates)]
             done = getattr(kernel, function)(self._code, self._constants, *arrays, table)
         except (TypeError, ValueError):  # types the kernel does not take, shapes that do not broadcast
             return None
@@ -572,9 +572,9 @@ class HydraulicModel:
         """Q (..., nq) for D (eq. 3 through the linkages, eqs. 1-2)."""
         if type(D) is not np.ndarray:  # (another dtype: the kernel refuses it, validate converts)
             D = np.asarray(D, dtype=float)
-        if D.shape == self._one and (Q := self._compiled("pose", np.empty(self._nq), D)) is not None:
+        if (Q := self._compiled("pose", "poses", self._pose_shapes, D)) is not None:
             return Q
-        if D.ndim > 1 and (Q := self._batch("poses", (self._nq,), D)) is not None:
+        if D.ndim > 1 and (Q := self._batch("poses", self._pose_shapes[0], D)) is not None:
             return Q
         return self._solve(self.validate(D), every_pin=False).Q.p
 
@@ -708,7 +708,9 @@ class HydraulicModel:
         """JC0 = dQ/dD (..., nq, m) (eq. 8), rows in Q's order."""
         if type(D) is not np.ndarray:
             D = np.asarray(D, dtype=float)
-        if D.shape == self._one and (J := self._compiled("jc0", np.empty((self._nq, self.m)), D)) is not None:
+        if (J := self._compiled("jc0", "jc0s", self._jc0_shapes, D)) is not None:
+            return J
+        if D.ndim > 1 and (J := self._batch("jc0s", self._jc0_shapes[0], D)) is not None:
             return J
         return self._solve(self.validate(D), every_pin=False).Q.J
 
@@ -736,9 +738,22 @@ class HydraulicModel:
                 state = _NEW(HydraulicState)
                 state._values, state._table, state._n = None, table, self._n
                 return state
-        elif (
-            D.ndim > 1 and (tables := self._batch("states", self._table_shape, D, D_dot, D_ddot)) is not None
-        ):
+        elif D.ndim == 2 and (kernel := KERNEL.ready or KERNEL.get()) is not None:
+            # A batch (N, m), the same steps as the single call: the rates as given, (N, m) or one
+            # row for all (the kernel checks their rows; other shapes and types: _batch below), so
+            # that a batch of one costs what a single call does (issue #32).
+            n = len(D)
+            table = np.empty(self._table_one if n == 1 else (n, self._table_rows, 3 + self.m))
+            accelerations = self._no_accelerations if D_ddot is None else D_ddot
+            try:
+                done = kernel.states(self._code, self._constants, D, D_dot, accelerations, table)
+            except TypeError:
+                done = False
+            if done:
+                state = _NEW(HydraulicState)
+                state._values, state._table, state._n = None, table, self._n
+                return state
+        if D.ndim > 1 and (tables := self._batch("states", self._table_shape, D, D_dot, D_ddot)) is not None:
             return HydraulicState.of_table(tables, self._n)
         D = self.validate(D)
         D_dot = _finite(D_dot, D.shape, "D_dot")
