@@ -42,8 +42,10 @@ def test_the_shipped_file_is_the_old_files_machine_digit_for_digit() -> None:
     excavator figure, test and benchmark keeps its numbers."""
     new, old = Excavator.from_file(SHIPPED), Excavator.from_file(OLD_FILE)
     a, b = new.description, old.description
-    for field in a.__dataclass_fields__:
-        if field in ("limits", "joint_limits"):
+    for field, spec in a.__dataclass_fields__.items():
+        # The family section as read is no geometry of its own (compare=False): the old file's
+        # converted section has other chain limits, as joint_limits.
+        if field in ("limits", "joint_limits") or not spec.compare:
             continue
         assert getattr(a, field) == getattr(b, field), field
     for field in a.limits.__dataclass_fields__:

@@ -34,7 +34,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -348,6 +348,10 @@ class Description:
     # The sensors' zero offsets in the order of D (swing rad, boom/arm/bucket cylinder m): true =
     # reading + offset (issue 33; a measure-up writes them). Strokes and swing limits are true.
     zero_offset: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    # The machine file's hydraulic_machine section as validated: the same machine for the
+    # family's model (HydraulicModel of parse(family)), which gives the monitored points
+    # (excavator_kinematics.core.monitored). Not part of the geometry's identity.
+    family: Mapping[str, Any] = field(default_factory=dict, compare=False, repr=False)
 
 
 def upgrade(params: Mapping[str, Any], source: str = "") -> dict[str, Any]:
@@ -520,6 +524,7 @@ def describe(params: Mapping[str, Any]) -> Description:
         bucket_outline=tuple(zip(outline[::2], outline[1::2], strict=True)),
         tail=tuple((radius, z) for z in heights or ()),
         zero_offset=(swing["zero_offset"], *(c["zero_offset"] for c in cylinders)),
+        family=g,
     )
 
 
