@@ -443,8 +443,10 @@ class Monitor:
         nearest, least = np.empty(k, dtype=np.int64), np.empty(k)
         pose = self._no_site if site is None else np.vstack((site[0], site[1]), dtype=float)
         u_f = self._no_flight if in_flight is None else np.asarray(in_flight, dtype=float)
-        if u_f.shape != c.shape:  # the numpy path broadcasts it
-            raise TypeError(f"in_flight of shape {u_f.shape}, not {c.shape}")
+        if u_f.shape != c.shape or p.shape != (n, 3) or v.shape != p.shape or a.shape != p.shape:
+            # The kernel reads (P, 3) and (P, K) without bounds checks; the numpy path broadcasts
+            # what it can and says what it cannot.
+            raise TypeError(f"shapes {p.shape}, {v.shape}, {a.shape}, {u_f.shape}: not the kernel's")
         limiting = kernel.check(
             p,
             v,
