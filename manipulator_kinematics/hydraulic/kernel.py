@@ -24,9 +24,10 @@ Each instruction writes every row of its slot that a call of its order reads (no
 cleared first), and a batch makes one work array for all its states. The instructions' helpers
 are inlined into the interpreter (``inline="always"``: numba inlines them before LLVM sees them;
 left as calls, with the work array and D, D_dot, D_ddot passed to each, the full state took a
-quarter longer; docs/hydraulic_family.md, "Speed"). The interpreter is inlined into its five
-callers too, a tenth of the compute and issue 31's 2x target, for five times the cold compile
-(about 100 s of CPU, was 22; scripts/warm_kernels.py does it at set-up).
+quarter longer; docs/hydraulic_family.md, "Speed"). The interpreter is inlined into its callers
+too (five, and ``monitored`` since issue 34), a tenth of the compute and issue 31's 2x target,
+for five times the cold compile (about 100 s of CPU with five, was 22; a sixth caller adds its
+share, not measured apart; scripts/warm_kernels.py does it at set-up).
 
 Each function returns False, writing nothing valid, for a state outside the stroke box (faces
 included), not finite, of the wrong length, or where a dyad does not close: the caller then takes
