@@ -49,6 +49,7 @@ import importlib
 import importlib.util
 import os
 import pickle
+import re
 import subprocess
 import sys
 import threading
@@ -210,8 +211,9 @@ def _ending() -> bool:
 
 def cache_is_cold(module: str) -> bool:
     """Whether numba's cache has no index for ``module``, or only indexes older than its source,
-    in each place numba looks (module docstring). A guess made without importing numba: a wrong
-    "warm" costs one compile in this process, a wrong "cold" one child that loads and ends."""
+    in each place numba looks (module docstring), counting the functions its source defines. A
+    guess made without importing numba: a wrong "warm" costs one compile in this process, a wrong
+    "cold" one child that loads and ends."""
     spec = importlib.util.find_spec(module)
     if spec is None or not spec.origin or not spec.origin.endswith(".py"):
         return False  # nothing numba compiles from a file (or no module: the import says why)
@@ -224,13 +226,17 @@ def cache_is_cold(module: str) -> bool:
     if os.environ.get("NUMBA_CACHE_DIR"):
         places = [Path(os.environ["NUMBA_CACHE_DIR"], sub)]  # numba then looks nowhere else first
     stamp = source.stat().st_mtime
+    # The functions the source defines now: the index of one since removed or renamed stays
+    # behind in the cache for ever, and would keep the module cold.
+    defined = set(re.findall(r"^\s*def (\w+)\(", source.read_text(encoding="utf-8"), flags=re.MULTILINE))
     for place in places:
         # <stem>.<function>-<line>.py311.nbi: an edit above a function leaves its index under the
         # old line behind, so each function counts by its newest index.
         newest: dict[str, float] = {}
         for index in place.glob(f"{source.stem}.*.nbi"):
             function = index.name[len(source.stem) + 1 :].rsplit("-", 1)[0]
-            newest[function] = max(newest.get(function, 0.0), index.stat().st_mtime)
+            if function in defined:
+                newest[function] = max(newest.get(function, 0.0), index.stat().st_mtime)
         if newest and all(mtime >= stamp for mtime in newest.values()):
             return False
     return True

@@ -53,6 +53,7 @@ import numpy as np
 from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.param_files import ConfigError, read_document
 from manipulator_kinematics.schema import Number, Numbers, Schema, Text, require, validate
+from manipulator_kinematics.zone_layout import KIND, WIDTH, ZONE, check_compiled
 
 KINDS = ("ceiling", "floor", "wall", "box", "sector", "surface")
 FRAMES = ("base", "site")
@@ -328,21 +329,31 @@ def scale_for(
     return np.minimum(s, 1.0)
 
 
-#: Order of the kinds' columns within a frame (the kernel's: planes, boxes, sectors, then TINs).
+#: Order of the kinds' columns within a frame on the numpy path: planes, boxes, sectors, then TINs.
 _KIND_ORDER = ("plane", "box", "sector", "surface")
 
 
 def _warm(kernel: ModuleType) -> None:
-    """Run the kernel once (numba loads or compiles it) for one zone of each kind."""
-    plane = Zone("c", "ceiling", "base", 0.1, {"height": 3.0})
-    box = Zone("b", "box", "base", 0.1, {"min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 1.0]})
-    sector = Zone("s", "sector", "base", 0.1, {"from": 0.5, "to": 1.0})
-    _, arrays, n = Monitor([plane, box, sector], ["p"])._frames["base"]
-    c, u, w, p = np.empty((2, n)), np.empty((2, n)), np.empty((2, n)), np.ones((2, 3))
-    kernel.geometry(p, p, p, *arrays, c, u, w)
-    # A TIN's located triangles are matplotlib's int32 (-1: off the TIN).
-    kernel.surface(p, p, p, np.array([0, -1], np.int32), np.ones((1, 3)), np.zeros(3), 1.0, 0.1, c, u, w, 0)
-    kernel.scales(c, u, w, u, 0.02, 0.3, 0.05, np.empty((2, n)))
+    """Refuse a kernel compiled for another zone layout, then run it once (numba loads or compiles
+    it) on one zone of each kind, without and with a site pose, and let it take only those types:
+    arguments of others (a list, a strided view, integers) raise TypeError and the check takes
+    the numpy path instead of compiling for seconds in a command."""
+    check_compiled(kernel)
+    tin = _Tin(np.array([[0.0, 0.0, 1.0]]), np.zeros(3), np.array([0, -1], np.int32))
+    monitor = Monitor(
+        [
+            Zone("c", "ceiling", "base", 0.1, {"height": 3.0}),
+            Zone("b", "box", "site", 0.1, {"min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 1.0]}),
+            Zone("s", "sector", "base", 0.1, {"from": 0.5, "to": 1.0}),
+            Zone("t", "surface", "base", 0.1, {"side": "below"}, tin),
+        ],
+        ["p", "q"],
+    )
+    p = np.ones((2, 3))
+    for site in (None, (np.eye(3), np.zeros(3))):
+        monitor.compiled(kernel, p, p, p, 0.3, 0.05, site, np.zeros((2, 4)), 0.02)
+    kernel.check.disable_compile()
+    kernel.layout_signature.disable_compile()
 
 
 #: The compiled check (:mod:`manipulator_kinematics.zone_kernel`), see manipulator_kinematics.compiled.
@@ -351,27 +362,33 @@ KERNEL = Kernel("manipulator_kinematics.zone_kernel", _warm)
 
 class Monitor:
     """The zones of a machine and its monitored points (by name), checked per command by the
-    compiled kernel (:mod:`zone_kernel`: every kind, a TIN's point location by matplotlib), or
-    until it is loaded (or with ``MK_COMPILED=0``) in numpy, every zone of a kind in one array
-    operation."""
+    compiled kernel (:mod:`zone_kernel`: every kind in one call, a TIN's point location by
+    matplotlib before it), or until it is loaded (or with ``MK_COMPILED=0``) in numpy, every zone
+    of a kind in one array operation."""
 
     def __init__(self, zones: Sequence[Zone], points: Sequence[str]) -> None:
         self.zones, self.points = list(zones), list(points)
-        # Per frame: the kinds' batches (in _KIND_ORDER), the compiled kinds' arrays and their
-        # column count; and where the columns go in the zones' order.
-        self._frames: dict[str, tuple[list[_Kind], tuple[np.ndarray, ...], int]] = {}
+        self._names = [z.name for z in self.zones]
+        # Per frame: the kinds' batches in _KIND_ORDER (the numpy path); where its columns go in
+        # the zones' order.
+        self._frames: dict[str, list[_Kind]] = {}
         for frame in FRAMES:
             groups: dict[str, list[Zone]] = {}
             for z in self.zones:
                 if z.frame == frame:
                     groups.setdefault("plane" if z.kind in _PLANES else z.kind, []).append(z)
             if groups:
-                kinds = [_Kind.of(groups[k]) for k in _KIND_ORDER if k in groups]
-                self._frames[frame] = (kinds, *_packed(kinds))
-        order = [z.name for kinds, _, _ in self._frames.values() for k in kinds for z in k.zones]
+                self._frames[frame] = [_Kind.of(groups[k]) for k in _KIND_ORDER if k in groups]
+        order = [z.name for kinds in self._frames.values() for k in kinds for z in k.zones]
         self._order = np.array([order.index(z.name) for z in self.zones], dtype=int)
         self._reordered = bool(np.any(self._order != np.arange(len(self.zones))))
         self._site = np.array([z.frame == "site" for z in self.zones], dtype=bool)
+        # The kernel's: the zone table (zone_layout), every TIN's planes one after the other, the
+        # TIN zones (with their row in the located-triangle table), no site pose, no command in force.
+        self._table, self._planes, self._tins = _packed(self.zones)
+        self._no_site = np.zeros((4, 3))
+        self._no_flight = np.zeros((len(self.points), len(self.zones)))
+        self._columns = np.arange(len(self.zones))
 
     def check(
         self,
@@ -394,11 +411,96 @@ class Monitor:
         (without it they are reported at clearance -inf and stop every command: no pose, no
         motion toward them). ``compiled`` false: the numpy path even where the kernel is loaded
         (tests compare them)."""
-        p, v = np.asarray(positions, float), np.asarray(velocities, float)
-        a = np.zeros_like(p) if accelerations is None else np.asarray(accelerations, float)
+        p, v = np.ascontiguousarray(positions, float), np.ascontiguousarray(velocities, float)
+        a = np.zeros_like(p) if accelerations is None else np.ascontiguousarray(accelerations, float)
         kernel = (KERNEL.ready or KERNEL.get()) if compiled else None
+        if kernel is not None and len(p) == len(self.points):
+            try:
+                return self.compiled(kernel, p, v, a, stop_time, period, site, in_flight, delay)
+            except TypeError:  # arguments of types the kernel does not take (_warm): numpy's
+                pass
+        c, u, s = self._numpy(p, v, a, stop_time, period, site, in_flight, delay)
+        j, i = np.unravel_index(int(np.argmin(s)), s.shape)
+        nearest = np.argmin(c, axis=0)
+        return self._verdict(c, u, s, nearest, c[nearest, self._columns], int(j), int(i), site)
+
+    def compiled(
+        self,
+        kernel: ModuleType,
+        p: np.ndarray,
+        v: np.ndarray,
+        a: np.ndarray,
+        stop_time: float,
+        period: float,
+        site: tuple[np.ndarray, np.ndarray] | None,
+        in_flight: np.ndarray | None,
+        delay: float,
+    ) -> Check:
+        """:meth:`check` by the loaded ``kernel`` (:mod:`zone_kernel`: one call), the points (P,
+        3) C-contiguous float arrays; TypeError for arguments it does not take."""
+        n, k = p.shape[0], len(self.zones)
+        c, u, s = np.empty((n, k)), np.empty((n, k)), np.empty((n, k))
+        nearest, least = np.empty(k, dtype=np.int64), np.empty(k)
+        pose = self._no_site if site is None else np.vstack((site[0], site[1]), dtype=float)
+        u_f = self._no_flight if in_flight is None else np.asarray(in_flight, dtype=float)
+        if u_f.shape != c.shape or p.shape != (n, 3) or v.shape != p.shape or a.shape != p.shape:
+            # The kernel reads (P, 3) and (P, K) without bounds checks; the numpy path broadcasts
+            # what it can and says what it cannot.
+            raise TypeError(f"shapes {p.shape}, {v.shape}, {a.shape}, {u_f.shape}: not the kernel's")
+        limiting = kernel.check(
+            p,
+            v,
+            a,
+            self._table,
+            self._planes,
+            self._locate(p, pose, site is not None),
+            pose,
+            site is not None,
+            u_f,
+            float(delay),
+            float(stop_time),
+            float(period),
+            c,
+            u,
+            s,
+            nearest,
+            least,
+        )
+        return self._verdict(c, u, s, nearest, least, limiting // k, limiting % k, site)
+
+    def _locate(self, p: np.ndarray, pose: np.ndarray, posed: bool) -> np.ndarray:
+        """The located-triangle table (TINs, P) of points p (base frame) for the kernel: each TIN's
+        triangle under each point in the TIN's frame (-1 off it; a site-frame TIN without a site
+        pose is not read)."""
+        rows = []
+        for zone in self._tins:
+            tin = zone.surface
+            assert tin is not None
+            if zone.frame == "base":
+                rows.append(tin.locate(p[:, :2]))
+            elif posed:
+                rows.append(tin.locate(p @ pose[:2].T + pose[3, :2]))  # the site frame's x, y
+            else:
+                rows.append(np.full(len(p), -1))
+        if len(rows) == 1 and rows[0].dtype == np.int32:  # matplotlib's: no copy
+            return rows[0].reshape(1, -1)
+        return np.array(rows, dtype=np.int32).reshape(len(rows), len(p))
+
+    def _numpy(
+        self,
+        p: np.ndarray,
+        v: np.ndarray,
+        a: np.ndarray,
+        stop_time: float,
+        period: float,
+        site: tuple[np.ndarray, np.ndarray] | None,
+        in_flight: np.ndarray | None,
+        delay: float,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Clearances, approach speeds and scales (P, K, zones in file order) in numpy, every zone
+        of a kind in one array operation (the reference of the kernel)."""
         cs, us, ws = [], [], []
-        for frame, (kinds, arrays, columns) in self._frames.items():
+        for frame, kinds in self._frames.items():
             if frame == "site":
                 if site is None:
                     n = sum(len(k.zones) for k in kinds)
@@ -410,70 +512,92 @@ class Monitor:
                 zp, zv, za = p @ R.T + site[1], v @ R.T, a @ R.T
             else:
                 zp, zv, za = p, v, a
-            if kernel is not None:
-                surfaces = [z for k in kinds if k.kind == "surface" for z in k.zones]
-                width = columns + len(surfaces)
-                c, u, w = np.empty((len(p), width)), np.empty((len(p), width)), np.empty((len(p), width))
-                zp, zv, za = np.ascontiguousarray(zp), np.ascontiguousarray(zv), np.ascontiguousarray(za)
-                kernel.geometry(zp, zv, za, *arrays, c, u, w)
-                for col, z in enumerate(surfaces, start=columns):
-                    tin = z.surface
-                    assert tin is not None
-                    triangle = np.asarray(tin.locate(zp[:, :2]))
-                    sign = 1.0 if z.values["side"] == "below" else -1.0
-                    kernel.surface(zp, zv, za, triangle, tin.planes, tin.origin, sign, z.margin, c, u, w, col)
-            else:
-                parts = [k.approach(zp, zv, za) for k in kinds]
-                c, u, w = (np.concatenate([part[i] for part in parts], axis=1) for i in range(3))
-            cs.append(c)
-            us.append(u)
-            ws.append(w)
-        if len(cs) == 1:
-            c, u, w = cs[0], us[0], ws[0]
-        else:
-            c, u, w = (np.concatenate(x, axis=1) for x in (cs, us, ws))
+            parts = [k.approach(zp, zv, za) for k in kinds]
+            for out, i in ((cs, 0), (us, 1), (ws, 2)):
+                out.append(np.concatenate([part[i] for part in parts], axis=1))
+        c, u, w = (np.concatenate(x, axis=1) for x in (cs, us, ws))
         if self._reordered:
             c, u, w = c[:, self._order], u[:, self._order], w[:, self._order]
         u_f = np.zeros_like(c) if in_flight is None else np.asarray(in_flight, float)
-        if kernel is not None:
-            s = np.empty_like(c)
-            kernel.scales(
-                c, u, w, np.ascontiguousarray(u_f), float(delay), float(stop_time), float(period), s
-            )
-        else:
-            s = scale_for(c, u, stop_time, period, w, u_f, delay)
+        s = scale_for(c, u, stop_time, period, w, u_f, delay)
         if site is None and "site" in self._frames:
             s[:, self._site] = 0.0  # no pose: no motion at all
-        nearest = np.argmin(c, axis=0)
-        smallest = c[nearest, np.arange(c.shape[1])].tolist()
+        return c, u, s
+
+    def _verdict(
+        self,
+        c: np.ndarray,
+        u: np.ndarray,
+        s: np.ndarray,
+        nearest: np.ndarray,
+        least: np.ndarray,
+        j: int,
+        i: int,
+        site: tuple[np.ndarray, np.ndarray] | None,
+    ) -> Check:
+        """The Check of a command's clearances, approach speeds and scales (P, K), each zone's
+        nearest point ``nearest`` (K,) and its clearance ``least`` (K,), and the pair (point j,
+        zone i) of the smallest scale."""
+        points = self.points
         clearance = {
-            zone.name: (value, self.points[k] if math.isfinite(value) else "")
-            for zone, k, value in zip(self.zones, nearest.tolist(), smallest, strict=True)
+            name: (value, points[k] if math.isfinite(value) else "")
+            for name, k, value in zip(self._names, nearest.tolist(), least.tolist(), strict=True)
         }
-        j, i = np.unravel_index(int(np.argmin(s)), s.shape)
         if s[j, i] >= 1.0:
             return Check(1.0, None, None, clearance, u)
-        lost = self.zones[i].frame == "site" and site is None
-        return Check(float(s[j, i]), self.zones[i].name, None if lost else self.points[j], clearance, u)
+        lost = site is None and self.zones[i].frame == "site"
+        return Check(float(s[j, i]), self._names[i], None if lost else points[j], clearance, u)
 
 
-def _packed(kinds: list[_Kind]) -> tuple[tuple[np.ndarray, ...], int]:
-    """The kernel's arrays of a frame's planes, boxes and sectors (empty where it has none) and
-    how many columns they make."""
-    by = {k.kind: k.arrays for k in kinds}
-    normals, offsets = by.get("plane", (np.zeros((0, 3)), np.zeros(0)))
-    centre, half, box_margin = by.get("box", (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)))
-    start, width, sector_margin = by.get("sector", (np.zeros(0), np.zeros(0), np.zeros(0)))
-    arrays = tuple(
-        np.ascontiguousarray(a, dtype=float)
-        for a in (normals, offsets, centre, half, box_margin, start, width, sector_margin)
-    )
-    return arrays, len(offsets) + len(box_margin) + len(start)
+@dataclass(frozen=True)
+class _Tin:
+    """A one-triangle stand-in for a TIN (the kernel's warm-up): ``locate`` gives ``triangles``."""
+
+    planes: np.ndarray
+    origin: np.ndarray
+    triangles: np.ndarray
+
+    def locate(self, xy: Any) -> np.ndarray:
+        return self.triangles
+
+
+def _packed(zones: Sequence[Zone]) -> tuple[np.ndarray, np.ndarray, list[Zone]]:
+    """The kernel's zone table (zone_layout), every TIN's planes one after the other, and the TIN
+    zones in the order of their rows in the located-triangle table."""
+    table = np.zeros((len(zones), WIDTH))
+    planes, tins, first = [np.zeros((0, 3))], [], 0
+    for row, zone in zip(table, zones, strict=True):
+        row[ZONE.site] = zone.frame == "site"
+        row[ZONE.margin] = zone.margin
+        kind = "plane" if zone.kind in _PLANES else zone.kind
+        row[ZONE.kind] = getattr(KIND, kind)
+        v = zone.values
+        if kind == "plane":
+            normal, row[ZONE.offset] = zone.half_space()
+            row[ZONE.normal : ZONE.normal + 3] = normal
+        elif kind == "box":
+            lo, hi = np.asarray(v["min"], float), np.asarray(v["max"], float)
+            row[ZONE.centre : ZONE.centre + 3] = 0.5 * (lo + hi)
+            row[ZONE.half : ZONE.half + 3] = 0.5 * (hi - lo)
+        elif kind == "sector":
+            row[ZONE.start] = v["from"]
+            row[ZONE.width] = np.mod(v["to"] - v["from"], 2 * np.pi)
+        else:
+            tin = zone.surface
+            assert tin is not None
+            row[ZONE.origin : ZONE.origin + 3] = tin.origin
+            row[ZONE.sign] = 1.0 if v["side"] == "below" else -1.0
+            row[ZONE.tin], row[ZONE.first] = len(tins), first
+            tins.append(zone)
+            planes.append(np.asarray(tin.planes, float))
+            first += len(tin.planes)
+    return table, np.ascontiguousarray(np.concatenate(planes)), tins
 
 
 def stop_time(rates: np.ndarray, decelerations: np.ndarray) -> float:
     """T = max_i |Ddot_i| / a_i: how long the actuators need to stop a command at their limits."""
-    return float(np.max(np.abs(np.asarray(rates, float)) / np.asarray(decelerations, float), initial=0.0))
+    times = np.abs(np.asarray(rates, float)) / np.asarray(decelerations, float)
+    return float(times.max()) if times.size else 0.0  # the method: a fifth of np.max's cost
 
 
 __all__ = ["KINDS", "Check", "Monitor", "Zone", "load_zones", "scale_for", "stop_time"]

@@ -125,4 +125,18 @@ def test_the_cold_cache_guess_follows_numba(tmp_path: Path, monkeypatch: pytest.
     )
     assert len(list(cache.rglob("kernel.f-*.nbi"))) == 2
     assert not cache_is_cold("mk_cold_guess.kernel")
+    # A function removed (renamed here) leaves its index behind: warm once the module's
+    # functions are compiled, not cold for ever.
+    for index in cache.rglob("*.nbi"):
+        os.utime(index, (now - 10, now - 10))
+    source.write_text(source.read_text().replace("def f(", "def g("))
+    os.utime(source, (now - 2, now - 2))
+    assert cache_is_cold("mk_cold_guess.kernel")
+    subprocess.run(
+        [sys.executable, "-c", "import mk_cold_guess.kernel as k; k.g(1.0)"],
+        check=True,
+        timeout=120,
+        env={**os.environ, "PYTHONPATH": str(tmp_path)},
+    )
+    assert not cache_is_cold("mk_cold_guess.kernel")
     assert not cache_is_cold("math") and not cache_is_cold("no_such_module_anywhere")

@@ -4,7 +4,10 @@
 reference state with a constant target (the tip straight up at 0.6 m/s, bucket angle
 held) through the velocity IK's steps at 100 Hz (twist split, rate command, zone factor of
 :class:`manipulator_kinematics.zone_guard.ZoneGuard` for the monitored points of
-:class:`excavator_kinematics.core.monitored.MonitoredPoints`) on ideal actuators, under a ceiling at
+:class:`excavator_kinematics.core.monitored.MonitoredPoints`, as ``excavator_velocity_ik`` checks a
+command: the points' paths to second order, with their accelerations, and the command's period
+and the command in force's delay from :class:`manipulator_kinematics.zone_guard.CommandTimes`, here
+a state of no age) on ideal actuators, under a ceiling at
 7.5 m with a 0.5 m margin, and draws the machine every 0.5 s until it stops (the last pose bold, its monitored
 points as dots, the one nearest the ceiling ringed), the ceiling and its margin, and the zone
 factor and the smallest clearance over time. matplotlib, no rclpy.
@@ -23,7 +26,7 @@ from excavator_kinematics.core.plant import Plant
 from excavator_kinematics.core.rate_command import rate_command
 from excavator_kinematics.core.twist import split_twist
 from excavator_kinematics.tools.scene import BODIES, LINKAGE
-from manipulator_kinematics.zone_guard import ZoneGuard
+from manipulator_kinematics.zone_guard import CommandTimes, ZoneGuard
 from manipulator_kinematics.zones import Zone
 
 HEIGHT, MARGIN = 7.5, 0.5
@@ -37,12 +40,15 @@ def drive(exc: Excavator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     ceiling = Zone("power_line", "ceiling", "base", MARGIN, {"height": HEIGHT})
     guard = ZoneGuard([ceiling], points.names, exc.limits.max_rates / 0.3, 0.05)
     plant = Plant(exc.limits, exc.limits.reference)
+    times = CommandTimes()
     states, scales = [plant.d.copy()], [1.0]
-    for _ in range(int(SECONDS * RATE)):
+    for k in range(int(SECONDS * RATE)):
         D = plant.d.copy()
         split = split_twist(D[0], exc.pose(D)[:3], TARGET, np.zeros(3))
         rates = rate_command(exc.jc0(D), D, split.q_dot, exc.limits, 50.0, 0.1)
-        verdict = guard.check(*points(D, rates.d_dot), rates.d_dot)
+        p, v, a = points.motion(D, rates.d_dot)
+        period, delay = times(k / RATE, k / RATE)  # computed at once from the state just sampled
+        verdict = guard.check(p, v, rates.d_dot, period=period, accelerations=a, delay=delay)
         plant.step(verdict.scale * rates.d_dot, 1.0 / RATE)
         states.append(plant.d.copy())
         scales.append(verdict.scale * rates.scale)
@@ -113,7 +119,9 @@ def draw(exc: Excavator, path: Path) -> None:
     timeline.text(t[stop], 0.5, f" stopped {clearance[stop] * 1000:.1f} mm\n before the margin", color="0.3")
     lines = timeline.get_lines()[:1] + right.get_lines()
     timeline.legend(lines, [line.get_label() for line in lines], loc="upper right")
-    timeline.set_title("slowed approaching the zone, stopped at it")
+    timeline.set_title(
+        "slowed approaching the zone, stopped at it\n(the node's check: the points' paths to second order)"
+    )
     fig.savefig(path, dpi=110)
     plt.close(fig)
 

@@ -1,6 +1,7 @@
 """The hydraulic family's forward kinematics for ONE state, compiled (numba): the single-call hot
 path of :class:`manipulator_kinematics.hydraulic.model.HydraulicModel` (``state``, ``pose``,
-``jc0``, ``cylinder_rates``) for any machine file, whose vectorised numpy code stays the reference
+``jc0``, ``cylinder_rates``, and ``monitored_motion``: the avoidance zones' points, every
+velocity-IK command) for any machine file, whose vectorised numpy code stays the reference
 (a test compares the two for every shipped machine; ``MK_COMPILED=0`` keeps the numpy path).
 
 Why compiled: the numpy core runs some 300-600 small array operations per state whatever the
@@ -24,8 +25,9 @@ cleared first), and a batch makes one work array for all its states. The instruc
 are inlined into the interpreter (``inline="always"``: numba inlines them before LLVM sees them;
 left as calls, with the work array and D, D_dot, D_ddot passed to each, the full state took a
 quarter longer; docs/hydraulic_family.md, "Speed"). The interpreter is inlined into its callers
-too (the single calls and their batch loops), a tenth of the compute and issue 31's 2x target,
-for a cold compile several times longer (about 100 s of CPU with five callers, was 22;
+too (the single calls and their batch loops, and ``monitored`` since issue 34), a tenth of the
+compute and issue 31's 2x target, for a cold compile several times longer (about 100 s of CPU
+with five callers, was 22; the later callers add their share, not measured apart;
 scripts/warm_kernels.py does it at set-up).
 
 Each function returns False, writing nothing valid, for a state outside the stroke box (faces
@@ -40,7 +42,7 @@ import math
 import numpy as np
 from numba import njit
 
-from manipulator_kinematics.hydraulic.layout import FLOAT, INT, OP, SIGNATURE
+from manipulator_kinematics.hydraulic.layout import FLOAT, INT, OP, POINT, SIGNATURE
 
 # Rows of one slot of the work array: value, rate, acceleration, (cos, sin) of an angle (each
 # body's, made once where it is placed: its points and slides turn by it), then d/dD_j at _J + j.
@@ -472,3 +474,50 @@ def jc0s(code: np.ndarray, values: np.ndarray, D: np.ndarray, out: np.ndarray) -
     while i < D.shape[0] and _jc0(code, values, D[i], out[i], w):
         i += 1
     return i == D.shape[0]
+
+
+def monitored(
+    code: np.ndarray,
+    values: np.ndarray,
+    points: np.ndarray,
+    half: float,
+    swing: int,
+    D: np.ndarray,
+    D_dot: np.ndarray,
+    p: np.ndarray,
+    v: np.ndarray,
+    a: np.ndarray,
+) -> bool:
+    """The monitored points' positions, velocities and accelerations at the constant rates D_dot
+    (``HydraulicModel.monitored_motion``) into ``p``, ``v``, ``a`` (P, 3), base frame: the
+    monitored points' program (every pin, the tool outline's and the tail's points) run on the
+    state, then per row of the point table (layout.POINT) its boom-plane jet (r, z) turned by the
+    swing (column ``swing`` of D, -1: none), moved ``side`` x ``half`` across the boom plane."""
+    m = D.shape[0]
+    n = points.shape[0]
+    if not (_inside(code, values, D) and _finite(D_dot, m)):
+        return False
+    for out in (p, v, a):
+        if out.shape[0] != n or out.shape[1] != 3:
+            return False
+    w = _work(code, m)
+    if not _run(code, values, D, D_dot, np.zeros(m), MOTION, w):
+        return False
+    t1, w1 = (D[swing], D_dot[swing]) if swing >= 0 else (0.0, 0.0)
+    c, s = math.cos(t1), math.sin(t1)
+    ww = w1 * w1
+    for i in range(n):
+        slot = points[i, POINT.slot]
+        r, z = w[slot, _P, 0], w[slot, _P, 1]
+        rv, zv = w[slot, _V, 0], w[slot, _V, 1]
+        spin = w[slot, _A, 0] - r * ww  # radial: the boom plane's own and the centripetal
+        # Across the boom plane by k: (-s, c, 0) k, which the swing turns.
+        k = points[i, POINT.side] * half
+        p[i, 0], p[i, 1], p[i, 2] = r * c - k * s, r * s + k * c, z
+        v[i, 0] = rv * c - (r * s + k * c) * w1
+        v[i, 1] = rv * s + (r * c - k * s) * w1
+        v[i, 2] = zv
+        a[i, 0] = spin * c - 2.0 * rv * s * w1 + k * s * ww
+        a[i, 1] = spin * s + 2.0 * rv * c * w1 - k * c * ww
+        a[i, 2] = w[slot, _A, 1]
+    return True

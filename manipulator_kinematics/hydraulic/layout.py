@@ -33,6 +33,13 @@ task       x, y, z of Q into ``out``.. ``out`` + 2 from the tool point ``p``, tu
 add        slot ``out`` += slot ``p`` (alpha: the revolute joints' sum)
 =========  ======================================================================================
 
+The monitored points (:meth:`~manipulator_kinematics.hydraulic.model.HydraulicModel.monitored_motion`,
+the avoidance zones') have a program of their own, in which every pin is made, then the tool
+outline's points (``point``) and the tail's (``fixed``, at (-radius, height)), and a point table
+(int64, one column per :data:`POINT` field, one row per point in the names' order): ``slot`` the
+boom-plane point's slot, ``side`` 0 on the boom plane, 1 or -1 half the tool width to the left or
+right of it (the tool corners, the outline's side faces).
+
 Numba's on-disk cache is keyed on the kernel's own source file, so a kernel compiled for an
 older version of this layout would keep its old constants: the kernel compiles
 :data:`SIGNATURE` in and its loader refuses a kernel whose compiled signature differs
@@ -45,7 +52,7 @@ import zlib
 from types import ModuleType
 from typing import NamedTuple
 
-__all__ = ["FLOAT", "INT", "OP", "SIGNATURE", "check_compiled"]
+__all__ = ["FLOAT", "INT", "OP", "POINT", "SIGNATURE", "check_compiled"]
 
 
 class _Ops(NamedTuple):
@@ -88,14 +95,23 @@ class _Floats(NamedTuple):
     sin: int
 
 
+class _Points(NamedTuple):
+    """The fields of a monitored-point table, one column each (module docstring)."""
+
+    slot: int
+    side: int
+
+
 #: Instruction codes (ints; a namedtuple: a compile-time constant to numba).
 OP = _Ops(*range(len(_Ops._fields)))
 #: Column of each field in ``code`` (int64).
 INT = _Ints(*range(len(_Ints._fields)))
 #: Column of each field in ``values`` (float64).
 FLOAT = _Floats(*range(len(_Floats._fields)))
+#: Column of each field in a monitored-point table (int64).
+POINT = _Points(*range(len(_Points._fields)))
 #: Changes with any name or order above (the compiled kernel's staleness check).
-SIGNATURE = zlib.crc32(repr((_Ops._fields, _Ints._fields, _Floats._fields)).encode())
+SIGNATURE = zlib.crc32(repr((_Ops._fields, _Ints._fields, _Floats._fields, _Points._fields)).encode())
 
 
 def check_compiled(kernel: ModuleType) -> None:

@@ -28,7 +28,7 @@ import numpy as np
 from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.hydraulic import dyads, layout
 from manipulator_kinematics.hydraulic.description import SECTION, Description, Dyad, Place, Slide, read
-from manipulator_kinematics.hydraulic.program import Program, pack
+from manipulator_kinematics.hydraulic.program import Monitored, Program, pack, pack_monitored
 from manipulator_kinematics.param_files import ConfigError
 
 __all__ = ["HydraulicModel", "HydraulicState", "IKResult", "RateSolution", "StrokeError", "compiled_kernel"]
@@ -52,7 +52,19 @@ def _warm(kernel: ModuleType) -> None:
     kernel.states(code, values, batch, batch, batch, np.empty((1, 1, 4)))
     kernel.poses(code, values, batch, np.empty((1, 1)))
     kernel.jc0s(code, values, batch, np.empty((1, 1, 1)))
-    for function in (kernel.state, kernel.pose, kernel.jc0, kernel.states, kernel.poses, kernel.jc0s):
+    out = np.empty((1, 3))
+    kernel.monitored(
+        code, values, np.zeros((1, len(layout.POINT)), dtype=np.int64), 0.5, 0, D, D, out, out, out
+    )
+    for function in (
+        kernel.state,
+        kernel.pose,
+        kernel.jc0,
+        kernel.states,
+        kernel.poses,
+        kernel.jc0s,
+        kernel.monitored,
+    ):
         function.disable_compile()
 
 
@@ -253,6 +265,8 @@ class HydraulicModel:
         self._jc0_shapes = (self._nq, self.m), (1, self._nq, self.m)
         # D_ddot of a state without, and of every state of a batch (the kernel only reads it).
         self._no_acceleration, self._no_accelerations = np.zeros(self.m), np.zeros((1, self.m))
+        #: The avoidance zones' monitored points as the kernel makes them (every velocity-IK command).
+        self.monitored_points: Monitored = pack_monitored(d, self.lower, self.upper)
         if check:
             self.check()
 
@@ -617,7 +631,26 @@ class HydraulicModel:
     def monitored_motion(self, D: Any, D_dot: Any) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`monitored` and the points' accelerations (..., P, 3) along the motion at the
         constant rates ``D_dot`` (the jets' second derivatives with D_ddot = 0, and the swing's
-        centripetal and Coriolis terms): how a point's path curves, for the zones' check."""
+        centripetal and Coriolis terms): how a point's path curves, for the zones' check. One state
+        (float arrays (m,)) runs compiled once the kernel is loaded (``kernel.monitored``, the
+        program of :attr:`monitored_points`: a velocity IK calls this per command); the numpy path
+        below is the reference and says why a state is refused."""
+        points = self.monitored_points
+        if (
+            type(D) is np.ndarray
+            and D.shape == self._one
+            and (kernel := KERNEL.ready or KERNEL.get()) is not None
+        ):
+            n = len(points.names)
+            p, v, a = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
+            program = points.program
+            try:
+                if kernel.monitored(
+                    program.code, program.values, points.points, points.half, points.swing, D, D_dot, p, v, a
+                ):
+                    return list(points.names), p, v, a
+            except TypeError:  # arguments of types the kernel does not take (_warm): numpy's
+                pass
         D = self.validate(D)
         D_dot = _finite(D_dot, D.shape, "D_dot")
         solved = self._solve(D, D_dot)
@@ -645,30 +678,24 @@ class HydraulicModel:
         parts_p = [p[..., :n_pins, :], tool_p + across, tool_p - across]
         parts_v = [v[..., :n_pins, :], tool_v + turning, tool_v - turning]
         parts_a = [a[..., :n_pins, :], tool_a + turned, tool_a - turned]
-        names = [*solved.pins, "left_corner", "right_corner"]
         if d.outline:
             outline_p, outline_v, outline_a = p[..., n_pins:, :], v[..., n_pins:, :], a[..., n_pins:, :]
             if half > 0.0:
                 parts_p += [outline_p + across, outline_p - across]
                 parts_v += [outline_v + turning, outline_v - turning]
                 parts_a += [outline_a + turned, outline_a - turned]
-                names += [
-                    f"tool_outline_{i}_{side}" for side in ("left", "right") for i in range(len(d.outline))
-                ]
             else:
                 parts_p.append(outline_p)
                 parts_v.append(outline_v)
                 parts_a.append(outline_a)
-                names += [f"tool_outline_{i}" for i in range(len(d.outline))]
         if d.tail:
             radius, height = np.array(d.tail, dtype=float).T
             level = height * np.ones_like(c)
             parts_p.append(np.stack((-radius * c, -radius * s, level), axis=-1))
             parts_v.append(np.stack((radius * s * w, -radius * c * w, np.zeros_like(level)), axis=-1))
             parts_a.append(np.stack((radius * c * w * w, radius * s * w * w, np.zeros_like(level)), axis=-1))
-            names += [f"tail_{i}" for i in range(len(d.tail))]
         return (
-            names,
+            list(points.names),  # pack_monitored's: the same points in the same order
             np.concatenate(parts_p, axis=-2),
             np.concatenate(parts_v, axis=-2),
             np.concatenate(parts_a, axis=-2),

@@ -3,7 +3,8 @@
 :class:`~manipulator_kinematics.hydraulic.description.Description` the numpy core
 (:class:`~manipulator_kinematics.hydraulic.model.HydraulicModel`) runs: the same steps in the same
 order, each pin computed once, and only the pins a later step or the tool reads (the single
-call's work; :meth:`HydraulicModel.pins` stays on the numpy path).
+call's work; :meth:`HydraulicModel.pins` stays on the numpy path). The monitored points of the
+avoidance zones (:func:`pack_monitored`) have a program of their own that makes every pin.
 """
 
 from __future__ import annotations
@@ -14,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from manipulator_kinematics.hydraulic.description import Description, Dyad, Place, Radius, Slide
-from manipulator_kinematics.hydraulic.layout import FLOAT, INT, OP
+from manipulator_kinematics.hydraulic.layout import FLOAT, INT, OP, POINT
 
-__all__ = ["Program", "pack"]
+__all__ = ["Monitored", "Program", "pack", "pack_monitored"]
 
 
 @dataclass(frozen=True)
@@ -55,6 +56,57 @@ def _radius(side: Radius) -> tuple[int, float]:
 
 def pack(d: Description, lower: np.ndarray, upper: np.ndarray) -> Program:
     """The program of ``d`` with the stroke box [lower, upper] (module docstring)."""
+    return _pack(d, lower, upper)[0]
+
+
+@dataclass(frozen=True)
+class Monitored:
+    """The monitored points' program (every pin made, then the tool outline's points and the
+    tail's) with its point table ``points`` (P, len(POINT)) int64, the points' ``names`` in the
+    table's order (:meth:`HydraulicModel.monitored_motion`'s), half the tool width ``half`` and
+    the swing's column of D (-1: no swing)."""
+
+    program: Program
+    points: np.ndarray
+    names: tuple[str, ...]
+    half: float
+    swing: int
+
+
+def pack_monitored(d: Description, lower: np.ndarray, upper: np.ndarray) -> Monitored:
+    """The monitored points of ``d`` (layout module docstring): every pin under its name in the
+    order the numpy solve makes them, both tool corners (``left_corner``, ``right_corner``: the
+    tool point half the width to either side), the tool outline on both side faces
+    (``tool_outline_<i>_left``, ``_right``; one ``tool_outline_<i>`` where the width is 0) and the
+    tail (``tail_<i>``)."""
+    program, pins, extra = _pack(d, lower, upper, every_pin=True)
+    half = 0.5 * d.width
+    rows = [(slot, 0) for slot in pins.values()]
+    tool = pins[d.tool_pin]
+    rows += [(tool, 1), (tool, -1)]
+    names = [*pins, "left_corner", "right_corner"]
+    outline = extra[: len(d.outline)]
+    if outline and half > 0.0:
+        rows += [(slot, side) for side in (1, -1) for slot in outline]
+        names += [f"tool_outline_{i}_{side}" for side in ("left", "right") for i in range(len(outline))]
+    else:
+        rows += [(slot, 0) for slot in outline]
+        names += [f"tool_outline_{i}" for i in range(len(outline))]
+    rows += [(slot, 0) for slot in extra[len(d.outline) :]]
+    names += [f"tail_{i}" for i in range(len(d.tail))]
+    points = np.zeros((len(rows), len(POINT)), dtype=np.int64)
+    for row, (slot, side) in enumerate(rows):
+        points[row, POINT.slot], points[row, POINT.side] = slot, side
+    swing = 0 if d.swing is not None else -1
+    return Monitored(program, points, tuple(names), half, swing)
+
+
+def _pack(
+    d: Description, lower: np.ndarray, upper: np.ndarray, every_pin: bool = False
+) -> tuple[Program, dict[str, int], list[int]]:
+    """The program, its pins' slots and the extra points':
+    only the pins a later step reads, or ``every_pin`` (the monitored points' program: every pin,
+    then the tool outline's points and the tail's, whose slots come last)."""
     w = _Writer()
     m, swing = len(lower), d.swing is not None
     n = int(swing) + len(d.joints)
@@ -66,19 +118,25 @@ def pack(d: Description, lower: np.ndarray, upper: np.ndarray) -> Program:
     # Pins read after they are made: dyad centres, placing pins (the tool point is its own).
     read = {pin for step in d.steps if isinstance(step, Dyad) for pin in (step.pivot, step.first)}
     read |= {pin for step in d.steps if isinstance(step, Place) for pin in (step.one, step.two)}
+    if every_pin:
+        read |= {pin for pins in d.bodies.values() for pin in pins}
     pins: dict[str, int] = {}
     origin: dict[str, int] = {}
     angle: dict[str, int] = {}
 
+    def point(body: str, xz: tuple[float, float] | np.ndarray) -> int:
+        slot = w.slot()
+        w.emit(
+            OP.point,
+            {"out": slot, "p": origin[body], "angle": angle[body]},
+            {"x": float(xz[0]), "z": float(xz[1])},
+        )
+        return slot
+
     def points(body: str) -> None:
         for pin, xz in d.bodies[body].items():
             if pin in read and pin not in pins:
-                pins[pin] = w.slot()
-                w.emit(
-                    OP.point,
-                    {"out": pins[pin], "p": origin[body], "angle": angle[body]},
-                    {"x": float(xz[0]), "z": float(xz[1])},
-                )
+                pins[pin] = point(body, xz)
 
     origin[d.ground], angle[d.ground] = w.slot(), w.slot()
     w.emit(OP.fixed, {"out": origin[d.ground]}, {"x": 0.0, "z": 0.0})
@@ -133,18 +191,18 @@ def pack(d: Description, lower: np.ndarray, upper: np.ndarray) -> Program:
         else:
             w.emit(OP.angle, {"out": i, "p": angle[joint.child], "q": angle[joint.parent]})
             revolute.append(i)
-    tool = w.slot()
-    xz = d.bodies[d.tool_body][d.tool_pin]
-    w.emit(
-        OP.point,
-        {"out": tool, "p": origin[d.tool_body], "angle": angle[d.tool_body]},
-        {"x": float(xz[0]), "z": float(xz[1])},
-    )
+    tool = point(d.tool_body, d.bodies[d.tool_body][d.tool_pin])
     w.emit(OP.task, {"out": results + n, "p": tool, "act": 0 if swing else -1})
     if d.has_angle:
         w.emit(OP.fixed, {"out": alpha}, {"x": 0.0, "z": 0.0})
         for i in revolute:
             w.emit(OP.add, {"out": alpha, "p": i})
+    extra: list[int] = []
+    if every_pin:
+        extra = [point(d.tool_body, xz) for xz in d.outline]
+        for radius, height in d.tail:  # behind the swing axis: r = -radius
+            extra.append(w.slot())
+            w.emit(OP.fixed, {"out": extra[-1]}, {"x": -float(radius), "z": float(height)})
 
     head = {"op": OP.head, "out": w.slots, "p": results, "act": n, "q": nq, "act2": m}
     code = np.full((1 + len(w.rows), len(INT)), -1, dtype=np.int64)
@@ -154,7 +212,7 @@ def pack(d: Description, lower: np.ndarray, upper: np.ndarray) -> Program:
             code[row, getattr(INT, field)] = number
         for field, value in floats.items():
             values[row, getattr(FLOAT, field)] = value
-    return Program(code, values, n, nq, m)
+    return Program(code, values, n, nq, m), pins, extra
 
 
 def _slide(w: _Writer, step: Slide, origin: dict[str, int], angle: dict[str, int]) -> None:

@@ -73,7 +73,7 @@ from manipulator_kinematics.hydraulic.control import (
 )
 from manipulator_kinematics.hydraulic.description import SECTION
 from manipulator_kinematics.hydraulic.drawing import urdf_joint_values
-from manipulator_kinematics.hydraulic.model import HydraulicModel
+from manipulator_kinematics.hydraulic.model import HydraulicModel, StrokeError
 from manipulator_kinematics.hydraulic.path import plan_clear
 from manipulator_kinematics.joint_state import (
     PLAUSIBILITY_FACTOR,
@@ -261,9 +261,13 @@ def monitored(h: HydraulicModel, D: np.ndarray, D_dot: np.ndarray) -> tuple[np.n
     """Positions, velocities and accelerations of the monitored points at a measured state D; a state a
     round-off beyond a stroke end (reading + zero_offset of a state at the end) is taken at the
     end, one farther out is refused (StrokeError)."""
-    at_end = np.clip(D, h.lower, h.upper)
-    D = at_end if np.all(np.abs(at_end - D) <= 1e-9) else D
-    return h.monitored_motion(D, D_dot)[1:]
+    try:
+        return h.monitored_motion(D, D_dot)[1:]
+    except StrokeError:  # clipped only then: the clip costs as much as the compiled points
+        at_end = np.clip(D, h.lower, h.upper)
+        if not np.all(np.abs(at_end - D) <= 1e-9):
+            raise
+        return h.monitored_motion(at_end, D_dot)[1:]
 
 
 class HydraulicVelocityIK(MachineNode):
