@@ -476,6 +476,7 @@ def jc0s(code: np.ndarray, values: np.ndarray, D: np.ndarray, out: np.ndarray) -
     return i == D.shape[0]
 
 
+@njit(cache=True, error_model="numpy")
 def monitored(
     code: np.ndarray,
     values: np.ndarray,
