@@ -88,3 +88,15 @@ class MonitoredPoints:
             D[..., 0] = wrap_swing(D[..., 0])
         at_end = np.clip(D, self.family.lower, self.family.upper)
         return np.where(np.abs(at_end - D) <= STROKE_TOLERANCE, at_end, D)
+
+
+class ReadingPoints(MonitoredPoints):
+    """The monitored points of sensor readings (as joint_states / cylinder_lengths carry them; D =
+    reading + zero_offset): the registry's ``monitored`` hook, whose states are the machine's
+    joint values (machine_markers draws the zones' points with it)."""
+
+    def positions(self, D: np.ndarray) -> np.ndarray:
+        return super().positions(np.asarray(D, dtype=float) + self.exc.zero_offset)
+
+
+__all__ = ["MonitoredPoints", "ReadingPoints"]

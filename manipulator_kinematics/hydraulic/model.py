@@ -636,11 +636,7 @@ class HydraulicModel:
         program of :attr:`monitored_points`: a velocity IK calls this per command); the numpy path
         below is the reference and says why a state is refused."""
         points = self.monitored_points
-        if (
-            type(D) is np.ndarray
-            and D.shape == self._one
-            and (kernel := KERNEL.ready or KERNEL.get()) is not None
-        ):
+        if type(D) is np.ndarray and D.ndim == 1 and (kernel := KERNEL.ready or KERNEL.get()) is not None:
             n = len(points.names)
             p, v, a = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
             program = points.program
