@@ -19,7 +19,9 @@ import pytest
 from excavator_kinematics.core import kinematics
 from excavator_kinematics.core.kinematics import Excavator, StrokeError
 from excavator_kinematics.core.machine_file import PINS, STROKE_TOLERANCE
+from excavator_kinematics.core.urdf_joints import joint_positions
 from manipulator_kinematics.hydraulic import HydraulicModel
+from manipulator_kinematics.hydraulic.model import KERNEL
 from manipulator_kinematics.param_files import config_path, load_parameters
 
 EXC = Excavator.default()
@@ -111,3 +113,21 @@ def test_a_continuous_swing_is_wrapped_before_the_core() -> None:
     D[0] -= 2.0 * math.pi
     np.testing.assert_allclose(wound, turning.pose(D), rtol=0, atol=1e-12)
     np.testing.assert_allclose(wound, EXC.hydraulic.solve(D).Q, rtol=0, atol=1e-12)
+
+
+def test_one_states_pins_and_joint_angles_are_the_batchs_within_round_off() -> None:
+    """One state takes the family kernel (pins from its monitored points, angles from its state),
+    a batch the numpy core: the same machine to 1e-12, and the URDF joints made of either agree."""
+    KERNEL.get(wait=True)
+    rng = np.random.default_rng(7)
+    lower, upper = EXC.joint_limits.lower, EXC.joint_limits.upper
+    D = lower + (upper - lower) * rng.random((20, 4))
+    batch_pins, batch_angles = EXC.pins(D), EXC.joint_angles(D[:, 1:])
+    for i, state in enumerate(D):
+        pins = EXC.pins(state)
+        assert list(pins) == list(batch_pins)
+        for name, p in pins.items():
+            np.testing.assert_allclose(p, batch_pins[name][i], rtol=0, atol=1e-12, err_msg=name)
+        np.testing.assert_allclose(EXC.joint_angles(state[1:]), batch_angles[i], rtol=0, atol=1e-12)
+    single = np.array([joint_positions(EXC, state) for state in D])
+    np.testing.assert_allclose(single, joint_positions(EXC, D), rtol=0, atol=1e-12)

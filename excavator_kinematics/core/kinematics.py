@@ -75,6 +75,7 @@ from excavator_kinematics.core.machine_file import (
 )
 from manipulator_kinematics.compiled import Kernel
 from manipulator_kinematics.hydraulic import HydraulicModel, HydraulicState
+from manipulator_kinematics.hydraulic.model import KERNEL as FAMILY_KERNEL
 from manipulator_kinematics.model import IKSolutions
 from manipulator_kinematics.param_files import ConfigError, config_path, load_parameters
 from manipulator_kinematics.row_blocks import BLOCK, in_blocks
@@ -104,6 +105,7 @@ _NO_ACCELERATIONS = np.zeros((1, 4))
 # The cylinders at 1 m/s, the swing still (Excavator.k_entries); the rates along which Qddot gives
 # eq. 11's matrices: each actuator alone, then each pair (Excavator.acceleration_matrices).
 _CYLINDER_RATES = np.array([0.0, 1.0, 1.0, 1.0])
+_AT_REST = np.zeros(4)
 _PAIRS = np.array([(i, j) for i in range(4) for j in range(i + 1, 4)])
 _PROBES = np.concatenate((np.eye(4), np.eye(4)[_PAIRS[:, 0]] + np.eye(4)[_PAIRS[:, 1]]))
 
@@ -442,10 +444,14 @@ class Excavator:
     def joint_angles(self, lengths: Any) -> np.ndarray:
         """Cylinder lengths [d2, d3, d4] (..., 3) -> [theta2, theta3, theta4] (eqs. 1-2): the family
         core's, the same arithmetic as :meth:`pins` (the URDF's body frames, urdf_joints, are made
-        from both and must agree to the bit; the compiled kernel's would differ in the last bits)."""
+        from both and must agree to the bit). One state: the family kernel's once loaded, as
+        :meth:`pins` (the forward node's URDF joints per message: 2 ms in numpy)."""
         lengths = _vectors(lengths, 3, "[boom, arm, bucket] lengths")
         self._check_lengths(lengths)
-        return self._in_blocks(_joints, self._at_reference_swing(lengths))
+        D = self._at_reference_swing(lengths)
+        if D.ndim == 1 and FAMILY_KERNEL.ready is not None:
+            return self.hydraulic.state(D, _AT_REST).theta[1:]
+        return self._in_blocks(_joints, D)
 
     def k_entries(self, lengths: Any) -> tuple[np.ndarray, np.ndarray]:
         """dtheta_i/dd_i (the diagonal of K, eq. 7) and d2theta_i/dd_i2 (of K1), for i = 2..4:
@@ -521,8 +527,14 @@ class Excavator:
     def pins(self, D: Any) -> dict[str, np.ndarray]:
         """Every pin (and the tip) in the base frame, shape (..., 3), for drawing and checking:
         the family core's pins under the excavator's names (``machine_file.PINS``; the H-link pin
-        under both of its names is one array)."""
-        pins = self.hydraulic.solve_pins(self.validate(D))
+        under both of its names is one array). One state: the family kernel's once loaded (its
+        monitored points hold every pin; 7 us where the numpy core takes 2 ms), the same
+        arithmetic as :meth:`joint_angles` of one state."""
+        D = self.validate(D)
+        if D.ndim == 1 and FAMILY_KERNEL.ready is not None:
+            names, p, _, _ = self.hydraulic.monitored_motion(D, _AT_REST)
+            return {name: p[names.index(pin)] for name, pin in PINS.items()}
+        pins = self.hydraulic.solve_pins(D)
         return {name: pins[pin] for name, pin in PINS.items()}
 
     def j0(self, theta: Any) -> np.ndarray:
