@@ -600,7 +600,6 @@ class Excavator:
             except TypeError:  # arguments of types the kernel does not take (_warm)
                 pass
         D = self.validate(D)
-        D = self.validate(D)
         rates = _finite(D_dot, D.shape, "D_dot")
         accelerations = None if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot")
         return BucketState(np.moveaxis(self._in_blocks(_state_rows, D, rates, accelerations), -2, 0))
