@@ -223,16 +223,25 @@ def nodes(tmp: Path) -> Iterator[dict[str, NodeProcess]]:
         process.stop()
 
 
-def until_logged(probe: Probe, process: NodeProcess, text: str, send) -> None:
-    """``send()`` until the node's log holds ``text`` (a rejection may be held back by the throttle)."""
+def resend_until(probe: Probe, send, done, what: str, wait: float = 1.0) -> None:
+    """``send()`` until ``done()``, waiting ``wait`` s after each of at most 20 sends: a marker or
+    a rejection is re-sent because the node may drop one under load or hold a log line back."""
     for _ in range(20):
         send()
         try:
-            probe.wait_until(lambda: text in process.log(), 0.5, repr(text))
+            probe.wait_until(done, wait, what)
             return
         except TimeoutError:
             continue
-    raise TimeoutError(f"{text!r} never logged: {process.log()[-2000:]}")
+    raise TimeoutError(f"never: {what}")
+
+
+def until_logged(probe: Probe, process: NodeProcess, text: str, send) -> None:
+    """``send()`` until the node's log holds ``text`` (a rejection may be held back by the throttle)."""
+    try:
+        resend_until(probe, send, lambda: text in process.log(), repr(text), 0.5)
+    except TimeoutError:
+        raise TimeoutError(f"{text!r} never logged: {process.log()[-2000:]}") from None
 
 
 # ------------------------------------------------------------------------------ malformed input
@@ -357,15 +366,12 @@ def test_excavator_forward_survives_any_input(probe: Probe, nodes: dict[str, Nod
             def seen() -> list:
                 return [m for m in out.messages[pose_topic] if m.header.stamp.sec == sec]
 
-            for _ in range(20):
+            def send() -> None:
                 swing.publish(serialize_message(pair[0]))
                 cylinders.publish(serialize_message(pair[1]))
-                try:
-                    probe.wait_until(lambda: bool(seen()), 1.0, f"pose of marker {sec}")
-                    return seen()[0]
-                except TimeoutError:
-                    continue
-            raise TimeoutError(f"no pose for marker {sec}")
+
+            resend_until(probe, send, lambda: bool(seen()), f"pose of marker {sec}")
+            return seen()[0]
 
         for burst in range(10):
             for k in range(BURST):
@@ -686,16 +692,13 @@ def test_excavator_velocity_ik_survives_any_input(probe: Probe, nodes: dict[str,
             def seen() -> list:
                 return [m for m in out.messages[topic] if m.header.stamp.sec == sec and any(m.velocity)]
 
-            for _ in range(20):
+            def send() -> None:
                 swing.publish(joint_state(JOINTS[:1], D[:1], [0.0], 1))
                 cylinders.publish(joint_state(CYLINDERS, D[1:], [0.0] * 3, 1))
                 target.publish(twist)
-                try:
-                    probe.wait_until(lambda: bool(seen()), 1.0, f"command of marker {sec}")
-                    return seen()[0]
-                except TimeoutError:
-                    continue
-            raise TimeoutError(f"no command for marker {sec}")
+
+            resend_until(probe, send, lambda: bool(seen()), f"command of marker {sec}")
+            return seen()[0]
 
         for burst in range(10):
             for k in range(BURST):
@@ -788,14 +791,12 @@ def test_excavator_sim_survives_any_input(probe: Probe, nodes: dict[str, NodePro
                 free = (d > LIMITS.d_min) & (d < LIMITS.d_max)
                 return bool(np.array_equal(d_dot[free], command[free]))
 
-            for _ in range(20):
-                commands.publish(joint_state(ACTUATORS, velocity=command))
-                try:
-                    probe.wait_until(moving, 1.0, f"simulator moving at {command}")
-                    return
-                except TimeoutError:
-                    continue
-            raise TimeoutError(f"the simulator never moved at {command}")
+            resend_until(
+                probe,
+                lambda: commands.publish(joint_state(ACTUATORS, velocity=command)),
+                moving,
+                f"simulator moving at {command}",
+            )
 
         for burst in range(10):
             for k in range(BURST):
@@ -1238,14 +1239,13 @@ def test_family_forward_survives_any_input(
             def seen() -> list:
                 return [m for m in poses if m.header.stamp.sec == sec]
 
-            for _ in range(20):
-                states.publish(joint_state(names, q, qd, sec))
-                try:
-                    probe.wait_until(lambda: bool(seen()), 1.0, f"pose of marker {sec}")
-                    return seen()[0]
-                except TimeoutError:
-                    continue
-            raise TimeoutError(f"no pose for marker {sec}")
+            resend_until(
+                probe,
+                lambda: states.publish(joint_state(names, q, qd, sec)),
+                lambda: bool(seen()),
+                f"pose of marker {sec}",
+            )
+            return seen()[0]
 
         for burst in range(FAMILY_BURSTS):
             for k in range(BURST):
@@ -1339,15 +1339,12 @@ def test_family_velocity_ik_survives_any_input(
             def seen() -> list:
                 return [m for m in out.messages[topic] if m.header.stamp.sec == sec and any(m.velocity)]
 
-            for _ in range(20):
+            def send() -> None:
                 states.publish(joint_state(names, q, np.zeros(len(names)), 1))
                 target.publish(twist_message(sec, [*linear, 0.0, 0.0, 0.0]))
-                try:
-                    probe.wait_until(lambda: bool(seen()), 1.0, f"command of marker {sec}")
-                    return seen()[0]
-                except TimeoutError:
-                    continue
-            raise TimeoutError(f"no command for marker {sec}")
+
+            resend_until(probe, send, lambda: bool(seen()), f"command of marker {sec}")
+            return seen()[0]
 
         for burst in range(FAMILY_BURSTS):
             for k in range(BURST):
@@ -1432,14 +1429,12 @@ def test_family_sim_survives_any_input(probe: Probe, family_nodes: dict[str, Nod
                 free = (d > h.lower) & (d < h.upper)
                 return bool(np.array_equal(np.array(last.velocity)[free], command[free]))
 
-            for _ in range(20):
-                commands.publish(joint_state(names, velocity=command))
-                try:
-                    probe.wait_until(moving, 1.0, f"simulator moving at {command}")
-                    return
-                except TimeoutError:
-                    continue
-            raise TimeoutError(f"the simulator never moved at {command}")
+            resend_until(
+                probe,
+                lambda: commands.publish(joint_state(names, velocity=command)),
+                moving,
+                f"simulator moving at {command}",
+            )
 
         for burst in range(FAMILY_BURSTS):
             for k in range(BURST):
