@@ -131,3 +131,16 @@ def test_one_states_pins_and_joint_angles_are_the_batchs_within_round_off() -> N
         np.testing.assert_allclose(EXC.joint_angles(state[1:]), batch_angles[i], rtol=0, atol=1e-12)
     single = np.array([joint_positions(EXC, state) for state in D])
     np.testing.assert_allclose(single, joint_positions(EXC, D), rtol=0, atol=1e-12)
+
+
+def test_one_state_a_round_off_past_a_stroke_end_is_taken_at_the_end() -> None:
+    """The excavator accepts a length STROKE_TOLERANCE past an end (the family's model does not):
+    one state's pins and joint angles (the family kernel's) are those of the end, as the batch's
+    (the numpy core's) are within the round-off."""
+    KERNEL.get(wait=True)
+    D = EXC.limits.reference.copy()
+    D[1:] = EXC.limits.stroke_max + 0.5 * STROKE_TOLERANCE
+    batch = EXC.pins(D[None])
+    for name, p in EXC.pins(D).items():
+        np.testing.assert_allclose(p, batch[name][0], rtol=0, atol=1e-8, err_msg=name)
+    np.testing.assert_allclose(EXC.joint_angles(D[1:]), EXC.joint_angles(D[None, 1:])[0], rtol=0, atol=1e-8)

@@ -192,6 +192,9 @@ class Excavator:
         #: numpy core computes every forward quantity here (the reference); the excavator adds its
         #: checks of D (the stroke tolerance, a continuous swing) and its API around it.
         self.hydraulic = HydraulicModel(g.family, check=False)
+        # Where each pin of PINS is among the family kernel's monitored points (one state's pins).
+        points = self.hydraulic.monitored_points.names
+        self._pin_rows = np.array([points.index(pin) for pin in PINS.values()])
         self._check_assembly()
         self.hydraulic.check()  # the family's own checks too, after the excavator's named ones
         #: The IK's constants (:class:`excavator_kinematics.core.inverse.Constants`).
@@ -450,7 +453,7 @@ class Excavator:
         self._check_lengths(lengths)
         D = self._at_reference_swing(lengths)
         if D.ndim == 1 and FAMILY_KERNEL.ready is not None:
-            return self.hydraulic.state(D, _AT_REST).theta[1:]
+            return self.hydraulic.state(self._in_family_box(D), _AT_REST).theta[1:]
         return self._in_blocks(_joints, D)
 
     def k_entries(self, lengths: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -462,6 +465,11 @@ class Excavator:
         self._check_lengths(lengths)
         state = self.state(self._at_reference_swing(lengths), _CYLINDER_RATES)
         return state.theta_dot[..., 1:], state.theta_ddot[..., 1:]
+
+    def _in_family_box(self, D: np.ndarray) -> np.ndarray:
+        """A valid state D as the family's model takes it: a length a round-off past a stroke end
+        (within STROKE_TOLERANCE, which this model accepts and the family's refuses) at the end."""
+        return np.minimum(np.maximum(D, self.hydraulic.lower), self.hydraulic.upper)
 
     def _at_reference_swing(self, lengths: np.ndarray) -> np.ndarray:
         """D of cylinder lengths (..., 3) at the reference swing (the joints do not depend on it)."""
@@ -528,12 +536,12 @@ class Excavator:
         """Every pin (and the tip) in the base frame, shape (..., 3), for drawing and checking:
         the family core's pins under the excavator's names (``machine_file.PINS``; the H-link pin
         under both of its names is one array). One state: the family kernel's once loaded (its
-        monitored points hold every pin; 7 us where the numpy core takes 2 ms), the same
+        monitored points hold every pin; 10 us where the numpy core takes 2 ms), the same
         arithmetic as :meth:`joint_angles` of one state."""
         D = self.validate(D)
         if D.ndim == 1 and FAMILY_KERNEL.ready is not None:
-            names, p, _, _ = self.hydraulic.monitored_motion(D, _AT_REST)
-            return {name: p[names.index(pin)] for name, pin in PINS.items()}
+            positions = self.hydraulic.monitored_motion(self._in_family_box(D), _AT_REST)[1][self._pin_rows]
+            return dict(zip(PINS, positions, strict=True))
         pins = self.hydraulic.solve_pins(D)
         return {name: pins[pin] for name, pin in PINS.items()}
 
