@@ -11,6 +11,7 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
+from numpy_paths import numpy_only
 
 from excavator_kinematics.core import inverse
 from excavator_kinematics.core import kinematics as excavator
@@ -198,11 +199,9 @@ def test_palletizer_ik_batches(monkeypatch: pytest.MonkeyPatch, n: int, seeding:
 
 
 # ---- the SCARA ---------------------------------------------------------------------------------------
-def numpy_scara(monkeypatch: pytest.MonkeyPatch, *args, **kwargs):
+def numpy_scara(*args, **kwargs):
     """Scara.solve_ik on the numpy path (the kernel set aside for the call)."""
-    with monkeypatch.context() as patch:
-        patch.setattr(scara_module.KERNEL, "ready", None)
-        patch.setenv("MK_COMPILED", "0")
+    with numpy_only(scara_module.KERNEL):
         return SCARA.solve_ik(*args, **kwargs)
 
 
@@ -236,23 +235,21 @@ def test_scara_ik_batches(
     for i in range(n):
         single = {**options, "seed": None if seed is None else np.array(np.broadcast_to(seed, (n, 3))[i])}
         singles.append(SCARA.solve_ik(targets[i], **single))
-    same_solutions(batch, singles, numpy_scara(monkeypatch, targets, **options))
+    same_solutions(batch, singles, numpy_scara(targets, **options))
 
 
-def test_scara_fixed_phi_batch_refuses_another_heading(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_scara_fixed_phi_batch_refuses_another_heading() -> None:
     targets = SCARA.fkine(np.array([[0.1, 0.3, 1.2], [0.2, 0.4, 0.3]]))
     with pytest.raises(scara_module.RequestError) as batch:
         SCARA.solve_ik(targets, mode="fixed_phi")
     with pytest.raises(scara_module.RequestError) as reference:
-        numpy_scara(monkeypatch, targets, mode="fixed_phi")
+        numpy_scara(targets, mode="fixed_phi")
     assert str(batch.value) == str(reference.value) and "target heading is" in str(batch.value)
 
 
 # ---- the excavator -----------------------------------------------------------------------------------
-def numpy_excavator(monkeypatch: pytest.MonkeyPatch, method: str, *args):
-    with monkeypatch.context() as patch:
-        patch.setattr(excavator.KERNEL, "ready", None)
-        patch.setenv("MK_COMPILED", "0")
+def numpy_excavator(method: str, *args):
+    with numpy_only(excavator.KERNEL):
         return getattr(EXC, method)(*args)
 
 
@@ -270,7 +267,7 @@ def test_excavator_state_and_pose_batches(monkeypatch: pytest.MonkeyPatch, n: in
     for args in ((D, rates, accelerations), (D, rates), (D, rates[0], accelerations[0])):
         with kernel_only(monkeypatch):
             batch = EXC.state(*args)
-        reference = numpy_excavator(monkeypatch, "state", *args)
+        reference = numpy_excavator("state", *args)
         for field, got in batch._asdict().items():
             close(got, getattr(reference, field))
             for i in range(n):
@@ -278,7 +275,7 @@ def test_excavator_state_and_pose_batches(monkeypatch: pytest.MonkeyPatch, n: in
                 close(got[i], getattr(one, field))
     with kernel_only(monkeypatch):
         Q = EXC.pose(D)
-    close(Q, numpy_excavator(monkeypatch, "pose", D))
+    close(Q, numpy_excavator("pose", D))
     for i in range(n):
         close(Q[i], EXC.pose(D[i]))
 
@@ -335,19 +332,15 @@ def test_pump_boom_ik_batches(monkeypatch: pytest.MonkeyPatch, n: int, seeding: 
         )
         for i in range(n)
     ]
-    with monkeypatch.context() as patch:
-        patch.setattr(pump_boom.KERNEL, "ready", None)
-        patch.setenv("MK_COMPILED", "0")
+    with numpy_only(pump_boom.KERNEL):
         reference = BOOM.solve_ik(targets, use_orientation=False, seed=seed)
     same_solutions(batch, singles, reference)
     assert len(set(batch.status.ravel().tolist())) >= (2 if n >= 5 else 1)
 
 
 # ---- the hydraulic family ---------------------------------------------------------------------------
-def numpy_family(monkeypatch: pytest.MonkeyPatch, model: HydraulicModel, method: str, *args):
-    with monkeypatch.context() as patch:
-        patch.setattr(family.KERNEL, "ready", None)
-        patch.setenv("MK_COMPILED", "0")
+def numpy_family(model: HydraulicModel, method: str, *args):
+    with numpy_only(family.KERNEL):
         return getattr(model, method)(*args)
 
 
@@ -382,7 +375,7 @@ def test_family_batches_equal_single_calls_and_numpy(
     for args in ((D, rates, accelerations), (D, rates), (D, rates[:1], accelerations[:1]), (D, rates[0])):
         with kernel_only(monkeypatch), rows_as_given() if args[1].ndim == 2 else contextlib.nullcontext():
             batch = model.state(*args)
-        reference = numpy_family(monkeypatch, model, "state", *args)
+        reference = numpy_family(model, "state", *args)
         for field in HydraulicState._fields:
             got = getattr(batch, field)
             close(got, getattr(reference, field))
@@ -391,8 +384,8 @@ def test_family_batches_equal_single_calls_and_numpy(
                 close(got[i], getattr(one, field))
     with kernel_only(monkeypatch), rows_as_given():
         Q, J = model.pose(D), model.jc0(D)
-    close(Q, numpy_family(monkeypatch, model, "pose", D))
-    close(J, numpy_family(monkeypatch, model, "jc0", D))
+    close(Q, numpy_family(model, "pose", D))
+    close(J, numpy_family(model, "jc0", D))
     for i in range(n):
         close(Q[i], model.pose(D[i]))
         close(J[i], model.jc0(D[i]))
@@ -411,14 +404,14 @@ def test_a_family_batch_with_a_state_refused_raises_as_the_numpy_path() -> None:
     assert model.pose(np.empty((0, model.m))).shape == (0, len(model.task_names))
 
 
-def test_a_read_only_batch_takes_the_numpy_path_without_compiling(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_read_only_batch_takes_the_numpy_path_without_compiling() -> None:
     """Arguments of types a batch loop was not warmed with (a read-only view) raise TypeError in
     the loop (no compile inside the call) and the call answers from the numpy path."""
     D, _, _ = _states(5)
     Q = np.broadcast_to(EXC.pose(D), (5, 4))  # read-only
     close(EXC.ik(Q).q, inverse.solve_pose(EXC, Q, compiled=False).q)
     targets = np.broadcast_to(SCARA.fkine(np.array([[0.1, 0.3, 1.2], [0.2, 0.4, 0.3]])), (2, 4, 4))
-    close(SCARA.solve_ik(targets).q, numpy_scara(monkeypatch, targets).q)
+    close(SCARA.solve_ik(targets).q, numpy_scara(targets).q)
     points = np.broadcast_to(
         BOOM.fkine(np.zeros((3, 6)) + BOOM.limits.lower * 0.5 + BOOM.limits.upper * 0.5), (3, 4, 4)
     )

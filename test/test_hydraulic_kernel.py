@@ -6,12 +6,11 @@ named; the program layout's stale-cache refusal."""
 
 from __future__ import annotations
 
-import contextlib
 import types
-from collections.abc import Iterator
 
 import numpy as np
 import pytest
+from numpy_paths import numpy_only
 
 from manipulator_kinematics.hydraulic import HydraulicModel, StrokeError, layout
 from manipulator_kinematics.hydraulic import model as core
@@ -31,15 +30,6 @@ def kernel() -> types.ModuleType:
     loaded = core.compiled_kernel(wait=True)
     assert loaded is not None
     return loaded
-
-
-@contextlib.contextmanager
-def numpy_only() -> Iterator[None]:
-    """Every call inside takes the numpy path."""
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(core.KERNEL, "ready", None)
-        patch.setenv("MK_COMPILED", "0")
-        yield
 
 
 def _states(model: HydraulicModel, rng: np.random.Generator, n: int) -> tuple[np.ndarray, ...]:
@@ -69,7 +59,7 @@ def test_one_call_equals_the_numpy_core(
 ) -> None:
     model = MODELS[name]
     D, rates, accelerations = _states(model, np.random.default_rng(31), 400)
-    with numpy_only():
+    with numpy_only(core.KERNEL):
         reference = model.state(D, rates, accelerations)
         free = model.state(D, rates)
     # The single calls must not touch the numpy core.
@@ -102,7 +92,7 @@ def test_batches_equal_the_numpy_core(
         kernel_only.setattr(model, "_solve", lambda *_a, **_k: pytest.fail("numpy path taken"))
         compiled = [call() for call in calls]
         poses = [model.pose(D), model.pose(grid), model.pose(D[:1])]
-    with numpy_only():
+    with numpy_only(core.KERNEL):
         reference = [call() for call in calls]
         reference_poses = [model.pose(D), model.pose(grid), model.pose(D[:1])]
     for got, expected in zip(compiled, reference, strict=True):

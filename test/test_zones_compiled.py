@@ -7,12 +7,10 @@ path with zones in the base and the site frame, TINs in both, and with and witho
 
 from __future__ import annotations
 
-import contextlib
-from collections.abc import Iterator
-
 import numpy as np
 import pytest
 from matplotlib.tri import Triangulation
+from numpy_paths import numpy_only
 
 from excavator_kinematics.core.monitored import MonitoredPoints
 from excavator_kinematics.machine import MACHINE
@@ -45,15 +43,6 @@ def kernels() -> None:
     assert core.compiled_kernel(wait=True) is not None and KERNEL.get(wait=True) is not None
 
 
-@contextlib.contextmanager
-def numpy_only() -> Iterator[None]:
-    """Every family call inside takes the numpy path."""
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(core.KERNEL, "ready", None)
-        patch.setenv("MK_COMPILED", "0")
-        yield
-
-
 def _close(got: np.ndarray, expected: np.ndarray) -> None:
     """Within 1e-12 of the quantity's scale (its largest entry, at least 1)."""
     scale = max(1.0, float(np.max(np.abs(expected))))
@@ -74,7 +63,7 @@ def test_the_compiled_monitored_points_are_the_numpy_ones(name: str, monkeypatch
         with monkeypatch.context() as compiled_only:
             compiled_only.setattr(model, "_solve", lambda *_a, **_k: pytest.fail("numpy path taken"))
             names, p, v, a = model.monitored_motion(D, D_dot)
-        with numpy_only():
+        with numpy_only(core.KERNEL):
             expected = model.monitored_motion(D, D_dot)
         assert names == expected[0]
         for got, want in zip((p, v, a), expected[1:], strict=True):
