@@ -453,7 +453,7 @@ class Excavator:
         self._check_lengths(lengths)
         D = self._at_reference_swing(lengths)
         if D.ndim == 1 and FAMILY_KERNEL.ready is not None:
-            return self.hydraulic.state(self._in_family_box(D), _AT_REST).theta[1:]
+            return self.hydraulic.state(self.family_state(D), _AT_REST).theta[1:]
         return self._in_blocks(_joints, D)
 
     def k_entries(self, lengths: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -466,10 +466,16 @@ class Excavator:
         state = self.state(self._at_reference_swing(lengths), _CYLINDER_RATES)
         return state.theta_dot[..., 1:], state.theta_ddot[..., 1:]
 
-    def _in_family_box(self, D: np.ndarray) -> np.ndarray:
-        """A valid state D as the family's model takes it: a length a round-off past a stroke end
-        (within STROKE_TOLERANCE, which this model accepts and the family's refuses) at the end."""
-        return np.minimum(np.maximum(D, self.hydraulic.lower), self.hydraulic.upper)
+    def family_state(self, D: Any) -> np.ndarray:
+        """States D (..., 4) as the family's model (:attr:`hydraulic`) takes them: a continuous
+        swing wrapped to (-pi, pi], a length a round-off past a stroke end (within STROKE_TOLERANCE,
+        which this model accepts and the family's refuses) taken at the end; one farther out
+        stays, for the family's model to refuse naming it."""
+        D = np.array(D, dtype=float)
+        if self.limits.continuous_swing:
+            D[..., 0] = wrap_swing(D[..., 0])
+        at_end = np.clip(D, self.hydraulic.lower, self.hydraulic.upper)
+        return np.where(np.abs(at_end - D) <= STROKE_TOLERANCE, at_end, D)
 
     def _at_reference_swing(self, lengths: np.ndarray) -> np.ndarray:
         """D of cylinder lengths (..., 3) at the reference swing (the joints do not depend on it)."""
@@ -536,11 +542,11 @@ class Excavator:
         """Every pin (and the tip) in the base frame, shape (..., 3), for drawing and checking:
         the family core's pins under the excavator's names (``machine_file.PINS``; the H-link pin
         under both of its names is one array). One state: the family kernel's once loaded (its
-        monitored points hold every pin; 10 us where the numpy core takes 2 ms), the same
-        arithmetic as :meth:`joint_angles` of one state."""
+        monitored points hold every pin; about 30 us with the checks, where the numpy core takes
+        2 ms), the same arithmetic as :meth:`joint_angles` of one state."""
         D = self.validate(D)
         if D.ndim == 1 and FAMILY_KERNEL.ready is not None:
-            positions = self.hydraulic.monitored_motion(self._in_family_box(D), _AT_REST)[1][self._pin_rows]
+            positions = self.hydraulic.monitored_motion(self.family_state(D), _AT_REST)[1][self._pin_rows]
             return dict(zip(PINS, positions, strict=True))
         pins = self.hydraulic.solve_pins(D)
         return {name: pins[pin] for name, pin in PINS.items()}

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from excavator_kinematics.core.kinematics import Excavator
-from excavator_kinematics.core.machine_file import PINS, STROKE_TOLERANCE, wrap_swing
+from excavator_kinematics.core.machine_file import PINS
 from manipulator_kinematics.hydraulic.model import StrokeError
 
 
@@ -62,7 +62,7 @@ class MonitoredPoints:
 
     def positions(self, D: np.ndarray) -> np.ndarray:
         """Positions (..., P, 3) in the base frame of states D (..., 4), in the order of ``names``."""
-        D = self._in_box(D)
+        D = self.exc.family_state(D)
         return self.family.monitored_motion(D, np.zeros(D.shape))[1][..., self._order, :]
 
     def __call__(self, D: np.ndarray, D_dot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -75,19 +75,9 @@ class MonitoredPoints:
         try:
             _, p, v, a = self.family.monitored_motion(D, D_dot)
         except StrokeError:  # a state the excavator takes (a round-off beyond an end), or none
-            _, p, v, a = self.family.monitored_motion(self._in_box(D), D_dot)
+            _, p, v, a = self.family.monitored_motion(self.exc.family_state(D), D_dot)
         order = self._order
         return p[order], v[order], a[order]
-
-    def _in_box(self, D: np.ndarray) -> np.ndarray:
-        """States D as the family's model takes them: a continuous swing wrapped to (-pi, pi], a
-        length beyond a stroke end by at most the excavator's STROKE_TOLERANCE taken at the end
-        (one farther out stays, for the model to refuse naming it)."""
-        D = np.array(D, dtype=float)
-        if self.exc.limits.continuous_swing:
-            D[..., 0] = wrap_swing(D[..., 0])
-        at_end = np.clip(D, self.family.lower, self.family.upper)
-        return np.where(np.abs(at_end - D) <= STROKE_TOLERANCE, at_end, D)
 
 
 class ReadingPoints(MonitoredPoints):
