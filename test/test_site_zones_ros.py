@@ -123,8 +123,12 @@ def test_a_site_ceiling_stops_the_bucket_and_a_stale_site_pose_stops_the_machine
 
         n.create_timer(0.02, send)
         # Straight up: slowed and stopped by the ceiling, its margin not crossed.
+        # The stop, and the states up to it (under load the states' first messages may come after
+        # the first status).
         probe.wait_until(
-            lambda: any(s.startswith("stopped: ") and "at zone line" in s for s in statuses),
+            lambda: (
+                any(s.startswith("stopped: ") and "at zone line" in s for s in statuses) and bool(complete())
+            ),
             60.0,
             "the ceiling",
         )
