@@ -404,6 +404,49 @@ def test_a_family_batch_with_a_state_refused_raises_as_the_numpy_path() -> None:
     assert model.pose(np.empty((0, model.m))).shape == (0, len(model.task_names))
 
 
+def test_a_batch_of_one_is_checked_as_any_batch(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The kernels' straight line for a batch of one (issue #32) refuses what their loops refuse:
+    rates of another row count, a row of another width, a state beyond its stroke; the error is
+    the numpy path's. Rates as lists or of one state (4,) go the kernel's way once converted."""
+    D, rates, accelerations = _states(2)
+    with pytest.raises(ValueError, match="D_dot"):
+        EXC.state(D[:1], rates)
+    with pytest.raises(ValueError, match="D_ddot"):
+        EXC.state(D[:1], rates[:1], accelerations)
+    with pytest.raises(ValueError, match="shape"):
+        EXC.state(D[:1, :3], rates[:1, :3])
+    beyond = D[:1].copy()
+    beyond[0, 2] = EXC.limits.stroke_max[1] + 0.5
+    with pytest.raises(StrokeError, match="arm_cylinder length"):
+        EXC.state(beyond, rates[:1])
+    with kernel_only(monkeypatch):
+        listed = EXC.state(D[:1], [list(rates[0])], accelerations[0].tolist())
+        one = EXC.state(D[0], list(rates[0]), accelerations[0].tolist())
+    close(listed.Q_ddot[0], one.Q_ddot)
+    close(one.Q_ddot, EXC.state(D[0], rates[0], accelerations[0]).Q_ddot)
+    model = FAMILY["knuckle_crane"]
+    D, rates, _ = _family_states(model, 2)
+    with pytest.raises(FamilyStrokeError, match="D_dot"):
+        model.state(D[:1], rates)
+    with pytest.raises(ValueError, match="shape"):
+        model.pose(D[:1, :-1])
+    beyond = D[:1].copy()
+    beyond[0, 1] = model.upper[1] + 0.5
+    name = model.actuator_names[1]
+    for call in (
+        lambda: model.state(beyond, rates[:1]),
+        lambda: model.pose(beyond),
+        lambda: model.jc0(beyond),
+    ):
+        with pytest.raises(FamilyStrokeError, match=name):
+            call()
+    q = np.zeros((1, ARM.chain.n + 1))
+    with pytest.raises(ValueError, match="shape"):
+        ARM.chain.fkine(q)
+    with pytest.raises(ValueError, match="shape"):
+        ARM.chain.fkine_jacob0(q)
+
+
 def test_a_read_only_batch_takes_the_numpy_path_without_compiling() -> None:
     """Arguments of types a batch loop was not warmed with (a read-only view) raise TypeError in
     the loop (no compile inside the call) and the call answers from the numpy path."""

@@ -130,6 +130,7 @@ ELBOW_UP_ROW = np.array([0, 1, 0, 1, 2, 3, 2, 3])
 _SUCCESS, _SINGULAR, _JOINT_LIMITS, _UNREACHABLE, _INVALID = (int(s) for s in IKStatus)
 #: The seeds of a batch without one (ik_kernel.solve_batch reads its row, never uses it).
 _NO_SEEDS = np.zeros((1, 6))
+_ONE = ((1, 8, 6), (1, 8))  # _solve_many's candidates' shapes for one target
 _SIX = Numbers(6)
 
 #: The ``tool_changer:`` section of a parameters file (manipulator_kinematics.schema).
@@ -399,16 +400,16 @@ class ToolChanger:
         kernel = self.compiled_kernel() if compiled else None
         if kernel is not None and not shape:
             q, status, selected, tie, diag = self._solve_one(kernel, target, seed_q, index)
+        elif kernel is not None and len(shape) == 1:  # (N,): the kernel's outputs as they are
+            q, status, selected, tie, diag = self._solve_many(kernel, self._flange(target), seeds, index)
         elif kernel is not None:
             flat_seed = seeds if seeds is None or seeds.ndim == 2 else seeds.reshape(-1, 6)
-            flange = self._flange(target)
-            flange = flange if flange.ndim == 3 else flange.reshape(-1, 4, 4)
+            flange = self._flange(target).reshape(-1, 4, 4)
             q, status, selected, tie, diag = self._solve_many(kernel, flange, flat_seed, index)
-            if len(shape) != 1:  # (N,): the kernel's outputs as they are
-                q, status, selected, tie = (
-                    value.reshape(shape + value.shape[1:]) for value in (q, status, selected, tie)
-                )
-                diag = {key: value.reshape(shape + value.shape[1:]) for key, value in diag.items()}
+            q, status, selected, tie = (
+                value.reshape(shape + value.shape[1:]) for value in (q, status, selected, tie)
+            )
+            diag = {key: value.reshape(shape + value.shape[1:]) for key, value in diag.items()}
         else:
             flange = self._flange(target)
             flat_seed = None if seed_q is None else seed_q.reshape(-1, 6)
@@ -563,13 +564,15 @@ class ToolChanger:
         """Flange poses (N, 4, 4) through the kernel's loop (ik_kernel.solve_batch), seeds (N, 6) or
         (1, 6) for every target."""
         n = len(flange)
-        q, status = np.empty((n, 8, 6)), np.empty((n, 8), dtype=np.int8)
-        s5, reach, rho = np.empty((n, 8)), np.empty((n, 8)), np.empty(n)
+        # A batch of one's shapes made once: a tuple made per call costs 0.05 us (issue #32).
+        shape, candidates = _ONE if n == 1 else ((n, 8, 6), (n, 8))
+        q, status = np.empty(shape), np.empty(candidates, dtype=np.int8)
+        s5, reach, rho = np.empty(candidates), np.empty(candidates), np.empty(n)
         selected, tie, invalid = np.empty(n, dtype=np.intp), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
         seeded = seeds is not None
         kernel.solve_batch(
             self._packed,
-            np.ascontiguousarray(flange),
+            flange,  # C-contiguous: solve_ik's copy, or _flange's product
             np.ascontiguousarray(seeds) if seeded else _NO_SEEDS,
             seeded,
             -1 if branch is None else branch,

@@ -102,6 +102,8 @@ _BLOCK = 2 * BLOCK
 # never writes them).
 _NO_ACCELERATION = np.zeros(4)
 _NO_ACCELERATIONS = np.zeros((1, 4))
+# The table's shape for a batch of one, made once (a tuple made per call costs 0.04 us).
+_ROWS_OF_ONE = (10, 1, 4)
 # The cylinders at 1 m/s, the swing still (Excavator.k_entries); the rates along which Qddot gives
 # eq. 11's matrices: each actuator alone, then each pair (Excavator.acceleration_matrices).
 _CYLINDER_RATES = np.array([0.0, 1.0, 1.0, 1.0])
@@ -588,35 +590,53 @@ class Excavator:
         K1 Ddot^2, i.e. JC0 Dddot plus the velocity-product terms of eq. 11 (see
         :meth:`acceleration_matrices` for the paper's JC1_0 / JC2_0 split of those terms).
         """
-        D = np.asarray(D, dtype=float)
+        if type(D) is not np.ndarray:
+            D = np.asarray(D, dtype=float)
         if (kernel := KERNEL.ready or KERNEL.get()) is not None:
             # The single call (a 1 kHz node calls it per message) and a batch (N, 4), each one
-            # call of the kernel into a new table (the caller keeps the views): the kernel checks
-            # shapes and values; the numpy path below raises the error for what it refuses.
-            # _compiled written out: calling it costs 0.17 us, a fifth of the benchmark's peer (a
-            # numba pose call); a batch of one took 10x a single call through the numpy checks.
-            rates = np.asarray(D_dot, dtype=float)
+            # call of the kernel into a new table (the caller keeps the views), the arguments as
+            # given: the kernel checks shapes and values; the numpy path below raises the error for
+            # what it refuses. Written out (no _compiled, no asarray of an array): each Python step
+            # costs 0.03-0.2 us of a 1.7 us call, and a batch of one costs what one call does
+            # (issue #32).
             try:
                 if D.ndim == 1:
-                    given = _NO_ACCELERATION if D_ddot is None else np.asarray(D_ddot, dtype=float)
                     rows = np.empty((10, 4))
-                    if kernel.state(self.packed, D, rates, given, rows):
+                    given = _NO_ACCELERATION if D_ddot is None else D_ddot
+                    if kernel.state(self.packed, D, D_dot, given, rows):
                         return BucketState(rows)
-                elif D.ndim == 2:
-                    # Rates (4,) for every state: one row the kernel reads for each.
-                    rates = rates if rates.ndim == 2 else rates.reshape(1, -1)
-                    given = _NO_ACCELERATIONS if D_ddot is None else np.asarray(D_ddot, dtype=float)
-                    if given.ndim == 1:
-                        given = given.reshape(1, -1)
-                    rows = np.empty((10, len(D), 4))
-                    if kernel.states(self.packed, D, rates, given, rows):
+                else:  # a batch (N, 4); other shapes raise TypeError in the kernel
+                    rows = np.empty(_ROWS_OF_ONE if len(D) == 1 else (10, len(D), 4))
+                    given = _NO_ACCELERATIONS if D_ddot is None else D_ddot
+                    if kernel.states(self.packed, D, D_dot, given, rows):
                         return BucketState(rows)
             except TypeError:  # arguments of types the kernel does not take (_warm)
-                pass
+                if (converted := self._state_of_arrays(kernel, D, D_dot, D_ddot)) is not None:
+                    return BucketState(converted)
         D = self.validate(D)
         rates = _finite(D_dot, D.shape, "D_dot")
         accelerations = None if D_ddot is None else _finite(D_ddot, D.shape, "D_ddot")
         return BucketState(np.moveaxis(self._in_blocks(_state_rows, D, rates, accelerations), -2, 0))
+
+    def _state_of_arrays(
+        self, kernel: ModuleType, D: np.ndarray, D_dot: Any, D_ddot: Any
+    ) -> np.ndarray | None:
+        """:meth:`state`'s kernel call once more with D, the rates and the accelerations as arrays
+        of floats (lists, integers), rates (4,) for every state of a batch as one row; None where
+        the kernel still refuses them."""
+        D, rates = np.asarray(D, dtype=float), np.asarray(D_dot, dtype=float)
+        given = np.zeros(4) if D_ddot is None else np.asarray(D_ddot, dtype=float)
+        try:
+            if D.ndim == 1:
+                rows = np.empty((10, 4))
+                return rows if kernel.state(self.packed, D, rates, given, rows) else None
+            if D.ndim == 2:
+                rows = np.empty((10, len(D), 4))
+                rates, given = np.atleast_2d(rates), np.atleast_2d(given)
+                return rows if kernel.states(self.packed, D, rates, given, rows) else None
+        except TypeError:
+            pass
+        return None
 
     def acceleration_matrices(self, D: Any) -> tuple[np.ndarray, np.ndarray]:
         """JC1_0 (..., 4, 4) and JC2_0 (..., 4, 6) of eq. 11.

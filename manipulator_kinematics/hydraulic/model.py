@@ -555,10 +555,9 @@ class HydraulicModel:
             if ndim == 1:
                 out = np.empty(shapes[0])
                 return out if getattr(kernel, one)(self._code, self._constants, D, out) else None
-            if ndim == 2:
-                n = len(D)
-                out = np.empty(shapes[1] if n == 1 else (n, *shapes[0]))
-                return out if getattr(kernel, many)(self._code, self._constants, D, out) else None
+            n = len(D)  # (N, m); other dimensions: TypeError in the kernel
+            out = np.empty(shapes[1] if n == 1 else (n, *shapes[0]))
+            return out if getattr(kernel, many)(self._code, self._constants, D, out) else None
         except TypeError:
             pass
         return None
@@ -742,40 +741,42 @@ class HydraulicModel:
         Qddot = JC0 Dddot + (d/dt JC0) Ddot (the dyads' second derivatives along the motion)."""
         if type(D) is not np.ndarray:
             D = np.asarray(D, dtype=float)
-        if D.ndim == 1 and (kernel := KERNEL.ready or KERNEL.get()) is not None:
-            # The single call (a 1 kHz node calls it per message): the kernel checks lengths, types
-            # and values; the numpy path below converts and raises the error for what it refuses.
-            # Written out (no _compiled, no asarray of an array, no of_table): each Python call
-            # costs 0.1-0.2 us, an eighth of the kernel's (docs/benchmarks.md).
-            table = np.empty(self._table_shape)
-            accelerations = self._no_acceleration if D_ddot is None else D_ddot
-            try:
-                done = kernel.state(self._code, self._constants, D, D_dot, accelerations, table)
-            except TypeError:  # not arrays of floats (_warm): once more as such
+        if (kernel := KERNEL.ready or KERNEL.get()) is not None:
+            if D.ndim == 1:
+                # The single call (a 1 kHz node calls it per message): the kernel checks lengths,
+                # types and values; the numpy path below converts and raises the error for what it
+                # refuses. Written out (no _compiled, no asarray of an array, no of_table): each
+                # Python call costs 0.1-0.2 us, an eighth of the kernel's (docs/benchmarks.md).
+                table = np.empty(self._table_shape)
+                accelerations = self._no_acceleration if D_ddot is None else D_ddot
                 try:
-                    rates = np.asarray(D_dot, dtype=float), np.asarray(accelerations, dtype=float)
-                    done = kernel.state(self._code, self._constants, D, *rates, table)
-                except (TypeError, ValueError):  # the numpy path says why
+                    done = kernel.state(self._code, self._constants, D, D_dot, accelerations, table)
+                except TypeError:  # not arrays of floats (_warm): once more as such
+                    try:
+                        rates = np.asarray(D_dot, dtype=float), np.asarray(accelerations, dtype=float)
+                        done = kernel.state(self._code, self._constants, D, *rates, table)
+                    except (TypeError, ValueError):  # the numpy path says why
+                        done = False
+                if done:
+                    state = _NEW(HydraulicState)
+                    state._values, state._table, state._n = None, table, self._n
+                    return state
+            else:
+                # A batch (N, m), the same steps as the single call: the rates as given, (N, m) or
+                # one row for all (the kernel checks their rows; other shapes and types, D of
+                # another dimension too: TypeError, _batch below), so that a batch of one costs
+                # what a single call does (issue #32).
+                accelerations = self._no_accelerations if D_ddot is None else D_ddot
+                try:
+                    n = len(D)
+                    table = np.empty(self._table_one if n == 1 else (n, self._table_rows, 3 + self.m))
+                    done = kernel.states(self._code, self._constants, D, D_dot, accelerations, table)
+                except TypeError:
                     done = False
-            if done:
-                state = _NEW(HydraulicState)
-                state._values, state._table, state._n = None, table, self._n
-                return state
-        elif D.ndim == 2 and (kernel := KERNEL.ready or KERNEL.get()) is not None:
-            # A batch (N, m), the same steps as the single call: the rates as given, (N, m) or one
-            # row for all (the kernel checks their rows; other shapes and types: _batch below), so
-            # that a batch of one costs what a single call does (issue #32).
-            n = len(D)
-            table = np.empty(self._table_one if n == 1 else (n, self._table_rows, 3 + self.m))
-            accelerations = self._no_accelerations if D_ddot is None else D_ddot
-            try:
-                done = kernel.states(self._code, self._constants, D, D_dot, accelerations, table)
-            except TypeError:
-                done = False
-            if done:
-                state = _NEW(HydraulicState)
-                state._values, state._table, state._n = None, table, self._n
-                return state
+                if done:
+                    state = _NEW(HydraulicState)
+                    state._values, state._table, state._n = None, table, self._n
+                    return state
         if D.ndim > 1 and (tables := self._batch("states", self._table_shape, D, D_dot, D_ddot)) is not None:
             return HydraulicState.of_table(tables, self._n)
         D = self.validate(D)
