@@ -66,7 +66,8 @@ def probe() -> Iterator[Probe]:
 
 def drive_through_pi(probe: Probe, namespace: str, continuous: bool) -> tuple[list[float], list[float]]:
     """Sim, forward and velocity IK in ``namespace``, driven at SWING_RATE about z from START_SWING
-    until the swing has crossed pi (continuous) or has come within 0.04 rad of its stop at pi and
+    (once this probe has the sim's joint_states: a subscription matched late must not miss the
+    crossing) until the swing has crossed pi (continuous) or has come within 0.04 rad of its stop at pi and
     1 s of the sim's states (100) have followed; the sim's swing angles and the forward node's
     bucket headings. A healthy run: no ERROR line in any log (start-up, where the
     topics begin at different moments, included; issue 28 item 7)."""
@@ -93,6 +94,8 @@ def drive_through_pi(probe: Probe, namespace: str, continuous: bool) -> tuple[li
             swings.append(msg.position[0])
 
         def drive(msg: PoseStamped) -> None:
+            if not swings:  # not yet: the swing must be seen before it moves (discovery under load)
+                return
             if not started:
                 started.append(message_codec.stamp_ns(msg.header.stamp))
             o, p = msg.pose.orientation, msg.pose.position
@@ -112,7 +115,8 @@ def drive_through_pi(probe: Probe, namespace: str, continuous: bool) -> tuple[li
 
         def done() -> bool:
             if continuous:
-                return any(s < -2.9 for s in swings) and any(h < -2.9 for h in headings)
+                crossed = any(s > 3.0 for s in swings) and any(s < -2.9 for s in swings)
+                return crossed and any(h < -2.9 for h in headings)
             near = next((i for i, s in enumerate(swings) if s > math.pi - 0.04), None)
             return near is not None and len(swings) > near + 100
 
