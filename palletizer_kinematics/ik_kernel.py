@@ -64,9 +64,7 @@ def _is_pose(k: np.ndarray, pose: np.ndarray) -> bool:
     return det > 0.0 and bottom < k[19]
 
 
-# Inlined into solve_batch too: a call of a compiled function from another costs about 0.1 us
-# (issue #32: a batch of one no dearer than one call).
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def solve(
     k: np.ndarray,
     pose: np.ndarray,

@@ -57,9 +57,7 @@ def _rigid(T: np.ndarray, rotation_tol: float, bottom_tol: float) -> bool:
     return det > 0.0 and bottom < bottom_tol
 
 
-# Inlined into solve_batch too: a call of a compiled function from another costs about 0.1 us
-# (issue #32: a batch of one no dearer than one call).
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def solve(
     k: np.ndarray,
     T: np.ndarray,
