@@ -757,10 +757,6 @@ class HydraulicModel:
                         done = kernel.state(self._code, self._constants, D, *rates, table)
                     except (TypeError, ValueError):  # the numpy path says why
                         done = False
-                if done:
-                    state = _NEW(HydraulicState)
-                    state._values, state._table, state._n = None, table, self._n
-                    return state
             else:
                 # A batch (N, m), the same steps as the single call: the rates as given, (N, m) or
                 # one row for all (the kernel checks their rows; other shapes and types, D of
@@ -773,10 +769,10 @@ class HydraulicModel:
                     done = kernel.states(self._code, self._constants, D, D_dot, accelerations, table)
                 except TypeError:
                     done = False
-                if done:
-                    state = _NEW(HydraulicState)
-                    state._values, state._table, state._n = None, table, self._n
-                    return state
+            if done:
+                state = _NEW(HydraulicState)
+                state._values, state._table, state._n = None, table, self._n
+                return state
         if D.ndim > 1 and (tables := self._batch("states", self._table_shape, D, D_dot, D_ddot)) is not None:
             return HydraulicState.of_table(tables, self._n)
         D = self.validate(D)
