@@ -100,43 +100,39 @@ def test_the_cold_cache_guess_follows_numba(tmp_path: Path, monkeypatch: pytest.
     cache = tmp_path / "cache"
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
     monkeypatch.syspath_prepend(str(tmp_path))
+    source = package / "kernel.py"
+
+    def compile_in_a_child(call: str) -> None:
+        subprocess.run(
+            [sys.executable, "-c", f"import mk_cold_guess.kernel as k; k.{call}(1.0)"],
+            check=True,
+            timeout=120,
+            env={**os.environ, "PYTHONPATH": str(tmp_path)},
+        )
+
+    def edit(old: str, new: str, age: float) -> None:
+        """The source edited ``age`` s ago, every index 10 s ago: clear of the file system's
+        timestamp granularity."""
+        now = time.time()
+        for index in cache.rglob("*.nbi"):
+            os.utime(index, (now - 10, now - 10))
+        source.write_text(source.read_text().replace(old, new))
+        os.utime(source, (now - age, now - age))
+
     assert cache_is_cold("mk_cold_guess.kernel")
-    subprocess.run(
-        [sys.executable, "-c", "import mk_cold_guess.kernel as k; k.f(1.0)"],
-        check=True,
-        timeout=120,
-        env={**os.environ, "PYTHONPATH": str(tmp_path)},
-    )
+    compile_in_a_child("f")
     assert not cache_is_cold("mk_cold_guess.kernel")
     # An edit above the function moves it: cold until compiled again, then warm although the
     # index under its old line number stays behind (a developer's tree after any edit).
-    source = package / "kernel.py"
-    now = time.time()
-    for index in cache.rglob("*.nbi"):  # clear of the file system's timestamp granularity
-        os.utime(index, (now - 10, now - 10))
-    source.write_text("# moved\n" + source.read_text())
-    os.utime(source, (now - 5, now - 5))
+    edit("import numba", "# moved\nimport numba", 5)
     assert cache_is_cold("mk_cold_guess.kernel")
-    subprocess.run(
-        [sys.executable, "-c", "import mk_cold_guess.kernel as k; k.f(1.0)"],
-        check=True,
-        timeout=120,
-        env={**os.environ, "PYTHONPATH": str(tmp_path)},
-    )
+    compile_in_a_child("f")
     assert len(list(cache.rglob("kernel.f-*.nbi"))) == 2
     assert not cache_is_cold("mk_cold_guess.kernel")
     # A function removed (renamed here) leaves its index behind: warm once the module's
     # functions are compiled, not cold for ever.
-    for index in cache.rglob("*.nbi"):
-        os.utime(index, (now - 10, now - 10))
-    source.write_text(source.read_text().replace("def f(", "def g("))
-    os.utime(source, (now - 2, now - 2))
+    edit("def f(", "def g(", 2)
     assert cache_is_cold("mk_cold_guess.kernel")
-    subprocess.run(
-        [sys.executable, "-c", "import mk_cold_guess.kernel as k; k.g(1.0)"],
-        check=True,
-        timeout=120,
-        env={**os.environ, "PYTHONPATH": str(tmp_path)},
-    )
+    compile_in_a_child("g")
     assert not cache_is_cold("mk_cold_guess.kernel")
     assert not cache_is_cold("math") and not cache_is_cold("no_such_module_anywhere")

@@ -62,6 +62,7 @@ from excavator_kinematics.nodes.display_outputs import DesignPlane
 from manipulator_kinematics.hydraulic.control import rate_command as family_rate_command
 from manipulator_kinematics.hydraulic.control import task_rates
 from manipulator_kinematics.model import RequestError, matrix_quaternion
+from manipulator_kinematics.nodes.messages import twist_stamped
 from manipulator_kinematics.param_files import config_path, load_parameters
 from manipulator_kinematics.registry import machine
 from manipulator_kinematics_interfaces.msg import KinematicsErrorCodes as Codes
@@ -1314,13 +1315,6 @@ def test_family_velocity_ik_survives_any_input(
     q = D - h.zero_offset
     sent = 0
 
-    def twist_message(sec: int, values: list[float], frame: str = "base_link") -> TwistStamped:
-        msg = TwistStamped()
-        msg.header.stamp, msg.header.frame_id = Time(sec=sec), frame
-        t = msg.twist
-        t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z = map(float, values)
-        return msg
-
     try:
         family_started(probe, process)
         probe.wait_until(
@@ -1341,7 +1335,7 @@ def test_family_velocity_ik_survives_any_input(
 
             def send() -> None:
                 states.publish(joint_state(names, q, np.zeros(len(names)), 1))
-                target.publish(twist_message(sec, [*linear, 0.0, 0.0, 0.0]))
+                target.publish(twist_stamped(Time(sec=sec), "base_link", np.array([*linear, 0.0, 0.0, 0.0])))
 
             resend_until(probe, send, lambda: bool(seen()), f"command of marker {sec}")
             return seen()[0]
@@ -1351,7 +1345,7 @@ def test_family_velocity_ik_survives_any_input(
                 i = burst * BURST + k
                 if i % 2 == 0:
                     frame = "base_link" if rng.random() < 0.8 else "map"
-                    target.publish(twist_message(i, extreme(rng, 6, 1.0), frame))
+                    target.publish(twist_stamped(Time(sec=i), frame, np.array(extreme(rng, 6, 1.0))))
                 else:
                     msg = bad_joint_states(rng, names, limits.lower, limits.upper, h.max_speed, i // 2)
                     data = serialize_message(msg)
@@ -1363,7 +1357,9 @@ def test_family_velocity_ik_survives_any_input(
             probe,
             process,
             "implausible",
-            lambda: target.publish(twist_message(150_000, [1e9, 0, 0, 0, 0, 0])),
+            lambda: target.publish(
+                twist_stamped(Time(sec=150_000), "base_link", np.array([1e9, 0.0, 0.0, 0.0, 0.0, 0.0]))
+            ),
         )
         # The library's numbers afterwards: a new target (a new line, no correction yet) at D,
         # asked twice so that the state D has surely been taken before the second.
