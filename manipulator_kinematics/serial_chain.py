@@ -149,6 +149,7 @@ class SerialChain:
         self._theta = np.array([r.theta for r in rows], dtype=float)
         self._offset = np.array([r.offset for r in rows], dtype=float)
         self._prismatic = np.array([r.prismatic for r in rows], dtype=bool)
+        # self.n once: the property is a call on the batches' hot path.
         self._jacobian_shape, self._columns = (6, self.n), self.n
         self._jacobian_one = (1, 6, self.n)  # a batch of one's, made once
         self._packed = self._pack()
@@ -202,8 +203,7 @@ class SerialChain:
         kernel = KERNEL.ready
         if kernel is not None and compiled and not all_frames and type(q) is np.ndarray:
             try:  # the hot paths, as in fkine_jacob0
-                ndim = q.ndim
-                if ndim == 1:
+                if q.ndim == 1:
                     pose = np.empty((4, 4))
                     kernel.fkine(self._packed, q, pose)
                     return pose
@@ -258,8 +258,7 @@ class SerialChain:
             # a batch of one 2.4x a single call through the general path (issue #32). A batch's
             # shapes are built of ints: np.empty((n, *shape)) costs 0.1-0.2 us more.
             try:
-                ndim = q.ndim
-                if ndim == 1:
+                if q.ndim == 1:
                     pose, jacobian = np.empty((4, 4)), np.empty(self._jacobian_shape)
                     kernel.fkine_jacob0(self._packed, q, pose, jacobian)
                     return pose, jacobian
